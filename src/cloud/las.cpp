@@ -1,0 +1,344 @@
+#include "cloud/las.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <cstring>
+#include <filesystem>
+#include <limits>
+#include <vector>
+
+#include "core/atomic_file.hpp"
+#include "core/error.hpp"
+
+namespace cityforge {
+namespace {
+
+template <typename T>
+T get(const char* p) {
+    T v;
+    std::memcpy(&v, p, sizeof(T));
+    return v;
+}
+template <typename T>
+void put(std::vector<char>& buf, std::size_t pos, T v) {
+    std::memcpy(buf.data() + pos, &v, sizeof(T));
+}
+
+std::string trimmed(const char* p, std::size_t n) {
+    std::string s(p, strnlen(p, n));
+    while (!s.empty() && (s.back() == ' ' || s.back() == '\0')) s.pop_back();
+    return s;
+}
+
+// GeoKeyDirectory: header of 4 shorts, then entries (key, location, count, value).
+void parse_geokeys(const std::vector<char>& data, LasHeader& h) {
+    if (data.size() < 8) return;
+    const auto n = get<uint16_t>(data.data() + 6);
+    for (std::size_t i = 0; i < n && 8 + (i + 1) * 8 <= data.size(); ++i) {
+        const char* e = data.data() + 8 + i * 8;
+        const auto key = get<uint16_t>(e);
+        const auto loc = get<uint16_t>(e + 2);
+        const auto value = get<uint16_t>(e + 6);
+        if (loc != 0 || value == 0 || value == 32767) continue;  // user-defined or stored elsewhere
+        if (key == 3072 || (key == 2048 && h.geokey_horizontal_epsg == 0)) h.geokey_horizontal_epsg = value;
+        if (key == 4096) h.geokey_vertical_epsg = value;
+    }
+}
+
+}  // namespace
+
+void PointCloud::clear() {
+    for (auto* v : {&x, &y, &z, &gps_time}) v->clear();
+    for (auto* v : {&intensity, &red, &green, &blue}) v->clear();
+    for (auto* v : {&classification, &return_number, &number_of_returns}) v->clear();
+}
+
+void PointCloud::reserve(std::size_t n, bool color, bool gps) {
+    x.reserve(n), y.reserve(n), z.reserve(n), intensity.reserve(n);
+    classification.reserve(n), return_number.reserve(n), number_of_returns.reserve(n);
+    if (gps) gps_time.reserve(n);
+    if (color) red.reserve(n), green.reserve(n), blue.reserve(n);
+}
+
+int las_min_record_length(int format) {
+    static constexpr int lengths[] = {20, 28, 26, 34, 57, 63, 30, 36, 38, 59, 67};
+    if (format < 0 || format > 10) throw Error("unknown LAS point format " + std::to_string(format));
+    return lengths[format];
+}
+
+bool LasHeader::has_color() const {
+    return point_format == 2 || point_format == 3 || point_format == 5 || point_format == 7 || point_format == 8 ||
+           point_format == 10;
+}
+bool LasHeader::has_gps_time() const { return point_format != 0 && point_format != 2; }
+
+LasReader::LasReader(const std::string& path) : path_(path) {
+    namespace fs = std::filesystem;
+    if (!fs::exists(path)) throw Error(path, "file not found");
+    in_.open(path, std::ios::binary);
+    if (!in_) throw Error(path, "cannot open for reading");
+    const auto file_size = static_cast<uint64_t>(fs::file_size(path));
+    char hdr[375] = {};
+    in_.read(hdr, sizeof hdr);
+    const auto got = static_cast<std::size_t>(in_.gcount());
+    in_.clear();
+    if (got < 227 || std::memcmp(hdr, "LASF", 4) != 0) throw Error(path, "not a LAS file (no LASF signature)");
+    LasHeader& h = header_;
+    h.version_major = static_cast<uint8_t>(hdr[24]);
+    h.version_minor = static_cast<uint8_t>(hdr[25]);
+    if (h.version_major != 1 || h.version_minor > 4)
+        throw Error(path, "unsupported LAS version " + std::to_string(h.version_major) + "." + std::to_string(h.version_minor));
+    h.system_identifier = trimmed(hdr + 26, 32);
+    h.generating_software = trimmed(hdr + 58, 32);
+    const auto header_size = get<uint16_t>(hdr + 94);
+    h.offset_to_points = get<uint32_t>(hdr + 96);
+    const auto n_vlr = get<uint32_t>(hdr + 100);
+    const auto raw_format = static_cast<uint8_t>(hdr[104]);
+    if (raw_format & 0xC0)
+        throw Error(path, "LAZ-compressed points are not supported (Debian 12 has no LASzip): convert to LAS first, e.g. 'laszip -i in.laz -o out.las' or 'pdal translate in.laz out.las'");
+    h.point_format = raw_format;
+    if (h.point_format > 10) throw Error(path, "unknown LAS point format " + std::to_string(h.point_format));
+    h.point_record_length = get<uint16_t>(hdr + 105);
+    if (h.point_record_length < las_min_record_length(h.point_format))
+        throw Error(path, "point record length " + std::to_string(h.point_record_length) + " is too short for point format " +
+                              std::to_string(h.point_format));
+    h.point_count = get<uint32_t>(hdr + 107);
+    for (int i = 0; i < 3; ++i) {
+        h.scale[i] = get<double>(hdr + 131 + 8 * i);
+        h.offset[i] = get<double>(hdr + 155 + 8 * i);
+        h.max[i] = get<double>(hdr + 179 + 16 * i);
+        h.min[i] = get<double>(hdr + 187 + 16 * i);
+    }
+    for (double s : h.scale)
+        if (!(s > 0.0) || !std::isfinite(s)) throw Error(path, "invalid coordinate scale factor in the LAS header");
+    for (double o : h.offset)
+        if (!std::isfinite(o)) throw Error(path, "invalid coordinate offset in the LAS header");
+    if (h.version_minor >= 4 && header_size >= 375 && got >= 375) {
+        const auto count64 = get<uint64_t>(hdr + 247);
+        if (count64 != 0 || h.point_count == 0) h.point_count = count64;
+    }
+    if (header_size < 227 || h.offset_to_points < header_size || h.offset_to_points > file_size)
+        throw Error(path, "corrupt LAS header (header size / offset to point data)");
+
+    // VLRs: look for the CRS (OGC WKT 2112, GeoKeyDirectory 34735).
+    uint64_t pos = header_size;
+    for (uint32_t i = 0; i < n_vlr && pos + 54 <= h.offset_to_points; ++i) {
+        char vh[54];
+        in_.seekg(static_cast<std::streamoff>(pos));
+        in_.read(vh, 54);
+        if (!in_) throw Error(path, "truncated variable length record header");
+        const std::string user = trimmed(vh + 2, 16);
+        const auto record_id = get<uint16_t>(vh + 18);
+        const auto length = get<uint16_t>(vh + 20);
+        if (pos + 54 + length > h.offset_to_points) throw Error(path, "variable length record runs past the point data");
+        if (user == "LASF_Projection" && (record_id == 2112 || record_id == 34735)) {
+            std::vector<char> data(length);
+            in_.read(data.data(), length);
+            if (record_id == 2112) h.crs_wkt = trimmed(data.data(), data.size());
+            else parse_geokeys(data, h);
+        }
+        pos += 54 + length;
+    }
+    // LAS 1.4 may keep the WKT in an extended VLR after the points.
+    if (h.version_minor >= 4 && header_size >= 375 && h.crs_wkt.empty()) {
+        uint64_t epos = get<uint64_t>(hdr + 235);
+        const auto n_evlr = get<uint32_t>(hdr + 243);
+        for (uint32_t i = 0; i < n_evlr && epos + 60 <= file_size; ++i) {
+            char eh[60];
+            in_.seekg(static_cast<std::streamoff>(epos));
+            in_.read(eh, 60);
+            if (!in_) break;
+            const std::string user = trimmed(eh + 2, 16);
+            const auto record_id = get<uint16_t>(eh + 18);
+            const auto length = get<uint64_t>(eh + 20);
+            if (epos + 60 + length > file_size) throw Error(path, "extended variable length record runs past the end of the file");
+            if (user == "LASF_Projection" && record_id == 2112 && length < (1u << 24)) {
+                std::vector<char> data(length);
+                in_.read(data.data(), static_cast<std::streamsize>(length));
+                h.crs_wkt = trimmed(data.data(), data.size());
+            }
+            epos += 60 + length;
+        }
+    }
+    const uint64_t needed = h.offset_to_points + h.point_count * static_cast<uint64_t>(h.point_record_length);
+    if (needed > file_size)
+        throw Error(path, "header says " + std::to_string(h.point_count) + " points but the file holds only " +
+                              std::to_string((file_size - h.offset_to_points) / h.point_record_length) + " (truncated or corrupt)");
+    in_.seekg(h.offset_to_points);
+}
+
+std::size_t LasReader::read_chunk(PointCloud& out, std::size_t max_points) {
+    const auto n = static_cast<std::size_t>(std::min<uint64_t>(max_points, points_remaining()));
+    if (n == 0) return 0;
+    const LasHeader& h = header_;
+    const std::size_t rl = h.point_record_length;
+    std::vector<char> buf(n * rl);
+    in_.read(buf.data(), static_cast<std::streamsize>(buf.size()));
+    if (static_cast<std::size_t>(in_.gcount()) != buf.size()) throw Error(path_, "truncated point records");
+    const bool extended = h.point_format >= 6;
+    const bool color = h.has_color();
+    const bool gps = h.has_gps_time();
+    // Offset of the RGB triplet within the record for each format.
+    static constexpr int rgb_offset[] = {-1, -1, 20, 28, -1, 28, -1, 30, 30, -1, 30};
+    out.reserve(out.size() + n, color, gps);
+    for (std::size_t i = 0; i < n; ++i) {
+        const char* p = buf.data() + i * rl;
+        out.x.push_back(get<int32_t>(p) * h.scale[0] + h.offset[0]);
+        out.y.push_back(get<int32_t>(p + 4) * h.scale[1] + h.offset[1]);
+        out.z.push_back(get<int32_t>(p + 8) * h.scale[2] + h.offset[2]);
+        out.intensity.push_back(get<uint16_t>(p + 12));
+        const auto bits = static_cast<uint8_t>(p[14]);
+        if (extended) {
+            out.return_number.push_back(bits & 0x0F);
+            out.number_of_returns.push_back(static_cast<uint8_t>(bits >> 4));
+            out.classification.push_back(static_cast<uint8_t>(p[16]));
+            if (gps) out.gps_time.push_back(get<double>(p + 22));
+        } else {
+            out.return_number.push_back(bits & 0x07);
+            out.number_of_returns.push_back(static_cast<uint8_t>((bits >> 3) & 0x07));
+            out.classification.push_back(static_cast<uint8_t>(p[15]) & 0x1F);
+            if (gps) out.gps_time.push_back(get<double>(p + 20));
+        }
+        if (color) {
+            const char* c = p + rgb_offset[h.point_format];
+            out.red.push_back(get<uint16_t>(c));
+            out.green.push_back(get<uint16_t>(c + 2));
+            out.blue.push_back(get<uint16_t>(c + 4));
+        }
+    }
+    read_ += n;
+    return n;
+}
+
+PointCloud read_las(const std::string& path, LasHeader* header) {
+    LasReader reader(path);
+    if (header) *header = reader.header();
+    PointCloud cloud;
+    while (reader.read_chunk(cloud, 1u << 20) > 0) {
+    }
+    return cloud;
+}
+
+// ---------------------------------------------------------------- writer
+
+namespace {
+constexpr int kHeaderSize = 375;
+constexpr int kRecordLength = 36;  // point format 7
+}  // namespace
+
+LasWriter::LasWriter(const std::string& path, const std::array<double, 3>& scale, const std::array<double, 3>& offset,
+                     const std::string& crs_wkt, const std::string& generating_software)
+    : path_(path), scale_(scale), offset_(offset) {
+    for (double s : scale_)
+        if (!(s > 0.0)) throw Error(path, "LAS scale must be positive");
+    tmp_path_ = temporary_path_for(path).string();
+    out_.open(tmp_path_, std::ios::binary | std::ios::trunc);
+    if (!out_) throw Error(path, "cannot open for writing");
+    min_.fill(std::numeric_limits<double>::infinity());
+    max_.fill(-std::numeric_limits<double>::infinity());
+
+    std::vector<char> hdr(kHeaderSize, 0);
+    std::memcpy(hdr.data(), "LASF", 4);
+    put<uint16_t>(hdr, 6, crs_wkt.empty() ? 0 : 0x10);  // global encoding: bit 4 = CRS is WKT
+    hdr[24] = 1;
+    hdr[25] = 4;
+    std::strncpy(hdr.data() + 26, "cityforge", 32);
+    std::strncpy(hdr.data() + 58, generating_software.c_str(), 31);
+    put<uint16_t>(hdr, 90, 1);     // creation day of year: fixed so output bytes are reproducible
+    put<uint16_t>(hdr, 92, 2026);
+    put<uint16_t>(hdr, 94, kHeaderSize);
+    const uint32_t wkt_len = crs_wkt.empty() ? 0 : static_cast<uint32_t>(crs_wkt.size() + 1);
+    offset_to_points_ = kHeaderSize + (wkt_len ? 54 + wkt_len : 0);
+    put<uint32_t>(hdr, 96, offset_to_points_);
+    put<uint32_t>(hdr, 100, wkt_len ? 1 : 0);
+    hdr[104] = 7;
+    put<uint16_t>(hdr, 105, kRecordLength);
+    for (int i = 0; i < 3; ++i) {
+        put<double>(hdr, 131 + 8 * i, scale_[i]);
+        put<double>(hdr, 155 + 8 * i, offset_[i]);
+    }
+    out_.write(hdr.data(), static_cast<std::streamsize>(hdr.size()));
+    if (wkt_len) {
+        if (wkt_len > 65535) throw Error(path, "CRS WKT too long for a VLR");
+        std::vector<char> vh(54, 0);
+        std::strncpy(vh.data() + 2, "LASF_Projection", 16);
+        put<uint16_t>(vh, 18, 2112);
+        put<uint16_t>(vh, 20, static_cast<uint16_t>(wkt_len));
+        std::strncpy(vh.data() + 22, "OGC WKT coordinate system", 32);
+        out_.write(vh.data(), 54);
+        out_.write(crs_wkt.c_str(), wkt_len);  // includes the terminating NUL
+    }
+}
+
+LasWriter::~LasWriter() {
+    if (!closed_) {
+        out_.close();
+        discard_file(tmp_path_);
+    }
+}
+
+void LasWriter::write(const PointCloud& c) {
+    const std::size_t n = c.size();
+    std::vector<char> buf(n * kRecordLength, 0);
+    for (std::size_t i = 0; i < n; ++i) {
+        const std::size_t p = i * kRecordLength;
+        const double xyz[3] = {c.x[i], c.y[i], c.z[i]};
+        for (int k = 0; k < 3; ++k) {
+            const double q = std::round((xyz[k] - offset_[k]) / scale_[k]);
+            if (q < std::numeric_limits<int32_t>::min() || q > std::numeric_limits<int32_t>::max())
+                throw Error(path_, "coordinate out of range for the LAS scale/offset");
+            put<int32_t>(buf, p + 4 * k, static_cast<int32_t>(q));
+            const double v = q * scale_[k] + offset_[k];
+            min_[k] = std::min(min_[k], v);
+            max_[k] = std::max(max_[k], v);
+        }
+        put<uint16_t>(buf, p + 12, c.intensity.empty() ? uint16_t(0) : c.intensity[i]);
+        const uint8_t rn = c.return_number.empty() ? 1 : std::clamp<uint8_t>(c.return_number[i], 1, 15);
+        const uint8_t nr = c.number_of_returns.empty() ? 1 : std::clamp<uint8_t>(c.number_of_returns[i], 1, 15);
+        buf[p + 14] = static_cast<char>(rn | (nr << 4));
+        buf[p + 16] = static_cast<char>(c.classification.empty() ? 1 : c.classification[i]);
+        if (c.has_gps_time()) put<double>(buf, p + 22, c.gps_time[i]);
+        if (c.has_color()) {
+            put<uint16_t>(buf, p + 30, c.red[i]);
+            put<uint16_t>(buf, p + 32, c.green[i]);
+            put<uint16_t>(buf, p + 34, c.blue[i]);
+        }
+        ++by_return_[rn - 1];
+    }
+    out_.write(buf.data(), static_cast<std::streamsize>(buf.size()));
+    if (!out_) throw Error(path_, "write failed (disk full?)");
+    count_ += n;
+}
+
+void LasWriter::close() {
+    if (closed_) return;
+    auto seek_put = [&](std::streamoff pos, const void* data, std::size_t len) {
+        out_.seekp(pos);
+        out_.write(static_cast<const char*>(data), static_cast<std::streamsize>(len));
+    };
+    const uint32_t legacy = count_ <= std::numeric_limits<uint32_t>::max() ? static_cast<uint32_t>(count_) : 0;
+    seek_put(107, &legacy, 4);
+    for (int r = 0; r < 5; ++r) {
+        const uint32_t v = count_ <= std::numeric_limits<uint32_t>::max() ? static_cast<uint32_t>(by_return_[r]) : 0;
+        seek_put(111 + 4 * r, &v, 4);
+    }
+    if (count_ == 0) min_.fill(0.0), max_.fill(0.0);
+    for (int k = 0; k < 3; ++k) {
+        seek_put(179 + 16 * k, &max_[k], 8);
+        seek_put(187 + 16 * k, &min_[k], 8);
+    }
+    seek_put(247, &count_, 8);
+    for (int r = 0; r < 15; ++r) seek_put(255 + 8 * r, &by_return_[r], 8);
+    out_.flush();
+    const bool ok = static_cast<bool>(out_);
+    out_.close();
+    if (!ok) {
+        discard_file(tmp_path_);
+        closed_ = true;
+        throw Error(path_, "write failed (disk full?)");
+    }
+    commit_file(tmp_path_, path_);
+    closed_ = true;
+}
+
+}  // namespace cityforge

@@ -1,0 +1,92 @@
+#pragma once
+// ASPRS LAS 1.0–1.4 reading (point formats 0–10) and LAS 1.4 writing (format
+// 7: xyz, intensity, returns, class, GPS time, RGB). Our own code: Debian 12
+// has neither PDAL nor LASzip. Reads are streamed in chunks.
+#include <array>
+#include <cstdint>
+#include <fstream>
+#include <memory>
+#include <string>
+
+#include "cloud/point_cloud.hpp"
+
+namespace cityforge {
+
+/// The public header block fields we use, plus what the VLRs told us.
+struct LasHeader {
+    int version_major = 1;
+    int version_minor = 4;
+    int point_format = 7;          ///< 0..10
+    int point_record_length = 36;  ///< bytes, >= the format's minimum
+    uint32_t offset_to_points = 0;
+    uint64_t point_count = 0;
+    std::array<double, 3> scale{0.01, 0.01, 0.01};
+    std::array<double, 3> offset{0.0, 0.0, 0.0};
+    std::array<double, 3> min{0.0, 0.0, 0.0};  ///< from the header (not recomputed)
+    std::array<double, 3> max{0.0, 0.0, 0.0};
+    std::string system_identifier;
+    std::string generating_software;
+    std::string crs_wkt;             ///< from the OGC WKT VLR (2112), if present
+    int geokey_horizontal_epsg = 0;  ///< from the GeoKeyDirectory VLR (34735), 0 = none
+    int geokey_vertical_epsg = 0;
+    bool has_color() const;
+    bool has_gps_time() const;
+};
+
+/// Minimum record length of LAS point format `format` (0..10); throws otherwise.
+int las_min_record_length(int format);
+
+/// Streams points from a LAS file. Validates the header on open: throws Error
+/// naming the file for a missing file, a non-LAS file, LAZ compression, an
+/// unknown point format, a bad scale or a point count the file cannot hold.
+class LasReader {
+public:
+    explicit LasReader(const std::string& path);
+    const LasHeader& header() const { return header_; }
+    /// Appends up to `max_points` points to `out`; returns how many were read
+    /// (0 at the end). Throws Error on a truncated file.
+    std::size_t read_chunk(PointCloud& out, std::size_t max_points);
+    uint64_t points_remaining() const { return header_.point_count - read_; }
+
+private:
+    std::string path_;
+    std::ifstream in_;
+    LasHeader header_;
+    uint64_t read_ = 0;
+};
+
+/// Reads the whole file into memory (explicit: callers that know it fits).
+PointCloud read_las(const std::string& path, LasHeader* header = nullptr);
+
+/// Streams points into a LAS 1.4 point-format-7 file. The file appears under
+/// `path` only after close() succeeds (temporary file + rename); a writer
+/// destroyed without close() removes its temporary file.
+class LasWriter {
+public:
+    /// `scale`/`offset` define the integer grid (e.g. 0.001 m); `crs_wkt` is
+    /// stored as an OGC WKT VLR (empty = no CRS).
+    LasWriter(const std::string& path, const std::array<double, 3>& scale, const std::array<double, 3>& offset,
+              const std::string& crs_wkt, const std::string& generating_software = "cityforge");
+    ~LasWriter();
+    LasWriter(const LasWriter&) = delete;
+    LasWriter& operator=(const LasWriter&) = delete;
+
+    /// Appends all points of `cloud` (colour written as 0 when it has none).
+    void write(const PointCloud& cloud);
+    /// Finishes the header (counts, bounds) and moves the file into place.
+    void close();
+    uint64_t points_written() const { return count_; }
+
+private:
+    std::string path_;
+    std::string tmp_path_;
+    std::ofstream out_;
+    std::array<double, 3> scale_, offset_;
+    std::array<double, 3> min_, max_;
+    std::array<uint64_t, 15> by_return_{};
+    uint64_t count_ = 0;
+    uint32_t offset_to_points_ = 0;
+    bool closed_ = false;
+};
+
+}  // namespace cityforge

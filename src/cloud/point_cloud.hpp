@@ -1,0 +1,37 @@
+#pragma once
+// In-memory point cloud, structure of arrays. Coordinates are in the cloud's
+// CRS (horizontal units of that CRS, z in its vertical datum/units).
+#include <cstddef>
+#include <cstdint>
+#include <vector>
+
+namespace cityforge {
+
+/// ASPRS LAS classification codes we use by name.
+namespace las_class {
+inline constexpr uint8_t unclassified = 1;
+inline constexpr uint8_t ground = 2;
+inline constexpr uint8_t vegetation_high = 5;
+inline constexpr uint8_t building = 6;
+inline constexpr uint8_t low_noise = 7;
+inline constexpr uint8_t water = 9;
+inline constexpr uint8_t high_noise = 18;
+}  // namespace las_class
+
+struct PointCloud {
+    std::vector<double> x, y, z;          ///< CRS units
+    std::vector<uint16_t> intensity;
+    std::vector<uint8_t> classification;  ///< ASPRS class (0..255)
+    std::vector<uint8_t> return_number;   ///< 1-based
+    std::vector<uint8_t> number_of_returns;
+    std::vector<double> gps_time;         ///< empty when the source has none
+    std::vector<uint16_t> red, green, blue;  ///< 16-bit colour; empty when none
+
+    std::size_t size() const { return x.size(); }
+    bool has_color() const { return !red.empty(); }
+    bool has_gps_time() const { return !gps_time.empty(); }
+    void clear();
+    void reserve(std::size_t n, bool color, bool gps);
+};
+
+}  // namespace cityforge

@@ -1,0 +1,24 @@
+#pragma once
+// Write-then-rename so that a failure never leaves a half-written output.
+#include <filesystem>
+#include <string>
+
+namespace cityforge {
+
+/// Temporary sibling path for `final_path` ("name.part-PID.ext", same folder so
+/// the rename is atomic and keeps the extension so that drivers recognise it).
+std::filesystem::path temporary_path_for(const std::filesystem::path& final_path);
+
+/// Renames `tmp` onto `final_path` (replacing it). Throws Error naming final_path.
+void commit_file(const std::filesystem::path& tmp, const std::filesystem::path& final_path);
+
+/// Removes `tmp` if present; never throws (used on the error path).
+void discard_file(const std::filesystem::path& tmp) noexcept;
+
+/// Writes `content` to `path` atomically. Throws Error naming the path.
+void write_text_file(const std::filesystem::path& path, const std::string& content);
+
+/// Creates `dir` (and parents) or throws Error naming it.
+void ensure_directory(const std::filesystem::path& dir);
+
+}  // namespace cityforge

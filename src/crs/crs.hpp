@@ -1,0 +1,53 @@
+#pragma once
+// Coordinate reference systems: parsing, identification (EPSG codes of the
+// horizontal and vertical parts), units and ground sample distance in metres.
+// Wraps GDAL/OGR + PROJ; the algorithm modules never include this header.
+#include <optional>
+#include <string>
+
+#include "core/geo_transform.hpp"
+
+namespace cityforge {
+
+/// What we know of a CRS. `wkt` is empty when the data carried no CRS.
+struct CrsInfo {
+    std::string wkt;                       ///< WKT2_2019 (empty = unknown CRS)
+    std::string name;                      ///< e.g. "WGS 84 / UTM zone 50N"
+    std::optional<int> horizontal_epsg;    ///< EPSG of the horizontal (projected/geographic) part
+    std::optional<int> vertical_epsg;      ///< EPSG of the vertical part, when compound
+    std::optional<int> epsg;               ///< EPSG of the whole CRS (e.g. 7415 for RD New + NAP)
+    std::string vertical_name;             ///< e.g. "NAP height"; empty if none
+    bool geographic = false;               ///< axes are degrees of latitude/longitude
+    double linear_unit_m = 1.0;            ///< metres per horizontal CRS unit (0.3048 for int. feet)
+    std::string linear_unit_name = "metre";
+
+    bool empty() const { return wkt.empty(); }
+    /// "EPSG:32650", "EPSG:28992+5709" or the CRS name when no code is known.
+    std::string label() const;
+    /// OGC URN for GML srsName: "urn:ogc:def:crs:EPSG::32650" or, with a vertical
+    /// part, "urn:ogc:def:crs,crs:EPSG::28992,crs:EPSG::5709". Empty if no EPSG code.
+    std::string ogc_urn() const;
+};
+
+/// Parses anything GDAL's SetFromUserInput accepts ("EPSG:7415", WKT, PROJ
+/// string). `subject` names where the text came from, for the error message.
+CrsInfo crs_from_user_input(const std::string& text, const std::string& subject);
+
+/// Parses a WKT (1 or 2, ESRI flavour included). Empty input gives an empty CrsInfo.
+CrsInfo crs_from_wkt(const std::string& wkt, const std::string& subject);
+
+/// Ground sample distance in metres of a pixel at the raster's centre, along
+/// x and y. Projected CRSs scale by the linear unit (feet included);
+/// geographic CRSs use geodesic distances on the ellipsoid (GeographicLib).
+struct GroundSampleDistance {
+    double x_m = 0.0;
+    double y_m = 0.0;
+};
+GroundSampleDistance ground_sample_distance(const CrsInfo& crs, const GeoTransform& transform, int width,
+                                            int height);
+
+/// True when both describe the same CRS (horizontal and vertical), ignoring
+/// axis-order and naming differences.
+bool same_crs(const CrsInfo& a, const CrsInfo& b);
+
+}  // namespace cityforge

@@ -1,0 +1,216 @@
+#include "raster/raster.hpp"
+
+#include <cmath>
+#include <cpl_string.h>
+#include <filesystem>
+#include <gdal_priv.h>
+
+#include "core/atomic_file.hpp"
+#include "core/error.hpp"
+#include "crs/gdal_util.hpp"
+
+namespace cityforge {
+namespace {
+
+SampleType from_gdal(GDALDataType t) {
+    switch (t) {
+        case GDT_Byte: return SampleType::byte;
+        case GDT_UInt16: return SampleType::uint16;
+        case GDT_Int16: return SampleType::int16;
+        case GDT_UInt32: return SampleType::uint32;
+        case GDT_Int32: return SampleType::int32;
+        case GDT_Float32: return SampleType::float32;
+        case GDT_Float64: return SampleType::float64;
+        default: return SampleType::other;
+    }
+}
+
+template <typename T> constexpr GDALDataType gdal_type();
+template <> constexpr GDALDataType gdal_type<uint8_t>() { return GDT_Byte; }
+template <> constexpr GDALDataType gdal_type<uint16_t>() { return GDT_UInt16; }
+template <> constexpr GDALDataType gdal_type<int16_t>() { return GDT_Int16; }
+template <> constexpr GDALDataType gdal_type<uint32_t>() { return GDT_UInt32; }
+template <> constexpr GDALDataType gdal_type<float>() { return GDT_Float32; }
+template <> constexpr GDALDataType gdal_type<double>() { return GDT_Float64; }
+
+}  // namespace
+
+std::string to_string(SampleType t) {
+    switch (t) {
+        case SampleType::byte: return "Byte";
+        case SampleType::uint16: return "UInt16";
+        case SampleType::int16: return "Int16";
+        case SampleType::uint32: return "UInt32";
+        case SampleType::int32: return "Int32";
+        case SampleType::float32: return "Float32";
+        case SampleType::float64: return "Float64";
+        case SampleType::other: return "unsupported";
+    }
+    return "unsupported";
+}
+
+struct RasterReader::Impl {
+    GDALDataset* ds = nullptr;
+    ~Impl() {
+        if (ds) GDALClose(ds);
+    }
+};
+
+RasterReader::RasterReader(const std::string& path, const RasterOpenOptions& options) : impl_(new Impl) {
+    ensure_gdal_registered();
+    if (!std::filesystem::exists(path) && path.rfind("/vsi", 0) != 0) throw Error(path, "file not found");
+    GdalErrorCapture capture;
+    impl_->ds = GDALDataset::FromHandle(GDALOpenEx(path.c_str(), GDAL_OF_RASTER | GDAL_OF_READONLY, nullptr, nullptr, nullptr));
+    if (!impl_->ds) throw Error(path, "not a raster GDAL can read" + capture.suffix());
+    GDALDataset& ds = *impl_->ds;
+
+    info_.path = path;
+    info_.driver = ds.GetDriver() ? ds.GetDriver()->GetDescription() : "";
+    info_.width = ds.GetRasterXSize();
+    info_.height = ds.GetRasterYSize();
+    if (ds.GetRasterCount() <= 0) throw Error(path, "raster has no bands");
+    if (info_.width <= 0 || info_.height <= 0) throw Error(path, "raster has zero size");
+    for (int b = 1; b <= ds.GetRasterCount(); ++b) {
+        GDALRasterBand* band = ds.GetRasterBand(b);
+        RasterBandInfo bi;
+        bi.type = from_gdal(band->GetRasterDataType());
+        int has_nodata = 0;
+        const double nd = band->GetNoDataValue(&has_nodata);
+        if (has_nodata) bi.nodata = nd;
+        bi.color_interpretation = GDALGetColorInterpretationName(band->GetColorInterpretation());
+        bi.description = band->GetDescription();
+        info_.bands.push_back(bi);
+    }
+    ds.GetRasterBand(1)->GetBlockSize(&info_.block_width, &info_.block_height);
+
+    std::array<double, 6> gt{};
+    const bool has_gt = ds.GetGeoTransform(gt.data()) == CE_None;
+    const OGRSpatialReference* srs = ds.GetSpatialRef();
+    if (!options.assume_crs.empty()) {
+        info_.crs = crs_from_user_input(options.assume_crs, path);
+    } else if (srs) {
+        char* wkt = nullptr;
+        const char* wkt_options[] = {"FORMAT=WKT2_2019", nullptr};
+        srs->exportToWkt(&wkt, wkt_options);
+        info_.crs = crs_from_wkt(wkt ? wkt : "", path);
+        CPLFree(wkt);
+    }
+
+    if (has_gt) {
+        if (gt[2] != 0.0 || gt[4] != 0.0)
+            throw Error(path, "rotated or sheared geotransform is not supported (warp it north-up first, e.g. gdalwarp)");
+        if (gt[1] <= 0.0 || gt[5] == 0.0) throw Error(path, "geotransform has a zero or negative pixel width");
+    }
+    info_.georeferenced = has_gt && !info_.crs.empty();
+    if (!info_.georeferenced) {
+        if (!options.allow_pixel_coordinates) {
+            if (!has_gt) throw Error(path, "raster has no georeferencing (no geotransform)");
+            throw Error(path, "raster has a geotransform but no coordinate reference system (give one with --crs)");
+        }
+        if (!has_gt) gt = {0.0, 1.0, 0.0, 0.0, 0.0, -1.0};
+    }
+    info_.transform = GeoTransform::from_gdal(gt);
+    info_.gsd = ground_sample_distance(info_.crs, info_.transform, info_.width, info_.height);
+    const MapPoint a = info_.transform.pixel_to_map({0.0, 0.0});
+    const MapPoint b = info_.transform.pixel_to_map({double(info_.width), double(info_.height)});
+    info_.extent = {std::min(a.x, b.x), std::min(a.y, b.y), std::max(a.x, b.x), std::max(a.y, b.y)};
+}
+
+RasterReader::~RasterReader() = default;
+RasterReader::RasterReader(RasterReader&&) noexcept = default;
+RasterReader& RasterReader::operator=(RasterReader&&) noexcept = default;
+
+template <typename T>
+Image<T> RasterReader::read(const PixelWindow& w, const std::vector<int>& bands_in) const {
+    std::vector<int> bands = bands_in;
+    if (bands.empty())
+        for (int b = 1; b <= info_.band_count(); ++b) bands.push_back(b);
+    for (int b : bands)
+        if (b < 1 || b > info_.band_count())
+            throw Error(info_.path, "band " + std::to_string(b) + " does not exist (raster has " +
+                                        std::to_string(info_.band_count()) + ")");
+    for (int b : bands)
+        if (info_.bands[b - 1].type == SampleType::other)
+            throw Error(info_.path, "band " + std::to_string(b) + " has an unsupported data type");
+    if (w.width <= 0 || w.height <= 0 || w.col < 0 || w.row < 0 || w.col + w.width > info_.width ||
+        w.row + w.height > info_.height)
+        throw Error(info_.path, "window outside the raster");
+    Image<T> image(w.width, w.height, static_cast<int>(bands.size()));
+    GdalErrorCapture capture;
+    const CPLErr err = impl_->ds->RasterIO(GF_Read, w.col, w.row, w.width, w.height, image.data.data(), w.width,
+                                           w.height, gdal_type<T>(), static_cast<int>(bands.size()), bands.data(), 0,
+                                           0, 0, nullptr);
+    if (err != CE_None) throw Error(info_.path, "cannot read pixel data" + capture.suffix());
+    return image;
+}
+
+template Image<uint8_t> RasterReader::read(const PixelWindow&, const std::vector<int>&) const;
+template Image<uint16_t> RasterReader::read(const PixelWindow&, const std::vector<int>&) const;
+template Image<int16_t> RasterReader::read(const PixelWindow&, const std::vector<int>&) const;
+template Image<uint32_t> RasterReader::read(const PixelWindow&, const std::vector<int>&) const;
+template Image<float> RasterReader::read(const PixelWindow&, const std::vector<int>&) const;
+template Image<double> RasterReader::read(const PixelWindow&, const std::vector<int>&) const;
+
+RasterInfo read_raster_info(const std::string& path, const RasterOpenOptions& options) {
+    return RasterReader(path, options).info();
+}
+
+template <typename T>
+void write_geotiff(const std::string& path, const Image<T>& image, const GeoTransform& transform,
+                   const std::string& crs_wkt, const GeoTiffWriteOptions& options) {
+    ensure_gdal_registered();
+    if (image.width <= 0 || image.height <= 0 || image.bands <= 0) throw Error(path, "refusing to write an empty raster");
+    GDALDriver* driver = GetGDALDriverManager()->GetDriverByName("GTiff");
+    if (!driver) throw Error(path, "GDAL has no GTiff driver");
+    const std::filesystem::path tmp = temporary_path_for(path);
+    GdalErrorCapture capture;
+    CPLStringList co;
+    const bool tiled = image.width > options.block_size || image.height > options.block_size;
+    if (tiled) {
+        co.SetNameValue("TILED", "YES");
+        co.SetNameValue("BLOCKXSIZE", std::to_string(options.block_size).c_str());
+        co.SetNameValue("BLOCKYSIZE", std::to_string(options.block_size).c_str());
+    }
+    co.SetNameValue("COMPRESS", options.compression.c_str());
+    if (options.compression == "DEFLATE" || options.compression == "LZW" || options.compression == "ZSTD")
+        co.SetNameValue("PREDICTOR", (std::is_floating_point_v<T> ? "3" : "2"));
+    if (image.bands > 1) co.SetNameValue("INTERLEAVE", "PIXEL");
+    if (options.rgb && image.bands == 3 && std::is_same_v<T, uint8_t>) co.SetNameValue("PHOTOMETRIC", "RGB");
+    if (static_cast<double>(image.pixel_count()) * image.bands * sizeof(T) > 3.5e9) co.SetNameValue("BIGTIFF", "YES");
+
+    GDALDataset* ds = driver->Create(tmp.c_str(), image.width, image.height, image.bands, gdal_type<T>(), co.List());
+    if (!ds) throw Error(path, "cannot create GeoTIFF" + capture.suffix());
+    bool ok = true;
+    auto gt = transform.to_gdal();
+    ok = ok && ds->SetGeoTransform(gt.data()) == CE_None;
+    if (!crs_wkt.empty()) {
+        OGRSpatialReference srs;
+        ok = ok && srs.importFromWkt(crs_wkt.c_str()) == OGRERR_NONE;
+        ok = ok && ds->SetSpatialRef(&srs) == CE_None;
+    }
+    for (int b = 0; b < image.bands && ok; ++b) {
+        GDALRasterBand* band = ds->GetRasterBand(b + 1);
+        if (options.nodata) ok = band->SetNoDataValue(*options.nodata) == CE_None;
+        if (b < static_cast<int>(options.band_descriptions.size())) band->SetDescription(options.band_descriptions[b].c_str());
+    }
+    if (ok)
+        ok = ds->RasterIO(GF_Write, 0, 0, image.width, image.height, const_cast<T*>(image.data.data()), image.width,
+                          image.height, gdal_type<T>(), image.bands, nullptr, 0, 0, 0, nullptr) == CE_None;
+    GDALClose(ds);
+    ok = ok && CPLGetLastErrorType() < CE_Failure;
+    if (!ok) {
+        const std::string why = capture.suffix();
+        discard_file(tmp);
+        throw Error(path, "writing GeoTIFF failed" + why);
+    }
+    commit_file(tmp, path);
+}
+
+template void write_geotiff(const std::string&, const Image<uint8_t>&, const GeoTransform&, const std::string&, const GeoTiffWriteOptions&);
+template void write_geotiff(const std::string&, const Image<uint16_t>&, const GeoTransform&, const std::string&, const GeoTiffWriteOptions&);
+template void write_geotiff(const std::string&, const Image<int16_t>&, const GeoTransform&, const std::string&, const GeoTiffWriteOptions&);
+template void write_geotiff(const std::string&, const Image<uint32_t>&, const GeoTransform&, const std::string&, const GeoTiffWriteOptions&);
+template void write_geotiff(const std::string&, const Image<float>&, const GeoTransform&, const std::string&, const GeoTiffWriteOptions&);
+template void write_geotiff(const std::string&, const Image<double>&, const GeoTransform&, const std::string&, const GeoTiffWriteOptions&);
+
+}  // namespace cityforge

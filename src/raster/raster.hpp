@@ -1,0 +1,116 @@
+#pragma once
+// Georeferenced raster I/O through GDAL: metadata, windowed (block) reads and
+// tiled, compressed GeoTIFF writes that keep the source georeferencing.
+#include <cstdint>
+#include <memory>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "core/geo_transform.hpp"
+#include "core/image.hpp"
+#include "crs/crs.hpp"
+
+namespace cityforge {
+
+/// Sample types we read and write. `other` marks a type we refuse to process
+/// (complex numbers, for example) but can still describe.
+enum class SampleType { byte, uint16, int16, uint32, int32, float32, float64, other };
+std::string to_string(SampleType t);
+
+struct RasterBandInfo {
+    SampleType type = SampleType::byte;
+    std::optional<double> nodata;  ///< nodata value in the band's units, if set
+    std::string color_interpretation;  ///< "Red", "Gray", "Undefined", ...
+    std::string description;
+};
+
+/// Everything we learn from a raster's header, without reading pixels.
+struct RasterInfo {
+    std::string path;
+    std::string driver;          ///< GDAL short name, e.g. "GTiff"
+    int width = 0;               ///< columns
+    int height = 0;              ///< rows
+    int block_width = 0;         ///< natural block size of band 1
+    int block_height = 0;
+    std::vector<RasterBandInfo> bands;
+    bool georeferenced = false;  ///< false only when opened with allow_pixel_coordinates
+    GeoTransform transform;      ///< identity-like (1, -1) when not georeferenced
+    CrsInfo crs;                 ///< horizontal (+ vertical) CRS
+    GroundSampleDistance gsd;    ///< metres per pixel along x and y at the centre
+    Extent extent;               ///< in CRS units
+
+    int band_count() const { return static_cast<int>(bands.size()); }
+};
+
+struct RasterOpenOptions {
+    /// Accept a raster without geotransform/CRS and use pixel coordinates
+    /// (x = column, y = -row, GSD 1 m). Off by default: such rasters are refused.
+    bool allow_pixel_coordinates = false;
+    /// CRS to assume (or override with) when the raster has none; any
+    /// SetFromUserInput text ("EPSG:32616"). Empty = use the file's.
+    std::string assume_crs;
+};
+
+/// A pixel window: columns [col, col + width), rows [row, row + height).
+struct PixelWindow {
+    int col = 0;
+    int row = 0;
+    int width = 0;
+    int height = 0;
+};
+
+/// An open raster. Reads are windowed so a 40,000 x 40,000 tile never has to
+/// be loaded whole. Not thread-safe: open one reader per thread.
+class RasterReader {
+public:
+    /// Opens and validates `path`. Throws Error naming the file when it is
+    /// missing, not a raster, has no bands, no georeferencing (unless allowed)
+    /// or a rotated geotransform.
+    explicit RasterReader(const std::string& path, const RasterOpenOptions& options = {});
+    ~RasterReader();
+    RasterReader(RasterReader&&) noexcept;
+    RasterReader& operator=(RasterReader&&) noexcept;
+
+    const RasterInfo& info() const { return info_; }
+
+    /// Reads `window` of the 1-based `bands` (all bands when empty) converted
+    /// to T (uint8_t, uint16_t, int16_t, uint32_t, float or double). Throws
+    /// Error naming the file when the window is outside the raster or the data
+    /// cannot be decoded.
+    template <typename T>
+    Image<T> read(const PixelWindow& window, const std::vector<int>& bands = {}) const;
+
+    /// Reads the whole raster (explicit, for callers that know it fits).
+    template <typename T>
+    Image<T> read_all(const std::vector<int>& bands = {}) const {
+        return read<T>(PixelWindow{0, 0, info_.width, info_.height}, bands);
+    }
+
+private:
+    struct Impl;
+    std::unique_ptr<Impl> impl_;
+    RasterInfo info_;
+};
+
+/// Convenience: open `path` and return its header information.
+RasterInfo read_raster_info(const std::string& path, const RasterOpenOptions& options = {});
+
+/// Options of a GeoTIFF write.
+struct GeoTiffWriteOptions {
+    std::optional<double> nodata;           ///< written to every band when set
+    std::string compression = "DEFLATE";    ///< GDAL COMPRESS= value ("NONE" allowed)
+    int block_size = 256;                   ///< tile edge in pixels (multiple of 16)
+    std::vector<std::string> band_descriptions;  ///< optional, one per band
+    bool rgb = false;                       ///< mark 3 Byte bands as RGB (PHOTOMETRIC=RGB)
+};
+
+/// Writes `image` as a tiled, compressed GeoTIFF with the given georeferencing
+/// (transform + CRS WKT; an empty WKT writes no CRS). The file appears only
+/// when complete (temporary file + rename). Supported T: uint8_t, uint16_t,
+/// int16_t, uint32_t, float, double.
+template <typename T>
+void write_geotiff(const std::string& path, const Image<T>& image, const GeoTransform& transform,
+                   const std::string& crs_wkt, const GeoTiffWriteOptions& options = {});
+
+}  // namespace cityforge
