@@ -38,6 +38,10 @@ int main(int argc, char** argv) {
     CLI::App app{"cityforge: building extraction, heights and city models from aerial images and point clouds"};
     app.set_version_flag("--version", std::string("cityforge ") + CITYFORGE_VERSION);
     app.require_subcommand(1);
+    app.fallthrough();  // global flags (--quiet, ...) may also follow the subcommand
+    app.failure_message([](const CLI::App*, const CLI::Error& e) {
+        return std::string("cityforge: error: ") + e.what() + " (see --help)\n";
+    });
     GlobalFlags g;
     app.add_flag("-q,--quiet", g.quiet, "No progress and no messages except errors");
     app.add_flag("-v,--verbose", g.verbose, "More messages on stderr");

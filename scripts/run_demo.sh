@@ -1,0 +1,19 @@
+#!/usr/bin/env bash
+# Sets up (if needed), builds and runs the pipeline that exists so far on the
+# sample scene described in samples/. Outputs go to out/demo/.
+set -euo pipefail
+here="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
+bash "$here/scripts/build.sh"
+out="$here/out/demo"
+mkdir -p "$out"
+cf="$here/build/bin/cityforge"
+# The sample scene is regenerated from its recipe (samples/sample_scene.args):
+# same seed, same bytes, so nothing large is committed.
+# shellcheck disable=SC2046
+"$cf" synth --out "$out/scene" $(grep -v '^#' "$here/samples/sample_scene.args")
+"$cf" info "$out/scene/ortho.tif"
+"$cf" info "$out/scene/cloud.las"
+if "$cf" segment --help >/dev/null 2>&1; then
+  "$cf" segment --ortho "$out/scene/ortho.tif" --out "$out/segments" --config "$here/samples/segment.json"
+fi
+echo "cityforge demo: outputs in $out" >&2

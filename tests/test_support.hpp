@@ -1,0 +1,74 @@
+#pragma once
+// Shared helpers of the test suite: paths to real data and the built CLI,
+// scratch folders and running the CLI as a user would.
+#include <cstdio>
+#include <cstdlib>
+#include <filesystem>
+#include <fstream>
+#include <sstream>
+#include <string>
+#include <unistd.h>
+
+namespace cityforge::test {
+
+inline std::string shared_data(const std::string& rel) { return std::string(CITYFORGE_SHARED_DATA) + "/" + rel; }
+inline std::string source_dir() { return CITYFORGE_SOURCE_DIR; }
+inline std::string cli() { return CITYFORGE_CLI; }
+
+/// A fresh, empty scratch folder removed at scope exit.
+struct ScratchDir {
+    std::filesystem::path path;
+    explicit ScratchDir(const std::string& name) {
+        path = std::filesystem::temp_directory_path() / ("cityforge_test_" + name + "_" + std::to_string(::getpid()));
+        std::filesystem::remove_all(path);
+        std::filesystem::create_directories(path);
+    }
+    ~ScratchDir() {
+        std::error_code ec;
+        std::filesystem::remove_all(path, ec);
+    }
+    std::string operator/(const std::string& name) const { return (path / name).string(); }
+    std::size_t file_count() const {
+        std::size_t n = 0;
+        for ([[maybe_unused]] const auto& e : std::filesystem::recursive_directory_iterator(path)) ++n;
+        return n;
+    }
+};
+
+inline std::string slurp(const std::string& path) {
+    std::ifstream in(path, std::ios::binary);
+    std::ostringstream s;
+    s << in.rdbuf();
+    return s.str();
+}
+
+struct CommandResult {
+    int exit_code = -1;
+    std::string out;
+    std::string err;
+};
+
+/// Runs the built `cityforge` with `args` (shell-quoted by the caller).
+inline CommandResult run_cli(const std::string& args) {
+    static int counter = 0;
+    const auto base = std::filesystem::temp_directory_path() /
+                      ("cityforge_cli_" + std::to_string(::getpid()) + "_" + std::to_string(counter++));
+    const std::string out = base.string() + ".out", err = base.string() + ".err";
+    const std::string cmd = cli() + " " + args + " >" + out + " 2>" + err + " </dev/null";
+    const int status = std::system(cmd.c_str());
+    CommandResult r;
+    r.exit_code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+    r.out = slurp(out);
+    r.err = slurp(err);
+    std::filesystem::remove(out);
+    std::filesystem::remove(err);
+    return r;
+}
+
+inline int count_lines(const std::string& s) {
+    int n = 0;
+    for (char c : s) n += c == '\n';
+    return n;
+}
+
+}  // namespace cityforge::test
