@@ -122,6 +122,12 @@ RasterReader& RasterReader::operator=(RasterReader&&) noexcept = default;
 
 template <typename T>
 Image<T> RasterReader::read(const PixelWindow& w, const std::vector<int>& bands_in) const {
+    return read_resampled<T>(w, w.width, w.height, bands_in, "nearest");
+}
+
+template <typename T>
+Image<T> RasterReader::read_resampled(const PixelWindow& w, int out_width, int out_height,
+                                      const std::vector<int>& bands_in, const std::string& resampling) const {
     std::vector<int> bands = bands_in;
     if (bands.empty())
         for (int b = 1; b <= info_.band_count(); ++b) bands.push_back(b);
@@ -135,21 +141,35 @@ Image<T> RasterReader::read(const PixelWindow& w, const std::vector<int>& bands_
     if (w.width <= 0 || w.height <= 0 || w.col < 0 || w.row < 0 || w.col + w.width > info_.width ||
         w.row + w.height > info_.height)
         throw Error(info_.path, "window outside the raster");
-    Image<T> image(w.width, w.height, static_cast<int>(bands.size()));
+    if (out_width <= 0 || out_height <= 0) throw Error(info_.path, "resampled size must be positive");
+    GDALRasterIOExtraArg extra;
+    INIT_RASTERIO_EXTRA_ARG(extra);
+    if (resampling == "nearest") extra.eResampleAlg = GRIORA_NearestNeighbour;
+    else if (resampling == "bilinear") extra.eResampleAlg = GRIORA_Bilinear;
+    else if (resampling == "cubic") extra.eResampleAlg = GRIORA_Cubic;
+    else if (resampling == "average") extra.eResampleAlg = GRIORA_Average;
+    else throw Error("resampling", "unknown method '" + resampling + "'");
+    Image<T> image(out_width, out_height, static_cast<int>(bands.size()));
     GdalErrorCapture capture;
-    const CPLErr err = impl_->ds->RasterIO(GF_Read, w.col, w.row, w.width, w.height, image.data.data(), w.width,
-                                           w.height, gdal_type<T>(), static_cast<int>(bands.size()), bands.data(), 0,
-                                           0, 0, nullptr);
+    const CPLErr err = impl_->ds->RasterIO(GF_Read, w.col, w.row, w.width, w.height, image.data.data(), out_width,
+                                           out_height, gdal_type<T>(), static_cast<int>(bands.size()), bands.data(), 0,
+                                           0, 0, &extra);
     if (err != CE_None) throw Error(info_.path, "cannot read pixel data" + capture.suffix());
     return image;
 }
 
 template Image<uint8_t> RasterReader::read(const PixelWindow&, const std::vector<int>&) const;
+template Image<uint8_t> RasterReader::read_resampled(const PixelWindow&, int, int, const std::vector<int>&, const std::string&) const;
 template Image<uint16_t> RasterReader::read(const PixelWindow&, const std::vector<int>&) const;
+template Image<uint16_t> RasterReader::read_resampled(const PixelWindow&, int, int, const std::vector<int>&, const std::string&) const;
 template Image<int16_t> RasterReader::read(const PixelWindow&, const std::vector<int>&) const;
+template Image<int16_t> RasterReader::read_resampled(const PixelWindow&, int, int, const std::vector<int>&, const std::string&) const;
 template Image<uint32_t> RasterReader::read(const PixelWindow&, const std::vector<int>&) const;
+template Image<uint32_t> RasterReader::read_resampled(const PixelWindow&, int, int, const std::vector<int>&, const std::string&) const;
 template Image<float> RasterReader::read(const PixelWindow&, const std::vector<int>&) const;
+template Image<float> RasterReader::read_resampled(const PixelWindow&, int, int, const std::vector<int>&, const std::string&) const;
 template Image<double> RasterReader::read(const PixelWindow&, const std::vector<int>&) const;
+template Image<double> RasterReader::read_resampled(const PixelWindow&, int, int, const std::vector<int>&, const std::string&) const;
 
 RasterInfo read_raster_info(const std::string& path, const RasterOpenOptions& options) {
     return RasterReader(path, options).info();

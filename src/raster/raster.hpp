@@ -81,6 +81,12 @@ public:
     template <typename T>
     Image<T> read(const PixelWindow& window, const std::vector<int>& bands = {}) const;
 
+    /// Reads `window` resampled to out_width x out_height pixels (GDAL's
+    /// RasterIO resampling: "nearest", "bilinear", "cubic" or "average").
+    template <typename T>
+    Image<T> read_resampled(const PixelWindow& window, int out_width, int out_height, const std::vector<int>& bands,
+                            const std::string& resampling) const;
+
     /// Reads the whole raster (explicit, for callers that know it fits).
     template <typename T>
     Image<T> read_all(const std::vector<int>& bands = {}) const {

@@ -1,0 +1,215 @@
+#include "segment/watershed.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <numeric>
+#include <string>
+#include <tbb/parallel_for.h>
+
+#include "core/error.hpp"
+#include "core/parallel.hpp"
+
+namespace cityforge {
+
+void WatershedOptions::validate(int bands) const {
+    if (!band_weights.empty() && static_cast<int>(band_weights.size()) != bands)
+        throw Error("--band-weights", "has " + std::to_string(band_weights.size()) + " values but the image has " +
+                                          std::to_string(bands) + " band(s)");
+    for (double w : band_weights)
+        if (!(w >= 0.0) || !std::isfinite(w)) throw Error("--band-weights", "weights must be finite and >= 0");
+    if (!band_weights.empty() && std::accumulate(band_weights.begin(), band_weights.end(), 0.0) <= 0.0)
+        throw Error("--band-weights", "at least one weight must be > 0");
+    if (!(smoothing_sigma_px >= 0.0 && smoothing_sigma_px <= 20.0)) throw Error("--smoothing", "must be between 0 and 20 pixels");
+    if (!(h_minima >= 0.0 && h_minima <= 255.0)) throw Error("--h-minima", "must be between 0 and 255");
+}
+
+void normalize_bands(Image<float>& image, const std::vector<uint8_t>& valid) {
+    const std::size_t n = image.pixel_count();
+    for (int b = 0; b < image.bands; ++b) {
+        float* v = image.band_data(b);
+        // Percentiles from a regular sample (at most ~1M values): deterministic and fast.
+        const std::size_t step = std::max<std::size_t>(1, n / 1000000);
+        std::vector<float> sample;
+        for (std::size_t i = 0; i < n; i += step)
+            if (valid.empty() || valid[i]) sample.push_back(v[i]);
+        if (sample.empty()) continue;
+        auto pct = [&](double q) {
+            const auto k = static_cast<std::size_t>(q * static_cast<double>(sample.size() - 1));
+            std::nth_element(sample.begin(), sample.begin() + static_cast<std::ptrdiff_t>(k), sample.end());
+            return sample[k];
+        };
+        const float lo = pct(0.005), hi = pct(0.995);
+        const float scale = hi > lo ? 255.0f / (hi - lo) : 0.0f;
+        parallel_for_each_index(n, [&](std::size_t i) {
+            v[i] = std::clamp((v[i] - lo) * scale, 0.0f, 255.0f);
+        });
+    }
+}
+
+namespace {
+
+// Separable Gaussian blur of one band, edges clamped.
+void gaussian_blur(const float* in, float* out, int w, int h, double sigma) {
+    const int radius = std::max(1, static_cast<int>(std::ceil(3.0 * sigma)));
+    std::vector<float> k(2 * radius + 1);
+    double sum = 0.0;
+    for (int i = -radius; i <= radius; ++i) sum += k[i + radius] = static_cast<float>(std::exp(-0.5 * i * i / (sigma * sigma)));
+    for (auto& x : k) x = static_cast<float>(x / sum);
+    std::vector<float> tmp(static_cast<std::size_t>(w) * h);
+    tbb::parallel_for(0, h, [&](int y) {
+        const float* row = in + static_cast<std::size_t>(y) * w;
+        float* t = tmp.data() + static_cast<std::size_t>(y) * w;
+        for (int x = 0; x < w; ++x) {
+            float s = 0.0f;
+            for (int i = -radius; i <= radius; ++i) s += k[i + radius] * row[std::clamp(x + i, 0, w - 1)];
+            t[x] = s;
+        }
+    });
+    tbb::parallel_for(0, h, [&](int y) {
+        float* o = out + static_cast<std::size_t>(y) * w;
+        for (int x = 0; x < w; ++x) o[x] = 0.0f;
+        for (int i = -radius; i <= radius; ++i) {
+            const float* t = tmp.data() + static_cast<std::size_t>(std::clamp(y + i, 0, h - 1)) * w;
+            const float ki = k[i + radius];
+            for (int x = 0; x < w; ++x) o[x] += ki * t[x];
+        }
+    });
+}
+
+}  // namespace
+
+Image<float> multiband_gradient(const Image<float>& image, const WatershedOptions& options) {
+    const int w = image.width, h = image.height;
+    Image<float> grad(w, h, 1, 0.0f);
+    std::vector<float> smooth(image.pixel_count());
+    for (int b = 0; b < image.bands; ++b) {
+        const double wb = options.band_weights.empty() ? 1.0 : options.band_weights[b];
+        if (wb == 0.0) continue;
+        const float* src = image.band_data(b);
+        if (options.smoothing_sigma_px > 0.0) {
+            gaussian_blur(src, smooth.data(), w, h, options.smoothing_sigma_px);
+            src = smooth.data();
+        }
+        const auto fw = static_cast<float>(wb);
+        tbb::parallel_for(0, h, [&](int y) {
+            const int y0 = std::max(0, y - 1), y1 = std::min(h - 1, y + 1);
+            const float* a = src + static_cast<std::size_t>(y0) * w;
+            const float* m = src + static_cast<std::size_t>(y) * w;
+            const float* c = src + static_cast<std::size_t>(y1) * w;
+            float* g = grad.band_data(0) + static_cast<std::size_t>(y) * w;
+            for (int x = 0; x < w; ++x) {
+                const int x0 = std::max(0, x - 1), x1 = std::min(w - 1, x + 1);
+                const float gx = (a[x1] + 2 * m[x1] + c[x1]) - (a[x0] + 2 * m[x0] + c[x0]);
+                const float gy = (c[x0] + 2 * c[x] + c[x1]) - (a[x0] + 2 * a[x] + a[x1]);
+                g[x] += fw * (gx * gx + gy * gy);
+            }
+        });
+    }
+    // Sobel sums 8 weighted differences; /8 brings the gradient back to grey-level units.
+    double wsum = 0.0;
+    for (int b = 0; b < image.bands; ++b) wsum += options.band_weights.empty() ? 1.0 : options.band_weights[b];
+    const auto norm = static_cast<float>(1.0 / (8.0 * std::sqrt(std::max(wsum, 1e-12))));
+    float* g = grad.band_data(0);
+    parallel_for_each_index(grad.pixel_count(), [&](std::size_t i) { g[i] = std::sqrt(g[i]) * norm; });
+    return grad;
+}
+
+Oversegmentation watershed_oversegment(const Image<float>& image, const std::vector<uint8_t>& valid,
+                                       const WatershedOptions& options, const Progress& progress) {
+    options.validate(image.bands);
+    const int w = image.width, h = image.height;
+    const std::size_t n = image.pixel_count();
+    if (n == 0) throw Error("watershed", "empty image");
+    if (!valid.empty() && valid.size() != n) throw Error("watershed", "valid mask size does not match the image");
+    const Image<float> grad = multiband_gradient(image, options);
+    progress(0.3, "gradient");
+
+    // Quantise to integer levels (1/4 grey level) for a bucket (hierarchical) queue.
+    constexpr float kLevelsPerUnit = 4.0f;
+    const float* g = grad.band_data(0);
+    std::vector<uint16_t> level(n);
+    uint32_t max_level = 0;
+    for (std::size_t i = 0; i < n; ++i) {
+        level[i] = static_cast<uint16_t>(std::min(65535.0f, g[i] * kLevelsPerUnit));
+        max_level = std::max<uint32_t>(max_level, level[i]);
+    }
+    // Counting sort of valid pixels by level; ties stay in raster order (deterministic).
+    std::vector<uint32_t> count(max_level + 2, 0);
+    for (std::size_t i = 0; i < n; ++i)
+        if (valid.empty() || valid[i]) ++count[level[i] + 1];
+    for (std::size_t l = 1; l < count.size(); ++l) count[l] += count[l - 1];
+    const uint32_t n_valid = count.back();
+    if (n_valid == 0) throw Error("watershed", "image has no valid (non-nodata) pixels");
+    std::vector<uint32_t> order(n_valid);
+    for (std::size_t i = 0; i < n; ++i)
+        if (valid.empty() || valid[i]) order[count[level[i]]++] = static_cast<uint32_t>(i);
+    progress(0.5, "sorting");
+
+    // Union-find flooding. parent == kNone: not yet flooded. Each root keeps the
+    // level of its basin's minimum; basins meeting at level L merge when the
+    // shallower one's depth (L - its minimum) is below h.
+    constexpr uint32_t kNone = 0xFFFFFFFFu;
+    std::vector<uint32_t> parent(n, kNone);
+    std::vector<uint16_t> min_level(n, 0);
+    const auto h_levels = static_cast<uint32_t>(std::lround(options.h_minima * kLevelsPerUnit));
+    auto find = [&](uint32_t x) {
+        uint32_t r = x;
+        while (parent[r] != r) r = parent[r];
+        while (parent[x] != r) {
+            const uint32_t next = parent[x];
+            parent[x] = r;
+            x = next;
+        }
+        return r;
+    };
+    for (uint32_t k = 0; k < n_valid; ++k) {
+        const uint32_t p = order[k];
+        const uint32_t lp = level[p];
+        const int x = static_cast<int>(p % static_cast<uint32_t>(w)), y = static_cast<int>(p / static_cast<uint32_t>(w));
+        uint32_t roots[4];
+        int nr = 0;
+        auto visit = [&](uint32_t q) {
+            if (parent[q] == kNone) return;
+            const uint32_t r = find(q);
+            for (int i = 0; i < nr; ++i)
+                if (roots[i] == r) return;
+            roots[nr++] = r;
+        };
+        if (x > 0) visit(p - 1);
+        if (x < w - 1) visit(p + 1);
+        if (y > 0) visit(p - static_cast<uint32_t>(w));
+        if (y < h - 1) visit(p + static_cast<uint32_t>(w));
+        if (nr == 0) {
+            parent[p] = p;
+            min_level[p] = static_cast<uint16_t>(lp);
+            continue;
+        }
+        // Deepest basin first (lowest minimum, then lowest root index).
+        auto deeper = [&](uint32_t a, uint32_t b) {
+            return min_level[a] != min_level[b] ? min_level[a] < min_level[b] : a < b;
+        };
+        for (int i = 1; i < nr; ++i)  // insertion sort of at most 4 roots
+            for (int j = i; j > 0 && deeper(roots[j], roots[j - 1]); --j) std::swap(roots[j], roots[j - 1]);
+        const uint32_t deepest = roots[0];
+        for (int i = 1; i < nr; ++i)
+            if (lp - min_level[roots[i]] < h_levels) parent[roots[i]] = deepest;
+        parent[p] = deepest;
+        if ((k & 0xFFFFF) == 0) progress(0.5 + 0.4 * k / n_valid, "flooding");
+    }
+
+    Oversegmentation out;
+    out.labels = Image<uint32_t>(w, h, 1, 0u);
+    std::vector<uint32_t> root_label(n, 0);
+    uint32_t next = 0;
+    for (std::size_t i = 0; i < n; ++i) {
+        if (parent[i] == kNone) continue;
+        const uint32_t r = find(static_cast<uint32_t>(i));
+        if (!root_label[r]) root_label[r] = ++next;
+        out.labels.data[i] = root_label[r];
+    }
+    out.region_count = next;
+    progress(1.0, "watershed");
+    return out;
+}
+
+}  // namespace cityforge
