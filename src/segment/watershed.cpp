@@ -168,16 +168,26 @@ Oversegmentation watershed_oversegment(const Image<float>& image, const std::vec
         const int x = static_cast<int>(p % static_cast<uint32_t>(w)), y = static_cast<int>(p / static_cast<uint32_t>(w));
         uint32_t roots[4];
         int nr = 0;
+        // The flooded neighbour most similar in colour decides where p goes,
+        // so region borders follow the colour edge rather than the flooding order.
+        uint32_t closest_root = kNone;
+        float closest = 0.0f;
         auto visit = [&](uint32_t q) {
             if (parent[q] == kNone) return;
             const uint32_t r = find(q);
+            float d = 0.0f;
+            for (int b = 0; b < image.bands; ++b) {
+                const float diff = image.band_data(b)[p] - image.band_data(b)[q];
+                d += diff * diff;
+            }
+            if (closest_root == kNone || d < closest) closest = d, closest_root = r;
             for (int i = 0; i < nr; ++i)
                 if (roots[i] == r) return;
             roots[nr++] = r;
         };
+        if (y > 0) visit(p - static_cast<uint32_t>(w));
         if (x > 0) visit(p - 1);
         if (x < w - 1) visit(p + 1);
-        if (y > 0) visit(p - static_cast<uint32_t>(w));
         if (y < h - 1) visit(p + static_cast<uint32_t>(w));
         if (nr == 0) {
             parent[p] = p;
@@ -191,9 +201,13 @@ Oversegmentation watershed_oversegment(const Image<float>& image, const std::vec
         for (int i = 1; i < nr; ++i)  // insertion sort of at most 4 roots
             for (int j = i; j > 0 && deeper(roots[j], roots[j - 1]); --j) std::swap(roots[j], roots[j - 1]);
         const uint32_t deepest = roots[0];
+        bool closest_merged = false;
         for (int i = 1; i < nr; ++i)
-            if (lp - min_level[roots[i]] < h_levels) parent[roots[i]] = deepest;
-        parent[p] = deepest;
+            if (lp - min_level[roots[i]] < h_levels) {
+                parent[roots[i]] = deepest;
+                closest_merged = closest_merged || roots[i] == closest_root;
+            }
+        parent[p] = closest_merged ? deepest : closest_root;
         if ((k & 0xFFFFF) == 0) progress(0.5 + 0.4 * k / n_valid, "flooding");
     }
 

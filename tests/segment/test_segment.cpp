@@ -1,0 +1,166 @@
+#include <catch2/catch.hpp>
+#include <map>
+#include <set>
+
+#include "core/error.hpp"
+#include "pipeline/segment_raster.hpp"
+#include "raster/raster.hpp"
+#include "segment/region_merging.hpp"
+#include "segment/watershed.hpp"
+#include "synth/synth.hpp"
+#include "test_support.hpp"
+
+using namespace cityforge;
+using cityforge::test::ScratchDir;
+using cityforge::test::shared_data;
+
+namespace {
+// Four flat-colour rectangles with exact truth labels 1..4.
+void four_regions(Image<float>& img, Image<uint32_t>& truth) {
+    img = Image<float>(60, 40, 3, 0.0f);
+    truth = Image<uint32_t>(60, 40, 1, 0u);
+    const float colours[4][3] = {{200, 40, 40}, {40, 200, 40}, {40, 40, 200}, {220, 220, 60}};
+    for (int r = 0; r < 40; ++r)
+        for (int c = 0; c < 60; ++c) {
+            const int k = (c < 25 ? 0 : 1) + (r < 15 ? 0 : 2);
+            truth.at(0, c, r) = static_cast<uint32_t>(k + 1);
+            for (int b = 0; b < 3; ++b) img.at(b, c, r) = colours[k][b];
+        }
+}
+// True when a and b induce the same partition of the pixels.
+bool same_partition(const Image<uint32_t>& a, const Image<uint32_t>& b) {
+    std::map<uint32_t, uint32_t> ab, ba;
+    for (std::size_t i = 0; i < a.data.size(); ++i) {
+        auto [x, inserted_x] = ab.emplace(a.data[i], b.data[i]);
+        auto [y, inserted_y] = ba.emplace(b.data[i], a.data[i]);
+        if (x->second != b.data[i] || y->second != a.data[i]) return false;
+    }
+    return true;
+}
+}  // namespace
+
+TEST_CASE("Merging recovers flat-colour regions exactly with every strategy", "[segment]") {
+    Image<float> img;
+    Image<uint32_t> truth;
+    four_regions(img, truth);
+    WatershedOptions wo;
+    wo.smoothing_sigma_px = 0.0;
+    wo.h_minima = 0.0;
+    const Oversegmentation over = watershed_oversegment(img, {}, wo);
+    REQUIRE(over.region_count >= 4);
+    for (uint32_t v : over.labels.data) REQUIRE(v >= 1);  // every pixel labelled, no watershed lines
+    for (auto s : {QueueStrategy::rag, QueueStrategy::nng, QueueStrategy::mutual}) {
+        INFO(to_string(s));
+        RegionMergingOptions mo;
+        mo.scales = {20};
+        mo.strategy = s;
+        const auto res = merge_regions(img, over.labels, over.region_count, mo);
+        CHECK(res.levels[0].regions_after == 4);
+        CHECK(same_partition(relabel(over.labels, res.levels[0].label_of_input), truth));
+    }
+}
+
+TEST_CASE("Hierarchy is consistent and labels contiguous - same labels for every strategy", "[segment]") {
+    ScratchDir dir("seg_synth");
+    SynthOptions so;
+    so.size_m = 150;
+    so.cloud_density_m2 = 0;
+    write_synthetic_town(dir.path.string(), so);
+    Image<float> img = RasterReader(dir / "ortho.tif").read_all<float>();
+    normalize_bands(img, {});
+    const Oversegmentation over = watershed_oversegment(img, {}, WatershedOptions{});
+    RegionMergingOptions mo;
+    mo.scales = {10, 20, 40, 80};
+    std::vector<std::vector<uint32_t>> tables[3];
+    int k = 0;
+    for (auto s : {QueueStrategy::rag, QueueStrategy::nng, QueueStrategy::mutual}) {
+        mo.strategy = s;
+        const auto res = merge_regions(img, over.labels, over.region_count, mo);
+        uint32_t previous = over.region_count;
+        const Image<uint32_t>* prev_labels = &over.labels;
+        Image<uint32_t> prev_store;
+        for (const auto& l : res.levels) {
+            CHECK(l.regions_before == previous);
+            CHECK(l.regions_after <= l.regions_before);
+            CHECK(l.regions_before - l.regions_after == l.merges);
+            const Image<uint32_t> cur = relabel(over.labels, l.label_of_input);
+            std::set<uint32_t> used(cur.data.begin(), cur.data.end());
+            CHECK(used.size() == l.regions_after);
+            CHECK(*used.begin() == 1);
+            CHECK(*used.rbegin() == l.regions_after);
+            bool consistent = true;
+            for (std::size_t i = 0; i < cur.data.size(); ++i) consistent = consistent && l.parent[prev_labels->data[i]] == cur.data[i];
+            CHECK(consistent);
+            prev_store = cur;
+            prev_labels = &prev_store;
+            previous = l.regions_after;
+            tables[k].push_back(l.label_of_input);
+        }
+        ++k;
+    }
+    CHECK(tables[0] == tables[1]);
+    CHECK(tables[0] == tables[2]);
+    CHECK(tables[0].back().size() == over.region_count + 1);
+}
+
+TEST_CASE("Real panchromatic UInt16 tile segments - region count falls with scale", "[segment][real]") {
+    ScratchDir dir("seg_atl");
+    SegmentOptions o;
+    o.merging.scales = {10, 20, 40};
+    const SegmentReport r = segment_raster(shared_data("spacenet4_atlanta_pan_west/atlanta_pan_0p5m_west.tif"), dir / "out", o);
+    CHECK(r.oversegmentation_regions > 500);
+    REQUIRE(r.levels.size() == 3);
+    CHECK(r.levels[0].regions_after < r.oversegmentation_regions);
+    CHECK(r.levels[1].regions_after < r.levels[0].regions_after);
+    CHECK(r.levels[2].regions_after < r.levels[1].regions_after);
+    const RasterInfo li = read_raster_info(r.levels[2].labels_path);
+    CHECK(li.crs.epsg == 32616);
+    CHECK(li.width == 450);
+    CHECK(li.bands[0].type == SampleType::uint32);
+    // Nodata (0) pixels of the input stay 0 in the labels and never merge.
+    RasterReader in(shared_data("spacenet4_atlanta_pan_west/atlanta_pan_0p5m_west.tif"));
+    const auto src = in.read_all<uint16_t>();
+    const auto lab = RasterReader(r.levels[2].labels_path).read_all<uint32_t>();
+    for (std::size_t i = 0; i < src.data.size(); ++i) REQUIRE((src.data[i] == 0) == (lab.data[i] == 0));
+}
+
+TEST_CASE("Autzen ortho in feet is resampled to the 0.5 m working grid and labels come back on the input grid", "[segment][real]") {
+    ScratchDir dir("seg_autzen");
+    SegmentOptions o;
+    o.merging.scales = {20};
+    // A 600 x 600 px crop keeps the test fast.
+    RasterReader reader(shared_data("autzen_oregon/autzen_ortho_1ft_epsg2994.tif"));
+    const auto crop = reader.read<uint8_t>({1000, 1000, 600, 600});
+    write_geotiff(dir / "crop.tif", crop, reader.info().transform.window(1000, 1000), reader.info().crs.wkt);
+    const SegmentReport r = segment_raster(dir / "crop.tif", dir / "out", o);
+    CHECK(r.working_width == Approx(600 * 0.3048 / 0.5).margin(1));
+    const RasterInfo li = read_raster_info(r.levels[0].labels_path);
+    CHECK(li.width == 600);
+    CHECK(li.crs.horizontal_epsg == 2994);
+}
+
+TEST_CASE("Bad segmentation input is refused before anything is written", "[segment][errors]") {
+    ScratchDir dir("seg_bad");
+    const std::string tif = shared_data("spacenet4_atlanta_pan_west/atlanta_pan_0p5m_west.tif");
+    SegmentOptions o;
+    o.merging.scales = {20, 10};
+    CHECK_THROWS_WITH(segment_raster(tif, dir / "o", o), Catch::Contains("--scales") && Catch::Contains("increasing"));
+    o.merging.scales = {0, 10};
+    CHECK_THROWS_WITH(segment_raster(tif, dir / "o", o), Catch::Contains("--scales") && Catch::Contains("> 0"));
+    o.merging.scales = {10};
+    o.merging.band_weights = {1, 1, 1};
+    CHECK_THROWS_WITH(segment_raster(tif, dir / "o", o), Catch::Contains("--band-weights") && Catch::Contains("1 band"));
+    o.merging.band_weights.clear();
+    Image<uint8_t> flat(50, 50, 3, 128);
+    const GeoTransform gt{500000, 0.5, 4400000, -0.5};
+    const std::string wkt = read_raster_info(tif).crs.wkt;
+    write_geotiff(dir / "flat.tif", flat, gt, wkt);
+    CHECK_THROWS_WITH(segment_raster(dir / "flat.tif", dir / "o", o), Catch::Contains("flat.tif") && Catch::Contains("single value"));
+    Image<uint16_t> empty(50, 50, 1, 0);
+    GeoTiffWriteOptions nd;
+    nd.nodata = 0;
+    write_geotiff(dir / "nodata.tif", empty, gt, wkt, nd);
+    CHECK_THROWS_WITH(segment_raster(dir / "nodata.tif", dir / "o", o), Catch::Contains("nodata.tif") && Catch::Contains("only nodata"));
+    CHECK_FALSE(std::filesystem::exists(dir / "o"));
+    CHECK_THROWS_WITH(segment_options_from_json(nlohmann::json{{"scalez", {1}}}, "cfg.json"), Catch::Contains("cfg.json") && Catch::Contains("unknown key 'scalez'"));
+}
