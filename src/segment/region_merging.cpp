@@ -189,6 +189,10 @@ public:
         nn_[r] = best;
         nn_cost_[r] = best_cost;
     }
+    // Makes `candidate` r's nearest neighbour if it beats the current one on (cost, id).
+    void offer_candidate(uint32_t r, uint32_t candidate, double c) {
+        if (c < nn_cost_[r] || (c == nn_cost_[r] && candidate < nn_[r])) nn_[r] = candidate, nn_cost_[r] = c;
+    }
     uint32_t nn(uint32_t r) const { return nn_[r]; }
     double nn_cost(uint32_t r) const { return nn_cost_[r]; }
 
@@ -327,7 +331,12 @@ RegionMergingResult merge_regions(const Image<float>& image, const Image<uint32_
                 for (const Neighbour& k : g.neighbours(m)) push_pair(m, k.id, g.pair_cost(m, k));
             } else {
                 g.update_nn(m);
-                for (const Neighbour& k : g.neighbours(m)) g.update_nn(k.id);
+                // A neighbour's costs changed only towards m: rescan it fully only
+                // when its nearest neighbour was one of the merged pair.
+                for (const Neighbour& k : g.neighbours(m)) {
+                    if (g.nn(k.id) == e.a || g.nn(k.id) == e.b) g.update_nn(k.id);
+                    else g.offer_candidate(k.id, m, g.pair_cost(k.id, {m, k.shared}));
+                }
                 offer_nn(m);
                 for (const Neighbour& k : g.neighbours(m)) offer_nn(k.id);
             }
