@@ -7,6 +7,8 @@
 #include <stdexcept>
 #include <vector>
 
+#include "core/large_buffer.hpp"
+
 namespace cityforge {
 
 template <typename T>
@@ -14,7 +16,7 @@ struct Image {
     int width = 0;
     int height = 0;
     int bands = 0;
-    std::vector<T> data;
+    LargeVector<T> data;  ///< band-sequential samples
 
     Image() = default;
     Image(int w, int h, int b, T fill = T{})

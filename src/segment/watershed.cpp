@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <memory>
 #include <numeric>
 #include <string>
 #include <tbb/parallel_for.h>
@@ -49,27 +50,36 @@ void normalize_bands(Image<float>& image, const std::vector<uint8_t>& valid) {
 namespace {
 
 // Separable Gaussian blur of one band, edges clamped.
-void gaussian_blur(const float* in, float* out, int w, int h, double sigma) {
+void gaussian_blur(const float* in, float* out, float* tmp_buffer, int w, int h, double sigma) {
     const int radius = std::max(1, static_cast<int>(std::ceil(3.0 * sigma)));
     std::vector<float> k(2 * radius + 1);
     double sum = 0.0;
     for (int i = -radius; i <= radius; ++i) sum += k[i + radius] = static_cast<float>(std::exp(-0.5 * i * i / (sigma * sigma)));
     for (auto& x : k) x = static_cast<float>(x / sum);
-    std::vector<float> tmp(static_cast<std::size_t>(w) * h);
     tbb::parallel_for(0, h, [&](int y) {
         const float* row = in + static_cast<std::size_t>(y) * w;
-        float* t = tmp.data() + static_cast<std::size_t>(y) * w;
-        for (int x = 0; x < w; ++x) {
+        float* t = tmp_buffer + static_cast<std::size_t>(y) * w;
+        // Borders clamp; the interior runs without branches so it vectorises.
+        auto clamped = [&](int x) {
             float s = 0.0f;
             for (int i = -radius; i <= radius; ++i) s += k[i + radius] * row[std::clamp(x + i, 0, w - 1)];
-            t[x] = s;
+            return s;
+        };
+        const int lo = std::min(radius, w), hi = std::max(lo, w - radius);
+        for (int x = 0; x < lo; ++x) t[x] = clamped(x);
+        for (int x = lo; x < hi; ++x) t[x] = 0.0f;
+        for (int i = -radius; i <= radius; ++i) {
+            const float ki = k[i + radius];
+            const float* src = row + i;
+            for (int x = lo; x < hi; ++x) t[x] += ki * src[x];
         }
+        for (int x = hi; x < w; ++x) t[x] = clamped(x);
     });
     tbb::parallel_for(0, h, [&](int y) {
         float* o = out + static_cast<std::size_t>(y) * w;
         for (int x = 0; x < w; ++x) o[x] = 0.0f;
         for (int i = -radius; i <= radius; ++i) {
-            const float* t = tmp.data() + static_cast<std::size_t>(std::clamp(y + i, 0, h - 1)) * w;
+            const float* t = tmp_buffer + static_cast<std::size_t>(std::clamp(y + i, 0, h - 1)) * w;
             const float ki = k[i + radius];
             for (int x = 0; x < w; ++x) o[x] += ki * t[x];
         }
@@ -81,13 +91,14 @@ void gaussian_blur(const float* in, float* out, int w, int h, double sigma) {
 Image<float> multiband_gradient(const Image<float>& image, const WatershedOptions& options) {
     const int w = image.width, h = image.height;
     Image<float> grad(w, h, 1, 0.0f);
-    std::vector<float> smooth(image.pixel_count());
+    LargeVector<float> smooth, tmp;
+    if (options.smoothing_sigma_px > 0.0) smooth.resize(image.pixel_count()), tmp.resize(image.pixel_count());
     for (int b = 0; b < image.bands; ++b) {
         const double wb = options.band_weights.empty() ? 1.0 : options.band_weights[b];
         if (wb == 0.0) continue;
         const float* src = image.band_data(b);
         if (options.smoothing_sigma_px > 0.0) {
-            gaussian_blur(src, smooth.data(), w, h, options.smoothing_sigma_px);
+            gaussian_blur(src, smooth.data(), tmp.data(), w, h, options.smoothing_sigma_px);
             src = smooth.data();
         }
         const auto fw = static_cast<float>(wb);
@@ -97,12 +108,14 @@ Image<float> multiband_gradient(const Image<float>& image, const WatershedOption
             const float* m = src + static_cast<std::size_t>(y) * w;
             const float* c = src + static_cast<std::size_t>(y1) * w;
             float* g = grad.band_data(0) + static_cast<std::size_t>(y) * w;
-            for (int x = 0; x < w; ++x) {
-                const int x0 = std::max(0, x - 1), x1 = std::min(w - 1, x + 1);
+            auto sobel = [&](int x, int x0, int x1) {
                 const float gx = (a[x1] + 2 * m[x1] + c[x1]) - (a[x0] + 2 * m[x0] + c[x0]);
                 const float gy = (c[x0] + 2 * c[x] + c[x1]) - (a[x0] + 2 * a[x] + a[x1]);
                 g[x] += fw * (gx * gx + gy * gy);
-            }
+            };
+            sobel(0, 0, std::min(1, w - 1));
+            for (int x = 1; x < w - 1; ++x) sobel(x, x - 1, x + 1);
+            if (w > 1) sobel(w - 1, w - 2, w - 1);
         });
     }
     // Sobel sums 8 weighted differences; /8 brings the gradient back to grey-level units.
@@ -127,12 +140,10 @@ Oversegmentation watershed_oversegment(const Image<float>& image, const std::vec
     // Quantise to integer levels (1/4 grey level) for a bucket (hierarchical) queue.
     constexpr float kLevelsPerUnit = 4.0f;
     const float* g = grad.band_data(0);
-    std::vector<uint16_t> level(n);
-    uint32_t max_level = 0;
-    for (std::size_t i = 0; i < n; ++i) {
-        level[i] = static_cast<uint16_t>(std::min(65535.0f, g[i] * kLevelsPerUnit));
-        max_level = std::max<uint32_t>(max_level, level[i]);
-    }
+    // Buffers written before they are read are left uninitialised (no memset).
+    LargeVector<uint16_t> level(n);
+    parallel_for_each_index(n, [&](std::size_t i) { level[i] = static_cast<uint16_t>(std::min(65535.0f, g[i] * kLevelsPerUnit)); });
+    const uint32_t max_level = *std::max_element(level.begin(), level.end());
     // Counting sort of valid pixels by level; ties stay in raster order (deterministic).
     std::vector<uint32_t> count(max_level + 2, 0);
     for (std::size_t i = 0; i < n; ++i)
@@ -140,7 +151,9 @@ Oversegmentation watershed_oversegment(const Image<float>& image, const std::vec
     for (std::size_t l = 1; l < count.size(); ++l) count[l] += count[l - 1];
     const uint32_t n_valid = count.back();
     if (n_valid == 0) throw Error("watershed", "image has no valid (non-nodata) pixels");
-    std::vector<uint32_t> order(n_valid);
+    LargeVector<uint32_t> order;
+    order.reserve(n);  // reused as the root -> label table at the end
+    order.resize(n_valid);
     for (std::size_t i = 0; i < n; ++i)
         if (valid.empty() || valid[i]) order[count[level[i]]++] = static_cast<uint32_t>(i);
     progress(0.5, "sorting");
@@ -149,8 +162,8 @@ Oversegmentation watershed_oversegment(const Image<float>& image, const std::vec
     // level of its basin's minimum; basins meeting at level L merge when the
     // shallower one's depth (L - its minimum) is below h.
     constexpr uint32_t kNone = 0xFFFFFFFFu;
-    std::vector<uint32_t> parent(n, kNone);
-    std::vector<uint16_t> min_level(n, 0);
+    LargeVector<uint32_t> parent(n, kNone);
+    LargeVector<uint16_t> min_level(n);
     const auto h_levels = static_cast<uint32_t>(std::lround(options.h_minima * kLevelsPerUnit));
     auto find = [&](uint32_t x) {
         uint32_t r = x;
@@ -163,36 +176,44 @@ Oversegmentation watershed_oversegment(const Image<float>& image, const std::vec
         return r;
     };
     for (uint32_t k = 0; k < n_valid; ++k) {
+        if ((k & 0xFFFFF) == 0) progress(0.5 + 0.4 * k / n_valid, "flooding");
         const uint32_t p = order[k];
         const uint32_t lp = level[p];
         const int x = static_cast<int>(p % static_cast<uint32_t>(w)), y = static_cast<int>(p / static_cast<uint32_t>(w));
-        uint32_t roots[4];
+        uint32_t roots[4], via[4];
         int nr = 0;
-        // The flooded neighbour most similar in colour decides where p goes,
-        // so region borders follow the colour edge rather than the flooding order.
-        uint32_t closest_root = kNone;
-        float closest = 0.0f;
         auto visit = [&](uint32_t q) {
             if (parent[q] == kNone) return;
             const uint32_t r = find(q);
-            float d = 0.0f;
-            for (int b = 0; b < image.bands; ++b) {
-                const float diff = image.band_data(b)[p] - image.band_data(b)[q];
-                d += diff * diff;
-            }
-            if (closest_root == kNone || d < closest) closest = d, closest_root = r;
             for (int i = 0; i < nr; ++i)
                 if (roots[i] == r) return;
+            via[nr] = q;
             roots[nr++] = r;
         };
         if (y > 0) visit(p - static_cast<uint32_t>(w));
         if (x > 0) visit(p - 1);
         if (x < w - 1) visit(p + 1);
         if (y < h - 1) visit(p + static_cast<uint32_t>(w));
+        if (nr == 1) {
+            parent[p] = roots[0];
+            continue;
+        }
         if (nr == 0) {
             parent[p] = p;
             min_level[p] = static_cast<uint16_t>(lp);
             continue;
+        }
+        // The flooded neighbour most similar in colour decides where p goes, so
+        // region borders follow the colour edge rather than the flooding order.
+        uint32_t closest_root = roots[0];
+        float closest = INFINITY;
+        for (int i = 0; i < nr; ++i) {
+            float d = 0.0f;
+            for (int b = 0; b < image.bands; ++b) {
+                const float diff = image.band_data(b)[p] - image.band_data(b)[via[i]];
+                d += diff * diff;
+            }
+            if (d < closest) closest = d, closest_root = roots[i];
         }
         // Deepest basin first (lowest minimum, then lowest root index).
         auto deeper = [&](uint32_t a, uint32_t b) {
@@ -208,19 +229,27 @@ Oversegmentation watershed_oversegment(const Image<float>& image, const std::vec
                 closest_merged = closest_merged || roots[i] == closest_root;
             }
         parent[p] = closest_merged ? deepest : closest_root;
-        if ((k & 0xFFFFF) == 0) progress(0.5 + 0.4 * k / n_valid, "flooding");
     }
 
-    Oversegmentation out;
-    out.labels = Image<uint32_t>(w, h, 1, 0u);
-    std::vector<uint32_t> root_label(n, 0);
+    // Label in place: parent[i] becomes the basin's label, numbered in raster
+    // order of first appearance; `order` is reused as the root -> label table.
+    for (std::size_t i = 0; i < n; ++i)
+        if (parent[i] != kNone) parent[i] = find(static_cast<uint32_t>(i));
+    LargeVector<uint32_t>& root_label = order;
+    root_label.assign(n, 0);
     uint32_t next = 0;
     for (std::size_t i = 0; i < n; ++i) {
-        if (parent[i] == kNone) continue;
-        const uint32_t r = find(static_cast<uint32_t>(i));
+        const uint32_t r = parent[i];
+        if (r == kNone) {
+            parent[i] = 0;
+            continue;
+        }
         if (!root_label[r]) root_label[r] = ++next;
-        out.labels.data[i] = root_label[r];
+        parent[i] = root_label[r];
     }
+    Oversegmentation out;
+    out.labels.width = w, out.labels.height = h, out.labels.bands = 1;
+    out.labels.data = std::move(parent);
     out.region_count = next;
     progress(1.0, "watershed");
     return out;
