@@ -72,7 +72,10 @@ int main(int argc, char** argv) {
                     for (uint32_t v : over.labels.data) agree += last[v] == rag_final[v];
                     ras = double(agree) / double(over.labels.data.size());
                 }
-                std::printf("%-8s total %.3f s over %zu scales, RAS vs rag %.4f\n", to_string(s).c_str(), total, sc->size(), ras);
+                double merging = 0.0;
+                for (const auto& l : res.levels) merging += l.seconds;
+                std::printf("%-8s total %.3f s over %zu scales (graph %.3f s, merging %.3f s), RAS vs rag %.4f\n",
+                            to_string(s).c_str(), total, sc->size(), res.graph_seconds, merging, ras);
             }
         }
         std::printf("peak RSS so far: %.1f MB (%.1f bytes/pixel of the largest scene)\n", double(peak_rss_kb()) / 1024.0,

@@ -4,6 +4,9 @@
 #include <chrono>
 #include <cmath>
 #include <queue>
+#include <tbb/enumerable_thread_specific.h>
+#include <tbb/parallel_reduce.h>
+#include <tbb/parallel_sort.h>
 #include <tbb/parallel_for.h>
 
 #include "core/error.hpp"
@@ -56,6 +59,8 @@ Image<uint32_t> relabel(const Image<uint32_t>& labels, const std::vector<uint32_
 
 namespace {
 
+__extension__ typedef __int128 int128;  // exact sums of squared fixed-point values
+
 struct Neighbour {
     uint32_t id;
     double shared;  // boundary length in pixel edges
@@ -82,45 +87,7 @@ public:
             for (double w : o.band_weights) s += w;
             for (int b = 0; b < bands_; ++b) weights_[b] = o.band_weights[b] / s;
         }
-        area_.assign(n_, 0.0);
-        perimeter_.assign(n_, 0.0);
-        sum_.assign(n_ * bands_, 0.0);
-        sumsq_.assign(n_ * bands_, 0.0);
-        x0_.assign(n_, INT32_MAX), y0_.assign(n_, INT32_MAX), x1_.assign(n_, -1), y1_.assign(n_, -1);
-        const int w = labels.width, h = labels.height;
-        const uint32_t* lab = labels.band_data(0);
-        std::vector<uint64_t> pairs;  // (min << 32 | max) per shared pixel edge
-        for (int y = 0; y < h; ++y) {
-            for (int x = 0; x < w; ++x) {
-                const std::size_t i = static_cast<std::size_t>(y) * w + x;
-                const uint32_t a = lab[i];
-                if (!a) continue;
-                if (a >= n_) throw Error("region merging", "label " + std::to_string(a) + " exceeds the region count");
-                area_[a] += 1.0;
-                for (int b = 0; b < bands_; ++b) {
-                    const double v = image.band_data(b)[i];
-                    sum_[a * bands_ + b] += v;
-                    sumsq_[a * bands_ + b] += v * v;
-                }
-                x0_[a] = std::min(x0_[a], x), x1_[a] = std::max(x1_[a], x);
-                y0_[a] = std::min(y0_[a], y), y1_[a] = std::max(y1_[a], y);
-                const uint32_t left = x > 0 ? lab[i - 1] : 0, up = y > 0 ? lab[i - w] : 0;
-                const uint32_t right = x < w - 1 ? lab[i + 1] : 0, down = y < h - 1 ? lab[i + w] : 0;
-                perimeter_[a] += (left != a) + (up != a) + (right != a) + (down != a);
-                if (right && right != a) pairs.push_back(key(a, right));
-                if (down && down != a) pairs.push_back(key(a, down));
-            }
-        }
-        std::sort(pairs.begin(), pairs.end());
-        adj_.assign(n_, {});
-        for (std::size_t k = 0; k < pairs.size();) {
-            std::size_t e = k;
-            while (e < pairs.size() && pairs[e] == pairs[k]) ++e;
-            const auto a = static_cast<uint32_t>(pairs[k] >> 32), b = static_cast<uint32_t>(pairs[k] & 0xFFFFFFFFu);
-            adj_[a].push_back({b, double(e - k)});
-            adj_[b].push_back({a, double(e - k)});
-            k = e;
-        }
+        build(image, labels);
         for (auto& list : adj_) std::sort(list.begin(), list.end(), [](const Neighbour& p, const Neighbour& q) { return p.id < q.id; });
         alive_.assign(n_, 0);
         version_.assign(n_, 0);
@@ -132,6 +99,101 @@ public:
         }
         nn_.assign(n_, 0);
         nn_cost_.assign(n_, INFINITY);
+    }
+
+    // Region statistics and adjacency from the label raster, in parallel over
+    // row blocks. Band values are accumulated as exact integers (fixed point,
+    // 2^-k grey levels) so the totals do not depend on how rows were split
+    // between threads: same labels and image -> same statistics, bit for bit.
+    void build(const Image<float>& image, const Image<uint32_t>& labels) {
+        const int w = labels.width, h = labels.height;
+        const uint32_t* lab = labels.band_data(0);
+        const float max_abs = tbb::parallel_reduce(
+            tbb::blocked_range<std::size_t>(0, image.data.size(), 1 << 16), 0.0f,
+            [&](const tbb::blocked_range<std::size_t>& r, float m) {
+                for (std::size_t i = r.begin(); i != r.end(); ++i) m = std::max(m, std::abs(image.data[i]));
+                return m;
+            },
+            [](float a, float b) { return std::max(a, b); });
+        double fixed = 1.0;  // largest power of two keeping |v| * fixed <= 2^24
+        while (max_abs * fixed * 2.0 <= 16777216.0 && fixed < 65536.0) fixed *= 2.0;
+        while (max_abs * fixed > 16777216.0) fixed *= 0.5;
+        const std::size_t nb = static_cast<std::size_t>(n_) * bands_;
+        struct Partial {
+            std::vector<int64_t> area, perimeter, sum;
+            std::vector<int128> sumsq;
+            std::vector<int> x0, y0, x1, y1;
+            std::vector<std::pair<uint64_t, uint32_t>> pairs;  // (pair key, shared edges)
+        };
+        tbb::enumerable_thread_specific<Partial> partials([&] {
+            Partial p;
+            p.area.assign(n_, 0), p.perimeter.assign(n_, 0), p.sum.assign(nb, 0), p.sumsq.assign(nb, 0);
+            p.x0.assign(n_, INT32_MAX), p.y0.assign(n_, INT32_MAX), p.x1.assign(n_, -1), p.y1.assign(n_, -1);
+            return p;
+        });
+        tbb::parallel_for(tbb::blocked_range<int>(0, h, 64), [&](const tbb::blocked_range<int>& rows) {
+            Partial& P = partials.local();
+            for (int y = rows.begin(); y != rows.end(); ++y) {
+                uint64_t last_down = 0;  // runs of the same vertical neighbour pair collapse into one entry
+                for (int x = 0; x < w; ++x) {
+                    const std::size_t i = static_cast<std::size_t>(y) * w + x;
+                    const uint32_t a = lab[i];
+                    if (!a) continue;
+                    if (a >= n_) throw Error("region merging", "label " + std::to_string(a) + " exceeds the region count");
+                    ++P.area[a];
+                    for (int b = 0; b < bands_; ++b) {
+                        const double v = image.band_data(b)[i] * fixed;  // round half away from zero
+                        const auto q = static_cast<int64_t>(v + (v >= 0.0 ? 0.5 : -0.5));
+                        P.sum[a * bands_ + b] += q;
+                        P.sumsq[a * bands_ + b] += static_cast<int128>(q) * q;
+                    }
+                    P.x0[a] = std::min(P.x0[a], x), P.x1[a] = std::max(P.x1[a], x);
+                    P.y0[a] = std::min(P.y0[a], y), P.y1[a] = std::max(P.y1[a], y);
+                    const uint32_t left = x > 0 ? lab[i - 1] : 0, up = y > 0 ? lab[i - w] : 0;
+                    const uint32_t right = x < w - 1 ? lab[i + 1] : 0, down = y < h - 1 ? lab[i + w] : 0;
+                    P.perimeter[a] += (left != a) + (up != a) + (right != a) + (down != a);
+                    if (right && right != a) P.pairs.push_back({key(a, right), 1});
+                    if (down && down != a) {
+                        const uint64_t k = key(a, down);
+                        if (k == last_down && !P.pairs.empty() && P.pairs.back().first == k) ++P.pairs.back().second;
+                        else P.pairs.push_back({k, 1});
+                        last_down = k;
+                    } else {
+                        last_down = 0;
+                    }
+                }
+            }
+        });
+        area_.assign(n_, 0.0), perimeter_.assign(n_, 0.0), sum_.assign(nb, 0.0), sumsq_.assign(nb, 0.0);
+        x0_.assign(n_, INT32_MAX), y0_.assign(n_, INT32_MAX), x1_.assign(n_, -1), y1_.assign(n_, -1);
+        std::vector<int64_t> area(n_, 0), perimeter(n_, 0), sum(nb, 0);
+        std::vector<int128> sumsq(nb, 0);
+        std::vector<std::pair<uint64_t, uint32_t>> pairs;
+        for (Partial& P : partials) {
+            for (uint32_t r = 0; r < n_; ++r) {
+                area[r] += P.area[r], perimeter[r] += P.perimeter[r];
+                x0_[r] = std::min(x0_[r], P.x0[r]), x1_[r] = std::max(x1_[r], P.x1[r]);
+                y0_[r] = std::min(y0_[r], P.y0[r]), y1_[r] = std::max(y1_[r], P.y1[r]);
+            }
+            for (std::size_t k = 0; k < nb; ++k) sum[k] += P.sum[k], sumsq[k] += P.sumsq[k];
+            pairs.insert(pairs.end(), P.pairs.begin(), P.pairs.end());
+        }
+        for (uint32_t r = 0; r < n_; ++r) area_[r] = static_cast<double>(area[r]), perimeter_[r] = static_cast<double>(perimeter[r]);
+        for (std::size_t k = 0; k < nb; ++k) {
+            sum_[k] = static_cast<double>(sum[k]) / fixed;
+            sumsq_[k] = static_cast<double>(sumsq[k]) / (fixed * fixed);
+        }
+        tbb::parallel_sort(pairs.begin(), pairs.end());
+        adj_.assign(n_, {});
+        for (std::size_t k = 0; k < pairs.size();) {
+            std::size_t e = k;
+            uint32_t shared = 0;
+            while (e < pairs.size() && pairs[e].first == pairs[k].first) shared += pairs[e++].second;
+            const auto a = static_cast<uint32_t>(pairs[k].first >> 32), b = static_cast<uint32_t>(pairs[k].first & 0xFFFFFFFFu);
+            adj_[a].push_back({b, double(shared)});
+            adj_[b].push_back({a, double(shared)});
+            k = e;
+        }
     }
 
     static uint64_t key(uint32_t a, uint32_t b) {
@@ -271,8 +333,12 @@ RegionMergingResult merge_regions(const Image<float>& image, const Image<uint32_
     o.validate(image.bands);
     if (labels.width != image.width || labels.height != image.height)
         throw Error("region merging", "label raster and image differ in size");
+    RegionMergingResult result;
+    const auto t_graph = std::chrono::steady_clock::now();
     RegionGraph g(image, labels, region_count, o);
     const uint32_t n = g.size();
+    for (uint32_t r = 1; r < n; ++r) result.adjacent_pairs += g.neighbours(r).size();
+    result.adjacent_pairs /= 2;
     std::vector<uint32_t> uf(n);  // absorbed region -> survivor (union-find)
     for (uint32_t r = 0; r < n; ++r) uf[r] = r;
     auto find = [&](uint32_t x) {
@@ -284,7 +350,7 @@ RegionMergingResult merge_regions(const Image<float>& image, const Image<uint32_
         for (uint32_t r = 1; r < n; ++r)
             if (g.alive(r)) g.update_nn(r);
 
-    RegionMergingResult result;
+    result.graph_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t_graph).count();
     std::vector<uint32_t> previous_compact(n, 0);  // survivor id -> label at previous level
     {
         for (uint32_t r = 1; r < n; ++r) previous_compact[r] = g.alive(r) ? r : 0;

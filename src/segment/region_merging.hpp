@@ -66,6 +66,8 @@ struct ScaleLevel {
 };
 
 struct RegionMergingResult {
+    double graph_seconds = 0.0;   ///< building the region graph (statistics + adjacency)
+    uint64_t adjacent_pairs = 0;  ///< edges of the initial region adjacency graph
     std::vector<ScaleLevel> levels;
 };
 

@@ -1,6 +1,7 @@
 #include <catch2/catch.hpp>
 #include <map>
 #include <set>
+#include <tbb/global_control.h>
 
 #include "core/error.hpp"
 #include "pipeline/segment_raster.hpp"
@@ -163,4 +164,27 @@ TEST_CASE("Bad segmentation input is refused before anything is written", "[segm
     CHECK_THROWS_WITH(segment_raster(dir / "nodata.tif", dir / "o", o), Catch::Contains("nodata.tif") && Catch::Contains("only nodata"));
     CHECK_FALSE(std::filesystem::exists(dir / "o"));
     CHECK_THROWS_WITH(segment_options_from_json(nlohmann::json{{"scalez", {1}}}, "cfg.json"), Catch::Contains("cfg.json") && Catch::Contains("unknown key 'scalez'"));
+}
+
+TEST_CASE("Segmentation gives the same labels with 1 thread and with all threads", "[segment][determinism]") {
+    ScratchDir dir("seg_threads");
+    SynthOptions so;
+    so.size_m = 200;
+    so.cloud_density_m2 = 0;
+    so.seed = 11;
+    write_synthetic_town(dir.path.string(), so);
+    auto run = [&] {
+        Image<float> img = RasterReader(dir / "ortho.tif").read_all<float>();
+        normalize_bands(img, {});
+        const Oversegmentation over = watershed_oversegment(img, {}, WatershedOptions{});
+        RegionMergingOptions mo;
+        mo.scales = {10, 30, 60};
+        const auto res = merge_regions(img, over.labels, over.region_count, mo);
+        return std::make_pair(over.labels.data, res.levels.back().label_of_input);
+    };
+    const auto all_threads = run();
+    tbb::global_control one(tbb::global_control::max_allowed_parallelism, 1);
+    const auto one_thread = run();
+    CHECK(all_threads.first == one_thread.first);
+    CHECK(all_threads.second == one_thread.second);
 }
