@@ -44,29 +44,6 @@ VectorInfo read_vector_info(const std::string& path) {
     return info;
 }
 
-double signed_area(const Ring& r) {
-    double a = 0.0;
-    const std::size_t n = r.size();
-    for (std::size_t i = 0; i < n; ++i) {
-        const MapPoint& p = r[i];
-        const MapPoint& q = r[(i + 1) % n];
-        a += p.x * q.y - q.x * p.y;
-    }
-    return 0.5 * a;
-}
-
-double polygon_area(const Polygon& p) {
-    double a = std::abs(signed_area(p.outer));
-    for (const Ring& h : p.holes) a -= std::abs(signed_area(h));
-    return a;
-}
-
-void orient_polygon(Polygon& p) {
-    if (signed_area(p.outer) < 0) std::reverse(p.outer.begin(), p.outer.end());
-    for (Ring& h : p.holes)
-        if (signed_area(h) > 0) std::reverse(h.begin(), h.end());
-}
-
 namespace {
 OGRLinearRing to_ogr(const Ring& r) {
     OGRLinearRing ring;
@@ -100,7 +77,10 @@ void write_polygon_features(const std::string& path, const CrsInfo& crs, const s
         if (options.coordinate_precision > 0)
             lco.SetNameValue("COORDINATE_PRECISION", std::to_string(options.coordinate_precision).c_str());
     }
-    OGRLayer* layer = ds->CreateLayer(options.layer.c_str(), crs.empty() ? nullptr : &srs, wkbPolygon, lco.List());
+    bool any_multi = false;
+    for (const Feature& f : features) any_multi = any_multi || f.geometry.size() > 1;
+    OGRLayer* layer = ds->CreateLayer(options.layer.c_str(), crs.empty() ? nullptr : &srs,
+                                      any_multi ? wkbMultiPolygon : wkbPolygon, lco.List());
     bool ok = layer != nullptr;
     for (const FieldDefinition& f : fields) {
         if (!ok) break;
@@ -121,10 +101,15 @@ void write_polygon_features(const std::string& path, const CrsInfo& crs, const s
             else if (std::holds_alternative<std::string>(v)) f.SetField(idx, std::get<std::string>(v).c_str());
             else f.SetFieldNull(idx);
         }
-        OGRPolygon poly;
-        poly.addRingDirectly(new OGRLinearRing(to_ogr(feature.geometry.outer)));
-        for (const Ring& h : feature.geometry.holes) poly.addRingDirectly(new OGRLinearRing(to_ogr(h)));
-        f.SetGeometry(&poly);
+        OGRMultiPolygon multi;
+        for (const Polygon& part : feature.geometry) {
+            auto* poly = new OGRPolygon;
+            poly->addRingDirectly(new OGRLinearRing(to_ogr(part.outer)));
+            for (const Ring& h : part.holes) poly->addRingDirectly(new OGRLinearRing(to_ogr(h)));
+            multi.addGeometryDirectly(poly);
+        }
+        if (feature.geometry.size() == 1) f.SetGeometry(multi.getGeometryRef(0));
+        else f.SetGeometry(&multi);
         ok = layer->CreateFeature(&f) == OGRERR_NONE;
     }
     if (ok && options.driver == "GPKG") ok = layer->CommitTransaction() == OGRERR_NONE;
@@ -132,6 +117,77 @@ void write_polygon_features(const std::string& path, const CrsInfo& crs, const s
     ok = ok && CPLGetLastErrorType() < CE_Failure;
     if (!ok) fail("writing features failed");
     commit_file(tmp, path);
+}
+
+}  // namespace cityforge
+
+namespace cityforge {
+
+namespace {
+Ring from_ogr(const OGRLinearRing* r) {
+    Ring out;
+    const int n = r->getNumPoints();
+    for (int i = 0; i < n; ++i) out.push_back({r->getX(i), r->getY(i)});
+    if (out.size() > 1 && out.front().x == out.back().x && out.front().y == out.back().y) out.pop_back();
+    return out;
+}
+Polygon from_ogr(const OGRPolygon* p) {
+    Polygon out;
+    out.outer = from_ogr(p->getExteriorRing());
+    for (int i = 0; i < p->getNumInteriorRings(); ++i) out.holes.push_back(from_ogr(p->getInteriorRing(i)));
+    return out;
+}
+}  // namespace
+
+PolygonLayer read_polygon_layer(const std::string& path, const std::string& layer_name) {
+    ensure_gdal_registered();
+    if (!std::filesystem::exists(path)) throw Error(path, "file not found");
+    GdalErrorCapture capture;
+    std::unique_ptr<GDALDataset> ds(GDALDataset::Open(path.c_str(), GDAL_OF_VECTOR | GDAL_OF_READONLY));
+    if (!ds) throw Error(path, "not a vector dataset OGR can read" + capture.suffix());
+    OGRLayer* layer = layer_name.empty() ? (ds->GetLayerCount() > 0 ? ds->GetLayer(0) : nullptr)
+                                         : ds->GetLayerByName(layer_name.c_str());
+    if (!layer) throw Error(path, layer_name.empty() ? "has no layer" : "has no layer '" + layer_name + "'");
+    PolygonLayer out;
+    if (const OGRSpatialReference* srs = layer->GetSpatialRef()) {
+        char* wkt = nullptr;
+        const char* o[] = {"FORMAT=WKT2_2019", nullptr};
+        srs->exportToWkt(&wkt, o);
+        out.crs = crs_from_wkt(wkt ? wkt : "", path);
+        CPLFree(wkt);
+    }
+    OGRFeatureDefn* defn = layer->GetLayerDefn();
+    for (int i = 0; i < defn->GetFieldCount(); ++i) out.field_names.emplace_back(defn->GetFieldDefn(i)->GetNameRef());
+    layer->ResetReading();
+    for (auto& f : *layer) {
+        const OGRGeometry* g = f->GetGeometryRef();
+        const std::string where = path + " feature " + std::to_string(f->GetFID());
+        if (!g || g->IsEmpty()) throw Error(where, "has no geometry");
+        Feature feature;
+        const auto type = wkbFlatten(g->getGeometryType());
+        if (type == wkbPolygon) feature.geometry.push_back(from_ogr(g->toPolygon()));
+        else if (type == wkbMultiPolygon)
+            for (const OGRPolygon* p : *g->toMultiPolygon()) feature.geometry.push_back(from_ogr(p));
+        else throw Error(where, std::string("is a ") + OGRGeometryTypeToName(g->getGeometryType()) + ", not a polygon");
+        if (!g->IsValid()) throw Error(where, "is an invalid polygon (self-intersection or bad ring); repair it first, e.g. ogr2ogr -makevalid");
+        for (Polygon& p : feature.geometry) orient_polygon(p);
+        for (int i = 0; i < defn->GetFieldCount(); ++i)
+            feature.values.push_back(f->IsFieldSetAndNotNull(i) ? AttributeValue(std::string(f->GetFieldAsString(i))) : AttributeValue());
+        out.fids.push_back(f->GetFID());
+        out.features.push_back(std::move(feature));
+    }
+    if (out.features.empty()) throw Error(path, "layer holds no polygon");
+    return out;
+}
+
+std::string vector_driver_for(const std::string& path) {
+    std::string ext = std::filesystem::path(path).extension().string();
+    std::transform(ext.begin(), ext.end(), ext.begin(), [](unsigned char c) { return static_cast<char>(std::tolower(c)); });
+    if (ext == ".gpkg") return "GPKG";
+    if (ext == ".geojson" || ext == ".json") return "GeoJSON";
+    if (ext == ".fgb") return "FlatGeobuf";
+    if (ext == ".shp") return "ESRI Shapefile";
+    throw Error(path, "unknown vector output format (use .gpkg, .geojson, .fgb or .shp)");
 }
 
 }  // namespace cityforge

@@ -9,6 +9,7 @@
 #include <vector>
 
 #include "core/geo_transform.hpp"
+#include "core/geometry.hpp"
 #include "crs/crs.hpp"
 
 namespace cityforge {
@@ -32,20 +33,12 @@ struct VectorInfo {
 /// file when it is missing or not a vector dataset.
 VectorInfo read_vector_info(const std::string& path);
 
-/// A polygon ring: closed implicitly (first point not repeated), CRS units.
-using Ring = std::vector<MapPoint>;
-
-/// Polygon with holes: `outer` then any number of `holes`.
-struct Polygon {
-    Ring outer;
-    std::vector<Ring> holes;
-};
-
 /// Attribute value of a feature (null = std::monostate).
 using AttributeValue = std::variant<std::monostate, int64_t, double, std::string>;
 
+/// A (multi)polygon feature: one Polygon per part.
 struct Feature {
-    Polygon geometry;
+    std::vector<Polygon> geometry;
     std::vector<AttributeValue> values;  ///< one per field, in schema order
 };
 
@@ -63,17 +56,29 @@ struct VectorWriteOptions {
     int coordinate_precision = 0;  ///< 0 = driver default
 };
 
+/// Polygon features read from a vector file, with their CRS and attributes
+/// (every field as text, in the layer's order).
+struct PolygonLayer {
+    CrsInfo crs;
+    std::vector<std::string> field_names;
+    std::vector<Feature> features;  ///< values are std::string (or null)
+    std::vector<int64_t> fids;      ///< OGR feature ids, same order
+};
+
+/// Reads the polygon/multipolygon features of layer `layer` (first layer
+/// when empty). Throws Error naming the file for a missing file, a missing
+/// layer, a layer without polygons, or an invalid (self-intersecting or
+/// empty) polygon (with its feature id).
+PolygonLayer read_polygon_layer(const std::string& path, const std::string& layer = {});
+
 /// Writes polygon features in `crs` (temporary file + rename). Rings are
 /// written as given; the exterior counter-clockwise, holes clockwise is the
 /// caller's job (see orient_polygon).
 void write_polygon_features(const std::string& path, const CrsInfo& crs, const std::vector<FieldDefinition>& fields,
                             const std::vector<Feature>& features, const VectorWriteOptions& options = {});
 
-/// Signed area of a ring (> 0 counter-clockwise), CRS units squared.
-double signed_area(const Ring& ring);
-/// Area of a polygon (outer minus holes), CRS units squared.
-double polygon_area(const Polygon& polygon);
-/// Makes the outer ring counter-clockwise and holes clockwise (OGC/RFC 7946).
-void orient_polygon(Polygon& polygon);
+/// Output driver for a path: ".gpkg" -> GPKG, ".geojson"/".json" -> GeoJSON,
+/// ".fgb" -> FlatGeobuf, ".shp" -> ESRI Shapefile; Error otherwise.
+std::string vector_driver_for(const std::string& path);
 
 }  // namespace cityforge

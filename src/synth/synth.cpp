@@ -345,8 +345,10 @@ SynthResult write_synthetic_town(const std::string& out_dir, const SynthOptions&
             }
             return out;
         };
-        f.geometry.outer = to_map(b.outline);
-        for (const auto& hole : b.holes) f.geometry.holes.push_back(to_map(hole));
+        Polygon footprint;
+        footprint.outer = to_map(b.outline);
+        for (const auto& hole : b.holes) footprint.holes.push_back(to_map(hole));
+        f.geometry = {footprint};
         double orientation = std::fmod(b.angle_rad * 180.0 / std::numbers::pi + 180.0, 180.0);
         f.values = {int64_t(b.id), synth::to_string(b.shape), synth::to_string(b.roof), b.eave_height_m,
                     b.ridge_height_m, b.ground_z, orientation, b.area_m2(), int64_t(b.holes.size())};

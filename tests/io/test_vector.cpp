@@ -25,12 +25,17 @@ TEST_CASE("Polygons with holes round-trip through GeoJSON and GeoPackage", "[io]
     ScratchDir dir("vector_rt");
     const CrsInfo crs = crs_from_user_input("EPSG:28992", "test");
     Feature f;
-    f.geometry.outer = {{0, 0}, {0, 10}, {10, 10}, {10, 0}};  // clockwise on purpose
-    f.geometry.holes = {{{2, 2}, {4, 2}, {4, 4}, {2, 4}}};
-    orient_polygon(f.geometry);
-    CHECK(signed_area(f.geometry.outer) > 0);
-    CHECK(signed_area(f.geometry.holes[0]) < 0);
-    CHECK(polygon_area(f.geometry) == Approx(96.0));
+    Polygon p;
+    p.outer = {{0, 0}, {0, 10}, {10, 10}, {10, 0}};  // clockwise on purpose
+    p.holes = {{{2, 2}, {4, 2}, {4, 4}, {2, 4}}};
+    orient_polygon(p);
+    CHECK(signed_area(p.outer) > 0);
+    CHECK(signed_area(p.holes[0]) < 0);
+    CHECK(polygon_area(p) == Approx(96.0));
+    CHECK(point_in_polygon(p, 1, 1));
+    CHECK_FALSE(point_in_polygon(p, 3, 3));
+    CHECK(distance_to_boundary(p, 5, 5) == Approx(std::sqrt(2.0)));  // to the hole corner (4, 4)
+    f.geometry = {p};
     f.values = {int64_t(7), 12.5, std::string("gable"), std::monostate{}};
     const std::vector<FieldDefinition> fields{{"id", FieldType::integer}, {"height_m", FieldType::real},
                                               {"roof", FieldType::string}, {"missing", FieldType::real}};
@@ -45,6 +50,10 @@ TEST_CASE("Polygons with holes round-trip through GeoJSON and GeoPackage", "[io]
         CHECK(v.layers[0].feature_count == 1);
         CHECK(v.layers[0].crs.horizontal_epsg == 28992);
         CHECK(v.layers[0].fields.size() == 4);
+        const PolygonLayer back = read_polygon_layer(dir / name);
+        REQUIRE(back.features.size() == 1);
+        CHECK(polygon_area(back.features[0].geometry[0]) == Approx(96.0));
+        CHECK(back.features[0].geometry[0].holes.size() == 1);
     }
 }
 

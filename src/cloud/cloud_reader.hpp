@@ -1,0 +1,55 @@
+#pragma once
+// Point cloud readers behind one interface: LAS (las.hpp), PLY (ASCII and
+// binary, x/y/z plus optional colour, classification, intensity) and XYZ/CSV
+// text. Streamed in chunks. No GDAL here: the CRS is passed on as the WKT the
+// file carries (empty when it has none); callers resolve overrides.
+#include <cstdint>
+#include <memory>
+#include <string>
+
+#include "cloud/point_cloud.hpp"
+
+namespace cityforge {
+
+enum class CloudFormat { las, ply, xyz };
+std::string to_string(CloudFormat f);
+
+/// One format's streaming reader.
+class CloudFormatReader {
+public:
+    virtual ~CloudFormatReader() = default;
+    /// Appends up to `max_points` points to `out`; returns how many (0 = end).
+    virtual std::size_t read_chunk(PointCloud& out, std::size_t max_points) = 0;
+};
+
+/// Opens `path` by its content (LAS signature, "ply" magic) or extension
+/// (.xyz, .txt, .csv, .pts). Throws Error naming the file on a missing file,
+/// unknown format or bad header.
+class CloudReader {
+public:
+    explicit CloudReader(const std::string& path);
+    ~CloudReader();
+    CloudReader(CloudReader&&) noexcept;
+    CloudReader& operator=(CloudReader&&) noexcept;
+
+    CloudFormat format() const { return format_; }
+    const std::string& path() const { return path_; }
+    /// CRS WKT stored in the file (LAS VLRs); empty for PLY/XYZ or when absent.
+    const std::string& crs_wkt() const { return crs_wkt_; }
+    /// Point count announced by the header (LAS, PLY); 0 when unknown (XYZ).
+    uint64_t announced_points() const { return announced_; }
+    std::size_t read_chunk(PointCloud& out, std::size_t max_points) { return impl_->read_chunk(out, max_points); }
+
+private:
+    std::string path_;
+    CloudFormat format_ = CloudFormat::las;
+    std::string crs_wkt_;
+    uint64_t announced_ = 0;
+    std::unique_ptr<CloudFormatReader> impl_;
+};
+
+/// Reads every point (explicit: callers that know it fits). Throws Error
+/// naming the file if it holds no point at all.
+PointCloud read_point_cloud(const std::string& path, std::string* crs_wkt = nullptr);
+
+}  // namespace cityforge
