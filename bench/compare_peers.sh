@@ -71,10 +71,10 @@ echo "watershed: $sk_regions regions in $sk_ws s; RAG on our $cf_regions regions
 echo "== GRASS GIS i.segment (seeds = our watershed regions)"
 cat > "$work/grass.sh" <<SH
 set -e
-r.in.gdal -q input="$ortho" output=ortho
-r.in.gdal -q input="$work/cf/oversegmentation.tif" output=seeds
-g.region raster=ortho.1
-i.group group=g input=ortho.1,ortho.2,ortho.3
+r.in.gdal --quiet input="$ortho" output=ortho
+r.in.gdal --quiet input="$work/cf/oversegmentation.tif" output=seeds
+g.region raster=ortho.red
+i.group group=g input=ortho.red,ortho.green,ortho.blue
 t=\$(date +%s.%N)
 i.segment --quiet group=g output=seg seeds=seeds threshold=0.05 minsize=1 memory=4000
 echo "\$t \$(date +%s.%N)" > "$work/grass.txt"
@@ -85,7 +85,7 @@ echo "i.segment on the same seeds: $grass_s s"
 
 echo "== Orfeo ToolBox otbcli_Segmentation (watershed)"
 t0=$(now)
-otbcli_Segmentation -in "$ortho" -filter watershed -mode raster -mode.raster.out "$work/otb.tif" uint32 >/dev/null 2>&1 || echo "OTB run failed"
+timeout "${OTB_TIMEOUT:-900}" otbcli_Segmentation -in "$ortho" -filter watershed -mode raster -mode.raster.out "$work/otb.tif" uint32 >/dev/null 2>&1 || echo "OTB run failed or timed out after ${OTB_TIMEOUT:-900} s"
 otb_s=$(echo "$(now) - $t0" | bc -l)
 echo "otbcli_Segmentation watershed: $otb_s s"
 

@@ -11,6 +11,7 @@
 #include "core/log.hpp"
 #include "core/progress.hpp"
 #include "io/inspect.hpp"
+#include "pipeline/heights_run.hpp"
 #include "pipeline/segment_raster.hpp"
 #include <fstream>
 #include <nlohmann/json.hpp>
@@ -97,6 +98,29 @@ int main(int argc, char** argv) {
     segment->add_option("--gsd", seg_gsd, "Working GSD in metres (default 0.5; 0 = keep the input's)");
     segment->add_flag("--allow-pixel-coordinates", seg.allow_pixel_coordinates, "Accept a raster without georeferencing");
 
+    // heights ---------------------------------------------------------------
+    auto* heights = app.add_subcommand("heights", "Per-building heights from a dense point cloud (LOD1 attributes)");
+    std::string h_footprints, h_cloud, h_out;
+    cf::HeightsRunOptions hopt;
+    bool h_recompute_ground = false, h_no_outliers = false;
+    heights->add_option("--footprints", h_footprints, "Footprint polygons (GeoPackage, Shapefile, GeoJSON, ...)")->required();
+    heights->add_option("--cloud", h_cloud, "Point cloud (LAS 1.0-1.4, PLY, XYZ/CSV)")->required();
+    heights->add_option("--out", h_out, "Output .gpkg (layer buildings), .geojson, .fgb or .shp")->required();
+    heights->add_option("--cloud-crs", hopt.cloud_crs, "CRS of the cloud, e.g. EPSG:7415 (overrides the file's)");
+    heights->add_option("--layer", hopt.footprint_layer, "Footprint layer name (default: first)");
+    heights->add_option("--roof-percentile", hopt.heights.roof_percentile, "Roof percentile used for height_m")->capture_default_str();
+    heights->add_option("--ground-percentile", hopt.heights.ground_percentile, "Percentile of ground z around the footprint")->capture_default_str();
+    heights->add_option("--ground-buffer-m", hopt.heights.ground_buffer_m, "Width of the ring searched for ground points, metres")->capture_default_str();
+    heights->add_option("--min-height-m", hopt.heights.min_height_above_ground_m, "Roof points must be this far above the ground, metres")->capture_default_str();
+    heights->add_option("--min-roof-points", hopt.heights.min_roof_points, "Fewer roof points -> null percentiles")->capture_default_str();
+    heights->add_flag("--recompute-ground", h_recompute_ground, "Ignore class 2 and classify ground with SMRF");
+    heights->add_flag("--no-outlier-filter", h_no_outliers, "Skip statistical outlier removal");
+    heights->add_option("--sor-k", hopt.outliers.k_neighbours, "Outlier removal: neighbours")->capture_default_str();
+    heights->add_option("--sor-std", hopt.outliers.std_multiplier, "Outlier removal: sigma multiplier")->capture_default_str();
+    heights->add_option("--smrf-slope", hopt.ground.slope, "SMRF slope (rise/run)")->capture_default_str();
+    heights->add_option("--smrf-window-m", hopt.ground.window, "SMRF largest window, metres")->capture_default_str();
+    heights->add_option("--smrf-threshold-m", hopt.ground.elevation_threshold, "SMRF elevation threshold, metres")->capture_default_str();
+
     try {
         app.parse(argc, argv);
     } catch (const CLI::ParseError& e) {
@@ -139,6 +163,18 @@ int main(int argc, char** argv) {
                     std::fprintf(stderr, "cityforge: scale %g (%s): %u -> %u regions, queue %llu, %.3f s\n", l.scale,
                                  r.strategy.c_str(), l.regions_before, l.regions_after,
                                  static_cast<unsigned long long>(l.initial_queue_length), l.seconds);
+            }
+        } else if (*heights) {
+            hopt.ground.trust_classification = !h_recompute_ground;
+            hopt.outliers.enabled = !h_no_outliers;
+            const cf::HeightsRunReport r = cf::run_heights(h_footprints, h_cloud, h_out, hopt, make_progress(g));
+            if (!g.quiet) {
+                std::string q;
+                for (const auto& [k, v] : r.quality_counts) q += " " + k + "=" + std::to_string(v);
+                std::fprintf(stderr, "cityforge: heights for %zu buildings in %.1f s (%s; %llu points, %zu outliers + %zu isolated removed, %zu ground points %s%s); quality:%s\n",
+                             r.buildings, r.seconds, r.crs.c_str(), static_cast<unsigned long long>(r.points_read),
+                             r.removed_statistical, r.removed_isolated, r.ground_points,
+                             r.ground_from_classification ? "from class 2" : "from SMRF", r.reprojected ? ", cloud reprojected" : "", q.c_str());
             }
         } else if (*synth) {
             if (origin.size() == 2) synth_options.origin_x = origin[0], synth_options.origin_y = origin[1];

@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cstdio>
 #include <memory>
+#include <mutex>
 #include <unistd.h>
 
 #include "core/error.hpp"
@@ -18,8 +19,14 @@ void Progress::operator()(double fraction, std::string_view message) const {
 ProgressFn make_terminal_progress(bool force) {
     if (!force && !isatty(fileno(stderr))) return {};
     // State shared by copies of the callback: the last tick printed (0..40, 2.5 % each).
-    auto last = std::make_shared<int>(-1);
-    return [last](double fraction, std::string_view) {
+    struct State {
+        std::mutex mutex;  // parallel stages may report from several threads
+        int last = -1;
+    };
+    auto state = std::make_shared<State>();
+    return [state](double fraction, std::string_view) {
+        std::lock_guard lock(state->mutex);
+        int* last = &state->last;
         const int tick = static_cast<int>(std::clamp(fraction, 0.0, 1.0) * 40.0 + 1e-9);
         if (tick <= *last) return true;
         for (int t = *last + 1; t <= tick; ++t) {

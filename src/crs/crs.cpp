@@ -1,6 +1,7 @@
 #include "crs/crs.hpp"
 
 #include <GeographicLib/Geodesic.hpp>
+#include <algorithm>
 #include <cmath>
 #include <cpl_conv.h>
 #include <cpl_error.h>
@@ -59,7 +60,10 @@ CrsInfo describe(OGRSpatialReference& srs) {
         info.linear_unit_name = "degree";
     }
 
+    info.z_unit_m = info.geographic ? 1.0 : info.linear_unit_m;
     if (srs.IsCompound()) {
+        const double vu = srs.GetTargetLinearUnits("VERT_CS");
+        if (vu > 0.0) info.z_unit_m = vu;
         info.epsg = authority_code(srs, nullptr);
         OGRSpatialReference horizontal(srs);
         horizontal.StripVertical();
@@ -124,6 +128,43 @@ GroundSampleDistance ground_sample_distance(const CrsInfo& crs, const GeoTransfo
     geod.Inverse(c.y, c.x, c.y, c.x + t.pixel_width, dx);
     geod.Inverse(c.y, c.x, c.y + t.pixel_height, c.x, dy);
     return {std::abs(dx), std::abs(dy)};
+}
+
+bool same_horizontal_crs(const CrsInfo& a, const CrsInfo& b) {
+    if (a.empty() || b.empty()) return a.empty() && b.empty();
+    OGRSpatialReference sa, sb;
+    sa.importFromWkt(a.wkt.c_str());
+    sb.importFromWkt(b.wkt.c_str());
+    if (sa.IsCompound()) sa.StripVertical();
+    if (sb.IsCompound()) sb.StripVertical();
+    const char* options[] = {"IGNORE_DATA_AXIS_TO_SRS_AXIS_MAPPING=YES", "CRITERION=EQUIVALENT_EXCEPT_AXIS_ORDER_GEOGCRS", nullptr};
+    return sa.IsSame(&sb, options);
+}
+
+CrsInfo combine_with_vertical(const CrsInfo& horizontal, const CrsInfo& vertical) {
+    if (horizontal.vertical_epsg || !horizontal.horizontal_epsg || !vertical.vertical_epsg) return horizontal;
+    return crs_from_user_input("EPSG:" + std::to_string(*horizontal.horizontal_epsg) + "+" + std::to_string(*vertical.vertical_epsg),
+                               "combined CRS");
+}
+
+void transform_points(const CrsInfo& from, const CrsInfo& to, std::vector<double>& x, std::vector<double>& y,
+                      std::vector<double>& z, const std::string& subject) {
+    GdalErrorCapture capture;
+    OGRSpatialReference a, b;
+    a.importFromWkt(from.wkt.c_str());
+    b.importFromWkt(to.wkt.c_str());
+    a.SetAxisMappingStrategy(OAMS_TRADITIONAL_GIS_ORDER);
+    b.SetAxisMappingStrategy(OAMS_TRADITIONAL_GIS_ORDER);
+    std::unique_ptr<OGRCoordinateTransformation> ct(OGRCreateCoordinateTransformation(&a, &b));
+    if (!ct) throw Error(subject, "no transformation from " + from.label() + " to " + to.label() + capture.suffix());
+    const std::size_t chunk = 1 << 16;
+    std::vector<int> ok(chunk);
+    for (std::size_t s0 = 0; s0 < x.size(); s0 += chunk) {
+        const std::size_t n = std::min(chunk, x.size() - s0);
+        if (!ct->Transform(static_cast<int>(n), x.data() + s0, y.data() + s0, z.data() + s0, nullptr, ok.data()) ||
+            std::find(ok.begin(), ok.begin() + static_cast<std::ptrdiff_t>(n), 0) != ok.begin() + static_cast<std::ptrdiff_t>(n))
+            throw Error(subject, "reprojection from " + from.label() + " to " + to.label() + " failed for some points" + capture.suffix());
+    }
 }
 
 bool same_crs(const CrsInfo& a, const CrsInfo& b) {

@@ -4,6 +4,7 @@
 // Wraps GDAL/OGR + PROJ; the algorithm modules never include this header.
 #include <optional>
 #include <string>
+#include <vector>
 
 #include "core/geo_transform.hpp"
 
@@ -20,6 +21,7 @@ struct CrsInfo {
     bool geographic = false;               ///< axes are degrees of latitude/longitude
     double linear_unit_m = 1.0;            ///< metres per horizontal CRS unit (0.3048 for int. feet)
     std::string linear_unit_name = "metre";
+    double z_unit_m = 1.0;                 ///< metres per z unit (vertical CRS unit, else the linear unit)
 
     bool empty() const { return wkt.empty(); }
     /// "EPSG:32650", "EPSG:28992+5709" or the CRS name when no code is known.
@@ -45,6 +47,20 @@ struct GroundSampleDistance {
 };
 GroundSampleDistance ground_sample_distance(const CrsInfo& crs, const GeoTransform& transform, int width,
                                             int height);
+
+/// True when the horizontal parts are the same CRS (vertical parts ignored).
+bool same_horizontal_crs(const CrsInfo& a, const CrsInfo& b);
+
+/// Horizontal CRS of `horizontal` combined with the vertical CRS of
+/// `vertical` when both have EPSG codes (e.g. 28992 + 5709 -> EPSG:7415 URN);
+/// otherwise `horizontal` unchanged.
+CrsInfo combine_with_vertical(const CrsInfo& horizontal, const CrsInfo& vertical);
+
+/// Transforms points in place from `from` to `to` (horizontal, and vertical
+/// where PROJ knows both vertical datums). Throws Error naming `subject` when
+/// PROJ has no transformation or a point fails.
+void transform_points(const CrsInfo& from, const CrsInfo& to, std::vector<double>& x, std::vector<double>& y,
+                      std::vector<double>& z, const std::string& subject);
 
 /// True when both describe the same CRS (horizontal and vertical), ignoring
 /// axis-order and naming differences.

@@ -1,0 +1,207 @@
+#include "cloud/cloud_filters.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <nanoflann.hpp>
+#include <numeric>
+#include <tbb/parallel_for.h>
+
+#include "core/error.hpp"
+
+namespace cityforge {
+
+void OutlierFilterOptions::validate() const {
+    if (k_neighbours < 1 || k_neighbours > 100) throw Error("--sor-k", "must be between 1 and 100");
+    if (!(std_multiplier > 0.0)) throw Error("--sor-std", "must be > 0");
+    if (!(isolated_radius >= 0.0)) throw Error("--isolated-radius", "must be >= 0");
+    if (isolated_min_neighbours < 0) throw Error("--isolated-min", "must be >= 0");
+}
+
+void GroundFilterOptions::validate() const {
+    if (!(cell > 0.0)) throw Error("--smrf-cell", "must be > 0");
+    if (!(slope >= 0.0)) throw Error("--smrf-slope", "must be >= 0");
+    if (!(window >= cell)) throw Error("--smrf-window", "must be at least one cell");
+    if (!(elevation_threshold > 0.0)) throw Error("--smrf-threshold", "must be > 0");
+}
+
+namespace {
+
+// nanoflann adaptor over the SoA cloud (3D or 2D).
+template <int Dim>
+struct CloudAdaptor {
+    const PointCloud& c;
+    std::size_t kdtree_get_point_count() const { return c.size(); }
+    double kdtree_get_pt(std::size_t i, std::size_t d) const { return d == 0 ? c.x[i] : d == 1 ? c.y[i] : c.z[i]; }
+    template <class BBox>
+    bool kdtree_get_bbox(BBox&) const { return false; }
+};
+using Tree3 = nanoflann::KDTreeSingleIndexAdaptor<nanoflann::L2_Simple_Adaptor<double, CloudAdaptor<3>>, CloudAdaptor<3>, 3>;
+
+}  // namespace
+
+OutlierFilterResult filter_outliers(const PointCloud& c, const OutlierFilterOptions& o) {
+    o.validate();
+    OutlierFilterResult r;
+    const std::size_t n = c.size();
+    r.keep.assign(n, 1);
+    for (std::size_t i = 0; i < n; ++i)
+        if (c.classification[i] == las_class::low_noise || c.classification[i] == las_class::high_noise) r.keep[i] = 0, ++r.removed_statistical;
+    if (!o.enabled || n < static_cast<std::size_t>(o.k_neighbours) + 1) return r;
+    CloudAdaptor<3> adaptor{c};
+    Tree3 tree(3, adaptor, nanoflann::KDTreeSingleIndexAdaptorParams(16));
+    tree.buildIndex();
+    const std::size_t k = static_cast<std::size_t>(o.k_neighbours) + 1;  // the point itself comes back first
+    std::vector<double> mean_dist(n, 0.0);
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, 4096), [&](const tbb::blocked_range<std::size_t>& range) {
+        std::vector<uint32_t> idx(k);
+        std::vector<double> d2(k);
+        for (std::size_t i = range.begin(); i != range.end(); ++i) {
+            const double q[3] = {c.x[i], c.y[i], c.z[i]};
+            const std::size_t found = tree.knnSearch(q, k, idx.data(), d2.data());
+            double s = 0.0;
+            for (std::size_t j = 1; j < found; ++j) s += std::sqrt(d2[j]);
+            mean_dist[i] = found > 1 ? s / static_cast<double>(found - 1) : 0.0;
+        }
+    });
+    // Sums in index order: the threshold does not depend on the thread count.
+    double sum = 0.0, sum2 = 0.0;
+    for (double d : mean_dist) sum += d, sum2 += d * d;
+    const double mean = sum / static_cast<double>(n);
+    const double sigma = std::sqrt(std::max(0.0, sum2 / static_cast<double>(n) - mean * mean));
+    const double limit = mean + o.std_multiplier * sigma;
+    for (std::size_t i = 0; i < n; ++i)
+        if (r.keep[i] && mean_dist[i] > limit) r.keep[i] = 0, ++r.removed_statistical;
+    if (o.isolated_radius > 0.0) {
+        std::vector<uint8_t> isolated(n, 0);
+        const double r2 = o.isolated_radius * o.isolated_radius;
+        tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, 4096), [&](const tbb::blocked_range<std::size_t>& range) {
+            std::vector<std::pair<uint32_t, double>> matches;
+            for (std::size_t i = range.begin(); i != range.end(); ++i) {
+                if (!r.keep[i]) continue;
+                const double q[3] = {c.x[i], c.y[i], c.z[i]};
+                matches.clear();
+                nanoflann::SearchParams params;
+                params.sorted = false;
+                const std::size_t found = tree.radiusSearch(q, r2, matches, params);
+                if (static_cast<int>(found) - 1 < o.isolated_min_neighbours) isolated[i] = 1;
+            }
+        });
+        for (std::size_t i = 0; i < n; ++i)
+            if (isolated[i]) r.keep[i] = 0, ++r.removed_isolated;
+    }
+    return r;
+}
+
+GroundResult classify_ground(const PointCloud& c, const std::vector<uint8_t>& keep, const GroundFilterOptions& o) {
+    o.validate();
+    GroundResult g;
+    const std::size_t n = c.size();
+    g.is_ground.assign(n, 0);
+    auto kept = [&](std::size_t i) { return keep.empty() || keep[i]; };
+    if (o.trust_classification) {
+        std::size_t class2 = 0;
+        for (std::size_t i = 0; i < n; ++i) class2 += c.classification[i] == las_class::ground && kept(i);
+        if (class2 > 0) {
+            for (std::size_t i = 0; i < n; ++i) g.is_ground[i] = c.classification[i] == las_class::ground && kept(i);
+            g.from_classification = true;
+            g.ground_points = class2;
+            return g;
+        }
+    }
+    if (n == 0) return g;
+    // SMRF: minimum surface on a grid, holes filled from neighbours, then
+    // progressive openings with growing windows; cells whose height drops by
+    // more than slope * window * cell are non-ground.
+    double minx = INFINITY, miny = INFINITY, maxx = -INFINITY, maxy = -INFINITY;
+    for (std::size_t i = 0; i < n; ++i)
+        if (kept(i)) minx = std::min(minx, c.x[i]), maxx = std::max(maxx, c.x[i]), miny = std::min(miny, c.y[i]), maxy = std::max(maxy, c.y[i]);
+    if (!std::isfinite(minx)) return g;
+    const int w = static_cast<int>((maxx - minx) / o.cell) + 1, h = static_cast<int>((maxy - miny) / o.cell) + 1;
+    if (static_cast<double>(w) * h > 4e8) throw Error("ground filter", "cloud extent too large for one SMRF grid; tile it first");
+    std::vector<double> zmin(static_cast<std::size_t>(w) * h, INFINITY);
+    auto cell_of = [&](std::size_t i) {
+        const int cx = std::min(w - 1, static_cast<int>((c.x[i] - minx) / o.cell));
+        const int cy = std::min(h - 1, static_cast<int>((c.y[i] - miny) / o.cell));
+        return static_cast<std::size_t>(cy) * w + cx;
+    };
+    for (std::size_t i = 0; i < n; ++i)
+        if (kept(i)) zmin[cell_of(i)] = std::min(zmin[cell_of(i)], c.z[i]);
+    // Fill empty cells by repeated 3x3 averaging of filled neighbours (inpainting).
+    auto fill = [&](std::vector<double>& grid) {
+        bool any_empty = true;
+        for (int iter = 0; iter < 4 * std::max(w, h) && any_empty; ++iter) {
+            any_empty = false;
+            std::vector<double> next = grid;
+            for (int y = 0; y < h; ++y)
+                for (int x = 0; x < w; ++x) {
+                    const std::size_t k = static_cast<std::size_t>(y) * w + x;
+                    if (std::isfinite(grid[k])) continue;
+                    double s = 0.0;
+                    int m = 0;
+                    for (int dy = -1; dy <= 1; ++dy)
+                        for (int dx = -1; dx <= 1; ++dx) {
+                            const int xx = x + dx, yy = y + dy;
+                            if (xx < 0 || yy < 0 || xx >= w || yy >= h) continue;
+                            const double v = grid[static_cast<std::size_t>(yy) * w + xx];
+                            if (std::isfinite(v)) s += v, ++m;
+                        }
+                    if (m) next[k] = s / m;
+                    else any_empty = true;
+                }
+            grid.swap(next);
+        }
+    };
+    fill(zmin);
+    // Morphological opening (erosion then dilation) with a square window of radius r cells.
+    auto morph = [&](const std::vector<double>& in, int r, bool erode) {
+        std::vector<double> tmp(in.size()), out(in.size());
+        for (int y = 0; y < h; ++y)
+            for (int x = 0; x < w; ++x) {
+                double v = erode ? INFINITY : -INFINITY;
+                for (int dx = std::max(0, x - r); dx <= std::min(w - 1, x + r); ++dx) {
+                    const double q = in[static_cast<std::size_t>(y) * w + dx];
+                    v = erode ? std::min(v, q) : std::max(v, q);
+                }
+                tmp[static_cast<std::size_t>(y) * w + x] = v;
+            }
+        for (int y = 0; y < h; ++y)
+            for (int x = 0; x < w; ++x) {
+                double v = erode ? INFINITY : -INFINITY;
+                for (int dy = std::max(0, y - r); dy <= std::min(h - 1, y + r); ++dy) {
+                    const double q = tmp[static_cast<std::size_t>(dy) * w + x];
+                    v = erode ? std::min(v, q) : std::max(v, q);
+                }
+                out[static_cast<std::size_t>(y) * w + x] = v;
+            }
+        return out;
+    };
+    std::vector<uint8_t> object(zmin.size(), 0);
+    std::vector<double> surface = zmin;
+    const int max_r = std::max(1, static_cast<int>(std::ceil(o.window / o.cell)));
+    for (int r = 1; r <= max_r; ++r) {
+        const std::vector<double> opened = morph(morph(surface, r, true), r, false);
+        const double threshold = o.slope * r * o.cell;
+        for (std::size_t k = 0; k < surface.size(); ++k)
+            if (surface[k] - opened[k] > threshold) object[k] = 1;
+        surface = opened;
+    }
+    // Provisional DTM: minimum surface at ground cells, object cells inpainted.
+    std::vector<double> dtm = zmin;
+    for (std::size_t k = 0; k < dtm.size(); ++k)
+        if (object[k]) dtm[k] = INFINITY;
+    fill(dtm);
+    // Local slope of the DTM scales the threshold (steep terrain tolerates more).
+    for (std::size_t i = 0; i < n; ++i) {
+        if (!kept(i)) continue;
+        const std::size_t k = cell_of(i);
+        const int x = static_cast<int>(k % static_cast<std::size_t>(w)), y = static_cast<int>(k / static_cast<std::size_t>(w));
+        const double gx = (dtm[static_cast<std::size_t>(y) * w + std::min(w - 1, x + 1)] - dtm[static_cast<std::size_t>(y) * w + std::max(0, x - 1)]) / (2 * o.cell);
+        const double gy = (dtm[static_cast<std::size_t>(std::min(h - 1, y + 1)) * w + x] - dtm[static_cast<std::size_t>(std::max(0, y - 1)) * w + x]) / (2 * o.cell);
+        const double threshold = o.elevation_threshold + o.elevation_scalar * std::sqrt(gx * gx + gy * gy);
+        if (std::isfinite(dtm[k]) && std::abs(c.z[i] - dtm[k]) <= threshold) g.is_ground[i] = 1, ++g.ground_points;
+    }
+    return g;
+}
+
+}  // namespace cityforge

@@ -1,0 +1,55 @@
+#pragma once
+// Cleaning and ground classification of dense clouds. Pure algorithms on a
+// PointCloud in a projected CRS; distances are in CRS units (callers convert
+// metre options with the CRS's linear unit).
+#include <cstdint>
+#include <vector>
+
+#include "cloud/point_cloud.hpp"
+
+namespace cityforge {
+
+struct OutlierFilterOptions {
+    bool enabled = true;
+    int k_neighbours = 8;            ///< statistical outlier removal: neighbours per point
+    double std_multiplier = 3.0;     ///< remove when mean kNN distance > mean + m * sigma
+    double isolated_radius = 2.0;    ///< isolated-point filter radius, CRS units (0 = off)
+    int isolated_min_neighbours = 2; ///< fewer neighbours than this within the radius = isolated
+    /// Throws Error naming the option on bad values.
+    void validate() const;
+};
+
+struct OutlierFilterResult {
+    std::vector<uint8_t> keep;          ///< 1 = kept, one per point
+    std::size_t removed_statistical = 0;
+    std::size_t removed_isolated = 0;
+};
+
+/// Statistical outlier removal (3D k nearest neighbours) followed by an
+/// isolated-point filter. Points classified as noise (7, 18) are removed too
+/// and counted as statistical. Deterministic (k-d tree, fixed tie order).
+OutlierFilterResult filter_outliers(const PointCloud& cloud, const OutlierFilterOptions& options);
+
+/// Simple Morphological Filter (SMRF, Pingel et al. 2013) parameters.
+struct GroundFilterOptions {
+    /// Use class 2 when the cloud has ground points; false = always recompute.
+    bool trust_classification = true;
+    double cell = 1.0;                 ///< minimum-surface grid cell, CRS units
+    double slope = 0.15;               ///< rise over run
+    double window = 18.0;              ///< largest opening window, CRS units
+    double elevation_threshold = 0.5;  ///< max height above the provisional DTM, CRS units
+    double elevation_scalar = 1.25;    ///< extra threshold per unit of local slope
+    void validate() const;
+};
+
+struct GroundResult {
+    std::vector<uint8_t> is_ground;  ///< 1 = ground, one per point
+    bool from_classification = false;
+    std::size_t ground_points = 0;
+};
+
+/// Ground points: class 2 when present and trusted, SMRF otherwise. Points
+/// with keep[i] == 0 are never ground (keep may be empty = all kept).
+GroundResult classify_ground(const PointCloud& cloud, const std::vector<uint8_t>& keep, const GroundFilterOptions& options);
+
+}  // namespace cityforge

@@ -1,0 +1,63 @@
+#pragma once
+// Building heights from dense point clouds, per footprint: ground height from
+// ground points in a ring around the footprint, roof percentiles of the
+// non-ground points inside it, LOD1 height, point density and coverage, and a
+// quality flag. Pure algorithm (no GDAL): cloud and footprints share one CRS,
+// horizontal units convert to metres with `unit_m`, z is in the cloud's
+// vertical datum.
+#include <cstdint>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "cloud/point_cloud.hpp"
+#include "core/geometry.hpp"
+#include "core/progress.hpp"
+
+namespace cityforge {
+
+struct HeightOptions {
+    double ground_buffer_m = 3.0;          ///< ring around the footprint searched for ground points
+    double ground_percentile = 10.0;       ///< percentile of ground z taken as the building's ground
+    int min_ground_points = 5;             ///< fewer -> ring widened (x2, x4), then flagged
+    double roof_percentile = 70.0;         ///< percentile of roof z used for height_m (LOD1)
+    double min_height_above_ground_m = 0.5;///< roof points must be this far above ground_z
+    int min_roof_points = 5;               ///< fewer -> percentiles null, flagged
+    double coverage_cell_m = 1.0;          ///< cell size of the nodata_fraction grid
+    double unit_m = 1.0;                   ///< metres per horizontal CRS unit
+    double z_unit_m = 1.0;                 ///< metres per z unit
+    /// Throws Error naming the option on bad values.
+    void validate() const;
+};
+
+/// One footprint's heights. Absolute z values are in the cloud's vertical
+/// datum and units; heights above ground in metres. Nulls mean "could not be
+/// measured" (see height_quality), never a made-up number.
+struct BuildingHeight {
+    std::optional<double> ground_z;
+    std::optional<double> roof_z_min, roof_z_50p, roof_z_70p, roof_z_90p, roof_z_max;
+    std::optional<double> height_m;  ///< roof_percentile z - ground_z, metres
+    int64_t n_points_roof = 0;
+    int64_t n_points_ground = 0;
+    double ground_buffer_used_m = 0.0;
+    double point_density_m2 = 0.0;   ///< roof points per square metre of footprint
+    double nodata_fraction = 1.0;    ///< share of coverage cells inside the footprint without roof points
+    /// "good", "ground_buffer_widened", "few_ground_points", "no_ground",
+    /// "few_roof_points", "no_roof_points", "sparse" (< 1 roof point per m2).
+    std::string height_quality;
+};
+
+/// Percentile (0..100) by linear interpolation between order statistics
+/// (NumPy's default); sorts `values`. Empty input -> nullopt.
+std::optional<double> percentile(std::vector<double>& values, double p);
+
+/// Heights of every footprint (a footprint may have several parts). Points
+/// with keep[i] == 0 are ignored; is_ground marks ground points. Cost grows
+/// with points + footprints (grid index), parallel over footprints; output
+/// order = input order, independent of the thread count.
+std::vector<BuildingHeight> compute_building_heights(const PointCloud& cloud, const std::vector<uint8_t>& keep,
+                                                     const std::vector<uint8_t>& is_ground,
+                                                     const std::vector<std::vector<Polygon>>& footprints,
+                                                     const HeightOptions& options, const Progress& progress = {});
+
+}  // namespace cityforge

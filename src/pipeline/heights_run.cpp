@@ -1,0 +1,108 @@
+#include "pipeline/heights_run.hpp"
+
+#include <chrono>
+
+#include "cloud/cloud_reader.hpp"
+#include "core/error.hpp"
+#include "core/log.hpp"
+#include "crs/crs.hpp"
+#include "io/vector.hpp"
+
+namespace cityforge {
+
+HeightsRunReport run_heights(const std::string& footprints_path, const std::string& cloud_path,
+                             const std::string& output_path, const HeightsRunOptions& o, const Progress& progress) {
+    const auto t0 = std::chrono::steady_clock::now();
+    o.outliers.validate();
+    o.ground.validate();
+    o.heights.validate();
+    const std::string driver = vector_driver_for(output_path);
+    HeightsRunReport rep;
+    rep.output_path = output_path;
+
+    const PolygonLayer footprints = read_polygon_layer(footprints_path, o.footprint_layer);
+    if (footprints.crs.empty()) throw Error(footprints_path, "footprints have no coordinate reference system");
+    if (footprints.crs.geographic) throw Error(footprints_path, "footprints are in a geographic CRS; reproject them to a projected CRS first");
+    progress(0.05, "footprints");
+
+    std::string file_wkt;
+    PointCloud cloud = read_point_cloud(cloud_path, &file_wkt);
+    rep.points_read = cloud.size();
+    CrsInfo cloud_crs;
+    if (!o.cloud_crs.empty()) cloud_crs = crs_from_user_input(o.cloud_crs, "--cloud-crs");
+    else if (!file_wkt.empty()) cloud_crs = crs_from_wkt(file_wkt, cloud_path);
+    else throw Error(cloud_path, "point cloud has no CRS; give it with --cloud-crs (e.g. EPSG:7415)");
+    progress(0.3, "cloud");
+
+    if (!same_horizontal_crs(cloud_crs, footprints.crs)) {
+        log::info("reprojecting the cloud from " + cloud_crs.label() + " to " + footprints.crs.label());
+        CrsInfo target = combine_with_vertical(footprints.crs, cloud_crs);
+        transform_points(cloud_crs, target, cloud.x, cloud.y, cloud.z, cloud_path);
+        rep.reprojected = true;
+    }
+    const CrsInfo out_crs = combine_with_vertical(footprints.crs, cloud_crs);
+    rep.crs = out_crs.label();
+    const double unit = footprints.crs.linear_unit_m;
+
+    OutlierFilterOptions oo = o.outliers;
+    oo.isolated_radius /= unit;
+    const OutlierFilterResult cleaned = filter_outliers(cloud, oo);
+    rep.removed_statistical = cleaned.removed_statistical;
+    rep.removed_isolated = cleaned.removed_isolated;
+    GroundFilterOptions go = o.ground;
+    go.cell /= unit, go.window /= unit, go.elevation_threshold /= cloud_crs.z_unit_m;
+    const GroundResult ground = classify_ground(cloud, cleaned.keep, go);
+    rep.ground_points = ground.ground_points;
+    rep.ground_from_classification = ground.from_classification;
+    progress(0.5, "ground");
+
+    HeightOptions ho = o.heights;
+    ho.unit_m = unit;
+    ho.z_unit_m = cloud_crs.z_unit_m;
+    std::vector<std::vector<Polygon>> parts;
+    parts.reserve(footprints.features.size());
+    for (const Feature& f : footprints.features) parts.push_back(f.geometry);
+    const std::vector<BuildingHeight> heights = compute_building_heights(cloud, cleaned.keep, ground.is_ground, parts, ho, progress.sub(0.5, 0.9));
+    rep.buildings = heights.size();
+
+    // Output: the source attributes (as text), then ours.
+    std::vector<FieldDefinition> fields;
+    fields.push_back({"source_fid", FieldType::integer});
+    for (const std::string& name : footprints.field_names) fields.push_back({name, FieldType::string});
+    const char* real_fields[] = {"ground_z", "roof_z_min", "roof_z_50p", "roof_z_70p", "roof_z_90p", "roof_z_max", "height_m",
+                                 "point_density_m2", "nodata_fraction", "ground_buffer_m"};
+    for (const char* n : real_fields) fields.push_back({n, FieldType::real});
+    fields.push_back({"n_points_roof", FieldType::integer});
+    fields.push_back({"n_points_ground", FieldType::integer});
+    fields.push_back({"height_quality", FieldType::string});
+    fields.push_back({"z_crs", FieldType::string});
+    const std::string z_crs = cloud_crs.vertical_epsg ? "EPSG:" + std::to_string(*cloud_crs.vertical_epsg) : cloud_crs.label();
+    std::vector<Feature> out;
+    out.reserve(heights.size());
+    auto opt = [](const std::optional<double>& v) { return v ? AttributeValue(*v) : AttributeValue(); };
+    for (std::size_t i = 0; i < heights.size(); ++i) {
+        const BuildingHeight& h = heights[i];
+        Feature f;
+        f.geometry = footprints.features[i].geometry;
+        f.values.push_back(footprints.fids[i]);
+        for (const AttributeValue& v : footprints.features[i].values) f.values.push_back(v);
+        for (const auto& v : {opt(h.ground_z), opt(h.roof_z_min), opt(h.roof_z_50p), opt(h.roof_z_70p), opt(h.roof_z_90p),
+                              opt(h.roof_z_max), opt(h.height_m), AttributeValue(h.point_density_m2),
+                              AttributeValue(h.nodata_fraction), AttributeValue(h.ground_buffer_used_m)})
+            f.values.push_back(v);
+        f.values.push_back(h.n_points_roof);
+        f.values.push_back(h.n_points_ground);
+        f.values.push_back(h.height_quality);
+        f.values.push_back(z_crs);
+        ++rep.quality_counts[h.height_quality];
+        out.push_back(std::move(f));
+    }
+    VectorWriteOptions wo;
+    wo.driver = driver;
+    write_polygon_features(output_path, out_crs, fields, out, wo);
+    progress(1.0, "written");
+    rep.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    return rep;
+}
+
+}  // namespace cityforge

@@ -1,0 +1,43 @@
+#pragma once
+// `cityforge heights`: footprints (any OGR polygon layer) + a dense cloud
+// (LAS/PLY/XYZ) -> the footprints with per-building heights, in the
+// footprints' CRS plus the cloud's vertical datum.
+#include <map>
+#include <string>
+
+#include "cloud/cloud_filters.hpp"
+#include "core/progress.hpp"
+#include "heights/building_heights.hpp"
+
+namespace cityforge {
+
+struct HeightsRunOptions {
+    std::string cloud_crs;            ///< CRS of the cloud (overrides the file's; needed when it has none)
+    std::string footprint_layer;      ///< layer name (empty = first)
+    OutlierFilterOptions outliers;    ///< radii in metres here; converted to CRS units
+    GroundFilterOptions ground;       ///< lengths in metres here; converted to CRS units
+    HeightOptions heights;            ///< unit_m / z_unit_m are set from the CRSs
+};
+
+struct HeightsRunReport {
+    std::string output_path;
+    std::string crs;                  ///< output CRS label (horizontal + vertical)
+    uint64_t points_read = 0;
+    std::size_t removed_statistical = 0, removed_isolated = 0;
+    std::size_t ground_points = 0;
+    bool ground_from_classification = false;
+    bool reprojected = false;
+    std::size_t buildings = 0;
+    std::map<std::string, std::size_t> quality_counts;
+    double seconds = 0.0;
+};
+
+/// Runs the whole height tool. Throws Error naming the file on a missing or
+/// empty cloud, a cloud without CRS (and no cloud_crs), footprints without
+/// CRS or with invalid polygons, or CRSs PROJ cannot relate. The output
+/// (.gpkg layer "buildings", .geojson, .fgb, .shp) appears only when complete.
+HeightsRunReport run_heights(const std::string& footprints_path, const std::string& cloud_path,
+                             const std::string& output_path, const HeightsRunOptions& options,
+                             const Progress& progress = {});
+
+}  // namespace cityforge
