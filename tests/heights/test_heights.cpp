@@ -1,0 +1,165 @@
+#include <catch2/catch.hpp>
+#include <cmath>
+#include <fstream>
+#include <map>
+#include <ogrsf_frmts.h>
+
+#include "core/error.hpp"
+#include "heights/building_heights.hpp"
+#include "io/vector.hpp"
+#include "pipeline/heights_run.hpp"
+#include "synth/synth.hpp"
+#include "test_support.hpp"
+
+using namespace cityforge;
+using cityforge::test::ScratchDir;
+using cityforge::test::shared_data;
+
+namespace {
+struct Row {
+    std::map<std::string, std::string> text;
+    std::map<std::string, std::optional<double>> num;
+};
+std::vector<Row> read_rows(const std::string& path) {
+    std::vector<Row> rows;
+    GDALDataset* ds = GDALDataset::Open(path.c_str(), GDAL_OF_VECTOR);
+    REQUIRE(ds);
+    OGRLayer* layer = ds->GetLayer(0);
+    for (auto& f : *layer) {
+        Row r;
+        for (int i = 0; i < f->GetFieldCount(); ++i) {
+            const std::string name = f->GetFieldDefnRef(i)->GetNameRef();
+            r.text[name] = f->IsFieldSetAndNotNull(i) ? f->GetFieldAsString(i) : "";
+            r.num[name] = f->IsFieldSetAndNotNull(i) ? std::optional<double>(f->GetFieldAsDouble(i)) : std::nullopt;
+        }
+        rows.push_back(std::move(r));
+    }
+    GDALClose(ds);
+    return rows;
+}
+double median(std::vector<double> v) {
+    std::sort(v.begin(), v.end());
+    return v.size() % 2 ? v[v.size() / 2] : 0.5 * (v[v.size() / 2 - 1] + v[v.size() / 2]);
+}
+}  // namespace
+
+TEST_CASE("percentile interpolates like NumPy", "[heights]") {
+    std::vector<double> v{4, 1, 3, 2};
+    CHECK(*percentile(v, 0) == 1.0);
+    CHECK(*percentile(v, 100) == 4.0);
+    CHECK(*percentile(v, 50) == 2.5);
+    CHECK(*percentile(v, 90) == Approx(3.7));
+    std::vector<double> empty;
+    CHECK_FALSE(percentile(empty, 50));
+}
+
+TEST_CASE("A flat box gets its exact height - too few points give nulls with a flag", "[heights]") {
+    PointCloud c;
+    auto add = [&](double x, double y, double z, uint8_t cls) {
+        c.x.push_back(x), c.y.push_back(y), c.z.push_back(z), c.classification.push_back(cls);
+        c.intensity.push_back(0), c.return_number.push_back(1), c.number_of_returns.push_back(1);
+    };
+    for (double x = -10; x <= 30; x += 0.5)
+        for (double y = -10; y <= 30; y += 0.5) {
+            const bool roof = x > 0 && x < 20 && y > 0 && y < 10;
+            add(x, y, roof ? 112.0 : 100.0, roof ? las_class::building : las_class::ground);
+        }
+    Polygon box;
+    box.outer = {{0, 0}, {20, 0}, {20, 10}, {0, 10}};
+    Polygon tiny;  // over open ground with no roof points
+    tiny.outer = {{25, 25}, {26, 25}, {26, 26}, {25, 26}};
+    std::vector<uint8_t> ground(c.size());
+    for (std::size_t i = 0; i < c.size(); ++i) ground[i] = c.classification[i] == las_class::ground;
+    const auto h = compute_building_heights(c, {}, ground, {{box}, {tiny}}, HeightOptions{});
+    REQUIRE(h.size() == 2);
+    CHECK(*h[0].ground_z == Approx(100.0));
+    CHECK(*h[0].height_m == Approx(12.0));
+    CHECK(*h[0].roof_z_90p == Approx(112.0));
+    CHECK(h[0].point_density_m2 == Approx(4.0).margin(0.3));
+    CHECK(h[0].nodata_fraction == Approx(0.0));
+    CHECK(h[0].height_quality == "good");
+    CHECK_FALSE(h[1].height_m);
+    CHECK(h[1].height_quality == "no_roof_points");
+}
+
+TEST_CASE("Delft AHN3 - roof p90 agrees with 3dfier's reference (median |diff| <= 0.40 m)", "[heights][real]") {
+    ScratchDir dir("delft");
+    HeightsRunOptions o;
+    o.cloud_crs = "EPSG:7415";
+    const auto rep = run_heights(shared_data("delft_ahn3_bgt_west/bgt_pand_west_with_ref_heights.geojson"),
+                                 shared_data("delft_ahn3_bgt_west/ahn3_delft_west.las"), dir / "delft.gpkg", o);
+    CHECK(rep.buildings == 135);
+    CHECK(rep.ground_from_classification);
+    CHECK(rep.crs == "EPSG:28992+5709");
+    const auto rows = read_rows(dir / "delft.gpkg");
+    REQUIRE(rows.size() == 135);
+    std::vector<double> roof, ground, height;
+    for (const Row& r : rows) {
+        REQUIRE(r.num.at("roof_z_90p"));
+        roof.push_back(std::abs(*r.num.at("roof_z_90p") - std::stod(r.text.at("ref_roof_nap_m"))));
+        ground.push_back(std::abs(*r.num.at("ground_z") - std::stod(r.text.at("ref_ground_nap_m"))));
+        CHECK(r.text.at("z_crs") == "EPSG:5709");
+    }
+    INFO("median |roof p90 - ref| = " << median(roof) << ", median |ground - ref| = " << median(ground));
+    CHECK(median(roof) <= 0.40);
+    CHECK(median(ground) <= 0.05);
+    // The cloud has no CRS: without --cloud-crs it is refused, naming the file.
+    CHECK_THROWS_WITH(run_heights(shared_data("delft_ahn3_bgt_west/bgt_pand_west_with_ref_heights.geojson"),
+                                  shared_data("delft_ahn3_bgt_west/ahn3_delft_west.las"), dir / "x.gpkg", HeightsRunOptions{}),
+                      Catch::Contains("ahn3_delft_west.las") && Catch::Contains("--cloud-crs"));
+    CHECK_FALSE(std::filesystem::exists(dir / "x.gpkg"));
+}
+
+TEST_CASE("Synthetic town - flat roof heights within 0.15 m (lidar) - reprojected footprints give the same heights", "[heights][synth]") {
+    ScratchDir dir("synth_heights");
+    SynthOptions so;
+    so.size_m = 300;
+    so.seed = 2;
+    const SynthResult s = write_synthetic_town(dir.path.string(), so);
+    const auto rep = run_heights(s.truth_path, s.cloud_path, dir / "h.gpkg", HeightsRunOptions{});
+    CHECK_FALSE(rep.reprojected);
+    const auto rows = read_rows(dir / "h.gpkg");
+    double err = 0.0;
+    int n = 0;
+    for (const Row& r : rows)
+        if (r.text.at("roof_type") == "flat" && r.num.at("height_m")) {
+            err += std::abs(*r.num.at("height_m") - std::stod(r.text.at("eave_height_m")));
+            ++n;
+        }
+    REQUIRE(n > 5);
+    INFO("flat-roof MAE " << err / n << " m over " << n);
+    CHECK(err / n <= 0.15);
+
+    // Footprints in the neighbouring UTM zone: the cloud is reprojected to them.
+    const std::string moved = dir / "truth_32651.geojson";
+    const std::string cmd = "ogr2ogr -q -t_srs EPSG:32651 " + moved + " " + s.truth_path;
+    REQUIRE(std::system(cmd.c_str()) == 0);
+    const auto rep2 = run_heights(moved, s.cloud_path, dir / "h2.gpkg", HeightsRunOptions{});
+    CHECK(rep2.reprojected);
+    const auto rows2 = read_rows(dir / "h2.gpkg");
+    REQUIRE(rows2.size() == rows.size());
+    int same = 0;
+    for (std::size_t i = 0; i < rows.size(); ++i)
+        if (rows[i].num.at("height_m") && rows2[i].num.at("height_m"))
+            same += std::abs(*rows[i].num.at("height_m") - *rows2[i].num.at("height_m")) < 0.05;
+    CHECK(same >= static_cast<int>(rows.size()) - 2);
+}
+
+TEST_CASE("heights refuses bad inputs with the file named", "[heights][errors]") {
+    ScratchDir dir("heights_bad");
+    const std::string fp = shared_data("delft_ahn3_bgt_west/bgt_pand_west_with_ref_heights.geojson");
+    { std::ofstream(dir / "empty.xyz") << "x y z\n"; }
+    HeightsRunOptions o;
+    o.cloud_crs = "EPSG:7415";
+    CHECK_THROWS_WITH(run_heights(fp, dir / "empty.xyz", dir / "o.gpkg", o), Catch::Contains("empty.xyz") && Catch::Contains("empty"));
+    CHECK_THROWS_WITH(run_heights(fp, dir / "none.las", dir / "o.gpkg", o), Catch::Contains("none.las: file not found"));
+    CHECK_THROWS_WITH(run_heights(fp, dir / "empty.xyz", dir / "o.txt", o), Catch::Contains("o.txt") && Catch::Contains("unknown vector output format"));
+    {
+        std::ofstream(dir / "bowtie.geojson")
+            << R"({"type":"FeatureCollection","crs":{"type":"name","properties":{"name":"urn:ogc:def:crs:EPSG::28992"}},)"
+            << R"("features":[{"type":"Feature","properties":{},"geometry":{"type":"Polygon","coordinates":[[[0,0],[10,10],[10,0],[0,10],[0,0]]]}}]})";
+    }
+    CHECK_THROWS_WITH(run_heights(dir / "bowtie.geojson", shared_data("delft_ahn3_bgt_west/ahn3_delft_west.las"), dir / "o.gpkg", o),
+                      Catch::Contains("bowtie.geojson feature") && Catch::Contains("invalid polygon"));
+    CHECK_FALSE(std::filesystem::exists(dir / "o.gpkg"));
+}
