@@ -12,6 +12,7 @@
 #include "core/progress.hpp"
 #include "io/inspect.hpp"
 #include "pipeline/heights_run.hpp"
+#include "pipeline/rasterize_run.hpp"
 #include "pipeline/segment_raster.hpp"
 #include <fstream>
 #include <nlohmann/json.hpp>
@@ -121,6 +122,20 @@ int main(int argc, char** argv) {
     heights->add_option("--smrf-window-m", hopt.ground.window, "SMRF largest window, metres")->capture_default_str();
     heights->add_option("--smrf-threshold-m", hopt.ground.elevation_threshold, "SMRF elevation threshold, metres")->capture_default_str();
 
+    // cloud rasterize -------------------------------------------------------
+    auto* cloud = app.add_subcommand("cloud", "Point cloud tools");
+    cloud->require_subcommand(1);
+    auto* rasterize = cloud->add_subcommand("rasterize", "DSM, DTM, nDSM and point density GeoTIFFs from a cloud");
+    std::string r_cloud, r_out;
+    cf::RasterizeOptions ropt;
+    bool r_recompute_ground = false;
+    rasterize->add_option("--cloud", r_cloud, "Point cloud (LAS, PLY, XYZ/CSV)")->required();
+    rasterize->add_option("--out", r_out, "Output folder")->required();
+    rasterize->add_option("--grid", ropt.grid_raster, "Use this raster's grid exactly (origin, size, GSD, CRS), e.g. the ortho");
+    rasterize->add_option("--gsd", ropt.gsd_m, "Cell size in metres when no --grid is given")->capture_default_str();
+    rasterize->add_option("--cloud-crs", ropt.cloud_crs, "CRS of the cloud, e.g. EPSG:7415");
+    rasterize->add_flag("--recompute-ground", r_recompute_ground, "Ignore class 2 and classify ground with SMRF");
+
     try {
         app.parse(argc, argv);
     } catch (const CLI::ParseError& e) {
@@ -176,6 +191,13 @@ int main(int argc, char** argv) {
                              r.removed_statistical, r.removed_isolated, r.ground_points,
                              r.ground_from_classification ? "from class 2" : "from SMRF", r.reprojected ? ", cloud reprojected" : "", q.c_str());
             }
+        } else if (*rasterize) {
+            ropt.ground.trust_classification = !r_recompute_ground;
+            const cf::RasterizeReport r = cf::rasterize_run(r_cloud, r_out, ropt, make_progress(g));
+            if (!g.quiet)
+                std::fprintf(stderr, "cityforge: rasters %d x %d (%s) from %llu points, %zu ground (%s) in %.1f s -> %s\n", r.width,
+                             r.height, r.crs.c_str(), static_cast<unsigned long long>(r.points), r.ground_points,
+                             r.ground_from_classification ? "class 2" : "SMRF", r.seconds, r_out.c_str());
         } else if (*synth) {
             if (origin.size() == 2) synth_options.origin_x = origin[0], synth_options.origin_y = origin[1];
             synth_options.cloud_mode = cf::cloud_mode_from_string(cloud_mode);

@@ -8,6 +8,7 @@
 #include <tbb/parallel_for.h>
 
 #include "core/error.hpp"
+#include "core/grid_fill.hpp"
 
 namespace cityforge {
 
@@ -127,32 +128,9 @@ GroundResult classify_ground(const PointCloud& c, const std::vector<uint8_t>& ke
     };
     for (std::size_t i = 0; i < n; ++i)
         if (kept(i)) zmin[cell_of(i)] = std::min(zmin[cell_of(i)], c.z[i]);
-    // Fill empty cells by repeated 3x3 averaging of filled neighbours (inpainting).
-    auto fill = [&](std::vector<double>& grid) {
-        bool any_empty = true;
-        for (int iter = 0; iter < 4 * std::max(w, h) && any_empty; ++iter) {
-            any_empty = false;
-            std::vector<double> next = grid;
-            for (int y = 0; y < h; ++y)
-                for (int x = 0; x < w; ++x) {
-                    const std::size_t k = static_cast<std::size_t>(y) * w + x;
-                    if (std::isfinite(grid[k])) continue;
-                    double s = 0.0;
-                    int m = 0;
-                    for (int dy = -1; dy <= 1; ++dy)
-                        for (int dx = -1; dx <= 1; ++dx) {
-                            const int xx = x + dx, yy = y + dy;
-                            if (xx < 0 || yy < 0 || xx >= w || yy >= h) continue;
-                            const double v = grid[static_cast<std::size_t>(yy) * w + xx];
-                            if (std::isfinite(v)) s += v, ++m;
-                        }
-                    if (m) next[k] = s / m;
-                    else any_empty = true;
-                }
-            grid.swap(next);
-        }
-    };
-    fill(zmin);
+    for (double& v : zmin)
+        if (!std::isfinite(v)) v = NAN;
+    fill_gaps(zmin, w, h);
     // Morphological opening (erosion then dilation) with a square window of radius r cells.
     auto morph = [&](const std::vector<double>& in, int r, bool erode) {
         std::vector<double> tmp(in.size()), out(in.size());
@@ -189,8 +167,8 @@ GroundResult classify_ground(const PointCloud& c, const std::vector<uint8_t>& ke
     // Provisional DTM: minimum surface at ground cells, object cells inpainted.
     std::vector<double> dtm = zmin;
     for (std::size_t k = 0; k < dtm.size(); ++k)
-        if (object[k]) dtm[k] = INFINITY;
-    fill(dtm);
+        if (object[k]) dtm[k] = NAN;
+    fill_gaps(dtm, w, h);
     // Local slope of the DTM scales the threshold (steep terrain tolerates more).
     for (std::size_t i = 0; i < n; ++i) {
         if (!kept(i)) continue;

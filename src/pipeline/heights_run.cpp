@@ -2,7 +2,7 @@
 
 #include <chrono>
 
-#include "cloud/cloud_reader.hpp"
+#include "pipeline/prepared_cloud.hpp"
 #include "core/error.hpp"
 #include "core/log.hpp"
 #include "crs/crs.hpp"
@@ -13,8 +13,6 @@ namespace cityforge {
 HeightsRunReport run_heights(const std::string& footprints_path, const std::string& cloud_path,
                              const std::string& output_path, const HeightsRunOptions& o, const Progress& progress) {
     const auto t0 = std::chrono::steady_clock::now();
-    o.outliers.validate();
-    o.ground.validate();
     o.heights.validate();
     const std::string driver = vector_driver_for(output_path);
     HeightsRunReport rep;
@@ -25,35 +23,17 @@ HeightsRunReport run_heights(const std::string& footprints_path, const std::stri
     if (footprints.crs.geographic) throw Error(footprints_path, "footprints are in a geographic CRS; reproject them to a projected CRS first");
     progress(0.05, "footprints");
 
-    std::string file_wkt;
-    PointCloud cloud = read_point_cloud(cloud_path, &file_wkt);
-    rep.points_read = cloud.size();
-    CrsInfo cloud_crs;
-    if (!o.cloud_crs.empty()) cloud_crs = crs_from_user_input(o.cloud_crs, "--cloud-crs");
-    else if (!file_wkt.empty()) cloud_crs = crs_from_wkt(file_wkt, cloud_path);
-    else throw Error(cloud_path, "point cloud has no CRS; give it with --cloud-crs (e.g. EPSG:7415)");
-    progress(0.3, "cloud");
-
-    if (!same_horizontal_crs(cloud_crs, footprints.crs)) {
-        log::info("reprojecting the cloud from " + cloud_crs.label() + " to " + footprints.crs.label());
-        CrsInfo target = combine_with_vertical(footprints.crs, cloud_crs);
-        transform_points(cloud_crs, target, cloud.x, cloud.y, cloud.z, cloud_path);
-        rep.reprojected = true;
-    }
-    const CrsInfo out_crs = combine_with_vertical(footprints.crs, cloud_crs);
+    const PreparedCloud pc = prepare_cloud(cloud_path, o.cloud_crs, footprints.crs, o.outliers, o.ground);
+    rep.points_read = pc.cloud.size();
+    rep.reprojected = pc.reprojected;
+    rep.removed_statistical = pc.removed_statistical;
+    rep.removed_isolated = pc.removed_isolated;
+    rep.ground_points = pc.ground_points;
+    rep.ground_from_classification = pc.ground_from_classification;
+    const CrsInfo& cloud_crs = pc.source_crs;
+    const CrsInfo& out_crs = pc.crs;
     rep.crs = out_crs.label();
     const double unit = footprints.crs.linear_unit_m;
-
-    OutlierFilterOptions oo = o.outliers;
-    oo.isolated_radius /= unit;
-    const OutlierFilterResult cleaned = filter_outliers(cloud, oo);
-    rep.removed_statistical = cleaned.removed_statistical;
-    rep.removed_isolated = cleaned.removed_isolated;
-    GroundFilterOptions go = o.ground;
-    go.cell /= unit, go.window /= unit, go.elevation_threshold /= cloud_crs.z_unit_m;
-    const GroundResult ground = classify_ground(cloud, cleaned.keep, go);
-    rep.ground_points = ground.ground_points;
-    rep.ground_from_classification = ground.from_classification;
     progress(0.5, "ground");
 
     HeightOptions ho = o.heights;
@@ -62,7 +42,7 @@ HeightsRunReport run_heights(const std::string& footprints_path, const std::stri
     std::vector<std::vector<Polygon>> parts;
     parts.reserve(footprints.features.size());
     for (const Feature& f : footprints.features) parts.push_back(f.geometry);
-    const std::vector<BuildingHeight> heights = compute_building_heights(cloud, cleaned.keep, ground.is_ground, parts, ho, progress.sub(0.5, 0.9));
+    const std::vector<BuildingHeight> heights = compute_building_heights(pc.cloud, pc.keep, pc.is_ground, parts, ho, progress.sub(0.5, 0.9));
     rep.buildings = heights.size();
 
     // Output: the source attributes (as text), then ours.

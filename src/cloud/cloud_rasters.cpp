@@ -1,0 +1,45 @@
+#include "cloud/cloud_rasters.hpp"
+
+#include <cmath>
+
+#include "core/error.hpp"
+#include "core/grid_fill.hpp"
+
+namespace cityforge {
+
+CloudRasters rasterize_cloud(const PointCloud& c, const std::vector<uint8_t>& keep, const std::vector<uint8_t>& is_ground,
+                             const GridSpec& g, double unit_m) {
+    if (g.width <= 0 || g.height <= 0) throw Error("rasterize", "grid has no cells");
+    if (is_ground.size() != c.size()) throw Error("rasterize", "ground mask size differs from the cloud");
+    const std::size_t n = static_cast<std::size_t>(g.width) * g.height;
+    CloudRasters r;
+    r.dsm = Image<float>(g.width, g.height, 1, NAN);
+    r.density = Image<float>(g.width, g.height, 1, 0.0f);
+    std::vector<double> ground_sum(n, 0.0);
+    std::vector<uint32_t> ground_n(n, 0);
+    for (std::size_t i = 0; i < c.size(); ++i) {
+        if (!keep.empty() && !keep[i]) continue;
+        const PixelPoint p = g.transform.map_to_pixel({c.x[i], c.y[i]});
+        const auto col = static_cast<int>(std::floor(p.col)), row = static_cast<int>(std::floor(p.row));
+        if (col < 0 || row < 0 || col >= g.width || row >= g.height) continue;
+        const std::size_t k = static_cast<std::size_t>(row) * g.width + col;
+        const auto z = static_cast<float>(c.z[i]);
+        if (std::isnan(r.dsm.data[k]) || z > r.dsm.data[k]) r.dsm.data[k] = z;
+        r.density.data[k] += 1.0f;
+        if (is_ground[i]) ground_sum[k] += c.z[i], ++ground_n[k];
+    }
+    const double cell_m2 = std::abs(g.transform.pixel_width * g.transform.pixel_height) * unit_m * unit_m;
+    for (float& d : r.density.data) d = static_cast<float>(d / cell_m2);
+    std::vector<double> dtm(n);
+    for (std::size_t k = 0; k < n; ++k) dtm[k] = ground_n[k] ? ground_sum[k] / ground_n[k] : NAN;
+    fill_gaps(dtm, g.width, g.height);
+    r.dtm = Image<float>(g.width, g.height, 1, NAN);
+    r.ndsm = Image<float>(g.width, g.height, 1, NAN);
+    for (std::size_t k = 0; k < n; ++k) {
+        r.dtm.data[k] = static_cast<float>(dtm[k]);
+        if (!std::isnan(r.dsm.data[k]) && !std::isnan(dtm[k])) r.ndsm.data[k] = static_cast<float>(r.dsm.data[k] - dtm[k]);
+    }
+    return r;
+}
+
+}  // namespace cityforge

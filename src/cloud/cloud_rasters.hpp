@@ -1,0 +1,33 @@
+#pragma once
+// DSM / DTM / nDSM / point density rasters from a cleaned, ground-classified
+// cloud, on a given north-up grid in the cloud's CRS. No GDAL.
+#include <cstdint>
+#include <vector>
+
+#include "cloud/point_cloud.hpp"
+#include "core/geo_transform.hpp"
+#include "core/image.hpp"
+
+namespace cityforge {
+
+/// A north-up grid: `transform` maps pixel edges to CRS coordinates.
+struct GridSpec {
+    GeoTransform transform;
+    int width = 0;
+    int height = 0;
+};
+
+/// Float rasters, NaN = no data. z in the cloud's vertical units.
+struct CloudRasters {
+    Image<float> dsm;      ///< highest kept point per cell (NaN where empty)
+    Image<float> dtm;      ///< mean ground z per cell, gaps filled (no holes)
+    Image<float> ndsm;     ///< dsm - dtm where the dsm has data
+    Image<float> density;  ///< kept points per square metre
+};
+
+/// Rasterises `cloud` (points with keep[i] == 0 skipped; keep may be empty)
+/// on `grid`. `unit_m` = metres per horizontal CRS unit (for the density).
+CloudRasters rasterize_cloud(const PointCloud& cloud, const std::vector<uint8_t>& keep, const std::vector<uint8_t>& is_ground,
+                             const GridSpec& grid, double unit_m);
+
+}  // namespace cityforge

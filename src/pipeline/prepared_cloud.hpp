@@ -1,0 +1,31 @@
+#pragma once
+// Shared first steps of every cloud-based command: read the cloud, resolve
+// its CRS (override > file), bring it into the target CRS, remove outliers
+// and find the ground. Lengths in the options are metres.
+#include <string>
+#include <vector>
+
+#include "cloud/cloud_filters.hpp"
+#include "cloud/point_cloud.hpp"
+#include "crs/crs.hpp"
+
+namespace cityforge {
+
+struct PreparedCloud {
+    PointCloud cloud;             ///< in `crs` (the target's horizontal CRS + the cloud's vertical)
+    CrsInfo crs;
+    CrsInfo source_crs;           ///< the cloud's own CRS
+    std::vector<uint8_t> keep;    ///< 0 = outlier
+    std::vector<uint8_t> is_ground;
+    bool reprojected = false;
+    std::size_t removed_statistical = 0, removed_isolated = 0, ground_points = 0;
+    bool ground_from_classification = false;
+};
+
+/// `target` may be empty (keep the cloud's CRS). Throws Error naming the file
+/// for a missing/empty cloud, a cloud without CRS and no override, or CRSs
+/// PROJ cannot relate.
+PreparedCloud prepare_cloud(const std::string& cloud_path, const std::string& cloud_crs_override, const CrsInfo& target,
+                            const OutlierFilterOptions& outliers, const GroundFilterOptions& ground);
+
+}  // namespace cityforge

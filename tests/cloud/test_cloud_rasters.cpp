@@ -1,0 +1,45 @@
+#include <catch2/catch.hpp>
+#include <cmath>
+
+#include "pipeline/rasterize_run.hpp"
+#include "raster/raster.hpp"
+#include "synth/synth.hpp"
+#include "test_support.hpp"
+
+using namespace cityforge;
+using cityforge::test::ScratchDir;
+
+TEST_CASE("cloud rasterize on the ortho grid - DTM without holes - nDSM shows building heights", "[cloud][rasterize]") {
+    ScratchDir dir("rasterize");
+    SynthOptions so;
+    so.size_m = 150;
+    so.seed = 6;
+    const SynthResult s = write_synthetic_town(dir.path.string(), so);
+    RasterizeOptions o;
+    o.grid_raster = s.ortho_path;
+    const RasterizeReport r = rasterize_run(s.cloud_path, dir / "r", o);
+    const RasterInfo ortho = read_raster_info(s.ortho_path);
+    const RasterInfo dtm_info = read_raster_info(r.dtm_path);
+    CHECK(dtm_info.width == ortho.width);
+    CHECK(dtm_info.height == ortho.height);
+    CHECK(dtm_info.extent.min_x == ortho.extent.min_x);
+    CHECK(dtm_info.extent.max_y == ortho.extent.max_y);
+    CHECK(dtm_info.crs.epsg == ortho.crs.epsg);
+    const auto dtm = RasterReader(r.dtm_path).read_all<float>();
+    for (float v : dtm.data) REQUIRE(v != -9999.0f);
+    // Inside buildings (truth raster), the nDSM sits between 2 m and 40 m; on open ground near 0.
+    const auto ndsm = RasterReader(r.ndsm_path).read_all<float>();
+    const auto truth = RasterReader(s.truth_raster_path).read_all<uint32_t>();
+    std::size_t roof = 0, roof_ok = 0, open = 0, open_ok = 0;
+    for (std::size_t i = 0; i < ndsm.data.size(); ++i) {
+        if (ndsm.data[i] == -9999.0f) continue;
+        if (truth.data[i]) ++roof, roof_ok += ndsm.data[i] > 2.0f && ndsm.data[i] < 40.0f;
+        else ++open, open_ok += std::abs(ndsm.data[i]) < 0.5f;
+    }
+    CHECK(double(roof_ok) / double(roof) > 0.95);
+    CHECK(double(open_ok) / double(open) > 0.75);  // trees are the rest
+    const auto density = RasterReader(r.density_path).read_all<float>();
+    double sum = 0.0;
+    for (float v : density.data) sum += v;
+    CHECK(sum / double(density.data.size()) == Approx(8.0).epsilon(0.15));
+}
