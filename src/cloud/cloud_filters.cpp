@@ -28,16 +28,16 @@ void GroundFilterOptions::validate() const {
 
 namespace {
 
-// nanoflann adaptor over the SoA cloud (3D or 2D).
-template <int Dim>
-struct CloudAdaptor {
-    const PointCloud& c;
-    std::size_t kdtree_get_point_count() const { return c.size(); }
-    double kdtree_get_pt(std::size_t i, std::size_t d) const { return d == 0 ? c.x[i] : d == 1 ? c.y[i] : c.z[i]; }
+// Points as float xyz relative to the cloud's minimum corner: half the memory
+// of doubles and faster queries; float keeps ~0.1 mm over 10 km.
+struct LocalPoints {
+    std::vector<float> xyz;
+    std::size_t kdtree_get_point_count() const { return xyz.size() / 3; }
+    float kdtree_get_pt(std::size_t i, std::size_t d) const { return xyz[3 * i + d]; }
     template <class BBox>
     bool kdtree_get_bbox(BBox&) const { return false; }
 };
-using Tree3 = nanoflann::KDTreeSingleIndexAdaptor<nanoflann::L2_Simple_Adaptor<double, CloudAdaptor<3>>, CloudAdaptor<3>, 3>;
+using Tree3 = nanoflann::KDTreeSingleIndexAdaptor<nanoflann::L2_Simple_Adaptor<float, LocalPoints>, LocalPoints, 3>;
 
 }  // namespace
 
@@ -49,20 +49,35 @@ OutlierFilterResult filter_outliers(const PointCloud& c, const OutlierFilterOpti
     for (std::size_t i = 0; i < n; ++i)
         if (c.classification[i] == las_class::low_noise || c.classification[i] == las_class::high_noise) r.keep[i] = 0, ++r.removed_statistical;
     if (!o.enabled || n < static_cast<std::size_t>(o.k_neighbours) + 1) return r;
-    CloudAdaptor<3> adaptor{c};
-    Tree3 tree(3, adaptor, nanoflann::KDTreeSingleIndexAdaptorParams(16));
+    LocalPoints local;
+    double ox = INFINITY, oy = INFINITY, oz = INFINITY;
+    for (std::size_t i = 0; i < n; ++i) ox = std::min(ox, c.x[i]), oy = std::min(oy, c.y[i]), oz = std::min(oz, c.z[i]);
+    local.xyz.resize(3 * n);
+    for (std::size_t i = 0; i < n; ++i) {
+        local.xyz[3 * i] = static_cast<float>(c.x[i] - ox);
+        local.xyz[3 * i + 1] = static_cast<float>(c.y[i] - oy);
+        local.xyz[3 * i + 2] = static_cast<float>(c.z[i] - oz);
+    }
+    Tree3 tree(3, local, nanoflann::KDTreeSingleIndexAdaptorParams(16));
     tree.buildIndex();
-    const std::size_t k = static_cast<std::size_t>(o.k_neighbours) + 1;  // the point itself comes back first
+    // One k-nearest-neighbour pass serves both filters: the isolated-point test
+    // only needs the distance to the m-th neighbour (m = isolated_min_neighbours).
+    const std::size_t k = static_cast<std::size_t>(std::max(o.k_neighbours, o.isolated_min_neighbours)) + 1;  // self first
+    const auto m = static_cast<std::size_t>(o.isolated_min_neighbours);
     std::vector<double> mean_dist(n, 0.0);
+    std::vector<uint8_t> isolated(n, 0);
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, 4096), [&](const tbb::blocked_range<std::size_t>& range) {
         std::vector<uint32_t> idx(k);
-        std::vector<double> d2(k);
+        std::vector<float> d2(k);
         for (std::size_t i = range.begin(); i != range.end(); ++i) {
-            const double q[3] = {c.x[i], c.y[i], c.z[i]};
+            const float* q = &local.xyz[3 * i];
             const std::size_t found = tree.knnSearch(q, k, idx.data(), d2.data());
             double s = 0.0;
-            for (std::size_t j = 1; j < found; ++j) s += std::sqrt(d2[j]);
-            mean_dist[i] = found > 1 ? s / static_cast<double>(found - 1) : 0.0;
+            const std::size_t used = std::min(found, static_cast<std::size_t>(o.k_neighbours) + 1);
+            for (std::size_t j = 1; j < used; ++j) s += std::sqrt(d2[j]);
+            mean_dist[i] = used > 1 ? s / static_cast<double>(used - 1) : 0.0;
+            if (o.isolated_radius > 0.0 && m > 0)
+                isolated[i] = found <= m || d2[m] > o.isolated_radius * o.isolated_radius;
         }
     });
     // Sums in index order: the threshold does not depend on the thread count.
@@ -73,24 +88,8 @@ OutlierFilterResult filter_outliers(const PointCloud& c, const OutlierFilterOpti
     const double limit = mean + o.std_multiplier * sigma;
     for (std::size_t i = 0; i < n; ++i)
         if (r.keep[i] && mean_dist[i] > limit) r.keep[i] = 0, ++r.removed_statistical;
-    if (o.isolated_radius > 0.0) {
-        std::vector<uint8_t> isolated(n, 0);
-        const double r2 = o.isolated_radius * o.isolated_radius;
-        tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, 4096), [&](const tbb::blocked_range<std::size_t>& range) {
-            std::vector<std::pair<uint32_t, double>> matches;
-            for (std::size_t i = range.begin(); i != range.end(); ++i) {
-                if (!r.keep[i]) continue;
-                const double q[3] = {c.x[i], c.y[i], c.z[i]};
-                matches.clear();
-                nanoflann::SearchParams params;
-                params.sorted = false;
-                const std::size_t found = tree.radiusSearch(q, r2, matches, params);
-                if (static_cast<int>(found) - 1 < o.isolated_min_neighbours) isolated[i] = 1;
-            }
-        });
-        for (std::size_t i = 0; i < n; ++i)
-            if (isolated[i]) r.keep[i] = 0, ++r.removed_isolated;
-    }
+    for (std::size_t i = 0; i < n; ++i)
+        if (r.keep[i] && isolated[i]) r.keep[i] = 0, ++r.removed_isolated;
     return r;
 }
 

@@ -54,6 +54,9 @@ void PointCloud::clear() {
 }
 
 void PointCloud::reserve(std::size_t n, bool color, bool gps) {
+    // Grow geometrically: readers call this once per chunk.
+    if (n <= x.capacity() && (!color || n <= red.capacity()) && (!gps || n <= gps_time.capacity())) return;
+    n = std::max(n, 2 * x.capacity());
     x.reserve(n), y.reserve(n), z.reserve(n), intensity.reserve(n);
     classification.reserve(n), return_number.reserve(n), number_of_returns.reserve(n);
     if (gps) gps_time.reserve(n);
@@ -172,7 +175,8 @@ std::size_t LasReader::read_chunk(PointCloud& out, std::size_t max_points) {
     if (n == 0) return 0;
     const LasHeader& h = header_;
     const std::size_t rl = h.point_record_length;
-    std::vector<char> buf(n * rl);
+    std::vector<char>& buf = buffer_;  // reused between chunks: no page faults per chunk
+    buf.resize(n * rl);
     in_.read(buf.data(), static_cast<std::streamsize>(buf.size()));
     if (static_cast<std::size_t>(in_.gcount()) != buf.size()) throw Error(path_, "truncated point records");
     const bool extended = h.point_format >= 6;
@@ -180,30 +184,34 @@ std::size_t LasReader::read_chunk(PointCloud& out, std::size_t max_points) {
     const bool gps = h.has_gps_time();
     // Offset of the RGB triplet within the record for each format.
     static constexpr int rgb_offset[] = {-1, -1, 20, 28, -1, 28, -1, 30, 30, -1, 30};
-    out.reserve(out.size() + n, color, gps);
+    // Resize once, then fill by index (much faster than per-field push_back).
+    const std::size_t base = out.size();
+    out.reserve(base + n, color, gps);
+    for (auto* v : {&out.x, &out.y, &out.z}) v->resize(base + n);
+    out.intensity.resize(base + n);
+    for (auto* v : {&out.classification, &out.return_number, &out.number_of_returns}) v->resize(base + n);
+    if (gps) out.gps_time.resize(base + n);
+    if (color) out.red.resize(base + n), out.green.resize(base + n), out.blue.resize(base + n);
+    const int class_offset = extended ? 16 : 15;
+    const int gps_offset = extended ? 22 : 20;
+    const int rgb = rgb_offset[h.point_format];
     for (std::size_t i = 0; i < n; ++i) {
         const char* p = buf.data() + i * rl;
-        out.x.push_back(get<int32_t>(p) * h.scale[0] + h.offset[0]);
-        out.y.push_back(get<int32_t>(p + 4) * h.scale[1] + h.offset[1]);
-        out.z.push_back(get<int32_t>(p + 8) * h.scale[2] + h.offset[2]);
-        out.intensity.push_back(get<uint16_t>(p + 12));
+        const std::size_t k = base + i;
+        out.x[k] = get<int32_t>(p) * h.scale[0] + h.offset[0];
+        out.y[k] = get<int32_t>(p + 4) * h.scale[1] + h.offset[1];
+        out.z[k] = get<int32_t>(p + 8) * h.scale[2] + h.offset[2];
+        out.intensity[k] = get<uint16_t>(p + 12);
         const auto bits = static_cast<uint8_t>(p[14]);
-        if (extended) {
-            out.return_number.push_back(bits & 0x0F);
-            out.number_of_returns.push_back(static_cast<uint8_t>(bits >> 4));
-            out.classification.push_back(static_cast<uint8_t>(p[16]));
-            if (gps) out.gps_time.push_back(get<double>(p + 22));
-        } else {
-            out.return_number.push_back(bits & 0x07);
-            out.number_of_returns.push_back(static_cast<uint8_t>((bits >> 3) & 0x07));
-            out.classification.push_back(static_cast<uint8_t>(p[15]) & 0x1F);
-            if (gps) out.gps_time.push_back(get<double>(p + 20));
-        }
+        out.return_number[k] = extended ? (bits & 0x0F) : (bits & 0x07);
+        out.number_of_returns[k] = static_cast<uint8_t>(extended ? bits >> 4 : (bits >> 3) & 0x07);
+        const auto cls = static_cast<uint8_t>(p[class_offset]);
+        out.classification[k] = extended ? cls : (cls & 0x1F);
+        if (gps) out.gps_time[k] = get<double>(p + gps_offset);
         if (color) {
-            const char* c = p + rgb_offset[h.point_format];
-            out.red.push_back(get<uint16_t>(c));
-            out.green.push_back(get<uint16_t>(c + 2));
-            out.blue.push_back(get<uint16_t>(c + 4));
+            out.red[k] = get<uint16_t>(p + rgb);
+            out.green[k] = get<uint16_t>(p + rgb + 2);
+            out.blue[k] = get<uint16_t>(p + rgb + 4);
         }
     }
     read_ += n;
@@ -214,6 +222,7 @@ PointCloud read_las(const std::string& path, LasHeader* header) {
     LasReader reader(path);
     if (header) *header = reader.header();
     PointCloud cloud;
+    cloud.reserve(static_cast<std::size_t>(reader.header().point_count), reader.header().has_color(), reader.header().has_gps_time());
     while (reader.read_chunk(cloud, 1u << 20) > 0) {
     }
     return cloud;

@@ -7,6 +7,7 @@
 #include <fstream>
 #include <memory>
 #include <string>
+#include <vector>
 
 #include "cloud/point_cloud.hpp"
 
@@ -53,6 +54,7 @@ private:
     std::ifstream in_;
     LasHeader header_;
     uint64_t read_ = 0;
+    std::vector<char> buffer_;
 };
 
 /// Reads the whole file into memory (explicit: callers that know it fits).
