@@ -13,7 +13,8 @@ cf="$here/build/bin/cityforge"
 "$cf" synth --out "$out/scene" $(grep -v '^#' "$here/samples/sample_scene.args")
 "$cf" info "$out/scene/ortho.tif"
 "$cf" info "$out/scene/cloud.las"
-if "$cf" segment --help >/dev/null 2>&1; then
-  "$cf" segment --ortho "$out/scene/ortho.tif" --out "$out/segments" --config "$here/samples/segment.json"
-fi
+"$cf" segment --ortho "$out/scene/ortho.tif" --out "$out/segments" --config "$here/samples/segment.json"
+"$cf" cloud rasterize --cloud "$out/scene/cloud.las" --grid "$out/scene/ortho.tif" --out "$out/rasters"
+# Until footprint extraction lands, heights run on the scene's truth footprints.
+"$cf" heights --footprints "$out/scene/truth.geojson" --cloud "$out/scene/cloud.las" --out "$out/buildings_heights.gpkg"
 echo "cityforge demo: outputs in $out" >&2
