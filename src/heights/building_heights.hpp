@@ -23,6 +23,11 @@ struct HeightOptions {
     double roof_percentile = 70.0;         ///< percentile of roof z used for height_m (LOD1)
     double min_height_above_ground_m = 0.5;///< roof points must be this far above ground_z
     int min_roof_points = 5;               ///< fewer -> percentiles null, flagged
+    /// When a footprint holds at least min_roof_points building-class (6)
+    /// points, only those are roof points: unclassified points there are
+    /// mostly vegetation overhanging the roof. Otherwise every non-ground,
+    /// non-noise, non-water point counts (unclassified or photogrammetric clouds).
+    bool prefer_building_class = true;
     double coverage_cell_m = 1.0;          ///< cell size of the nodata_fraction grid
     double unit_m = 1.0;                   ///< metres per horizontal CRS unit
     double z_unit_m = 1.0;                 ///< metres per z unit
