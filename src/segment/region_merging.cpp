@@ -241,7 +241,10 @@ public:
     double pair_cost(uint32_t r, const Neighbour& k) const { return r < k.id ? cost(r, k.id, k.shared) : cost(k.id, r, k.shared); }
 
     // Nearest neighbour of r: lowest (cost, id).
-    void update_nn(uint32_t r) {
+    // Returns true when r's nearest neighbour or its cost changed.
+    bool update_nn(uint32_t r) {
+        const uint32_t old = nn_[r];
+        const double old_cost = nn_cost_[r];
         uint32_t best = 0;
         double best_cost = INFINITY;
         for (const Neighbour& k : adj_[r]) {
@@ -250,10 +253,15 @@ public:
         }
         nn_[r] = best;
         nn_cost_[r] = best_cost;
+        return best != old || best_cost != old_cost;
     }
     // Makes `candidate` r's nearest neighbour if it beats the current one on (cost, id).
-    void offer_candidate(uint32_t r, uint32_t candidate, double c) {
-        if (c < nn_cost_[r] || (c == nn_cost_[r] && candidate < nn_[r])) nn_[r] = candidate, nn_cost_[r] = c;
+    bool offer_candidate(uint32_t r, uint32_t candidate, double c) {
+        if (c < nn_cost_[r] || (c == nn_cost_[r] && candidate < nn_[r])) {
+            nn_[r] = candidate, nn_cost_[r] = c;
+            return true;
+        }
+        return false;
     }
     uint32_t nn(uint32_t r) const { return nn_[r]; }
     double nn_cost(uint32_t r) const { return nn_cost_[r]; }
@@ -385,6 +393,7 @@ RegionMergingResult merge_regions(const Image<float>& image, const Image<uint32_
             }
         }
         level.initial_queue_length = heap.size();
+        std::vector<uint32_t> changed;
         while (!heap.empty()) {
             const QueueEntry e = heap.top();
             heap.pop();
@@ -398,13 +407,21 @@ RegionMergingResult merge_regions(const Image<float>& image, const Image<uint32_
             } else {
                 g.update_nn(m);
                 // A neighbour's costs changed only towards m: rescan it fully only
-                // when its nearest neighbour was one of the merged pair.
+                // when its nearest neighbour was one of the merged pair. Only
+                // regions whose nearest neighbour changed need a (new) queue
+                // entry: an unchanged pair keeps its valid entry, since its cost
+                // can only change through a merge of one of its regions.
+                changed.clear();
                 for (const Neighbour& k : g.neighbours(m)) {
+                    // A neighbour that pointed at the merged pair always needs a
+                    // fresh entry: its old one carries the pair's old versions.
+                    bool moved = true;
                     if (g.nn(k.id) == e.a || g.nn(k.id) == e.b) g.update_nn(k.id);
-                    else g.offer_candidate(k.id, m, g.pair_cost(k.id, {m, k.shared}));
+                    else moved = g.offer_candidate(k.id, m, g.pair_cost(k.id, {m, k.shared}));
+                    if (moved) changed.push_back(k.id);
                 }
                 offer_nn(m);
-                for (const Neighbour& k : g.neighbours(m)) offer_nn(k.id);
+                for (uint32_t k : changed) offer_nn(k);
             }
         }
         level.regions_after = g.alive_count();
