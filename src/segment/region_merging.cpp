@@ -315,6 +315,39 @@ public:
         return a;
     }
 
+    // Invariants of the graph: totals over alive regions equal the totals of
+    // the initial regions, adjacency is symmetric with equal shared lengths.
+    void verify(const std::vector<double>& totals) const {
+        std::vector<double> now(totals.size(), 0.0);
+        for (uint32_t r = 1; r < n_; ++r) {
+            if (!alive_[r]) {
+                if (!adj_[r].empty()) throw Error("region merging", "dead region " + std::to_string(r) + " still has neighbours");
+                continue;
+            }
+            now[0] += area_[r];
+            for (int b = 0; b < bands_; ++b) now[1 + b] += sum_[r * bands_ + b], now[1 + bands_ + b] += sumsq_[r * bands_ + b];
+            for (const Neighbour& k : adj_[r]) {
+                if (!alive_[k.id]) throw Error("region merging", "region " + std::to_string(r) + " borders a dead region");
+                const auto& other = adj_[k.id];
+                const auto it = std::lower_bound(other.begin(), other.end(), r, [](const Neighbour& q, uint32_t id) { return q.id < id; });
+                if (it == other.end() || it->id != r || it->shared != k.shared)
+                    throw Error("region merging", "adjacency of " + std::to_string(r) + " and " + std::to_string(k.id) + " is not symmetric");
+            }
+        }
+        for (std::size_t i = 0; i < totals.size(); ++i)
+            if (std::abs(now[i] - totals[i]) > 1e-9 * std::max(1.0, std::abs(totals[i])))
+                throw Error("region merging", "region statistics no longer add up to the image totals");
+    }
+    std::vector<double> totals() const {
+        std::vector<double> t(1 + 2 * static_cast<std::size_t>(bands_), 0.0);
+        for (uint32_t r = 1; r < n_; ++r) {
+            if (!alive_[r]) continue;
+            t[0] += area_[r];
+            for (int b = 0; b < bands_; ++b) t[1 + b] += sum_[r * bands_ + b], t[1 + bands_ + b] += sumsq_[r * bands_ + b];
+        }
+        return t;
+    }
+
 private:
     double bbox_perimeter(uint32_t r) const { return 2.0 * ((x1_[r] - x0_[r] + 1) + (y1_[r] - y0_[r] + 1)); }
 
@@ -359,6 +392,7 @@ RegionMergingResult merge_regions(const Image<float>& image, const Image<uint32_
             if (g.alive(r)) g.update_nn(r);
 
     result.graph_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t_graph).count();
+    const std::vector<double> initial_totals = o.verify_invariants ? g.totals() : std::vector<double>{};
     std::vector<uint32_t> previous_compact(n, 0);  // survivor id -> label at previous level
     {
         for (uint32_t r = 1; r < n; ++r) previous_compact[r] = g.alive(r) ? r : 0;
@@ -425,6 +459,7 @@ RegionMergingResult merge_regions(const Image<float>& image, const Image<uint32_
             }
         }
         level.regions_after = g.alive_count();
+        if (o.verify_invariants) g.verify(initial_totals);
         // Contiguous labels of this level in ascending survivor id; hierarchy links.
         std::vector<uint32_t> compact(n, 0);
         uint32_t next = 0;

@@ -44,6 +44,10 @@ struct RegionMergingOptions {
     double compactness = 0.5;      ///< w_cmpct in [0, 1] within the shape term
     std::vector<double> band_weights;  ///< one per band (empty = equal)
     QueueStrategy strategy = QueueStrategy::mutual;
+    /// After every scale, check that region statistics still add up to the
+    /// image totals (area, band sums and sums of squares) and that adjacency
+    /// is symmetric; throws Error if not. For tests and debugging (O(regions)).
+    bool verify_invariants = false;
     /// Throws Error naming the option on bad values (`bands` = image band count).
     void validate(int bands) const;
 };

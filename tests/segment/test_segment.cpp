@@ -61,7 +61,7 @@ TEST_CASE("Merging recovers flat-colour regions exactly with every strategy", "[
     }
 }
 
-TEST_CASE("Hierarchy is consistent and labels contiguous - same labels for every strategy", "[segment]") {
+TEST_CASE("Merging preserves totals and adjacency symmetry - hierarchy consistent - labels contiguous - same labels for every strategy", "[segment]") {
     ScratchDir dir("seg_synth");
     SynthOptions so;
     so.size_m = 150;
@@ -72,6 +72,7 @@ TEST_CASE("Hierarchy is consistent and labels contiguous - same labels for every
     const Oversegmentation over = watershed_oversegment(img, {}, WatershedOptions{});
     RegionMergingOptions mo;
     mo.scales = {10, 20, 40, 80};
+    mo.verify_invariants = true;  // totals (area, band sums) kept, adjacency symmetric, after every scale
     std::vector<std::vector<uint32_t>> tables[3];
     int k = 0;
     for (auto s : {QueueStrategy::rag, QueueStrategy::nng, QueueStrategy::mutual}) {
