@@ -7,7 +7,7 @@ PACKAGES=(
   build-essential cmake pkg-config ninja-build
   libgdal-dev gdal-bin libproj-dev proj-bin
   libgeographiclib-dev
-  libcgal-dev libeigen3-dev
+  libcgal-dev libeigen3-dev libboost-dev
   libopencv-imgproc-dev libopencv-core-dev
   catch2 libtbb-dev nlohmann-json3-dev libcli11-dev libgeos-dev libnanoflann-dev
   libxml2-utils

@@ -1,0 +1,43 @@
+#pragma once
+// Rectangle fits of building outlines and their accuracy against the raw
+// polygon. Planar, in the polygon's CRS units (projected CRS expected).
+#include <array>
+#include <vector>
+
+#include "core/geometry.hpp"
+
+namespace cityforge {
+
+/// An oriented rectangle.
+struct OrientedRectangle {
+    MapPoint centre;
+    double length = 0.0;       ///< along the orientation, CRS units (>= width)
+    double width = 0.0;        ///< across, CRS units
+    double orientation_deg = 0.0;  ///< long side from east, counter-clockwise, in [0, 180)
+    /// Corners counter-clockwise.
+    std::array<MapPoint, 4> corners() const;
+    Polygon polygon() const;
+};
+
+/// Convex hull (Andrew's monotone chain), counter-clockwise, no collinear points.
+Ring convex_hull(const std::vector<MapPoint>& points);
+
+/// Minimum-area bounding rectangle of the polygon's exterior (rotating
+/// calipers over the convex hull's edges; ties go to the smaller angle).
+/// Throws Error for a polygon with fewer than 3 distinct vertices or zero area.
+OrientedRectangle minimum_area_rectangle(const Polygon& polygon);
+
+/// Accuracy of a fitted polygon against the raw one.
+struct FitAccuracy {
+    double area_error_pct = 0.0;  ///< (area(fit) - area(raw)) / area(raw) * 100
+    double iou = 0.0;             ///< area(fit ∩ raw) / area(fit ∪ raw)
+};
+FitAccuracy fit_accuracy(const Polygon& raw, const Polygon& fit);
+
+/// Intersection over union of two polygons with holes (Boost.Geometry).
+double polygon_iou(const Polygon& a, const Polygon& b);
+
+/// Perimeter of all rings, CRS units.
+double polygon_perimeter(const Polygon& p);
+
+}  // namespace cityforge

@@ -1,0 +1,28 @@
+#pragma once
+// Raster regions -> polygons exactly along pixel edges (holes kept), and
+// outline simplification. No GDAL: pixel geometry goes to map coordinates
+// through the raster's GeoTransform.
+#include <cstdint>
+#include <vector>
+
+#include "core/geo_transform.hpp"
+#include "core/geometry.hpp"
+#include "core/image.hpp"
+
+namespace cityforge {
+
+/// The polygons of one region: its 4-connected parts, each with its holes.
+/// Exterior rings counter-clockwise, holes clockwise (in map coordinates with
+/// y up); only corner vertices are kept (collinear pixel-edge vertices dropped).
+/// Rings may touch at single vertices (diagonal pixels) but never cross.
+std::vector<Polygon> vectorize_region(const Image<uint32_t>& labels, uint32_t region, const GeoTransform& transform);
+
+/// Every region 1..max label of `labels` at once (index = label; entry 0 and
+/// absent labels are empty). One pass over the raster plus the boundaries.
+std::vector<std::vector<Polygon>> vectorize_all(const Image<uint32_t>& labels, const GeoTransform& transform);
+
+/// Douglas–Peucker simplification of every ring with `tolerance` (CRS units).
+/// A ring that would collapse below 3 vertices is kept as it was.
+Polygon simplify_polygon(const Polygon& polygon, double tolerance);
+
+}  // namespace cityforge

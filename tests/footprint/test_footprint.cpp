@@ -1,0 +1,125 @@
+#include <catch2/catch.hpp>
+#include <cmath>
+#include <numbers>
+
+#include "core/error.hpp"
+#include "core/random.hpp"
+#include "footprint/rectangle_fit.hpp"
+#include "footprint/vectorize.hpp"
+#include "io/vector.hpp"
+#include "raster/raster.hpp"
+#include "synth/synth.hpp"
+#include "test_support.hpp"
+
+using namespace cityforge;
+using cityforge::test::ScratchDir;
+
+namespace {
+const GeoTransform kGrid{500000.0, 0.5, 4400100.0, -0.5};
+Image<uint32_t> paint(int w, int h, const std::vector<std::array<int, 5>>& boxes) {  // {label, x0, y0, x1, y1} inclusive
+    Image<uint32_t> img(w, h, 1, 0u);
+    for (const auto& b : boxes)
+        for (int y = b[2]; y <= b[4]; ++y)
+            for (int x = b[1]; x <= b[3]; ++x) img.at(0, x, y) = static_cast<uint32_t>(b[0]);
+    return img;
+}
+}  // namespace
+
+TEST_CASE("A pixel rectangle vectorises to its 4 corners with the exact area", "[footprint][vectorize]") {
+    const auto img = paint(20, 20, {{7, 3, 4, 12, 9}});
+    const auto polys = vectorize_region(img, 7, kGrid);
+    REQUIRE(polys.size() == 1);
+    CHECK(polys[0].outer.size() == 4);
+    CHECK(polygon_area(polys[0]) == Approx(10 * 6 * 0.25));
+    CHECK(signed_area(polys[0].outer) > 0);  // counter-clockwise exterior
+    CHECK(polys[0].outer[0].x >= 500001.5 - 1e-9);
+}
+
+TEST_CASE("L-shapes - holes and diagonal pixels vectorise validly", "[footprint][vectorize]") {
+    // L: 6 corners.
+    const auto l = paint(20, 20, {{1, 2, 2, 12, 5}, {1, 2, 6, 5, 14}});
+    const auto lp = vectorize_region(l, 1, kGrid);
+    REQUIRE(lp.size() == 1);
+    CHECK(lp[0].outer.size() == 6);
+    CHECK(polygon_area(lp[0]) == Approx((11 * 4 + 4 * 9) * 0.25));
+    // Courtyard: ring of width 2 around a 4x4 hole.
+    auto ring = paint(20, 20, {{3, 2, 2, 9, 9}});
+    for (int y = 4; y <= 7; ++y)
+        for (int x = 4; x <= 7; ++x) ring.at(0, x, y) = 0;
+    const auto rp = vectorize_region(ring, 3, kGrid);
+    REQUIRE(rp.size() == 1);
+    REQUIRE(rp[0].holes.size() == 1);
+    CHECK(signed_area(rp[0].holes[0]) < 0);
+    CHECK(polygon_area(rp[0]) == Approx((64 - 16) * 0.25));
+    // Two pixels touching at a corner only: two separate polygons.
+    auto diag = paint(6, 6, {{5, 1, 1, 1, 1}, {5, 2, 2, 2, 2}});
+    const auto dp = vectorize_region(diag, 5, kGrid);
+    CHECK(dp.size() == 2);
+    // A hole touching the exterior at one vertex (pinch) stays a valid polygon with a hole.
+    auto pinch = paint(10, 10, {{9, 1, 1, 6, 6}});
+    pinch.at(0, 3, 3) = 0, pinch.at(0, 4, 4) = 0, pinch.at(0, 3, 4) = 0, pinch.at(0, 4, 3) = 0;
+    const auto pp = vectorize_region(pinch, 9, kGrid);
+    REQUIRE(pp.size() == 1);
+    CHECK(polygon_area(pp[0]) == Approx((36 - 4) * 0.25));
+}
+
+TEST_CASE("A rectangle fits itself with 0 % error - a rotated noisy rectangle's orientation comes back within 1 degree", "[footprint][fit]") {
+    OrientedRectangle r;
+    r.centre = {500100, 4400100};
+    r.length = 30, r.width = 12, r.orientation_deg = 33.0;
+    const Polygon exact = r.polygon();
+    const OrientedRectangle f = minimum_area_rectangle(exact);
+    CHECK(f.orientation_deg == Approx(33.0).margin(1e-6));
+    CHECK(f.length == Approx(30.0));
+    const FitAccuracy acc = fit_accuracy(exact, f.polygon());
+    CHECK(std::abs(acc.area_error_pct) < 1e-6);
+    CHECK(acc.iou == Approx(1.0));
+    // Noisy outline: 200 points along the edges jittered by 5 cm.
+    Rng rng(3);
+    Polygon noisy;
+    const auto c = r.corners();
+    for (int e = 0; e < 4; ++e)
+        for (int k = 0; k < 50; ++k) {
+            const double t = k / 50.0;
+            noisy.outer.push_back({c[e].x + (c[(e + 1) % 4].x - c[e].x) * t + 0.05 * rng.normal(),
+                                   c[e].y + (c[(e + 1) % 4].y - c[e].y) * t + 0.05 * rng.normal()});
+        }
+    const OrientedRectangle nf = minimum_area_rectangle(noisy);
+    CHECK(nf.orientation_deg == Approx(33.0).margin(1.0));
+    CHECK(fit_accuracy(noisy, nf.polygon()).iou > 0.97);
+    Polygon degenerate;
+    degenerate.outer = {{0, 0}, {1, 1}, {2, 2}};
+    CHECK_THROWS_WITH(minimum_area_rectangle(degenerate), Catch::Contains("degenerate"));
+}
+
+TEST_CASE("IoU of a shifted square is known", "[footprint][fit]") {
+    Polygon a, b;
+    a.outer = {{0, 0}, {10, 0}, {10, 10}, {0, 10}};
+    b.outer = {{2, 0}, {12, 0}, {12, 10}, {2, 10}};
+    CHECK(polygon_iou(a, b) == Approx(80.0 / 120.0));
+    CHECK(polygon_perimeter(a) == Approx(40.0));
+}
+
+TEST_CASE("Synthetic truth raster vectorises back to the truth footprints", "[footprint][synth]") {
+    ScratchDir dir("vec_synth");
+    SynthOptions so;
+    so.size_m = 200;
+    so.cloud_density_m2 = 0;
+    so.seed = 8;
+    const SynthResult s = write_synthetic_town(dir.path.string(), so);
+    RasterReader reader(s.truth_raster_path);
+    const auto labels = reader.read_all<uint32_t>();
+    const auto polys = vectorize_all(labels, reader.info().transform);
+    const PolygonLayer truth = read_polygon_layer(s.truth_path);
+    int checked = 0;
+    for (std::size_t i = 0; i < truth.features.size(); ++i) {
+        const auto id = static_cast<uint32_t>(std::stoul(std::get<std::string>(truth.features[i].values[0])));
+        REQUIRE(id < polys.size());
+        REQUIRE(polys[id].size() == 1);
+        const Polygon& t = truth.features[i].geometry[0];
+        CHECK(polys[id][0].holes.size() == t.holes.size());
+        CHECK(polygon_iou(polys[id][0], t) > 0.9);
+        ++checked;
+    }
+    CHECK(checked == s.buildings);
+}
