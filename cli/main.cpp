@@ -11,6 +11,7 @@
 #include "core/log.hpp"
 #include "core/progress.hpp"
 #include "io/inspect.hpp"
+#include "pipeline/footprints_run.hpp"
 #include "pipeline/heights_run.hpp"
 #include "pipeline/rasterize_run.hpp"
 #include "pipeline/segment_raster.hpp"
@@ -136,6 +137,23 @@ int main(int argc, char** argv) {
     rasterize->add_option("--cloud-crs", ropt.cloud_crs, "CRS of the cloud, e.g. EPSG:7415");
     rasterize->add_flag("--recompute-ground", r_recompute_ground, "Ignore class 2 and classify ground with SMRF");
 
+    // footprints ------------------------------------------------------------
+    auto* footprints = app.add_subcommand("footprints", "Building footprints with rectangle fits (cloud-only mode for now)");
+    std::string f_out, f_fit = "rectangle";
+    cf::FootprintsRunOptions fopt;
+    footprints->add_option("--cloud", fopt.cloud, "Point cloud (LAS, PLY, XYZ/CSV)")->required();
+    footprints->add_option("--ortho", fopt.ortho, "Ortho whose grid and CRS the footprints follow");
+    footprints->add_option("--out", f_out, "Output .gpkg (layer buildings), .geojson, .fgb or .shp")->required();
+    footprints->add_option("--cloud-crs", fopt.cloud_crs, "CRS of the cloud, e.g. EPSG:7415");
+    footprints->add_option("--fit", f_fit, "Geometry written: rectangle (minimum-area) or raw (simplified outline)")
+        ->check(CLI::IsMember({"rectangle", "raw"}))
+        ->capture_default_str();
+    footprints->add_option("--gsd", fopt.mask.gsd_m, "Raster cell in metres when no --ortho is given")->capture_default_str();
+    footprints->add_option("--min-height-m", fopt.mask.min_height_m, "nDSM threshold for buildings, metres")->capture_default_str();
+    footprints->add_option("--min-area-m2", fopt.mask.min_area_m2, "Smallest building kept, square metres")->capture_default_str();
+    footprints->add_option("--min-hole-m2", fopt.mask.min_hole_m2, "Smaller holes are filled, larger ones (courtyards) kept")->capture_default_str();
+    footprints->add_option("--simplify-m", fopt.simplify_m, "Douglas-Peucker tolerance of the outline, metres")->capture_default_str();
+
     try {
         app.parse(argc, argv);
     } catch (const CLI::ParseError& e) {
@@ -198,6 +216,13 @@ int main(int argc, char** argv) {
                 std::fprintf(stderr, "cityforge: rasters %d x %d (%s) from %llu points, %zu ground (%s) in %.1f s -> %s\n", r.width,
                              r.height, r.crs.c_str(), static_cast<unsigned long long>(r.points), r.ground_points,
                              r.ground_from_classification ? "class 2" : "SMRF", r.seconds, r_out.c_str());
+        } else if (*footprints) {
+            fopt.fit = cf::footprint_fit_from_string(f_fit);
+            const cf::FootprintsReport r = cf::run_footprints(f_out, fopt, make_progress(g));
+            if (!g.quiet)
+                std::fprintf(stderr, "cityforge: %zu footprints (%s, %s, classes %s) on %d x %d cells in %.1f s; mean |fit area error| %.2f %% -> %s\n",
+                             r.buildings, r.mode.c_str(), r.crs.c_str(), r.used_classes ? "used" : "absent", r.width, r.height,
+                             r.seconds, r.mean_abs_fit_area_error_pct, f_out.c_str());
         } else if (*synth) {
             if (origin.size() == 2) synth_options.origin_x = origin[0], synth_options.origin_y = origin[1];
             synth_options.cloud_mode = cf::cloud_mode_from_string(cloud_mode);

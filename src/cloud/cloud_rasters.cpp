@@ -16,7 +16,7 @@ CloudRasters rasterize_cloud(const PointCloud& c, const std::vector<uint8_t>& ke
     r.dsm = Image<float>(g.width, g.height, 1, NAN);
     r.density = Image<float>(g.width, g.height, 1, 0.0f);
     std::vector<double> ground_sum(n, 0.0);
-    std::vector<uint32_t> ground_n(n, 0);
+    std::vector<uint32_t> ground_n(n, 0), above_n(n, 0), building_n(n, 0), vegetation_n(n, 0);
     for (std::size_t i = 0; i < c.size(); ++i) {
         if (!keep.empty() && !keep[i]) continue;
         const PixelPoint p = g.transform.map_to_pixel({c.x[i], c.y[i]});
@@ -26,8 +26,22 @@ CloudRasters rasterize_cloud(const PointCloud& c, const std::vector<uint8_t>& ke
         const auto z = static_cast<float>(c.z[i]);
         if (std::isnan(r.dsm.data[k]) || z > r.dsm.data[k]) r.dsm.data[k] = z;
         r.density.data[k] += 1.0f;
-        if (is_ground[i]) ground_sum[k] += c.z[i], ++ground_n[k];
+        if (is_ground[i]) {
+            ground_sum[k] += c.z[i], ++ground_n[k];
+        } else {
+            ++above_n[k];
+            const uint8_t cls = c.classification[i];
+            building_n[k] += cls == las_class::building;
+            vegetation_n[k] += cls == 3 || cls == 4 || cls == las_class::vegetation_high;
+        }
     }
+    r.building_share = Image<float>(g.width, g.height, 1, NAN);
+    r.vegetation_share = Image<float>(g.width, g.height, 1, NAN);
+    for (std::size_t k = 0; k < n; ++k)
+        if (above_n[k]) {
+            r.building_share.data[k] = static_cast<float>(building_n[k]) / static_cast<float>(above_n[k]);
+            r.vegetation_share.data[k] = static_cast<float>(vegetation_n[k]) / static_cast<float>(above_n[k]);
+        }
     const double cell_m2 = std::abs(g.transform.pixel_width * g.transform.pixel_height) * unit_m * unit_m;
     for (float& d : r.density.data) d = static_cast<float>(d / cell_m2);
     std::vector<double> dtm(n);

@@ -1,6 +1,7 @@
 #include "crs/crs.hpp"
 
 #include <GeographicLib/Geodesic.hpp>
+#include <GeographicLib/PolygonArea.hpp>
 #include <algorithm>
 #include <cmath>
 #include <cpl_conv.h>
@@ -165,6 +166,23 @@ void transform_points(const CrsInfo& from, const CrsInfo& to, std::vector<double
             std::find(ok.begin(), ok.begin() + static_cast<std::ptrdiff_t>(n), 0) != ok.begin() + static_cast<std::ptrdiff_t>(n))
             throw Error(subject, "reprojection from " + from.label() + " to " + to.label() + " failed for some points" + capture.suffix());
     }
+}
+
+double geodesic_area_m2(const std::vector<std::vector<MapPoint>>& rings, const CrsInfo& crs) {
+    if (rings.empty()) return 0.0;
+    const CrsInfo wgs84 = crs_from_user_input("EPSG:4326", "geodesic area");
+    double total = 0.0;
+    for (std::size_t r = 0; r < rings.size(); ++r) {
+        std::vector<double> x, y, z;
+        for (const MapPoint& p : rings[r]) x.push_back(p.x), y.push_back(p.y), z.push_back(0.0);
+        if (!crs.geographic) transform_points(crs, wgs84, x, y, z, "geodesic area");
+        GeographicLib::PolygonArea poly(GeographicLib::Geodesic::WGS84());
+        for (std::size_t i = 0; i < x.size(); ++i) poly.AddPoint(y[i], x[i]);  // lat, lon
+        double perimeter = 0.0, area = 0.0;
+        poly.Compute(false, true, perimeter, area);
+        total += r == 0 ? std::abs(area) : -std::abs(area);
+    }
+    return total;
 }
 
 bool same_crs(const CrsInfo& a, const CrsInfo& b) {

@@ -62,6 +62,10 @@ CrsInfo combine_with_vertical(const CrsInfo& horizontal, const CrsInfo& vertical
 void transform_points(const CrsInfo& from, const CrsInfo& to, std::vector<double>& x, std::vector<double>& y,
                       std::vector<double>& z, const std::string& subject);
 
+/// Area on the WGS84 ellipsoid (GeographicLib) of a polygon given in `crs`,
+/// square metres. Vertices are transformed to geographic coordinates first.
+double geodesic_area_m2(const std::vector<std::vector<MapPoint>>& rings_outer_first, const CrsInfo& crs);
+
 /// True when both describe the same CRS (horizontal and vertical), ignoring
 /// axis-order and naming differences.
 bool same_crs(const CrsInfo& a, const CrsInfo& b);

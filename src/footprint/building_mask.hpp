@@ -1,0 +1,36 @@
+#pragma once
+// Cloud-only building detection on rasters: nDSM above a height threshold,
+// not vegetation (point classes when the cloud has them, DSM roughness when
+// it does not), cleaned by morphology, small parts dropped and small holes
+// filled. Pure raster algorithm on a north-up grid (no GDAL).
+#include <cstdint>
+#include <string>
+
+#include "core/image.hpp"
+
+namespace cityforge {
+
+struct BuildingMaskOptions {
+    double gsd_m = 0.5;                 ///< cell size of the rasters, metres
+    double min_height_m = 2.5;          ///< nDSM threshold, metres above ground
+    double min_building_share = 0.5;    ///< with classes: share of class-6 points among non-ground points
+    double max_vegetation_share = 0.5;  ///< with classes: more vegetation points than this -> not building
+    double max_roughness_m = 0.35;      ///< without classes: local DSM plane residual (3x3) above this -> vegetation
+    double min_area_m2 = 20.0;          ///< smaller components are dropped
+    double min_hole_m2 = 6.0;           ///< smaller holes (data gaps) are filled; larger ones (courtyards) kept
+    int opening_radius_px = 1;          ///< morphological opening removing thin artefacts (0 = none)
+    void validate() const;
+};
+
+struct BuildingMask {
+    Image<uint32_t> labels;  ///< 1..count per building component (4-connected), 0 = not building
+    uint32_t count = 0;
+    bool used_classes = false;  ///< true when point classes decided vegetation vs building
+};
+
+/// `ndsm`, `dsm`, `building_share`, `vegetation_share` on the same grid (NaN =
+/// no data). Shares may be all-NaN for unclassified clouds.
+BuildingMask detect_buildings(const Image<float>& ndsm, const Image<float>& dsm, const Image<float>& building_share,
+                              const Image<float>& vegetation_share, const BuildingMaskOptions& options);
+
+}  // namespace cityforge

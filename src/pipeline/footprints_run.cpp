@@ -1,0 +1,123 @@
+#include "pipeline/footprints_run.hpp"
+
+#include <chrono>
+#include <cmath>
+
+#include "cloud/cloud_rasters.hpp"
+#include "core/error.hpp"
+#include "footprint/rectangle_fit.hpp"
+#include "footprint/vectorize.hpp"
+#include "heights/building_heights.hpp"
+#include "io/vector.hpp"
+#include "pipeline/prepared_cloud.hpp"
+#include "raster/raster.hpp"
+
+namespace cityforge {
+
+FootprintFit footprint_fit_from_string(const std::string& s) {
+    if (s == "raw") return FootprintFit::raw;
+    if (s == "rectangle") return FootprintFit::rectangle;
+    throw Error("--fit", "must be raw or rectangle, not '" + s + "'");
+}
+std::string to_string(FootprintFit f) { return f == FootprintFit::raw ? "raw" : "rectangle"; }
+
+void FootprintsRunOptions::validate() const {
+    if (cloud.empty()) throw Error("--cloud", "a point cloud is needed (ortho-only detection is not implemented yet)");
+    if (!(simplify_m >= 0.0)) throw Error("--simplify-m", "must be >= 0");
+    mask.validate();
+}
+
+FootprintsReport run_footprints(const std::string& output_path, const FootprintsRunOptions& o, const Progress& progress) {
+    const auto t0 = std::chrono::steady_clock::now();
+    o.validate();
+    const std::string driver = vector_driver_for(output_path);
+    FootprintsReport rep;
+    rep.mode = "cloud_only";
+    GridSpec grid;
+    CrsInfo target;
+    if (!o.ortho.empty()) {
+        const RasterInfo info = read_raster_info(o.ortho);
+        grid = {info.transform, info.width, info.height};
+        target = info.crs;
+    }
+    const PreparedCloud pc = prepare_cloud(o.cloud, o.cloud_crs, target, o.outliers, o.ground);
+    const double unit = pc.crs.linear_unit_m;
+    if (o.ortho.empty()) {
+        double minx = INFINITY, miny = INFINITY, maxx = -INFINITY, maxy = -INFINITY;
+        for (std::size_t i = 0; i < pc.cloud.size(); ++i) {
+            minx = std::min(minx, pc.cloud.x[i]), maxx = std::max(maxx, pc.cloud.x[i]);
+            miny = std::min(miny, pc.cloud.y[i]), maxy = std::max(maxy, pc.cloud.y[i]);
+        }
+        const double cell = o.mask.gsd_m / unit;
+        const double x0 = std::floor(minx / cell) * cell, y1 = std::ceil(maxy / cell) * cell;
+        grid = {{x0, cell, y1, -cell}, static_cast<int>(std::floor((maxx - x0) / cell)) + 1,
+                static_cast<int>(std::floor((y1 - miny) / cell)) + 1};
+    }
+    rep.width = grid.width, rep.height = grid.height;
+    progress(0.4, "cloud");
+    const CloudRasters rasters = rasterize_cloud(pc.cloud, pc.keep, pc.is_ground, grid, unit);
+    BuildingMaskOptions mo = o.mask;
+    mo.gsd_m = std::abs(grid.transform.pixel_width) * unit;
+    mo.min_height_m /= pc.crs.z_unit_m;
+    const BuildingMask mask = detect_buildings(rasters.ndsm, rasters.dsm, rasters.building_share, rasters.vegetation_share, mo);
+    rep.used_classes = mask.used_classes;
+    progress(0.6, "detection");
+    const auto polygons = vectorize_all(mask.labels, grid.transform);
+    // Median nDSM per building, a first height cue for the output.
+    std::vector<std::vector<double>> heights(mask.count + 1);
+    for (std::size_t k = 0; k < mask.labels.data.size(); ++k)
+        if (const uint32_t id = mask.labels.data[k]; id && !std::isnan(rasters.ndsm.data[k])) heights[id].push_back(rasters.ndsm.data[k]);
+
+    const std::vector<FieldDefinition> fields{
+        {"id", FieldType::integer},           {"mode", FieldType::string},         {"fit", FieldType::string},
+        {"status", FieldType::string},        {"reason", FieldType::string},       {"area_m2", FieldType::real},
+        {"raw_area_m2", FieldType::real},     {"geodesic_area_m2", FieldType::real}, {"perimeter_m", FieldType::real},
+        {"orientation_deg", FieldType::real}, {"fit_area_error_pct", FieldType::real}, {"fit_iou", FieldType::real},
+        {"n_vertices", FieldType::integer},   {"height_p50_m", FieldType::real}};
+    std::vector<Feature> features;
+    double error_sum = 0.0;
+    for (uint32_t id = 1; id <= mask.count; ++id) {
+        if (polygons[id].empty()) continue;
+        const Polygon raw = simplify_polygon(polygons[id][0], o.simplify_m / unit);
+        Feature f;
+        std::string status = "ok", reason;
+        Polygon out = raw;
+        double orientation = 0.0, err = 0.0, iou = 1.0;
+        try {
+            const OrientedRectangle rect = minimum_area_rectangle(raw);
+            orientation = rect.orientation_deg;
+            if (o.fit == FootprintFit::rectangle) {
+                out = rect.polygon();
+                const FitAccuracy acc = fit_accuracy(raw, out);
+                err = acc.area_error_pct, iou = acc.iou;
+            }
+        } catch (const Error& e) {
+            status = "fit_failed", reason = e.what();
+        }
+        orient_polygon(out);
+        std::vector<Ring> rings{out.outer};
+        for (const Ring& h : out.holes) rings.push_back(h);
+        std::size_t vertices = out.outer.size();
+        for (const Ring& h : out.holes) vertices += h.size();
+        std::vector<double>& hv = heights[id];
+        const std::optional<double> h50 = percentile(hv, 50.0);
+        f.geometry = {out};
+        f.values = {int64_t(features.size() + 1), rep.mode, to_string(o.fit), status, reason,
+                    polygon_area(out) * unit * unit, polygon_area(raw) * unit * unit, geodesic_area_m2(rings, pc.crs),
+                    polygon_perimeter(out) * unit, orientation, err, iou, int64_t(vertices),
+                    h50 ? AttributeValue(*h50 * pc.crs.z_unit_m) : AttributeValue()};
+        error_sum += std::abs(err);
+        features.push_back(std::move(f));
+    }
+    rep.buildings = features.size();
+    rep.mean_abs_fit_area_error_pct = features.empty() ? 0.0 : error_sum / static_cast<double>(features.size());
+    VectorWriteOptions wo;
+    wo.driver = driver;
+    write_polygon_features(output_path, pc.crs, fields, features, wo);
+    rep.crs = pc.crs.label();
+    rep.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    progress(1.0, "written");
+    return rep;
+}
+
+}  // namespace cityforge

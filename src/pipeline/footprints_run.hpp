@@ -1,0 +1,46 @@
+#pragma once
+// `cityforge footprints`: building footprints with rectangle fits. This stage
+// implements the cloud-only mode (buildings from the nDSM and point classes);
+// with --ortho the ortho's grid is used so footprints line up with the image.
+#include <map>
+#include <string>
+
+#include "cloud/cloud_filters.hpp"
+#include "core/progress.hpp"
+#include "footprint/building_mask.hpp"
+
+namespace cityforge {
+
+enum class FootprintFit { raw, rectangle };
+FootprintFit footprint_fit_from_string(const std::string& s);
+std::string to_string(FootprintFit f);
+
+struct FootprintsRunOptions {
+    std::string cloud;             ///< required in this mode
+    std::string cloud_crs;         ///< overrides/supplies the cloud's CRS
+    std::string ortho;             ///< optional: its grid and CRS are used
+    BuildingMaskOptions mask;      ///< detection thresholds (gsd_m is the raster cell)
+    double simplify_m = 0.25;      ///< Douglas–Peucker tolerance of the raw outline, metres
+    FootprintFit fit = FootprintFit::rectangle;  ///< geometry written
+    OutlierFilterOptions outliers;
+    GroundFilterOptions ground;
+    void validate() const;
+};
+
+struct FootprintsReport {
+    std::string mode;              ///< "cloud_only" (ortho cues are not used yet)
+    std::string crs;
+    std::size_t buildings = 0;
+    bool used_classes = false;
+    int width = 0, height = 0;
+    double seconds = 0.0;
+    double mean_abs_fit_area_error_pct = 0.0;
+};
+
+/// Writes the footprints (.gpkg layer "buildings", .geojson, ...) with
+/// id, mode, fit, area_m2, raw_area_m2, geodesic_area_m2, perimeter_m,
+/// orientation_deg, fit_area_error_pct, fit_iou, n_vertices, height_p50_m.
+FootprintsReport run_footprints(const std::string& output_path, const FootprintsRunOptions& options,
+                                const Progress& progress = {});
+
+}  // namespace cityforge
