@@ -139,19 +139,20 @@ int main(int argc, char** argv) {
 
     // footprints ------------------------------------------------------------
     auto* footprints = app.add_subcommand("footprints", "Building footprints with rectangle fits (cloud-only mode for now)");
-    std::string f_out, f_fit = "rectangle";
+    std::string f_out, f_fit = "recursive";
     cf::FootprintsRunOptions fopt;
     footprints->add_option("--cloud", fopt.cloud, "Point cloud (LAS, PLY, XYZ/CSV)")->required();
     footprints->add_option("--ortho", fopt.ortho, "Ortho whose grid and CRS the footprints follow");
     footprints->add_option("--out", f_out, "Output .gpkg (layer buildings), .geojson, .fgb or .shp")->required();
     footprints->add_option("--cloud-crs", fopt.cloud_crs, "CRS of the cloud, e.g. EPSG:7415");
-    footprints->add_option("--fit", f_fit, "Geometry written: rectangle (minimum-area) or raw (simplified outline)")
-        ->check(CLI::IsMember({"rectangle", "raw"}))
+    footprints->add_option("--fit", f_fit, "Geometry written: recursive (rectangles cut/added until the area error < tolerance), rectangle (minimum-area) or raw (simplified outline)")
+        ->check(CLI::IsMember({"recursive", "rectangle", "raw"}))
         ->capture_default_str();
     footprints->add_option("--gsd", fopt.mask.gsd_m, "Raster cell in metres when no --ortho is given")->capture_default_str();
     footprints->add_option("--min-height-m", fopt.mask.min_height_m, "nDSM threshold for buildings, metres")->capture_default_str();
     footprints->add_option("--min-area-m2", fopt.mask.min_area_m2, "Smallest building kept, square metres")->capture_default_str();
     footprints->add_option("--min-hole-m2", fopt.mask.min_hole_m2, "Smaller holes are filled, larger ones (courtyards) kept")->capture_default_str();
+    footprints->add_option("--fit-tolerance-pct", fopt.recursive.tolerance_pct, "Recursive fit: stop below this area error, percent")->capture_default_str();
     footprints->add_option("--simplify-m", fopt.simplify_m, "Douglas-Peucker tolerance of the outline, metres")->capture_default_str();
 
     try {

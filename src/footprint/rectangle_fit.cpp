@@ -131,3 +131,113 @@ double polygon_perimeter(const Polygon& p) {
 }
 
 }  // namespace cityforge
+
+#include "footprint/vectorize.hpp"
+
+namespace cityforge {
+namespace {
+
+// Largest all-ones axis-aligned rectangle of a binary grid (histogram stack).
+struct GridRect {
+    int x0 = 0, y0 = 0, x1 = -1, y1 = -1;  // inclusive
+    long area() const { return static_cast<long>(x1 - x0 + 1) * (y1 - y0 + 1); }
+};
+GridRect largest_rectangle(const std::vector<uint8_t>& m, int w, int h) {
+    std::vector<int> height(w, 0);
+    GridRect best;
+    long best_area = 0;
+    std::vector<int> stack;
+    for (int y = 0; y < h; ++y) {
+        for (int x = 0; x < w; ++x) height[x] = m[static_cast<std::size_t>(y) * w + x] ? height[x] + 1 : 0;
+        stack.clear();
+        for (int x = 0; x <= w; ++x) {
+            const int hx = x < w ? height[x] : 0;
+            while (!stack.empty() && height[stack.back()] >= hx) {
+                const int top = stack.back();
+                stack.pop_back();
+                const int left = stack.empty() ? 0 : stack.back() + 1;
+                const long area = static_cast<long>(height[top]) * (x - left);
+                if (area > best_area) {
+                    best_area = area;
+                    best = {left, y - height[top] + 1, x - 1, y};
+                }
+            }
+            stack.push_back(x);
+        }
+    }
+    return best;
+}
+
+}  // namespace
+
+RecursiveFit recursive_rectangle_fit(const Polygon& polygon, const RecursiveFitOptions& o) {
+    const OrientedRectangle r0 = minimum_area_rectangle(polygon);
+    RecursiveFit fit;
+    fit.orientation_deg = r0.orientation_deg;
+    const double area = polygon_area(polygon);
+    // Frame: u along the orientation, v across, origin at the rectangle centre.
+    const double a = r0.orientation_deg * std::numbers::pi / 180.0, ux = std::cos(a), uy = std::sin(a);
+    const double cell = o.cell > 0 ? o.cell : std::max(std::sqrt(area) / 400.0, 1e-6);
+    const int w = std::max(1, static_cast<int>(std::ceil(r0.length / cell))), h = std::max(1, static_cast<int>(std::ceil(r0.width / cell)));
+    const double u0 = -0.5 * w * cell, v0 = -0.5 * h * cell;
+    auto to_map = [&](double u, double v) { return MapPoint{r0.centre.x + u * ux - v * uy, r0.centre.y + u * uy + v * ux}; };
+    // Raw polygon on the frame grid (cell centres).
+    Polygon local;
+    auto to_local = [&](const Ring& ring) {
+        Ring out;
+        for (const MapPoint& p : ring) {
+            const double dx = p.x - r0.centre.x, dy = p.y - r0.centre.y;
+            out.push_back({dx * ux + dy * uy, -dx * uy + dy * ux});
+        }
+        return out;
+    };
+    local.outer = to_local(polygon.outer);
+    for (const Ring& hr : polygon.holes) local.holes.push_back(to_local(hr));
+    std::vector<uint8_t> inside(static_cast<std::size_t>(w) * h), model(static_cast<std::size_t>(w) * h, 1);
+    for (int y = 0; y < h; ++y)
+        for (int x = 0; x < w; ++x)
+            inside[static_cast<std::size_t>(y) * w + x] = point_in_polygon(local, u0 + (x + 0.5) * cell, v0 + (y + 0.5) * cell);
+    const long min_cells = std::max(1L, static_cast<long>(o.min_rectangle_area / (cell * cell)));
+    auto model_error_pct = [&] {
+        long diff = 0, model_cells = 0, in_cells = 0;
+        for (std::size_t k = 0; k < model.size(); ++k) model_cells += model[k], in_cells += inside[k];
+        diff = model_cells - in_cells;
+        return in_cells ? 100.0 * static_cast<double>(diff) / static_cast<double>(in_cells) : 0.0;
+    };
+    std::vector<uint8_t> missing(model.size()), extra(model.size());
+    for (int step = 0; step < o.max_rectangles && std::abs(model_error_pct()) > o.tolerance_pct; ++step) {
+        for (std::size_t k = 0; k < model.size(); ++k) missing[k] = model[k] && !inside[k], extra[k] = !model[k] && inside[k];
+        const GridRect cut = largest_rectangle(missing, w, h);
+        const GridRect add = largest_rectangle(extra, w, h);
+        const bool do_cut = cut.area() >= add.area();
+        const GridRect& r = do_cut ? cut : add;
+        if (r.area() < min_cells) break;
+        for (int y = r.y0; y <= r.y1; ++y)
+            for (int x = r.x0; x <= r.x1; ++x) model[static_cast<std::size_t>(y) * w + x] = do_cut ? 0 : 1;
+        ++fit.rectangles;
+    }
+    // The model grid back to a polygon: vectorise in frame coordinates, then rotate.
+    Image<uint32_t> grid(w, h, 1, 0u);
+    for (std::size_t k = 0; k < model.size(); ++k) grid.data[k] = model[k];
+    const GeoTransform frame{u0, cell, v0 + h * cell, -cell};  // row 0 at the largest v
+    // Rows run towards smaller v in the frame transform, so flip the grid rows.
+    Image<uint32_t> flipped(w, h, 1, 0u);
+    for (int y = 0; y < h; ++y)
+        for (int x = 0; x < w; ++x) flipped.at(0, x, h - 1 - y) = grid.at(0, x, y);
+    std::vector<Polygon> parts = vectorize_region(flipped, 1, frame);
+    if (parts.empty()) throw Error("rectangle fit", "recursive fit removed the whole building");
+    // Keep the largest part (cuts may split a thin model); holes come along.
+    std::sort(parts.begin(), parts.end(), [](const Polygon& p, const Polygon& q) { return polygon_area(p) > polygon_area(q); });
+    auto ring_to_map = [&](const Ring& ring) {
+        Ring out;
+        for (const MapPoint& p : ring) out.push_back(to_map(p.x, p.y));
+        return out;
+    };
+    fit.polygon.outer = ring_to_map(parts[0].outer);
+    for (const Ring& hr : parts[0].holes) fit.polygon.holes.push_back(ring_to_map(hr));
+    orient_polygon(fit.polygon);
+    fit.accuracy = fit_accuracy(polygon, fit.polygon);
+    return fit;
+}
+
+}  // namespace cityforge

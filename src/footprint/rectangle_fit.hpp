@@ -41,3 +41,27 @@ double polygon_iou(const Polygon& a, const Polygon& b);
 double polygon_perimeter(const Polygon& p);
 
 }  // namespace cityforge
+
+namespace cityforge {
+
+struct RecursiveFitOptions {
+    double tolerance_pct = 1.0;        ///< stop when |area error| is below this
+    double min_rectangle_area = 2.0;   ///< smallest rectangle added or cut, CRS units squared
+    int max_rectangles = 16;           ///< cuts + additions after the first rectangle
+    double cell = 0.0;                 ///< working grid cell, CRS units (0 = automatic)
+};
+
+struct RecursiveFit {
+    Polygon polygon;                   ///< union/difference of rectangles aligned with the dominant direction
+    double orientation_deg = 0.0;      ///< the dominant direction (of the minimum-area rectangle)
+    int rectangles = 1;                ///< 1 + cuts + additions
+    FitAccuracy accuracy;              ///< against the raw polygon
+};
+
+/// Recursive rectangle fitting: start from the minimum-area rectangle and cut
+/// (or add) the largest rectangles aligned with its direction inside the
+/// remaining difference until the area error is under the tolerance. Gives
+/// L, T, U, Z and courtyard shapes with right angles.
+RecursiveFit recursive_rectangle_fit(const Polygon& polygon, const RecursiveFitOptions& options = {});
+
+}  // namespace cityforge

@@ -17,9 +17,17 @@ namespace cityforge {
 FootprintFit footprint_fit_from_string(const std::string& s) {
     if (s == "raw") return FootprintFit::raw;
     if (s == "rectangle") return FootprintFit::rectangle;
-    throw Error("--fit", "must be raw or rectangle, not '" + s + "'");
+    if (s == "recursive") return FootprintFit::recursive;
+    throw Error("--fit", "must be raw, rectangle or recursive, not '" + s + "'");
 }
-std::string to_string(FootprintFit f) { return f == FootprintFit::raw ? "raw" : "rectangle"; }
+std::string to_string(FootprintFit f) {
+    switch (f) {
+        case FootprintFit::raw: return "raw";
+        case FootprintFit::rectangle: return "rectangle";
+        case FootprintFit::recursive: return "recursive";
+    }
+    return "raw";
+}
 
 void FootprintsRunOptions::validate() const {
     if (cloud.empty()) throw Error("--cloud", "a point cloud is needed (ortho-only detection is not implemented yet)");
@@ -90,6 +98,12 @@ FootprintsReport run_footprints(const std::string& output_path, const Footprints
                 out = rect.polygon();
                 const FitAccuracy acc = fit_accuracy(raw, out);
                 err = acc.area_error_pct, iou = acc.iou;
+            } else if (o.fit == FootprintFit::recursive) {
+                RecursiveFitOptions ro = o.recursive;
+                ro.min_rectangle_area /= unit * unit;
+                const RecursiveFit rf = recursive_rectangle_fit(raw, ro);
+                out = rf.polygon;
+                err = rf.accuracy.area_error_pct, iou = rf.accuracy.iou;
             }
         } catch (const Error& e) {
             status = "fit_failed", reason = e.what();

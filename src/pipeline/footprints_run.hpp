@@ -8,10 +8,11 @@
 #include "cloud/cloud_filters.hpp"
 #include "core/progress.hpp"
 #include "footprint/building_mask.hpp"
+#include "footprint/rectangle_fit.hpp"
 
 namespace cityforge {
 
-enum class FootprintFit { raw, rectangle };
+enum class FootprintFit { raw, rectangle, recursive };
 FootprintFit footprint_fit_from_string(const std::string& s);
 std::string to_string(FootprintFit f);
 
@@ -21,7 +22,8 @@ struct FootprintsRunOptions {
     std::string ortho;             ///< optional: its grid and CRS are used
     BuildingMaskOptions mask;      ///< detection thresholds (gsd_m is the raster cell)
     double simplify_m = 0.25;      ///< Douglas–Peucker tolerance of the raw outline, metres
-    FootprintFit fit = FootprintFit::rectangle;  ///< geometry written
+    FootprintFit fit = FootprintFit::recursive;  ///< geometry written
+    RecursiveFitOptions recursive;     ///< tolerance etc. of the recursive fit (areas in m2)
     OutlierFilterOptions outliers;
     GroundFilterOptions ground;
     void validate() const;

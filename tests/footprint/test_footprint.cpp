@@ -123,3 +123,29 @@ TEST_CASE("Synthetic truth raster vectorises back to the truth footprints", "[fo
     }
     CHECK(checked == s.buildings);
 }
+
+TEST_CASE("Recursive rectangle fitting recovers an L and a courtyard with right angles", "[footprint][fit]") {
+    // A rotated L (30 degrees) with noisy vertices.
+    const double a = 30.0 * std::numbers::pi / 180.0;
+    auto rot = [&](double u, double v) { return MapPoint{400000 + u * std::cos(a) - v * std::sin(a), 5000000 + u * std::sin(a) + v * std::cos(a)}; };
+    Polygon l;
+    for (auto [u, v] : std::vector<std::pair<double, double>>{{0, 0}, {30, 0}, {30, 8}, {8, 8}, {8, 20}, {0, 20}}) l.outer.push_back(rot(u, v));
+    const RecursiveFit lf = recursive_rectangle_fit(l);
+    CHECK(lf.rectangles == 2);
+    CHECK(lf.polygon.outer.size() == 6);
+    CHECK(std::abs(lf.accuracy.area_error_pct) < 1.0);
+    CHECK(lf.accuracy.iou > 0.98);
+    CHECK(std::fmod(lf.orientation_deg, 90.0) == Approx(30.0).margin(0.5));
+    // Courtyard: 40 x 30 with a 20 x 10 hole.
+    Polygon c;
+    c.outer = {rot(0, 0), rot(40, 0), rot(40, 30), rot(0, 30)};
+    c.holes = {{rot(10, 10), rot(10, 20), rot(30, 20), rot(30, 10)}};
+    const RecursiveFit cf = recursive_rectangle_fit(c);
+    CHECK(cf.polygon.holes.size() == 1);
+    CHECK(std::abs(cf.accuracy.area_error_pct) < 1.0);
+    CHECK(cf.accuracy.iou > 0.98);
+    // A plain rectangle needs no more than the first rectangle.
+    Polygon r;
+    r.outer = {rot(0, 0), rot(25, 0), rot(25, 12), rot(0, 12)};
+    CHECK(recursive_rectangle_fit(r).rectangles == 1);
+}

@@ -67,15 +67,21 @@ TEST_CASE("Cloud-only footprints on a synthetic town match the truth (regression
     CHECK(raw_rep.used_classes);
     o.fit = FootprintFit::rectangle;
     run_footprints(dir / "rect.gpkg", o);
+    o.fit = FootprintFit::recursive;
+    const FootprintsReport rec_rep = run_footprints(dir / "rec.gpkg", o);
     const PolygonLayer truth = read_polygon_layer(s.truth_path);
     const MatchScores raw = score(read_polygon_layer(dir / "raw.gpkg"), truth);
     const MatchScores rect = score(read_polygon_layer(dir / "rect.gpkg"), truth);
-    std::printf("footprints (lidar, seed 9, 300 m): raw P %.3f R %.3f F1 %.3f IoU %.3f |area err| %.2f %%; rectangle F1 %.3f IoU %.3f |area err| %.2f %%\n",
-                raw.precision, raw.recall, raw.f1, raw.mean_iou, raw.mean_abs_area_error_pct, rect.f1, rect.mean_iou, rect.mean_abs_area_error_pct);
+    const MatchScores rec = score(read_polygon_layer(dir / "rec.gpkg"), truth);
+    std::printf("footprints (lidar, seed 9, 300 m): raw P %.3f R %.3f F1 %.3f IoU %.3f |area err| %.2f %%; rectangle F1 %.3f IoU %.3f |area err| %.2f %%; recursive F1 %.3f IoU %.3f |area err| %.2f %% (fit vs raw %.2f %%)\n",
+                raw.precision, raw.recall, raw.f1, raw.mean_iou, raw.mean_abs_area_error_pct, rect.f1, rect.mean_iou,
+                rect.mean_abs_area_error_pct, rec.f1, rec.mean_iou, rec.mean_abs_area_error_pct, rec_rep.mean_abs_fit_area_error_pct);
+    CHECK(rec.f1 >= 0.9);
+    CHECK(rec_rep.mean_abs_fit_area_error_pct <= 6.0);  // regression guard: 4.55 % measured; the issue asks <= 1 % (open)
     CHECK(raw.f1 >= 0.9);
     CHECK(raw.mean_iou >= 0.85);
     CHECK(raw.mean_abs_area_error_pct <= 5.0);
-    const PolygonLayer out = read_polygon_layer(dir / "rect.gpkg");
+    const PolygonLayer out = read_polygon_layer(dir / "rec.gpkg");
     CHECK(out.crs.epsg == 32650);
     const auto& names = out.field_names;
     for (const char* f : {"area_m2", "geodesic_area_m2", "perimeter_m", "orientation_deg", "fit", "fit_area_error_pct", "fit_iou", "n_vertices", "status"})
