@@ -3,6 +3,7 @@
 #include <cmath>
 #include <cstdio>
 
+#include "audit/footprint_match.hpp"
 #include "core/error.hpp"
 #include "footprint/rectangle_fit.hpp"
 #include "io/vector.hpp"
@@ -14,42 +15,11 @@ using namespace cityforge;
 using cityforge::test::ScratchDir;
 
 namespace {
-struct MatchScores {
-    double precision = 0, recall = 0, f1 = 0, mean_iou = 0, mean_abs_area_error_pct = 0;
-};
-// One-to-one matching at IoU >= 0.5 (greedy by IoU, the SpaceNet rule).
-MatchScores score(const PolygonLayer& pred, const PolygonLayer& truth) {
-    struct Pair {
-        double iou;
-        std::size_t p, t;
-    };
-    std::vector<Pair> pairs;
-    for (std::size_t p = 0; p < pred.features.size(); ++p) {
-        const Extent ep = polygon_extent(pred.features[p].geometry[0]);
-        for (std::size_t t = 0; t < truth.features.size(); ++t) {
-            const Extent et = polygon_extent(truth.features[t].geometry[0]);
-            if (ep.max_x < et.min_x || et.max_x < ep.min_x || ep.max_y < et.min_y || et.max_y < ep.min_y) continue;
-            const double iou = polygon_iou(pred.features[p].geometry[0], truth.features[t].geometry[0]);
-            if (iou >= 0.5) pairs.push_back({iou, p, t});
-        }
-    }
-    std::sort(pairs.begin(), pairs.end(), [](const Pair& a, const Pair& b) { return a.iou > b.iou; });
-    std::vector<uint8_t> pu(pred.features.size(), 0), tu(truth.features.size(), 0);
-    MatchScores s;
-    std::size_t tp = 0;
-    for (const Pair& m : pairs) {
-        if (pu[m.p] || tu[m.t]) continue;
-        pu[m.p] = tu[m.t] = 1;
-        ++tp;
-        s.mean_iou += m.iou;
-        const double at = polygon_area(truth.features[m.t].geometry[0]);
-        s.mean_abs_area_error_pct += std::abs(polygon_area(pred.features[m.p].geometry[0]) - at) / at * 100.0;
-    }
-    s.precision = pred.features.empty() ? 0 : double(tp) / double(pred.features.size());
-    s.recall = double(tp) / double(truth.features.size());
-    s.f1 = s.precision + s.recall > 0 ? 2 * s.precision * s.recall / (s.precision + s.recall) : 0;
-    if (tp) s.mean_iou /= double(tp), s.mean_abs_area_error_pct /= double(tp);
-    return s;
+FootprintScores score(const PolygonLayer& pred, const PolygonLayer& truth) {
+    std::vector<std::vector<Polygon>> p, t;
+    for (const auto& f : pred.features) p.push_back(f.geometry);
+    for (const auto& f : truth.features) t.push_back(f.geometry);
+    return match_footprints(p, t, 0.5);
 }
 }  // namespace
 
@@ -70,9 +40,9 @@ TEST_CASE("Cloud-only footprints on a synthetic town match the truth (regression
     o.fit = FootprintFit::recursive;
     const FootprintsReport rec_rep = run_footprints(dir / "rec.gpkg", o);
     const PolygonLayer truth = read_polygon_layer(s.truth_path);
-    const MatchScores raw = score(read_polygon_layer(dir / "raw.gpkg"), truth);
-    const MatchScores rect = score(read_polygon_layer(dir / "rect.gpkg"), truth);
-    const MatchScores rec = score(read_polygon_layer(dir / "rec.gpkg"), truth);
+    const FootprintScores raw = score(read_polygon_layer(dir / "raw.gpkg"), truth);
+    const FootprintScores rect = score(read_polygon_layer(dir / "rect.gpkg"), truth);
+    const FootprintScores rec = score(read_polygon_layer(dir / "rec.gpkg"), truth);
     std::printf("footprints (lidar, seed 9, 300 m): raw P %.3f R %.3f F1 %.3f IoU %.3f |area err| %.2f %%; rectangle F1 %.3f IoU %.3f |area err| %.2f %%; recursive F1 %.3f IoU %.3f |area err| %.2f %% (fit vs raw %.2f %%)\n",
                 raw.precision, raw.recall, raw.f1, raw.mean_iou, raw.mean_abs_area_error_pct, rect.f1, rect.mean_iou,
                 rect.mean_abs_area_error_pct, rec.f1, rec.mean_iou, rec.mean_abs_area_error_pct, rec_rep.mean_abs_fit_area_error_pct);
@@ -93,4 +63,40 @@ TEST_CASE("footprints refuses to run without a cloud", "[footprint][errors]") {
     FootprintsRunOptions o;
     CHECK_THROWS_WITH(run_footprints(dir / "x.gpkg", o), Catch::StartsWith("--cloud"));
     CHECK(dir.file_count() == 0);
+}
+
+TEST_CASE("Delft AHN3 cloud-only footprints against the 135 BGT footprints (regression guard)", "[footprint][real]") {
+    ScratchDir dir("fp_delft");
+    FootprintsRunOptions o;
+    o.cloud = test::shared_data("delft_ahn3_bgt_west/ahn3_delft_west.las");
+    o.cloud_crs = "EPSG:7415";
+    o.fit = FootprintFit::raw;
+    run_footprints(dir / "delft.gpkg", o);
+    const PolygonLayer pred = read_polygon_layer(dir / "delft.gpkg");
+    const PolygonLayer ref = read_polygon_layer(test::shared_data("delft_ahn3_bgt_west/bgt_pand_west_with_ref_heights.geojson"));
+    // The cloud covers more than the reference area: score predictions whose
+    // centre lies inside the references' extent only.
+    Extent e{INFINITY, INFINITY, -INFINITY, -INFINITY};
+    for (const auto& f : ref.features)
+        for (const Polygon& p : f.geometry) {
+            const Extent q = polygon_extent(p);
+            e.min_x = std::min(e.min_x, q.min_x), e.min_y = std::min(e.min_y, q.min_y), e.max_x = std::max(e.max_x, q.max_x), e.max_y = std::max(e.max_y, q.max_y);
+        }
+    std::vector<std::vector<Polygon>> p, r;
+    for (const auto& f : pred.features) {
+        const Extent q = polygon_extent(f.geometry[0]);
+        const double cx = 0.5 * (q.min_x + q.max_x), cy = 0.5 * (q.min_y + q.max_y);
+        if (cx >= e.min_x && cx <= e.max_x && cy >= e.min_y && cy <= e.max_y) p.push_back(f.geometry);
+    }
+    for (const auto& f : ref.features) r.push_back(f.geometry);
+    const FootprintScores s = match_footprints(p, r, 0.5);
+    std::printf("Delft cloud-only footprints: %zu predicted in the reference extent, %zu reference; P %.3f R %.3f F1 %.3f mean IoU %.3f |area err| %.2f %%; per-area completeness %.3f correctness %.3f quality %.3f\n",
+                s.predicted, s.reference, s.precision, s.recall, s.f1, s.mean_iou, s.mean_abs_area_error_pct, s.area_completeness,
+                s.area_correctness, s.area_quality);
+    // Terraced Delft houses share walls: one detected block covers several BGT
+    // footprints, so per-object recall stays low until height-step splitting
+    // lands; the per-area measures show that the built-up area itself is found.
+    // Correctness is not meaningful here: the reference set holds only this
+    // split's buildings, while the cloud shows their unreferenced neighbours too.
+    CHECK(s.area_completeness >= 0.85);
 }

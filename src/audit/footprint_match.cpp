@@ -1,0 +1,97 @@
+#include "audit/footprint_match.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <tbb/parallel_for.h>
+
+#include "footprint/rectangle_fit.hpp"
+
+namespace cityforge {
+namespace {
+
+Extent extent_of(const std::vector<Polygon>& parts) {
+    Extent e{INFINITY, INFINITY, -INFINITY, -INFINITY};
+    for (const Polygon& p : parts) {
+        const Extent q = polygon_extent(p);
+        e.min_x = std::min(e.min_x, q.min_x), e.min_y = std::min(e.min_y, q.min_y);
+        e.max_x = std::max(e.max_x, q.max_x), e.max_y = std::max(e.max_y, q.max_y);
+    }
+    return e;
+}
+
+double area_of(const std::vector<Polygon>& parts) {
+    double a = 0.0;
+    for (const Polygon& p : parts) a += polygon_area(p);
+    return a;
+}
+
+// Intersection area of two multipolygons whose parts do not overlap among themselves.
+double multi_intersection(const std::vector<Polygon>& a, const std::vector<Polygon>& b) {
+    double inter = 0.0;
+    for (const Polygon& p : a)
+        for (const Polygon& q : b) {
+            const double iou = polygon_iou(p, q);
+            if (iou > 0) {
+                const double ap = polygon_area(p), aq = polygon_area(q);
+                inter += iou * (ap + aq) / (1.0 + iou);  // iou = i / (ap + aq - i)
+            }
+        }
+    return inter;
+}
+
+}  // namespace
+
+FootprintScores match_footprints(const std::vector<std::vector<Polygon>>& pred, const std::vector<std::vector<Polygon>>& ref,
+                                 double threshold) {
+    struct Candidate {
+        double iou;
+        std::size_t p, r;
+    };
+    std::vector<Extent> pe(pred.size()), re(ref.size());
+    for (std::size_t i = 0; i < pred.size(); ++i) pe[i] = extent_of(pred[i]);
+    for (std::size_t i = 0; i < ref.size(); ++i) re[i] = extent_of(ref[i]);
+    std::vector<std::vector<Candidate>> per_pred(pred.size());
+    std::vector<double> inter_of_pred(pred.size(), 0.0);
+    tbb::parallel_for(std::size_t(0), pred.size(), [&](std::size_t p) {
+        const double ap = area_of(pred[p]);
+        for (std::size_t r = 0; r < ref.size(); ++r) {
+            if (pe[p].max_x < re[r].min_x || re[r].max_x < pe[p].min_x || pe[p].max_y < re[r].min_y || re[r].max_y < pe[p].min_y) continue;
+            const double inter = multi_intersection(pred[p], ref[r]);
+            inter_of_pred[p] += inter;
+            const double uni = ap + area_of(ref[r]) - inter;
+            const double iou = uni > 0 ? inter / uni : 0.0;
+            if (iou >= threshold) per_pred[p].push_back({iou, p, r});
+        }
+    });
+    std::vector<Candidate> all;
+    for (const auto& v : per_pred) all.insert(all.end(), v.begin(), v.end());
+    std::sort(all.begin(), all.end(), [](const Candidate& a, const Candidate& b) {
+        if (a.iou != b.iou) return a.iou > b.iou;
+        return a.p != b.p ? a.p < b.p : a.r < b.r;
+    });
+    std::vector<uint8_t> pu(pred.size(), 0), ru(ref.size(), 0);
+    FootprintScores s;
+    s.predicted = pred.size(), s.reference = ref.size();
+    for (const Candidate& c : all) {
+        if (pu[c.p] || ru[c.r]) continue;
+        pu[c.p] = ru[c.r] = 1;
+        const double ar = area_of(ref[c.r]);
+        s.matches.push_back({c.p, c.r, c.iou, ar > 0 ? (area_of(pred[c.p]) - ar) / ar * 100.0 : 0.0});
+    }
+    std::sort(s.matches.begin(), s.matches.end(), [](const FootprintMatch& a, const FootprintMatch& b) { return a.reference < b.reference; });
+    s.true_positives = s.matches.size();
+    s.precision = pred.empty() ? 0.0 : double(s.true_positives) / double(pred.size());
+    s.recall = ref.empty() ? 0.0 : double(s.true_positives) / double(ref.size());
+    s.f1 = s.precision + s.recall > 0 ? 2 * s.precision * s.recall / (s.precision + s.recall) : 0.0;
+    for (const FootprintMatch& m : s.matches) s.mean_iou += m.iou, s.mean_abs_area_error_pct += std::abs(m.area_error_pct);
+    if (s.true_positives) s.mean_iou /= double(s.true_positives), s.mean_abs_area_error_pct /= double(s.true_positives);
+    double inter = 0.0, area_pred = 0.0, area_ref = 0.0;
+    for (std::size_t p = 0; p < pred.size(); ++p) inter += inter_of_pred[p], area_pred += area_of(pred[p]);
+    for (const auto& r : ref) area_ref += area_of(r);
+    s.area_completeness = area_ref > 0 ? inter / area_ref : 0.0;
+    s.area_correctness = area_pred > 0 ? inter / area_pred : 0.0;
+    s.area_quality = area_pred + area_ref - inter > 0 ? inter / (area_pred + area_ref - inter) : 0.0;
+    return s;
+}
+
+}  // namespace cityforge
