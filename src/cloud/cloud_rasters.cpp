@@ -26,10 +26,10 @@ CloudRasters rasterize_cloud(const PointCloud& c, const std::vector<uint8_t>& ke
         const auto z = static_cast<float>(c.z[i]);
         if (std::isnan(r.dsm.data[k]) || z > r.dsm.data[k]) r.dsm.data[k] = z;
         r.density.data[k] += 1.0f;
+        ++above_n[k];  // all kept points of the cell: shares are majorities of the cell
         if (is_ground[i]) {
             ground_sum[k] += c.z[i], ++ground_n[k];
         } else {
-            ++above_n[k];
             const uint8_t cls = c.classification[i];
             building_n[k] += cls == las_class::building;
             vegetation_n[k] += cls == 3 || cls == 4 || cls == las_class::vegetation_high;

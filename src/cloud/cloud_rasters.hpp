@@ -23,10 +23,11 @@ struct CloudRasters {
     Image<float> dtm;      ///< mean ground z per cell, gaps filled (no holes)
     Image<float> ndsm;     ///< dsm - dtm where the dsm has data
     Image<float> density;  ///< kept points per square metre
-    /// Share of the cell's non-ground points classified building (6); NaN
-    /// where the cell has no non-ground point.
+    /// Share of the cell's points classified building (6); NaN where the cell
+    /// has no point. A majority (>= 0.5) puts building edges where half the
+    /// cell is roof, so outlines are not biased outwards.
     Image<float> building_share;
-    /// Share of the cell's non-ground points classified vegetation (3, 4, 5).
+    /// Share of the cell's points classified vegetation (3, 4, 5).
     Image<float> vegetation_share;
 };
 

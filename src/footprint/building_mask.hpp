@@ -13,7 +13,7 @@ namespace cityforge {
 struct BuildingMaskOptions {
     double gsd_m = 0.5;                 ///< cell size of the rasters, metres
     double min_height_m = 2.5;          ///< nDSM threshold, metres above ground
-    double min_building_share = 0.5;    ///< with classes: share of class-6 points among non-ground points
+    double min_building_share = 0.5;    ///< with classes: share of class-6 points among the cell's points
     double max_vegetation_share = 0.5;  ///< with classes: more vegetation points than this -> not building
     double max_roughness_m = 0.35;      ///< without classes: local DSM plane residual (3x3) above this -> vegetation
     double min_area_m2 = 20.0;          ///< smaller components are dropped

@@ -177,7 +177,7 @@ RecursiveFit recursive_rectangle_fit(const Polygon& polygon, const RecursiveFitO
     const double area = polygon_area(polygon);
     // Frame: u along the orientation, v across, origin at the rectangle centre.
     const double a = r0.orientation_deg * std::numbers::pi / 180.0, ux = std::cos(a), uy = std::sin(a);
-    const double cell = o.cell > 0 ? o.cell : std::max(std::sqrt(area) / 400.0, 1e-6);
+    const double cell = o.cell > 0 ? o.cell : std::max(std::sqrt(area) / 200.0, 1e-6);
     const int w = std::max(1, static_cast<int>(std::ceil(r0.length / cell))), h = std::max(1, static_cast<int>(std::ceil(r0.width / cell)));
     const double u0 = -0.5 * w * cell, v0 = -0.5 * h * cell;
     auto to_map = [&](double u, double v) { return MapPoint{r0.centre.x + u * ux - v * uy, r0.centre.y + u * uy + v * ux}; };
@@ -215,6 +215,47 @@ RecursiveFit recursive_rectangle_fit(const Polygon& polygon, const RecursiveFitO
         for (int y = r.y0; y <= r.y1; ++y)
             for (int x = r.x0; x <= r.x1; ++x) model[static_cast<std::size_t>(y) * w + x] = do_cut ? 0 : 1;
         ++fit.rectangles;
+    }
+    // Outlines from rasters are staircases: every rectangle edge sits on the
+    // outer stair corners, a band of constant width along the whole outline.
+    // Move all edges by the same distance (erode or dilate with a square, which
+    // keeps right angles) so that the model's area matches the polygon's.
+    {
+        long model_cells = 0, in_cells = 0, boundary = 0;
+        for (int y = 0; y < h; ++y)
+            for (int x = 0; x < w; ++x) {
+                const std::size_t k = static_cast<std::size_t>(y) * w + x;
+                model_cells += model[k], in_cells += inside[k];
+                if (!model[k]) continue;
+                boundary += (x == 0 || !model[k - 1]) + (x == w - 1 || !model[k + 1]) + (y == 0 || !model[k - static_cast<std::size_t>(w)]) +
+                            (y == h - 1 || !model[k + static_cast<std::size_t>(w)]);
+            }
+        const int shift = boundary > 0 ? static_cast<int>(std::lround(static_cast<double>(model_cells - in_cells) / static_cast<double>(boundary))) : 0;
+        if (shift != 0 && std::abs(shift) < std::min(w, h) / 4) {
+            const bool erode = shift > 0;
+            const int r = std::abs(shift);
+            std::vector<uint8_t> tmp(model.size());
+            for (int y = 0; y < h; ++y)
+                for (int x = 0; x < w; ++x) {
+                    uint8_t v = erode ? 1 : 0;
+                    for (int d = -r; d <= r; ++d) {
+                        const int xx = x + d;
+                        const uint8_t q = (xx < 0 || xx >= w) ? 0 : model[static_cast<std::size_t>(y) * w + xx];
+                        v = erode ? (v & q) : (v | q);
+                    }
+                    tmp[static_cast<std::size_t>(y) * w + x] = v;
+                }
+            for (int y = 0; y < h; ++y)
+                for (int x = 0; x < w; ++x) {
+                    uint8_t v = erode ? 1 : 0;
+                    for (int d = -r; d <= r; ++d) {
+                        const int yy = y + d;
+                        const uint8_t q = (yy < 0 || yy >= h) ? 0 : tmp[static_cast<std::size_t>(yy) * w + x];
+                        v = erode ? (v & q) : (v | q);
+                    }
+                    model[static_cast<std::size_t>(y) * w + x] = v;
+                }
+        }
     }
     // The model grid back to a polygon: vectorise in frame coordinates, then rotate.
     Image<uint32_t> grid(w, h, 1, 0u);

@@ -46,6 +46,9 @@ TEST_CASE("Cloud-only footprints on a synthetic town match the truth (regression
     std::printf("footprints (lidar, seed 9, 300 m): raw P %.3f R %.3f F1 %.3f IoU %.3f |area err| %.2f %%; rectangle F1 %.3f IoU %.3f |area err| %.2f %%; recursive F1 %.3f IoU %.3f |area err| %.2f %% (fit vs raw %.2f %%)\n",
                 raw.precision, raw.recall, raw.f1, raw.mean_iou, raw.mean_abs_area_error_pct, rect.f1, rect.mean_iou,
                 rect.mean_abs_area_error_pct, rec.f1, rec.mean_iou, rec.mean_abs_area_error_pct, rec_rep.mean_abs_fit_area_error_pct);
+    double signed_err = 0.0;
+    for (const auto& m : raw.matches) signed_err += m.area_error_pct;
+    std::printf("raw outlines: mean signed area error %.2f %% over %zu matches\n", signed_err / double(raw.matches.size()), raw.matches.size());
     CHECK(rec.f1 >= 0.9);
     CHECK(rec_rep.mean_abs_fit_area_error_pct <= 6.0);  // regression guard: 4.55 % measured; the issue asks <= 1 % (open)
     CHECK(raw.f1 >= 0.9);
