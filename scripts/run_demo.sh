@@ -15,6 +15,7 @@ cf="$here/build/bin/cityforge"
 "$cf" info "$out/scene/cloud.las"
 "$cf" segment --ortho "$out/scene/ortho.tif" --out "$out/segments" --config "$here/samples/segment.json"
 "$cf" cloud rasterize --cloud "$out/scene/cloud.las" --grid "$out/scene/ortho.tif" --out "$out/rasters"
-# Until footprint extraction lands, heights run on the scene's truth footprints.
-"$cf" heights --footprints "$out/scene/truth.geojson" --cloud "$out/scene/cloud.las" --out "$out/buildings_heights.gpkg"
+# Footprints from the cloud on the ortho's grid, then their heights.
+"$cf" footprints --cloud "$out/scene/cloud.las" --ortho "$out/scene/ortho.tif" --out "$out/footprints.gpkg"
+"$cf" heights --footprints "$out/footprints.gpkg" --cloud "$out/scene/cloud.las" --out "$out/buildings.gpkg"
 echo "cityforge demo: outputs in $out" >&2
