@@ -11,6 +11,7 @@
 #include "core/log.hpp"
 #include "core/progress.hpp"
 #include "io/inspect.hpp"
+#include "pipeline/audit_run.hpp"
 #include "pipeline/footprints_run.hpp"
 #include "pipeline/heights_run.hpp"
 #include "pipeline/rasterize_run.hpp"
@@ -155,6 +156,17 @@ int main(int argc, char** argv) {
     footprints->add_option("--fit-tolerance-pct", fopt.recursive.tolerance_pct, "Recursive fit: stop below this area error, percent")->capture_default_str();
     footprints->add_option("--simplify-m", fopt.simplify_m, "Douglas-Peucker tolerance of the outline, metres")->capture_default_str();
 
+    // audit -----------------------------------------------------------------
+    auto* audit = app.add_subcommand("audit", "Accuracy audits");
+    audit->require_subcommand(1);
+    auto* audit_fp = audit->add_subcommand("footprints", "Footprints against reference footprints (SpaceNet matching, ISPRS per-area)");
+    std::string a_pred, a_ref, a_out;
+    cf::FootprintAuditOptions aopt;
+    audit_fp->add_option("--pred", a_pred, "Predicted footprints (any OGR polygon layer)")->required();
+    audit_fp->add_option("--ref", a_ref, "Reference footprints")->required();
+    audit_fp->add_option("--out", a_out, "Report folder (report.json, report.md)")->required();
+    audit_fp->add_option("--iou", aopt.iou_threshold, "IoU threshold of a match")->capture_default_str();
+
     try {
         app.parse(argc, argv);
     } catch (const CLI::ParseError& e) {
@@ -224,6 +236,12 @@ int main(int argc, char** argv) {
                 std::fprintf(stderr, "cityforge: %zu footprints (%s, %s, classes %s) on %d x %d cells in %.1f s; mean |fit area error| %.2f %% -> %s\n",
                              r.buildings, r.mode.c_str(), r.crs.c_str(), r.used_classes ? "used" : "absent", r.width, r.height,
                              r.seconds, r.mean_abs_fit_area_error_pct, f_out.c_str());
+        } else if (*audit_fp) {
+            const cf::FootprintAuditReport r = cf::audit_footprints(a_pred, a_ref, a_out, aopt);
+            const auto& s = r.scores;
+            std::printf("precision %.4f recall %.4f F1 %.4f mean IoU %.4f mean |area error| %.2f %% (TP %zu of %zu predicted, %zu reference)%s\n",
+                        s.precision, s.recall, s.f1, s.mean_iou, s.mean_abs_area_error_pct, s.true_positives, s.predicted,
+                        s.reference, r.reprojected ? "; prediction reprojected" : "");
         } else if (*synth) {
             if (origin.size() == 2) synth_options.origin_x = origin[0], synth_options.origin_y = origin[1];
             synth_options.cloud_mode = cf::cloud_mode_from_string(cloud_mode);

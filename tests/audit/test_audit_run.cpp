@@ -1,0 +1,37 @@
+#include <catch2/catch.hpp>
+#include <nlohmann/json.hpp>
+
+#include "pipeline/audit_run.hpp"
+#include "synth/synth.hpp"
+#include "test_support.hpp"
+
+using namespace cityforge;
+using cityforge::test::ScratchDir;
+
+TEST_CASE("audit footprints - truth against itself - reprojected copy - report files", "[audit][cli]") {
+    ScratchDir dir("audit_fp");
+    SynthOptions so;
+    so.size_m = 150;
+    so.cloud_density_m2 = 0;
+    const SynthResult s = write_synthetic_town(dir.path.string(), so);
+    const FootprintAuditReport same = audit_footprints(s.truth_path, s.truth_path, dir / "a", {});
+    CHECK(same.scores.f1 == 1.0);
+    CHECK(same.scores.mean_iou == Approx(1.0));
+    CHECK_FALSE(same.reprojected);
+    const std::string moved = dir / "truth_32651.geojson";
+    REQUIRE(std::system(("ogr2ogr -q -t_srs EPSG:32651 " + moved + " " + s.truth_path).c_str()) == 0);
+    const FootprintAuditReport rep = audit_footprints(moved, s.truth_path, dir / "b", {});
+    CHECK(rep.reprojected);
+    CHECK(rep.scores.f1 == 1.0);
+    CHECK(rep.scores.mean_iou > 0.999);
+    const auto j = nlohmann::json::parse(test::slurp(rep.json_path));
+    CHECK(j["totals"]["f1"] == 1.0);
+    CHECK(j["matches"].size() == static_cast<std::size_t>(s.buildings));
+    CHECK(test::slurp(rep.markdown_path).find("| F1 | 1 |") != std::string::npos);
+    const auto cli = test::run_cli("audit footprints --pred " + moved + " --ref " + s.truth_path + " --out " + (dir / "c"));
+    CHECK(cli.exit_code == 0);
+    CHECK(cli.out.find("F1 1.0000") != std::string::npos);
+    const auto bad = test::run_cli("audit footprints --pred " + (dir / "none.gpkg") + " --ref " + s.truth_path + " --out " + (dir / "d"));
+    CHECK(bad.exit_code != 0);
+    CHECK(bad.err.find("none.gpkg: file not found") != std::string::npos);
+}
