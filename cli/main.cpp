@@ -153,6 +153,7 @@ int main(int argc, char** argv) {
     footprints->add_option("--min-height-m", fopt.mask.min_height_m, "nDSM threshold for buildings, metres")->capture_default_str();
     footprints->add_option("--min-area-m2", fopt.mask.min_area_m2, "Smallest building kept, square metres")->capture_default_str();
     footprints->add_option("--min-hole-m2", fopt.mask.min_hole_m2, "Smaller holes are filled, larger ones (courtyards) kept")->capture_default_str();
+    footprints->add_option("--opening-px", fopt.mask.opening_radius_px, "Morphological opening radius removing slivers, pixels")->capture_default_str();
     footprints->add_option("--fit-tolerance-pct", fopt.recursive.tolerance_pct, "Recursive fit: stop below this area error, percent")->capture_default_str();
     footprints->add_option("--simplify-m", fopt.simplify_m, "Douglas-Peucker tolerance of the outline, metres")->capture_default_str();
 

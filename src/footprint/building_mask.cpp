@@ -96,7 +96,11 @@ BuildingMask detect_buildings(const Image<float>& ndsm, const Image<float>& dsm,
             if (std::isnan(z) || z < o.min_height_m) continue;
             if (out.used_classes) {
                 const float b = building_share.data[k], v = vegetation_share.data[k];
-                if (std::isnan(b) || b < o.min_building_share || v > o.max_vegetation_share) continue;
+                // Exact ties (a cell with as many building as other points, common
+                // at 1-2 points per cell) alternate in a checkerboard so that
+                // edge cells are neither all in nor all out: no outward bias.
+                if (std::isnan(b) || v > o.max_vegetation_share) continue;
+                if (b < o.min_building_share || (b == o.min_building_share && ((x + y) & 1))) continue;
             } else {
                 // Roughness: residual of the 3x3 DSM neighbourhood around its best plane,
                 // approximated by the mean absolute second difference.

@@ -18,7 +18,7 @@ struct BuildingMaskOptions {
     double max_roughness_m = 0.35;      ///< without classes: local DSM plane residual (3x3) above this -> vegetation
     double min_area_m2 = 20.0;          ///< smaller components are dropped
     double min_hole_m2 = 6.0;           ///< smaller holes (data gaps) are filled; larger ones (courtyards) kept
-    int opening_radius_px = 1;          ///< morphological opening removing thin artefacts (0 = none)
+    int opening_radius_px = 0;          ///< morphological opening removing thin artefacts (0 = none; 1 shrinks outlines ~2 %)
     void validate() const;
 };
 
