@@ -146,8 +146,8 @@ int main(int argc, char** argv) {
     footprints->add_option("--ortho", fopt.ortho, "Ortho whose grid and CRS the footprints follow");
     footprints->add_option("--out", f_out, "Output .gpkg (layer buildings), .geojson, .fgb or .shp")->required();
     footprints->add_option("--cloud-crs", fopt.cloud_crs, "CRS of the cloud, e.g. EPSG:7415");
-    footprints->add_option("--fit", f_fit, "Geometry written: recursive (rectangles cut/added until the area error < tolerance), rectangle (minimum-area) or raw (simplified outline)")
-        ->check(CLI::IsMember({"recursive", "rectangle", "raw"}))
+    footprints->add_option("--fit", f_fit, "Geometry written: recursive (rectangles cut/added until the area error < tolerance), regularised (edges snapped to the dominant directions), rectangle (minimum-area) or raw (simplified outline)")
+        ->check(CLI::IsMember({"recursive", "regularised", "rectangle", "raw"}))
         ->capture_default_str();
     footprints->add_option("--gsd", fopt.mask.gsd_m, "Raster cell in metres when no --ortho is given")->capture_default_str();
     footprints->add_option("--min-height-m", fopt.mask.min_height_m, "nDSM threshold for buildings, metres")->capture_default_str();

@@ -18,13 +18,15 @@ FootprintFit footprint_fit_from_string(const std::string& s) {
     if (s == "raw") return FootprintFit::raw;
     if (s == "rectangle") return FootprintFit::rectangle;
     if (s == "recursive") return FootprintFit::recursive;
-    throw Error("--fit", "must be raw, rectangle or recursive, not '" + s + "'");
+    if (s == "regularised" || s == "regularized") return FootprintFit::regularised;
+    throw Error("--fit", "must be raw, rectangle, recursive or regularised, not '" + s + "'");
 }
 std::string to_string(FootprintFit f) {
     switch (f) {
         case FootprintFit::raw: return "raw";
         case FootprintFit::rectangle: return "rectangle";
         case FootprintFit::recursive: return "recursive";
+        case FootprintFit::regularised: return "regularised";
     }
     return "raw";
 }
@@ -96,6 +98,15 @@ FootprintsReport run_footprints(const std::string& output_path, const Footprints
             orientation = rect.orientation_deg;
             if (o.fit == FootprintFit::rectangle) {
                 out = rect.polygon();
+                const FitAccuracy acc = fit_accuracy(raw, out);
+                err = acc.area_error_pct, iou = acc.iou;
+            } else if (o.fit == FootprintFit::regularised) {
+                RegularizeOptions go = o.regularize;
+                go.merge_offset /= unit, go.min_edge /= unit;
+                // Pixel staircases must be straightened before edges can be
+                // snapped: simplify with at least 1.5 pixels.
+                const double straighten = std::max(o.simplify_m / unit, 1.5 * std::abs(grid.transform.pixel_width));
+                out = regularize_polygon(simplify_polygon(polygons[id][0], straighten), rect.orientation_deg, go);
                 const FitAccuracy acc = fit_accuracy(raw, out);
                 err = acc.area_error_pct, iou = acc.iou;
             } else if (o.fit == FootprintFit::recursive) {

@@ -9,10 +9,11 @@
 #include "core/progress.hpp"
 #include "footprint/building_mask.hpp"
 #include "footprint/rectangle_fit.hpp"
+#include "footprint/regularize.hpp"
 
 namespace cityforge {
 
-enum class FootprintFit { raw, rectangle, recursive };
+enum class FootprintFit { raw, rectangle, recursive, regularised };
 FootprintFit footprint_fit_from_string(const std::string& s);
 std::string to_string(FootprintFit f);
 
@@ -24,6 +25,7 @@ struct FootprintsRunOptions {
     double simplify_m = 0.25;      ///< Douglas–Peucker tolerance of the raw outline, metres
     FootprintFit fit = FootprintFit::recursive;  ///< geometry written
     RecursiveFitOptions recursive;     ///< tolerance etc. of the recursive fit (areas in m2)
+    RegularizeOptions regularize;      ///< snapping of the regularised fit (lengths in metres)
     OutlierFilterOptions outliers;
     GroundFilterOptions ground;
     void validate() const;

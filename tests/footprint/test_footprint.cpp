@@ -5,6 +5,7 @@
 #include "core/error.hpp"
 #include "core/random.hpp"
 #include "footprint/rectangle_fit.hpp"
+#include "footprint/regularize.hpp"
 #include "footprint/vectorize.hpp"
 #include "io/vector.hpp"
 #include "raster/raster.hpp"
@@ -148,4 +149,29 @@ TEST_CASE("Recursive rectangle fitting recovers an L and a courtyard with right 
     Polygon r;
     r.outer = {rot(0, 0), rot(25, 0), rot(25, 12), rot(0, 12)};
     CHECK(recursive_rectangle_fit(r).rectangles == 1);
+}
+
+TEST_CASE("Regularisation gives right angles to a noisy rotated L", "[footprint][fit]") {
+    const double a = 25.0 * std::numbers::pi / 180.0;
+    Rng rng(12);
+    auto rot = [&](double u, double v) {
+        return MapPoint{300000 + u * std::cos(a) - v * std::sin(a) + 0.05 * rng.normal(), 6000000 + u * std::sin(a) + v * std::cos(a) + 0.05 * rng.normal()};
+    };
+    Polygon l;
+    // Edges with a few intermediate, slightly off-line vertices.
+    for (auto [u, v] : std::vector<std::pair<double, double>>{{0, 0}, {15, 0.1}, {30, 0}, {30, 8}, {20, 8.1}, {8, 8}, {8, 20}, {0, 20}, {0.1, 10}})
+        l.outer.push_back(rot(u, v));
+    const Polygon r = regularize_polygon(l, minimum_area_rectangle(l).orientation_deg);
+    REQUIRE(r.outer.size() == 6);
+    for (std::size_t i = 0; i < r.outer.size(); ++i) {
+        const MapPoint& p = r.outer[i];
+        const MapPoint& q = r.outer[(i + 1) % 6];
+        const MapPoint& s = r.outer[(i + 2) % 6];
+        const double dot = (q.x - p.x) * (s.x - q.x) + (q.y - p.y) * (s.y - q.y);
+        CHECK(std::abs(dot) / (std::hypot(q.x - p.x, q.y - p.y) * std::hypot(s.x - q.x, s.y - q.y)) < 1e-6);  // right angle
+    }
+    CHECK(std::abs(polygon_area(r) - (30 * 8 + 8 * 12)) / (30 * 8 + 8 * 12) < 0.02);
+    Polygon bowtie;
+    bowtie.outer = {{0, 0}, {10, 10}, {10, 0}, {0, 10}};
+    CHECK_THROWS(regularize_polygon(bowtie, 0.0));
 }
