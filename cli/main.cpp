@@ -139,11 +139,12 @@ int main(int argc, char** argv) {
     rasterize->add_flag("--recompute-ground", r_recompute_ground, "Ignore class 2 and classify ground with SMRF");
 
     // footprints ------------------------------------------------------------
-    auto* footprints = app.add_subcommand("footprints", "Building footprints with rectangle fits (cloud-only mode for now)");
+    auto* footprints = app.add_subcommand("footprints", "Building footprints with rectangle fits (cloud-only or ortho-only mode)");
     std::string f_out, f_fit = "recursive";
     cf::FootprintsRunOptions fopt;
-    footprints->add_option("--cloud", fopt.cloud, "Point cloud (LAS, PLY, XYZ/CSV)")->required();
-    footprints->add_option("--ortho", fopt.ortho, "Ortho whose grid and CRS the footprints follow");
+    footprints->add_option("--cloud", fopt.cloud, "Point cloud (LAS, PLY, XYZ/CSV): cloud-only mode");
+    footprints->add_option("--ortho", fopt.ortho, "Ortho whose grid and CRS the footprints follow; alone: ortho-only mode");
+    footprints->add_option("--segment-scale", fopt.segment_scale, "Ortho-only: merging scale of the segmentation")->capture_default_str();
     footprints->add_option("--out", f_out, "Output .gpkg (layer buildings), .geojson, .fgb or .shp")->required();
     footprints->add_option("--cloud-crs", fopt.cloud_crs, "CRS of the cloud, e.g. EPSG:7415");
     footprints->add_option("--fit", f_fit, "Geometry written: recursive (rectangles cut/added until the area error < tolerance), regularised (edges snapped to the dominant directions), rectangle (minimum-area) or raw (simplified outline)")

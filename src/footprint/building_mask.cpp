@@ -18,8 +18,9 @@ void BuildingMaskOptions::validate() const {
 
 namespace {
 
-// Connected components (4-connectivity) of mask == value; labels in raster order.
-uint32_t components(const std::vector<uint8_t>& mask, uint8_t value, int w, int h, std::vector<uint32_t>& label,
+}  // namespace
+
+uint32_t label_components(const std::vector<uint8_t>& mask, uint8_t value, int w, int h, std::vector<uint32_t>& label,
                     std::vector<uint32_t>& sizes) {
     label.assign(mask.size(), 0);
     sizes.assign(1, 0);
@@ -45,6 +46,8 @@ uint32_t components(const std::vector<uint8_t>& mask, uint8_t value, int w, int 
     }
     return next;
 }
+
+namespace {
 
 std::vector<uint8_t> morph(const std::vector<uint8_t>& in, int w, int h, int r, bool erode) {
     std::vector<uint8_t> tmp(in.size()), out(in.size());
@@ -133,17 +136,27 @@ BuildingMask detect_buildings(const Image<float>& ndsm, const Image<float>& dsm,
             }
         mask.swap(next);
     }
+    BuildingMask labelled = label_buildings(std::move(mask), w, h, o);
+    labelled.used_classes = out.used_classes;
+    return labelled;
+}
+
+BuildingMask label_buildings(std::vector<uint8_t> mask, int w, int h, const BuildingMaskOptions& o) {
+    o.validate();
+    const std::size_t n = static_cast<std::size_t>(w) * h;
+    if (mask.size() != n) throw Error("building detection", "mask size differs from the grid");
+    BuildingMask out;
     // Fill small holes (data gaps, dark roofs) before opening, keep courtyards.
     std::vector<uint32_t> label, sizes;
     const double cell_m2 = o.gsd_m * o.gsd_m;
-    const uint32_t holes = components(mask, 0, w, h, label, sizes);
+    const uint32_t holes = label_components(mask, 0, w, h, label, sizes);
     std::vector<uint8_t> touches_border(holes + 1, 0);
     for (int x = 0; x < w; ++x) touches_border[label[x]] = 1, touches_border[label[static_cast<std::size_t>(h - 1) * w + x]] = 1;
     for (int y = 0; y < h; ++y) touches_border[label[static_cast<std::size_t>(y) * w]] = 1, touches_border[label[static_cast<std::size_t>(y) * w + w - 1]] = 1;
     for (std::size_t k = 0; k < n; ++k)
         if (!mask[k] && !touches_border[label[k]] && sizes[label[k]] * cell_m2 < o.min_hole_m2) mask[k] = 1;
     if (o.opening_radius_px > 0) mask = morph(morph(mask, w, h, o.opening_radius_px, true), w, h, o.opening_radius_px, false);
-    const uint32_t parts = components(mask, 1, w, h, label, sizes);
+    const uint32_t parts = label_components(mask, 1, w, h, label, sizes);
     std::vector<uint32_t> keep(parts + 1, 0);
     for (uint32_t p = 1; p <= parts; ++p)
         if (sizes[p] * cell_m2 >= o.min_area_m2) keep[p] = ++out.count;

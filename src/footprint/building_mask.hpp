@@ -5,6 +5,7 @@
 // filled. Pure raster algorithm on a north-up grid (no GDAL).
 #include <cstdint>
 #include <string>
+#include <vector>
 
 #include "core/image.hpp"
 
@@ -27,6 +28,15 @@ struct BuildingMask {
     uint32_t count = 0;
     bool used_classes = false;  ///< true when point classes decided vegetation vs building
 };
+
+/// 4-connected components of the cells equal to `value` (labels 1..count in
+/// raster order of first appearance; other cells 0). `sizes[l]` = cells of l.
+uint32_t label_components(const std::vector<uint8_t>& mask, uint8_t value, int w, int h, std::vector<uint32_t>& labels,
+                          std::vector<uint32_t>& sizes);
+
+/// Building components of a binary mask (w x h, 1 = building): holes under
+/// min_hole_m2 filled, optional opening, components under min_area_m2 dropped.
+BuildingMask label_buildings(std::vector<uint8_t> mask, int w, int h, const BuildingMaskOptions& options);
 
 /// `ndsm`, `dsm`, `building_share`, `vegetation_share` on the same grid (NaN =
 /// no data). Shares may be all-NaN for unclassified clouds.

@@ -11,6 +11,7 @@
 #include "io/vector.hpp"
 #include "pipeline/prepared_cloud.hpp"
 #include "raster/raster.hpp"
+#include "segment/region_merging.hpp"
 
 namespace cityforge {
 
@@ -32,7 +33,8 @@ std::string to_string(FootprintFit f) {
 }
 
 void FootprintsRunOptions::validate() const {
-    if (cloud.empty()) throw Error("--cloud", "a point cloud is needed (ortho-only detection is not implemented yet)");
+    if (cloud.empty() && ortho.empty()) throw Error("--cloud", "give a point cloud, an ortho (--ortho) or both");
+    if (!(segment_scale > 0)) throw Error("--segment-scale", "must be > 0");
     if (!(simplify_m >= 0.0)) throw Error("--simplify-m", "must be >= 0");
     mask.validate();
 }
@@ -42,41 +44,77 @@ FootprintsReport run_footprints(const std::string& output_path, const Footprints
     o.validate();
     const std::string driver = vector_driver_for(output_path);
     FootprintsReport rep;
-    rep.mode = "cloud_only";
     GridSpec grid;
-    CrsInfo target;
-    if (!o.ortho.empty()) {
-        const RasterInfo info = read_raster_info(o.ortho);
-        grid = {info.transform, info.width, info.height};
-        target = info.crs;
-    }
-    const PreparedCloud pc = prepare_cloud(o.cloud, o.cloud_crs, target, o.outliers, o.ground);
-    const double unit = pc.crs.linear_unit_m;
-    if (o.ortho.empty()) {
-        double minx = INFINITY, miny = INFINITY, maxx = -INFINITY, maxy = -INFINITY;
-        for (std::size_t i = 0; i < pc.cloud.size(); ++i) {
-            minx = std::min(minx, pc.cloud.x[i]), maxx = std::max(maxx, pc.cloud.x[i]);
-            miny = std::min(miny, pc.cloud.y[i]), maxy = std::max(maxy, pc.cloud.y[i]);
+    CrsInfo crs;
+    BuildingMask mask;
+    Image<float> ndsm;  // empty in ortho-only mode
+    double unit = 1.0, z_unit = 1.0;
+    if (!o.cloud.empty()) {
+        rep.mode = "cloud_only";
+        CrsInfo target;
+        if (!o.ortho.empty()) {
+            const RasterInfo info = read_raster_info(o.ortho);
+            grid = {info.transform, info.width, info.height};
+            target = info.crs;
         }
-        const double cell = o.mask.gsd_m / unit;
-        const double x0 = std::floor(minx / cell) * cell, y1 = std::ceil(maxy / cell) * cell;
-        grid = {{x0, cell, y1, -cell}, static_cast<int>(std::floor((maxx - x0) / cell)) + 1,
-                static_cast<int>(std::floor((y1 - miny) / cell)) + 1};
+        const PreparedCloud pc = prepare_cloud(o.cloud, o.cloud_crs, target, o.outliers, o.ground);
+        crs = pc.crs;
+        unit = pc.crs.linear_unit_m, z_unit = pc.crs.z_unit_m;
+        if (o.ortho.empty()) {
+            double minx = INFINITY, miny = INFINITY, maxx = -INFINITY, maxy = -INFINITY;
+            for (std::size_t i = 0; i < pc.cloud.size(); ++i) {
+                minx = std::min(minx, pc.cloud.x[i]), maxx = std::max(maxx, pc.cloud.x[i]);
+                miny = std::min(miny, pc.cloud.y[i]), maxy = std::max(maxy, pc.cloud.y[i]);
+            }
+            const double cell = o.mask.gsd_m / unit;
+            const double x0 = std::floor(minx / cell) * cell, y1 = std::ceil(maxy / cell) * cell;
+            grid = {{x0, cell, y1, -cell}, static_cast<int>(std::floor((maxx - x0) / cell)) + 1,
+                    static_cast<int>(std::floor((y1 - miny) / cell)) + 1};
+        }
+        progress(0.4, "cloud");
+        CloudRasters rasters = rasterize_cloud(pc.cloud, pc.keep, pc.is_ground, grid, unit);
+        BuildingMaskOptions mo = o.mask;
+        mo.gsd_m = std::abs(grid.transform.pixel_width) * unit;
+        mo.min_height_m /= z_unit;
+        mask = detect_buildings(rasters.ndsm, rasters.dsm, rasters.building_share, rasters.vegetation_share, mo);
+        ndsm = std::move(rasters.ndsm);
+    } else {
+        // Ortho-only: watershed + region merging at one scale, then segment rules.
+        rep.mode = "ortho_only";
+        RasterReader reader(o.ortho);
+        const RasterInfo& info = reader.info();
+        grid = {info.transform, info.width, info.height};
+        crs = info.crs;
+        unit = crs.linear_unit_m;
+        Image<float> image = reader.read_all<float>();
+        std::vector<uint8_t> valid(image.pixel_count(), 1);
+        for (int b = 0; b < image.bands; ++b)
+            if (const auto& nd = info.bands[b].nodata)
+                for (std::size_t i = 0; i < valid.size(); ++i)
+                    if (image.band_data(b)[i] == static_cast<float>(*nd)) valid[i] = 0;
+        Image<float> normalised = image;
+        normalize_bands(normalised, valid);
+        const Oversegmentation over = watershed_oversegment(normalised, valid, o.watershed, progress.sub(0.05, 0.3));
+        RegionMergingOptions rmo;
+        rmo.scales = {o.segment_scale};
+        const RegionMergingResult merged = merge_regions(normalised, over.labels, over.region_count, rmo, progress.sub(0.3, 0.4));
+        const Image<uint32_t> segments = relabel(over.labels, merged.levels[0].label_of_input);
+        SegmentClassifierOptions co = o.classifier;
+        co.gsd_m = info.gsd.x_m;
+        std::vector<uint8_t> building;
+        classify_segments(image, segments, merged.levels[0].regions_after, co, building);
+        BuildingMaskOptions mo = o.mask;
+        mo.gsd_m = info.gsd.x_m;
+        mask = label_buildings(std::move(building), grid.width, grid.height, mo);
     }
     rep.width = grid.width, rep.height = grid.height;
-    progress(0.4, "cloud");
-    const CloudRasters rasters = rasterize_cloud(pc.cloud, pc.keep, pc.is_ground, grid, unit);
-    BuildingMaskOptions mo = o.mask;
-    mo.gsd_m = std::abs(grid.transform.pixel_width) * unit;
-    mo.min_height_m /= pc.crs.z_unit_m;
-    const BuildingMask mask = detect_buildings(rasters.ndsm, rasters.dsm, rasters.building_share, rasters.vegetation_share, mo);
     rep.used_classes = mask.used_classes;
     progress(0.6, "detection");
     const auto polygons = vectorize_all(mask.labels, grid.transform);
     // Median nDSM per building, a first height cue for the output.
     std::vector<std::vector<double>> heights(mask.count + 1);
     for (std::size_t k = 0; k < mask.labels.data.size(); ++k)
-        if (const uint32_t id = mask.labels.data[k]; id && !std::isnan(rasters.ndsm.data[k])) heights[id].push_back(rasters.ndsm.data[k]);
+        if (const uint32_t id = mask.labels.data[k]; id && !ndsm.data.empty() && !std::isnan(ndsm.data[k])) heights[id].push_back(ndsm.data[k]);
 
     const std::vector<FieldDefinition> fields{
         {"id", FieldType::integer},           {"mode", FieldType::string},         {"fit", FieldType::string},
@@ -128,9 +166,9 @@ FootprintsReport run_footprints(const std::string& output_path, const Footprints
         const std::optional<double> h50 = percentile(hv, 50.0);
         f.geometry = {out};
         f.values = {int64_t(features.size() + 1), rep.mode, to_string(o.fit), status, reason,
-                    polygon_area(out) * unit * unit, polygon_area(raw) * unit * unit, geodesic_area_m2(rings, pc.crs),
+                    polygon_area(out) * unit * unit, polygon_area(raw) * unit * unit, geodesic_area_m2(rings, crs),
                     polygon_perimeter(out) * unit, orientation, err, iou, int64_t(vertices),
-                    h50 ? AttributeValue(*h50 * pc.crs.z_unit_m) : AttributeValue()};
+                    h50 ? AttributeValue(*h50 * z_unit) : AttributeValue()};
         error_sum += std::abs(err);
         features.push_back(std::move(f));
     }
@@ -138,8 +176,8 @@ FootprintsReport run_footprints(const std::string& output_path, const Footprints
     rep.mean_abs_fit_area_error_pct = features.empty() ? 0.0 : error_sum / static_cast<double>(features.size());
     VectorWriteOptions wo;
     wo.driver = driver;
-    write_polygon_features(output_path, pc.crs, fields, features, wo);
-    rep.crs = pc.crs.label();
+    write_polygon_features(output_path, crs, fields, features, wo);
+    rep.crs = crs.label();
     rep.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
     progress(1.0, "written");
     return rep;

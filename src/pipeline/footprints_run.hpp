@@ -10,6 +10,8 @@
 #include "footprint/building_mask.hpp"
 #include "footprint/rectangle_fit.hpp"
 #include "footprint/regularize.hpp"
+#include "footprint/segment_classifier.hpp"
+#include "segment/watershed.hpp"
 
 namespace cityforge {
 
@@ -18,9 +20,12 @@ FootprintFit footprint_fit_from_string(const std::string& s);
 std::string to_string(FootprintFit f);
 
 struct FootprintsRunOptions {
-    std::string cloud;             ///< required in this mode
+    std::string cloud;             ///< point cloud: cloud-only mode (with or without --ortho)
     std::string cloud_crs;         ///< overrides/supplies the cloud's CRS
-    std::string ortho;             ///< optional: its grid and CRS are used
+    std::string ortho;             ///< ortho: its grid and CRS are used; alone, ortho-only mode
+    WatershedOptions watershed;    ///< ortho-only: over-segmentation
+    double segment_scale = 30.0;   ///< ortho-only: merging scale (cost < scale^2)
+    SegmentClassifierOptions classifier;  ///< ortho-only: segment rules
     BuildingMaskOptions mask;      ///< detection thresholds (gsd_m is the raster cell)
     double simplify_m = 0.25;      ///< Douglas–Peucker tolerance of the raw outline, metres
     FootprintFit fit = FootprintFit::recursive;  ///< geometry written
@@ -32,7 +37,7 @@ struct FootprintsRunOptions {
 };
 
 struct FootprintsReport {
-    std::string mode;              ///< "cloud_only" (ortho cues are not used yet)
+    std::string mode;              ///< "cloud_only" or "ortho_only" (the combined mode is not implemented yet)
     std::string crs;
     std::size_t buildings = 0;
     bool used_classes = false;

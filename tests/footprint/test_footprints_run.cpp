@@ -103,3 +103,21 @@ TEST_CASE("Delft AHN3 cloud-only footprints against the 135 BGT footprints (regr
     // split's buildings, while the cloud shows their unreferenced neighbours too.
     CHECK(s.area_completeness >= 0.85);
 }
+
+TEST_CASE("Ortho-only footprints on a synthetic town (regression guard)", "[footprint][synth]") {
+    ScratchDir dir("fp_ortho");
+    SynthOptions so;
+    so.size_m = 300;
+    so.seed = 4;
+    so.cloud_density_m2 = 0;
+    const SynthResult s = write_synthetic_town(dir.path.string(), so);
+    FootprintsRunOptions o;
+    o.ortho = s.ortho_path;
+    const FootprintsReport rep = run_footprints(dir / "fp.gpkg", o);
+    CHECK(rep.mode == "ortho_only");
+    const FootprintScores sc = score(read_polygon_layer(dir / "fp.gpkg"), read_polygon_layer(s.truth_path));
+    std::printf("ortho-only footprints (seed 4, 300 m): P %.3f R %.3f F1 %.3f mean IoU %.3f |area err| %.2f %%\n", sc.precision, sc.recall,
+                sc.f1, sc.mean_iou, sc.mean_abs_area_error_pct);
+    CHECK(sc.f1 >= 0.6);
+    CHECK(sc.mean_iou >= 0.85);
+}

@@ -1,0 +1,44 @@
+#pragma once
+// Ortho-only building detection on merged segments: per-segment spectral and
+// shape features, rule-based classification (vegetation, shadow, roads and
+// shape), and the building mask that results. Pure algorithm (no GDAL).
+#include <cstdint>
+#include <vector>
+
+#include "core/image.hpp"
+
+namespace cityforge {
+
+struct SegmentClassifierOptions {
+    double gsd_m = 0.5;                  ///< pixel size, metres
+    double max_vegetation_index = 0.25;  ///< ExG = (2G - R - B) / (R + G + B) above this -> vegetation (RGB only)
+    double min_brightness = 0.2;         ///< mean (R+G+B)/3 relative to the image's 99th percentile; darker -> shadow
+    double min_area_m2 = 20.0;
+    double max_area_m2 = 5000.0;
+    double min_rectangularity = 0.65;    ///< area / minimum-area-rectangle area
+    double max_elongation = 5.0;         ///< rectangle length / width above this -> road or track
+    void validate() const;
+};
+
+/// Features of one segment.
+struct SegmentFeatures {
+    double area_m2 = 0.0;
+    double brightness = 0.0;        ///< 0..1 relative
+    double vegetation_index = 0.0;  ///< ExG, 0 for fewer than 3 bands
+    double rectangularity = 0.0;
+    double elongation = 0.0;
+    bool building = false;
+};
+
+/// Segments are first kept or rejected on their spectra (vegetation,
+/// shadow); adjacent kept segments (roof facets, shaded halves) then form
+/// components, and the shape rules (area, rectangularity, elongation) apply
+/// to those components.
+/// `image` holds the original band values (1 band: panchromatic; 3+: R, G, B
+/// first); `labels` the merged segments (1..count, 0 = nodata). Returns the
+/// features of every segment (index = label) and sets `building_mask`
+/// (1 = building pixel).
+std::vector<SegmentFeatures> classify_segments(const Image<float>& image, const Image<uint32_t>& labels, uint32_t count,
+                                               const SegmentClassifierOptions& options, std::vector<uint8_t>& building_mask);
+
+}  // namespace cityforge
