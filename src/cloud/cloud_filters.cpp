@@ -9,6 +9,7 @@
 
 #include "core/error.hpp"
 #include "core/grid_fill.hpp"
+#include "core/morphology.hpp"
 
 namespace cityforge {
 
@@ -130,34 +131,11 @@ GroundResult classify_ground(const PointCloud& c, const std::vector<uint8_t>& ke
     for (double& v : zmin)
         if (!std::isfinite(v)) v = NAN;
     fill_gaps(zmin, w, h);
-    // Morphological opening (erosion then dilation) with a square window of radius r cells.
-    auto morph = [&](const std::vector<double>& in, int r, bool erode) {
-        std::vector<double> tmp(in.size()), out(in.size());
-        for (int y = 0; y < h; ++y)
-            for (int x = 0; x < w; ++x) {
-                double v = erode ? INFINITY : -INFINITY;
-                for (int dx = std::max(0, x - r); dx <= std::min(w - 1, x + r); ++dx) {
-                    const double q = in[static_cast<std::size_t>(y) * w + dx];
-                    v = erode ? std::min(v, q) : std::max(v, q);
-                }
-                tmp[static_cast<std::size_t>(y) * w + x] = v;
-            }
-        for (int y = 0; y < h; ++y)
-            for (int x = 0; x < w; ++x) {
-                double v = erode ? INFINITY : -INFINITY;
-                for (int dy = std::max(0, y - r); dy <= std::min(h - 1, y + r); ++dy) {
-                    const double q = tmp[static_cast<std::size_t>(dy) * w + x];
-                    v = erode ? std::min(v, q) : std::max(v, q);
-                }
-                out[static_cast<std::size_t>(y) * w + x] = v;
-            }
-        return out;
-    };
     std::vector<uint8_t> object(zmin.size(), 0);
     std::vector<double> surface = zmin;
     const int max_r = std::max(1, static_cast<int>(std::ceil(o.window / o.cell)));
     for (int r = 1; r <= max_r; ++r) {
-        const std::vector<double> opened = morph(morph(surface, r, true), r, false);
+        const std::vector<double> opened = morphology_square(morphology_square(surface, w, h, r, true), w, h, r, false);
         const double threshold = o.slope * r * o.cell;
         for (std::size_t k = 0; k < surface.size(); ++k)
             if (surface[k] - opened[k] > threshold) object[k] = 1;

@@ -5,6 +5,7 @@
 #include <vector>
 
 #include "core/error.hpp"
+#include "core/morphology.hpp"
 
 namespace cityforge {
 
@@ -16,9 +17,6 @@ void BuildingMaskOptions::validate() const {
     if (opening_radius_px < 0 || opening_radius_px > 10) throw Error("--opening-px", "must be between 0 and 10");
 }
 
-namespace {
-
-}  // namespace
 
 uint32_t label_components(const std::vector<uint8_t>& mask, uint8_t value, int w, int h, std::vector<uint32_t>& label,
                     std::vector<uint32_t>& sizes) {
@@ -47,34 +45,6 @@ uint32_t label_components(const std::vector<uint8_t>& mask, uint8_t value, int w
     return next;
 }
 
-namespace {
-
-std::vector<uint8_t> morph(const std::vector<uint8_t>& in, int w, int h, int r, bool erode) {
-    std::vector<uint8_t> tmp(in.size()), out(in.size());
-    for (int y = 0; y < h; ++y)
-        for (int x = 0; x < w; ++x) {
-            uint8_t v = erode ? 1 : 0;
-            for (int d = -r; d <= r; ++d) {
-                const int xx = std::clamp(x + d, 0, w - 1);
-                const uint8_t q = in[static_cast<std::size_t>(y) * w + xx];
-                v = erode ? (v & q) : (v | q);
-            }
-            tmp[static_cast<std::size_t>(y) * w + x] = v;
-        }
-    for (int y = 0; y < h; ++y)
-        for (int x = 0; x < w; ++x) {
-            uint8_t v = erode ? 1 : 0;
-            for (int d = -r; d <= r; ++d) {
-                const int yy = std::clamp(y + d, 0, h - 1);
-                const uint8_t q = tmp[static_cast<std::size_t>(yy) * w + x];
-                v = erode ? (v & q) : (v | q);
-            }
-            out[static_cast<std::size_t>(y) * w + x] = v;
-        }
-    return out;
-}
-
-}  // namespace
 
 BuildingMask detect_buildings(const Image<float>& ndsm, const Image<float>& dsm, const Image<float>& building_share,
                               const Image<float>& vegetation_share, const BuildingMaskOptions& o) {
@@ -155,7 +125,7 @@ BuildingMask label_buildings(std::vector<uint8_t> mask, int w, int h, const Buil
     for (int y = 0; y < h; ++y) touches_border[label[static_cast<std::size_t>(y) * w]] = 1, touches_border[label[static_cast<std::size_t>(y) * w + w - 1]] = 1;
     for (std::size_t k = 0; k < n; ++k)
         if (!mask[k] && !touches_border[label[k]] && sizes[label[k]] * cell_m2 < o.min_hole_m2) mask[k] = 1;
-    if (o.opening_radius_px > 0) mask = morph(morph(mask, w, h, o.opening_radius_px, true), w, h, o.opening_radius_px, false);
+    if (o.opening_radius_px > 0) mask = morphology_square(morphology_square(mask, w, h, o.opening_radius_px, true), w, h, o.opening_radius_px, false);
     const uint32_t parts = label_components(mask, 1, w, h, label, sizes);
     std::vector<uint32_t> keep(parts + 1, 0);
     for (uint32_t p = 1; p <= parts; ++p)

@@ -11,6 +11,7 @@
 #include <numbers>
 
 #include "core/error.hpp"
+#include "core/morphology.hpp"
 
 namespace cityforge {
 namespace bg = boost::geometry;
@@ -232,29 +233,8 @@ RecursiveFit recursive_rectangle_fit(const Polygon& polygon, const RecursiveFitO
             }
         const int shift = boundary > 0 ? static_cast<int>(std::lround(static_cast<double>(model_cells - in_cells) / static_cast<double>(boundary))) : 0;
         if (shift != 0 && std::abs(shift) < std::min(w, h) / 4) {
-            const bool erode = shift > 0;
-            const int r = std::abs(shift);
-            std::vector<uint8_t> tmp(model.size());
-            for (int y = 0; y < h; ++y)
-                for (int x = 0; x < w; ++x) {
-                    uint8_t v = erode ? 1 : 0;
-                    for (int d = -r; d <= r; ++d) {
-                        const int xx = x + d;
-                        const uint8_t q = (xx < 0 || xx >= w) ? 0 : model[static_cast<std::size_t>(y) * w + xx];
-                        v = erode ? (v & q) : (v | q);
-                    }
-                    tmp[static_cast<std::size_t>(y) * w + x] = v;
-                }
-            for (int y = 0; y < h; ++y)
-                for (int x = 0; x < w; ++x) {
-                    uint8_t v = erode ? 1 : 0;
-                    for (int d = -r; d <= r; ++d) {
-                        const int yy = y + d;
-                        const uint8_t q = (yy < 0 || yy >= h) ? 0 : tmp[static_cast<std::size_t>(yy) * w + x];
-                        v = erode ? (v & q) : (v | q);
-                    }
-                    model[static_cast<std::size_t>(y) * w + x] = v;
-                }
+            // Cells outside the frame count as empty: erosion trims the border too.
+            model = morphology_square<uint8_t>(model, w, h, std::abs(shift), shift > 0, uint8_t(0));
         }
     }
     // The model grid back to a polygon: vectorise in frame coordinates, then rotate.
