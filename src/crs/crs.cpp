@@ -107,6 +107,16 @@ CrsInfo crs_from_user_input(const std::string& text, const std::string& subject)
     return describe(srs);
 }
 
+CrsInfo crs_from_ogr(const OGRSpatialReference* srs, const std::string& subject) {
+    if (!srs) return {};
+    char* wkt = nullptr;
+    const char* options[] = {"FORMAT=WKT2_2019", nullptr};
+    srs->exportToWkt(&wkt, options);
+    const std::string text = wkt ? wkt : "";
+    CPLFree(wkt);
+    return crs_from_wkt(text, subject);
+}
+
 CrsInfo crs_from_wkt(const std::string& wkt, const std::string& subject) {
     if (wkt.empty()) return {};
     GdalErrorCapture capture;

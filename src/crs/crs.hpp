@@ -8,6 +8,8 @@
 
 #include "core/geo_transform.hpp"
 
+class OGRSpatialReference;
+
 namespace cityforge {
 
 /// What we know of a CRS. `wkt` is empty when the data carried no CRS.
@@ -37,6 +39,10 @@ CrsInfo crs_from_user_input(const std::string& text, const std::string& subject)
 
 /// Parses a WKT (1 or 2, ESRI flavour included). Empty input gives an empty CrsInfo.
 CrsInfo crs_from_wkt(const std::string& wkt, const std::string& subject);
+
+/// Describes an OGR spatial reference (e.g. a layer's or a dataset's);
+/// nullptr gives an empty CrsInfo.
+CrsInfo crs_from_ogr(const OGRSpatialReference* srs, const std::string& subject);
 
 /// Ground sample distance in metres of a pixel at the raster's centre, along
 /// x and y. Projected CRSs scale by the linear unit (feet included);

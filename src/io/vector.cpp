@@ -27,13 +27,7 @@ VectorInfo read_vector_info(const std::string& path) {
         li.name = layer->GetName();
         li.geometry_type = OGRGeometryTypeToName(layer->GetGeomType());
         li.feature_count = layer->GetFeatureCount(TRUE);
-        if (const OGRSpatialReference* srs = layer->GetSpatialRef()) {
-            char* wkt = nullptr;
-            const char* o[] = {"FORMAT=WKT2_2019", nullptr};
-            srs->exportToWkt(&wkt, o);
-            li.crs = crs_from_wkt(wkt ? wkt : "", path);
-            CPLFree(wkt);
-        }
+        li.crs = crs_from_ogr(layer->GetSpatialRef(), path);
         OGREnvelope env;
         if (li.feature_count > 0 && layer->GetExtent(&env, TRUE) == OGRERR_NONE)
             li.extent = Extent{env.MinX, env.MinY, env.MaxX, env.MaxY};
@@ -149,13 +143,7 @@ PolygonLayer read_polygon_layer(const std::string& path, const std::string& laye
                                          : ds->GetLayerByName(layer_name.c_str());
     if (!layer) throw Error(path, layer_name.empty() ? "has no layer" : "has no layer '" + layer_name + "'");
     PolygonLayer out;
-    if (const OGRSpatialReference* srs = layer->GetSpatialRef()) {
-        char* wkt = nullptr;
-        const char* o[] = {"FORMAT=WKT2_2019", nullptr};
-        srs->exportToWkt(&wkt, o);
-        out.crs = crs_from_wkt(wkt ? wkt : "", path);
-        CPLFree(wkt);
-    }
+    out.crs = crs_from_ogr(layer->GetSpatialRef(), path);
     OGRFeatureDefn* defn = layer->GetLayerDefn();
     for (int i = 0; i < defn->GetFieldCount(); ++i) out.field_names.emplace_back(defn->GetFieldDefn(i)->GetNameRef());
     layer->ResetReading();

@@ -88,12 +88,8 @@ RasterReader::RasterReader(const std::string& path, const RasterOpenOptions& opt
     const OGRSpatialReference* srs = ds.GetSpatialRef();
     if (!options.assume_crs.empty()) {
         info_.crs = crs_from_user_input(options.assume_crs, path);
-    } else if (srs) {
-        char* wkt = nullptr;
-        const char* wkt_options[] = {"FORMAT=WKT2_2019", nullptr};
-        srs->exportToWkt(&wkt, wkt_options);
-        info_.crs = crs_from_wkt(wkt ? wkt : "", path);
-        CPLFree(wkt);
+    } else {
+        info_.crs = crs_from_ogr(srs, path);
     }
 
     if (has_gt) {
