@@ -169,6 +169,16 @@ int main(int argc, char** argv) {
     audit_fp->add_option("--out", a_out, "Report folder (report.json, report.md)")->required();
     audit_fp->add_option("--iou", aopt.iou_threshold, "IoU threshold of a match")->capture_default_str();
 
+    auto* audit_cl = audit->add_subcommand("clouds", "Point cloud against a reference: precision/recall/F-score within tau, chamfer distance");
+    std::string c_pred, c_ref, c_out;
+    cf::CloudAuditOptions copt;
+    audit_cl->add_option("--pred", c_pred, "Predicted cloud (LAS, PLY, XYZ)")->required();
+    audit_cl->add_option("--ref", c_ref, "Reference cloud")->required();
+    audit_cl->add_option("--out", c_out, "Report folder (report.json, report.md)")->required();
+    audit_cl->add_option("--tau", copt.taus_m, "Distance thresholds in metres")->delimiter(',')->capture_default_str();
+    audit_cl->add_option("--pred-crs", copt.pred_crs, "CRS of the predicted cloud if it has none");
+    audit_cl->add_option("--ref-crs", copt.ref_crs, "CRS of the reference cloud if it has none");
+
     try {
         app.parse(argc, argv);
     } catch (const CLI::ParseError& e) {
@@ -244,6 +254,12 @@ int main(int argc, char** argv) {
             std::printf("precision %.4f recall %.4f F1 %.4f mean IoU %.4f mean |area error| %.2f %% (TP %zu of %zu predicted, %zu reference)%s\n",
                         s.precision, s.recall, s.f1, s.mean_iou, s.mean_abs_area_error_pct, s.true_positives, s.predicted,
                         s.reference, r.reprojected ? "; prediction reprojected" : "");
+        } else if (*audit_cl) {
+            const cf::CloudAuditReport r = cf::audit_clouds(c_pred, c_ref, c_out, copt);
+            const auto& c = r.comparison;
+            std::printf("chamfer %.4f m (pred->ref %.4f, ref->pred %.4f)", c.chamfer, c.mean_pred_to_ref, c.mean_ref_to_pred);
+            for (const auto& s : c.scores) std::printf("; tau %.2f m: P %.4f R %.4f F %.4f", s.tau, s.precision, s.recall, s.f_score);
+            std::printf("\n");
         } else if (*synth) {
             if (origin.size() == 2) synth_options.origin_x = origin[0], synth_options.origin_y = origin[1];
             synth_options.cloud_mode = cf::cloud_mode_from_string(cloud_mode);

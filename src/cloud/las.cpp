@@ -134,7 +134,10 @@ LasReader::LasReader(const std::string& path) : path_(path) {
         const auto record_id = get<uint16_t>(vh + 18);
         const auto length = get<uint16_t>(vh + 20);
         if (pos + 54 + length > h.offset_to_points) throw Error(path, "variable length record runs past the point data");
-        if (user == "LASF_Projection" && (record_id == 2112 || record_id == 34735)) {
+        // WKT: the standard LASF_Projection 2112 record, or libLAS's older
+        // "liblas" 2112 record (used only when no standard one is present).
+        const bool wkt_record = record_id == 2112 && (user == "LASF_Projection" || (user == "liblas" && h.crs_wkt.empty()));
+        if (wkt_record || (user == "LASF_Projection" && record_id == 34735)) {
             std::vector<char> data(length);
             in_.read(data.data(), length);
             if (record_id == 2112) h.crs_wkt = trimmed(data.data(), data.size());

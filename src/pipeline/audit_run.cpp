@@ -7,6 +7,7 @@
 #include "core/atomic_file.hpp"
 #include "core/error.hpp"
 #include "crs/crs.hpp"
+#include "cloud/cloud_reader.hpp"
 #include "io/vector.hpp"
 
 namespace cityforge {
@@ -84,6 +85,59 @@ FootprintAuditReport audit_footprints(const std::string& pred_path, const std::s
        << "## Matches\n\n| reference fid | predicted fid | IoU | area error (%) |\n|---|---|---|---|\n";
     for (const FootprintMatch& m : s.matches)
         md << "| " << ref.fids[m.reference] << " | " << pred.fids[m.predicted] << " | " << m.iou << " | " << m.area_error_pct << " |\n";
+    write_text_file(rep.markdown_path, md.str());
+    return rep;
+}
+
+CloudAuditReport audit_clouds(const std::string& pred_path, const std::string& ref_path, const std::string& out_dir,
+                              const CloudAuditOptions& o) {
+    for (double t : o.taus_m)
+        if (!(t > 0)) throw Error("--tau", "every tau must be > 0");
+    std::string pred_wkt, ref_wkt;
+    PointCloud pred = read_point_cloud(pred_path, &pred_wkt);
+    const PointCloud ref = read_point_cloud(ref_path, &ref_wkt);
+    const CrsInfo pred_crs = !o.pred_crs.empty() ? crs_from_user_input(o.pred_crs, "--pred-crs") : crs_from_wkt(pred_wkt, pred_path);
+    const CrsInfo ref_crs = !o.ref_crs.empty() ? crs_from_user_input(o.ref_crs, "--ref-crs") : crs_from_wkt(ref_wkt, ref_path);
+    if (pred_crs.empty() != ref_crs.empty())
+        throw Error(pred_crs.empty() ? pred_path : ref_path, "point cloud has no CRS while the other has one; give it with --pred-crs/--ref-crs");
+    CloudAuditReport rep;
+    if (!ref_crs.empty() && !same_horizontal_crs(pred_crs, ref_crs)) {
+        transform_points(pred_crs, ref_crs, pred.x, pred.y, pred.z, pred_path);
+        rep.reprojected = true;
+    }
+    rep.crs = ref_crs.empty() ? "none (both clouds without CRS, assumed the same)" : ref_crs.label();
+    const double unit = ref_crs.empty() ? 1.0 : ref_crs.linear_unit_m;
+    std::vector<double> taus;
+    for (double t : o.taus_m) taus.push_back(t / unit);
+    rep.comparison = compare_clouds(pred, ref, taus);
+    CloudComparison& c = rep.comparison;
+    c.mean_pred_to_ref *= unit, c.mean_ref_to_pred *= unit, c.chamfer *= unit, c.chamfer_squared *= unit * unit;
+    for (CloudFScore& s : c.scores) s.tau *= unit;
+
+    nlohmann::json j;
+    j["audit"] = "clouds";
+    j["predicted"] = {{"path", pred_path}, {"points", c.predicted_points}, {"reprojected", rep.reprojected}};
+    j["reference"] = {{"path", ref_path}, {"points", c.reference_points}, {"crs", rep.crs}};
+    j["distances_m"] = {{"mean_pred_to_ref", c.mean_pred_to_ref}, {"mean_ref_to_pred", c.mean_ref_to_pred},
+                        {"chamfer", c.chamfer}, {"chamfer_convention", "mean nearest distance pred->ref + mean ref->pred (metres)"},
+                        {"chamfer_squared", c.chamfer_squared},
+                        {"chamfer_squared_convention", "mean squared nearest distance both ways, summed (square metres)"}};
+    nlohmann::json rows = nlohmann::json::array();
+    for (const CloudFScore& s : c.scores) rows.push_back({{"tau_m", s.tau}, {"precision", s.precision}, {"recall", s.recall}, {"f_score", s.f_score}});
+    j["f_scores"] = rows;
+    ensure_directory(out_dir);
+    namespace fs = std::filesystem;
+    rep.json_path = (fs::path(out_dir) / "report.json").string();
+    rep.markdown_path = (fs::path(out_dir) / "report.md").string();
+    write_text_file(rep.json_path, j.dump(2) + "\n");
+    std::ostringstream md;
+    md.precision(4);
+    md << "# Point cloud audit\n\n- predicted: `" << pred_path << "` (" << c.predicted_points << " points" << (rep.reprojected ? ", reprojected" : "")
+       << ")\n- reference: `" << ref_path << "` (" << c.reference_points << " points, " << rep.crs << ")\n\n"
+       << "| measure | value |\n|---|---|\n| mean distance pred -> ref (m) | " << c.mean_pred_to_ref << " |\n| mean distance ref -> pred (m) | "
+       << c.mean_ref_to_pred << " |\n| chamfer (sum of both means, m) | " << c.chamfer << " |\n| chamfer, squared convention (m²) | "
+       << c.chamfer_squared << " |\n\n| tau (m) | precision | recall | F-score |\n|---|---|---|---|\n";
+    for (const CloudFScore& s : c.scores) md << "| " << s.tau << " | " << s.precision << " | " << s.recall << " | " << s.f_score << " |\n";
     write_text_file(rep.markdown_path, md.str());
     return rep;
 }

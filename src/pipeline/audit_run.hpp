@@ -4,7 +4,9 @@
 // CRSs differ, and write report.json + report.md.
 #include <string>
 
+#include "audit/cloud_compare.hpp"
 #include "audit/footprint_match.hpp"
+#include <vector>
 
 namespace cityforge {
 
@@ -25,5 +27,24 @@ struct FootprintAuditReport {
 /// for unreadable inputs, missing CRSs or projections PROJ cannot relate.
 FootprintAuditReport audit_footprints(const std::string& pred_path, const std::string& ref_path, const std::string& out_dir,
                                       const FootprintAuditOptions& options);
+
+struct CloudAuditOptions {
+    std::vector<double> taus_m{1.0, 2.0};  ///< distance thresholds, metres
+    std::string pred_crs, ref_crs;         ///< CRS overrides for clouds that carry none
+};
+
+struct CloudAuditReport {
+    CloudComparison comparison;  ///< distances in metres
+    std::string crs;
+    bool reprojected = false;
+    std::string json_path, markdown_path;
+};
+
+/// Compares two clouds (LAS/PLY/XYZ) and writes `out_dir`/report.json and
+/// report.md. The prediction is reprojected into the reference's CRS when
+/// they differ; a cloud without any CRS is assumed to share the other's only
+/// when both have none (said in the report).
+CloudAuditReport audit_clouds(const std::string& pred_path, const std::string& ref_path, const std::string& out_dir,
+                              const CloudAuditOptions& options);
 
 }  // namespace cityforge

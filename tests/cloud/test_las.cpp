@@ -83,6 +83,10 @@ TEST_CASE("Real LAS 1.2 files: Autzen (format 3 - RGB - CRS) and AHN3 Delft (for
     CHECK(unclassified == 83893);
     CHECK(h.min[2] == Approx(406.26).margin(0.01));
 
+    // autzen_thin_srs keeps its WKT in libLAS's "liblas" 2112 record.
+    LasReader thin(shared_data("autzen_oregon/autzen_thin_srs.las"));
+    CHECK(thin.header().crs_wkt.find("NAD_1983_HARN_Lambert_Conformal_Conic") != std::string::npos);
+
     LasReader delft(shared_data("delft_ahn3_bgt_west/ahn3_delft_west.las"));
     CHECK(delft.header().point_count == 675339);
     CHECK(delft.header().crs_wkt.empty());
