@@ -169,6 +169,15 @@ int main(int argc, char** argv) {
     audit_fp->add_option("--out", a_out, "Report folder (report.json, report.md)")->required();
     audit_fp->add_option("--iou", aopt.iou_threshold, "IoU threshold of a match")->capture_default_str();
 
+    auto* audit_h = audit->add_subcommand("heights", "Heights of matched footprints against reference heights (MAE, RMSE, bias, max)");
+    std::string h_pred, h_ref, h_aout;
+    cf::HeightAuditOptions hao;
+    audit_h->add_option("--pred", h_pred, "Predicted footprints with heights")->required();
+    audit_h->add_option("--ref", h_ref, "Reference footprints with heights")->required();
+    audit_h->add_option("--out", h_aout, "Report folder (report.json, report.md)")->required();
+    audit_h->add_option("--pred-field", hao.pred_field, "Predicted height attribute")->capture_default_str();
+    audit_h->add_option("--ref-field", hao.ref_field, "Reference height attribute")->required();
+    audit_h->add_option("--iou", hao.iou_threshold, "IoU threshold of a footprint match")->capture_default_str();
     auto* audit_cl = audit->add_subcommand("clouds", "Point cloud against a reference: precision/recall/F-score within tau, chamfer distance");
     std::string c_pred, c_ref, c_out;
     cf::CloudAuditOptions copt;
@@ -254,6 +263,10 @@ int main(int argc, char** argv) {
             std::printf("precision %.4f recall %.4f F1 %.4f mean IoU %.4f mean |area error| %.2f %% (TP %zu of %zu predicted, %zu reference)%s\n",
                         s.precision, s.recall, s.f1, s.mean_iou, s.mean_abs_area_error_pct, s.true_positives, s.predicted,
                         s.reference, r.reprojected ? "; prediction reprojected" : "");
+        } else if (*audit_h) {
+            const cf::HeightAuditReport r = cf::audit_heights(h_pred, h_ref, h_aout, hao);
+            std::printf("MAE %.3f m RMSE %.3f m bias %+.3f m max %.3f m over %zu buildings (%zu matched of %zu reference)\n", r.mae, r.rmse,
+                        r.bias, r.max_abs, r.with_values, r.matched, r.reference);
         } else if (*audit_cl) {
             const cf::CloudAuditReport r = cf::audit_clouds(c_pred, c_ref, c_out, copt);
             const auto& c = r.comparison;

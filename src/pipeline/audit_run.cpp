@@ -1,6 +1,8 @@
 #include "pipeline/audit_run.hpp"
 
+#include <cmath>
 #include <filesystem>
+#include <optional>
 #include <nlohmann/json.hpp>
 #include <sstream>
 
@@ -24,30 +26,49 @@ std::vector<std::vector<Polygon>> parts_of(const PolygonLayer& layer) {
 }
 }  // namespace
 
-FootprintAuditReport audit_footprints(const std::string& pred_path, const std::string& ref_path, const std::string& out_dir,
-                                      const FootprintAuditOptions& o) {
-    o.validate();
-    PolygonLayer pred = read_polygon_layer(pred_path, o.pred_layer);
-    const PolygonLayer ref = read_polygon_layer(ref_path, o.ref_layer);
-    if (ref.crs.empty()) throw Error(ref_path, "reference footprints have no CRS");
-    if (pred.crs.empty()) throw Error(pred_path, "predicted footprints have no CRS");
-    if (ref.crs.geographic) throw Error(ref_path, "reference footprints are in a geographic CRS; areas need a projected CRS");
-    FootprintAuditReport rep;
-    if (!same_horizontal_crs(pred.crs, ref.crs)) {
-        // Reproject every vertex of the prediction into the reference CRS.
-        for (Feature& f : pred.features)
+namespace {
+// Reads both layers and brings the prediction into the reference's CRS.
+struct LayerPair {
+    PolygonLayer pred, ref;
+    bool reprojected = false;
+};
+LayerPair read_pair(const std::string& pred_path, const std::string& ref_path, const std::string& pred_layer, const std::string& ref_layer) {
+    LayerPair lp{read_polygon_layer(pred_path, pred_layer), read_polygon_layer(ref_path, ref_layer), false};
+    if (lp.ref.crs.empty()) throw Error(ref_path, "reference footprints have no CRS");
+    if (lp.pred.crs.empty()) throw Error(pred_path, "predicted footprints have no CRS");
+    if (lp.ref.crs.geographic) throw Error(ref_path, "reference footprints are in a geographic CRS; areas need a projected CRS");
+    if (!same_horizontal_crs(lp.pred.crs, lp.ref.crs)) {
+        for (Feature& f : lp.pred.features)
             for (Polygon& p : f.geometry) {
                 auto move = [&](Ring& r) {
                     std::vector<double> x, y, z;
                     for (const MapPoint& q : r) x.push_back(q.x), y.push_back(q.y), z.push_back(0.0);
-                    transform_points(pred.crs, ref.crs, x, y, z, pred_path);
+                    transform_points(lp.pred.crs, lp.ref.crs, x, y, z, pred_path);
                     for (std::size_t i = 0; i < r.size(); ++i) r[i] = {x[i], y[i]};
                 };
                 move(p.outer);
                 for (Ring& h : p.holes) move(h);
             }
-        rep.reprojected = true;
+        lp.reprojected = true;
     }
+    return lp;
+}
+
+int field_index(const PolygonLayer& layer, const std::string& name, const std::string& path) {
+    for (std::size_t i = 0; i < layer.field_names.size(); ++i)
+        if (layer.field_names[i] == name) return static_cast<int>(i);
+    throw Error(path, "has no field '" + name + "'");
+}
+}  // namespace
+
+FootprintAuditReport audit_footprints(const std::string& pred_path, const std::string& ref_path, const std::string& out_dir,
+                                      const FootprintAuditOptions& o) {
+    o.validate();
+    LayerPair lp = read_pair(pred_path, ref_path, o.pred_layer, o.ref_layer);
+    const PolygonLayer& pred = lp.pred;
+    const PolygonLayer& ref = lp.ref;
+    FootprintAuditReport rep;
+    rep.reprojected = lp.reprojected;
     rep.crs = ref.crs.label();
     rep.scores = match_footprints(parts_of(pred), parts_of(ref), o.iou_threshold);
     const FootprintScores& s = rep.scores;
@@ -85,6 +106,74 @@ FootprintAuditReport audit_footprints(const std::string& pred_path, const std::s
        << "## Matches\n\n| reference fid | predicted fid | IoU | area error (%) |\n|---|---|---|---|\n";
     for (const FootprintMatch& m : s.matches)
         md << "| " << ref.fids[m.reference] << " | " << pred.fids[m.predicted] << " | " << m.iou << " | " << m.area_error_pct << " |\n";
+    write_text_file(rep.markdown_path, md.str());
+    return rep;
+}
+
+void HeightAuditOptions::validate() const {
+    if (ref_field.empty()) throw Error("--ref-field", "name the reference height attribute");
+    if (pred_field.empty()) throw Error("--pred-field", "name the predicted height attribute");
+    if (!(iou_threshold > 0.0 && iou_threshold <= 1.0)) throw Error("--iou", "must be in (0, 1]");
+}
+
+HeightAuditReport audit_heights(const std::string& pred_path, const std::string& ref_path, const std::string& out_dir,
+                                const HeightAuditOptions& o) {
+    o.validate();
+    const LayerPair lp = read_pair(pred_path, ref_path, "", "");
+    const int pf = field_index(lp.pred, o.pred_field, pred_path), rf = field_index(lp.ref, o.ref_field, ref_path);
+    std::vector<std::vector<Polygon>> p, r;
+    for (const Feature& f : lp.pred.features) p.push_back(f.geometry);
+    for (const Feature& f : lp.ref.features) r.push_back(f.geometry);
+    const FootprintScores scores = match_footprints(p, r, o.iou_threshold);
+    HeightAuditReport rep;
+    rep.matched = scores.true_positives, rep.reference = r.size();
+    auto number = [](const AttributeValue& v) -> std::optional<double> {
+        if (!std::holds_alternative<std::string>(v)) return std::nullopt;
+        try {
+            return std::stod(std::get<std::string>(v));
+        } catch (const std::exception&) {
+            return std::nullopt;
+        }
+    };
+    double sum = 0, sum_abs = 0, sum2 = 0;
+    for (const FootprintMatch& m : scores.matches) {
+        const auto pv = number(lp.pred.features[m.predicted].values[pf]);
+        const auto rv = number(lp.ref.features[m.reference].values[rf]);
+        if (!pv || !rv) continue;
+        HeightError e{lp.ref.fids[m.reference], lp.pred.fids[m.predicted], *pv, *rv, *pv - *rv};
+        sum += e.error, sum_abs += std::abs(e.error), sum2 += e.error * e.error;
+        rep.max_abs = std::max(rep.max_abs, std::abs(e.error));
+        rep.rows.push_back(e);
+    }
+    rep.with_values = rep.rows.size();
+    if (!rep.rows.empty()) {
+        const double n = double(rep.rows.size());
+        rep.mae = sum_abs / n, rep.rmse = std::sqrt(sum2 / n), rep.bias = sum / n;
+    }
+    nlohmann::json j;
+    j["audit"] = "heights";
+    j["predicted"] = {{"path", pred_path}, {"field", o.pred_field}, {"reprojected", lp.reprojected}};
+    j["reference"] = {{"path", ref_path}, {"field", o.ref_field}, {"count", rep.reference}};
+    j["totals"] = {{"matched", rep.matched}, {"with_values", rep.with_values}, {"mae_m", rep.mae}, {"rmse_m", rep.rmse},
+                   {"bias_m", rep.bias}, {"max_abs_m", rep.max_abs}};
+    nlohmann::json rows = nlohmann::json::array();
+    for (const HeightError& e : rep.rows)
+        rows.push_back({{"reference_fid", e.reference_fid}, {"predicted_fid", e.predicted_fid}, {"predicted_m", e.predicted},
+                        {"reference_m", e.reference}, {"error_m", e.error}});
+    j["buildings"] = rows;
+    ensure_directory(out_dir);
+    namespace fs = std::filesystem;
+    rep.json_path = (fs::path(out_dir) / "report.json").string();
+    rep.markdown_path = (fs::path(out_dir) / "report.md").string();
+    write_text_file(rep.json_path, j.dump(2) + "\n");
+    std::ostringstream md;
+    md.precision(4);
+    md << "# Height audit\n\n- predicted: `" << pred_path << "`, field `" << o.pred_field << "`\n- reference: `" << ref_path << "`, field `"
+       << o.ref_field << "` (" << rep.reference << " footprints)\n- " << rep.matched << " footprints matched at IoU >= " << o.iou_threshold
+       << ", " << rep.with_values << " with both values\n\n| measure | metres |\n|---|---|\n| MAE | " << rep.mae << " |\n| RMSE | "
+       << rep.rmse << " |\n| bias (predicted - reference) | " << rep.bias << " |\n| max abs | " << rep.max_abs
+       << " |\n\n| reference fid | predicted | reference | error |\n|---|---|---|---|\n";
+    for (const HeightError& e : rep.rows) md << "| " << e.reference_fid << " | " << e.predicted << " | " << e.reference << " | " << e.error << " |\n";
     write_text_file(rep.markdown_path, md.str());
     return rep;
 }

@@ -28,6 +28,31 @@ struct FootprintAuditReport {
 FootprintAuditReport audit_footprints(const std::string& pred_path, const std::string& ref_path, const std::string& out_dir,
                                       const FootprintAuditOptions& options);
 
+struct HeightAuditOptions {
+    std::string pred_field = "height_m";  ///< numeric attribute of the prediction
+    std::string ref_field;                ///< numeric attribute of the reference (required)
+    double iou_threshold = 0.5;           ///< footprints are matched one to one at this IoU
+    void validate() const;
+};
+
+struct HeightError {
+    int64_t reference_fid = 0, predicted_fid = 0;
+    double predicted = 0.0, reference = 0.0, error = 0.0;  ///< metres (predicted - reference)
+};
+
+struct HeightAuditReport {
+    std::size_t matched = 0, with_values = 0, reference = 0;
+    double mae = 0.0, rmse = 0.0, bias = 0.0, max_abs = 0.0;  ///< metres
+    std::vector<HeightError> rows;
+    std::string json_path, markdown_path;
+};
+
+/// Matches footprints (reprojecting the prediction if needed) and compares the
+/// two height attributes of the matches. Throws Error naming the file when a
+/// field is missing.
+HeightAuditReport audit_heights(const std::string& pred_path, const std::string& ref_path, const std::string& out_dir,
+                                const HeightAuditOptions& options);
+
 struct CloudAuditOptions {
     std::vector<double> taus_m{1.0, 2.0};  ///< distance thresholds, metres
     std::string pred_crs, ref_crs;         ///< CRS overrides for clouds that carry none

@@ -12,7 +12,7 @@ TEST_CASE("cityforge --version and --help on every subcommand", "[cli]") {
     const auto v = run_cli("--version");
     CHECK(v.exit_code == 0);
     CHECK(v.out.find("cityforge ") == 0);
-    for (const char* sub : {"info", "synth", "segment", "heights", "footprints", "cloud rasterize", "audit footprints", "audit clouds"}) {
+    for (const char* sub : {"info", "synth", "segment", "heights", "footprints", "cloud rasterize", "audit footprints", "audit heights", "audit clouds"}) {
         const auto h = run_cli(std::string(sub) + " --help");
         INFO(sub);
         CHECK(h.exit_code == 0);

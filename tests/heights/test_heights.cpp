@@ -2,6 +2,7 @@
 #include <cmath>
 #include <fstream>
 #include <map>
+#include <nlohmann/json.hpp>
 #include <ogrsf_frmts.h>
 
 #include "core/error.hpp"
@@ -162,4 +163,23 @@ TEST_CASE("heights refuses bad inputs with the file named", "[heights][errors]")
     CHECK_THROWS_WITH(run_heights(dir / "bowtie.geojson", shared_data("delft_ahn3_bgt_west/ahn3_delft_west.las"), dir / "o.gpkg", o),
                       Catch::Contains("bowtie.geojson feature") && Catch::Contains("invalid polygon"));
     CHECK_FALSE(std::filesystem::exists(dir / "o.gpkg"));
+}
+
+TEST_CASE("audit heights on Delft - our roof p90 against 3dfier's reference", "[heights][audit][real]") {
+    ScratchDir dir("audit_heights");
+    HeightsRunOptions o;
+    o.cloud_crs = "EPSG:7415";
+    const std::string ref = shared_data("delft_ahn3_bgt_west/bgt_pand_west_with_ref_heights.geojson");
+    run_heights(ref, shared_data("delft_ahn3_bgt_west/ahn3_delft_west.las"), dir / "h.gpkg", o);
+    const auto cli = test::run_cli("audit heights --pred " + (dir / "h.gpkg") + " --ref " + ref +
+                                   " --pred-field roof_z_90p --ref-field ref_roof_nap_m --out " + (dir / "audit"));
+    REQUIRE(cli.exit_code == 0);
+    const auto j = nlohmann::json::parse(test::slurp(dir / "audit/report.json"));
+    CHECK(j["totals"]["matched"] == 135);
+    CHECK(j["totals"]["with_values"] == 135);
+    CHECK(j["totals"]["mae_m"].get<double>() < 0.8);
+    CHECK(j["totals"]["bias_m"].get<double>() > 0.0);  // the systematic +0.25 m against 3dfier, see the note
+    const auto bad = test::run_cli("audit heights --pred " + (dir / "h.gpkg") + " --ref " + ref + " --ref-field nope --out " + (dir / "x"));
+    CHECK(bad.exit_code != 0);
+    CHECK(bad.err.find("has no field 'nope'") != std::string::npos);
 }
