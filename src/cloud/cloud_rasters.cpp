@@ -1,11 +1,27 @@
 #include "cloud/cloud_rasters.hpp"
 
+#include <algorithm>
 #include <cmath>
 
 #include "core/error.hpp"
 #include "core/grid_fill.hpp"
 
 namespace cityforge {
+
+GridSpec grid_over_cloud(const PointCloud& c, double cell) {
+    if (c.size() == 0) throw Error("rasterize", "cloud is empty");
+    if (!(cell > 0)) throw Error("rasterize", "cell size must be > 0");
+    double minx = INFINITY, miny = INFINITY, maxx = -INFINITY, maxy = -INFINITY;
+    for (std::size_t i = 0; i < c.size(); ++i) {
+        minx = std::min(minx, c.x[i]), maxx = std::max(maxx, c.x[i]);
+        miny = std::min(miny, c.y[i]), maxy = std::max(maxy, c.y[i]);
+    }
+    const double x0 = std::floor(minx / cell) * cell, y1 = std::ceil(maxy / cell) * cell;
+    GridSpec g{{x0, cell, y1, -cell}, static_cast<int>(std::floor((maxx - x0) / cell)) + 1,
+               static_cast<int>(std::floor((y1 - miny) / cell)) + 1};
+    if (static_cast<double>(g.width) * g.height > 2e9) throw Error("rasterize", "grid too large; choose a coarser cell size");
+    return g;
+}
 
 CloudRasters rasterize_cloud(const PointCloud& c, const std::vector<uint8_t>& keep, const std::vector<uint8_t>& is_ground,
                              const GridSpec& g, double unit_m) {

@@ -31,6 +31,10 @@ struct CloudRasters {
     Image<float> vegetation_share;
 };
 
+/// A grid of square `cell` (CRS units) covering the cloud, its origin snapped
+/// to multiples of the cell so that grids of neighbouring tiles align.
+GridSpec grid_over_cloud(const PointCloud& cloud, double cell);
+
 /// Rasterises `cloud` (points with keep[i] == 0 skipped; keep may be empty)
 /// on `grid`. `unit_m` = metres per horizontal CRS unit (for the density).
 CloudRasters rasterize_cloud(const PointCloud& cloud, const std::vector<uint8_t>& keep, const std::vector<uint8_t>& is_ground,

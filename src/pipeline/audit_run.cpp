@@ -3,6 +3,7 @@
 #include <cmath>
 #include <filesystem>
 #include <optional>
+#include <tuple>
 #include <nlohmann/json.hpp>
 #include <sstream>
 
@@ -54,6 +55,17 @@ LayerPair read_pair(const std::string& pred_path, const std::string& ref_path, c
     return lp;
 }
 
+// Writes DIR/report.json and DIR/report.md (each atomically) and returns their paths.
+std::pair<std::string, std::string> write_report(const std::string& out_dir, const nlohmann::json& j, const std::string& markdown) {
+    ensure_directory(out_dir);
+    namespace fs = std::filesystem;
+    const std::string json_path = (fs::path(out_dir) / "report.json").string();
+    const std::string md_path = (fs::path(out_dir) / "report.md").string();
+    write_text_file(json_path, j.dump(2) + "\n");
+    write_text_file(md_path, markdown);
+    return {json_path, md_path};
+}
+
 int field_index(const PolygonLayer& layer, const std::string& name, const std::string& path) {
     for (std::size_t i = 0; i < layer.field_names.size(); ++i)
         if (layer.field_names[i] == name) return static_cast<int>(i);
@@ -87,11 +99,6 @@ FootprintAuditReport audit_footprints(const std::string& pred_path, const std::s
         rows.push_back({{"reference_fid", ref.fids[m.reference]}, {"predicted_fid", pred.fids[m.predicted]}, {"iou", m.iou},
                         {"area_error_pct", m.area_error_pct}});
     j["matches"] = rows;
-    ensure_directory(out_dir);
-    namespace fs = std::filesystem;
-    rep.json_path = (fs::path(out_dir) / "report.json").string();
-    rep.markdown_path = (fs::path(out_dir) / "report.md").string();
-    write_text_file(rep.json_path, j.dump(2) + "\n");
     std::ostringstream md;
     md.precision(4);
     md << "# Footprint audit\n\n"
@@ -106,7 +113,7 @@ FootprintAuditReport audit_footprints(const std::string& pred_path, const std::s
        << "## Matches\n\n| reference fid | predicted fid | IoU | area error (%) |\n|---|---|---|---|\n";
     for (const FootprintMatch& m : s.matches)
         md << "| " << ref.fids[m.reference] << " | " << pred.fids[m.predicted] << " | " << m.iou << " | " << m.area_error_pct << " |\n";
-    write_text_file(rep.markdown_path, md.str());
+    std::tie(rep.json_path, rep.markdown_path) = write_report(out_dir, j, md.str());
     return rep;
 }
 
@@ -161,11 +168,6 @@ HeightAuditReport audit_heights(const std::string& pred_path, const std::string&
         rows.push_back({{"reference_fid", e.reference_fid}, {"predicted_fid", e.predicted_fid}, {"predicted_m", e.predicted},
                         {"reference_m", e.reference}, {"error_m", e.error}});
     j["buildings"] = rows;
-    ensure_directory(out_dir);
-    namespace fs = std::filesystem;
-    rep.json_path = (fs::path(out_dir) / "report.json").string();
-    rep.markdown_path = (fs::path(out_dir) / "report.md").string();
-    write_text_file(rep.json_path, j.dump(2) + "\n");
     std::ostringstream md;
     md.precision(4);
     md << "# Height audit\n\n- predicted: `" << pred_path << "`, field `" << o.pred_field << "`\n- reference: `" << ref_path << "`, field `"
@@ -174,7 +176,7 @@ HeightAuditReport audit_heights(const std::string& pred_path, const std::string&
        << rep.rmse << " |\n| bias (predicted - reference) | " << rep.bias << " |\n| max abs | " << rep.max_abs
        << " |\n\n| reference fid | predicted | reference | error |\n|---|---|---|---|\n";
     for (const HeightError& e : rep.rows) md << "| " << e.reference_fid << " | " << e.predicted << " | " << e.reference << " | " << e.error << " |\n";
-    write_text_file(rep.markdown_path, md.str());
+    std::tie(rep.json_path, rep.markdown_path) = write_report(out_dir, j, md.str());
     return rep;
 }
 
@@ -214,11 +216,6 @@ CloudAuditReport audit_clouds(const std::string& pred_path, const std::string& r
     nlohmann::json rows = nlohmann::json::array();
     for (const CloudFScore& s : c.scores) rows.push_back({{"tau_m", s.tau}, {"precision", s.precision}, {"recall", s.recall}, {"f_score", s.f_score}});
     j["f_scores"] = rows;
-    ensure_directory(out_dir);
-    namespace fs = std::filesystem;
-    rep.json_path = (fs::path(out_dir) / "report.json").string();
-    rep.markdown_path = (fs::path(out_dir) / "report.md").string();
-    write_text_file(rep.json_path, j.dump(2) + "\n");
     std::ostringstream md;
     md.precision(4);
     md << "# Point cloud audit\n\n- predicted: `" << pred_path << "` (" << c.predicted_points << " points" << (rep.reprojected ? ", reprojected" : "")
@@ -227,7 +224,7 @@ CloudAuditReport audit_clouds(const std::string& pred_path, const std::string& r
        << c.mean_ref_to_pred << " |\n| chamfer (sum of both means, m) | " << c.chamfer << " |\n| chamfer, squared convention (m²) | "
        << c.chamfer_squared << " |\n\n| tau (m) | precision | recall | F-score |\n|---|---|---|---|\n";
     for (const CloudFScore& s : c.scores) md << "| " << s.tau << " | " << s.precision << " | " << s.recall << " | " << s.f_score << " |\n";
-    write_text_file(rep.markdown_path, md.str());
+    std::tie(rep.json_path, rep.markdown_path) = write_report(out_dir, j, md.str());
     return rep;
 }
 

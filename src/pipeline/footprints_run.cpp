@@ -60,17 +60,7 @@ FootprintsReport run_footprints(const std::string& output_path, const Footprints
         const PreparedCloud pc = prepare_cloud(o.cloud, o.cloud_crs, target, o.outliers, o.ground);
         crs = pc.crs;
         unit = pc.crs.linear_unit_m, z_unit = pc.crs.z_unit_m;
-        if (o.ortho.empty()) {
-            double minx = INFINITY, miny = INFINITY, maxx = -INFINITY, maxy = -INFINITY;
-            for (std::size_t i = 0; i < pc.cloud.size(); ++i) {
-                minx = std::min(minx, pc.cloud.x[i]), maxx = std::max(maxx, pc.cloud.x[i]);
-                miny = std::min(miny, pc.cloud.y[i]), maxy = std::max(maxy, pc.cloud.y[i]);
-            }
-            const double cell = o.mask.gsd_m / unit;
-            const double x0 = std::floor(minx / cell) * cell, y1 = std::ceil(maxy / cell) * cell;
-            grid = {{x0, cell, y1, -cell}, static_cast<int>(std::floor((maxx - x0) / cell)) + 1,
-                    static_cast<int>(std::floor((y1 - miny) / cell)) + 1};
-        }
+        if (o.ortho.empty()) grid = grid_over_cloud(pc.cloud, o.mask.gsd_m / unit);
         progress(0.4, "cloud");
         CloudRasters rasters = rasterize_cloud(pc.cloud, pc.keep, pc.is_ground, grid, unit);
         BuildingMaskOptions mo = o.mask;

@@ -32,20 +32,7 @@ RasterizeReport rasterize_run(const std::string& cloud_path, const std::string& 
     }
     const PreparedCloud pc = prepare_cloud(cloud_path, o.cloud_crs, target, o.outliers, o.ground);
     progress(0.5, "cloud");
-    if (o.grid_raster.empty()) {
-        double minx = INFINITY, miny = INFINITY, maxx = -INFINITY, maxy = -INFINITY;
-        for (std::size_t i = 0; i < pc.cloud.size(); ++i) {
-            minx = std::min(minx, pc.cloud.x[i]), maxx = std::max(maxx, pc.cloud.x[i]);
-            miny = std::min(miny, pc.cloud.y[i]), maxy = std::max(maxy, pc.cloud.y[i]);
-        }
-        const double cell = o.gsd_m / pc.crs.linear_unit_m;
-        // Snap the origin to the cell size so that grids of neighbouring tiles align.
-        const double x0 = std::floor(minx / cell) * cell, y1 = std::ceil(maxy / cell) * cell;
-        grid.transform = {x0, cell, y1, -cell};
-        grid.width = static_cast<int>(std::floor((maxx - x0) / cell)) + 1;
-        grid.height = static_cast<int>(std::floor((y1 - miny) / cell)) + 1;
-        if (static_cast<double>(grid.width) * grid.height > 2e9) throw Error(cloud_path, "grid too large; choose a coarser --gsd");
-    }
+    if (o.grid_raster.empty()) grid = grid_over_cloud(pc.cloud, o.gsd_m / pc.crs.linear_unit_m);
     const CloudRasters r = rasterize_cloud(pc.cloud, pc.keep, pc.is_ground, grid, pc.crs.linear_unit_m);
     progress(0.8, "rasters");
     ensure_directory(out_dir);
