@@ -168,6 +168,8 @@ int main(int argc, char** argv) {
     audit_fp->add_option("--ref", a_ref, "Reference footprints")->required();
     audit_fp->add_option("--out", a_out, "Report folder (report.json, report.md)")->required();
     audit_fp->add_option("--iou", aopt.iou_threshold, "IoU threshold of a match")->capture_default_str();
+    std::string a_gates;
+    audit_fp->add_option("--fail-below", a_gates, "Exit with status 4 when a measure is below its minimum, e.g. f1=0.8,iou=0.7");
 
     auto* audit_h = audit->add_subcommand("heights", "Heights of matched footprints against reference heights (MAE, RMSE, bias, max)");
     std::string h_pred, h_ref, h_aout;
@@ -258,11 +260,18 @@ int main(int argc, char** argv) {
                              r.buildings, r.mode.c_str(), r.crs.c_str(), r.used_classes ? "used" : "absent", r.width, r.height,
                              r.seconds, r.mean_abs_fit_area_error_pct, f_out.c_str());
         } else if (*audit_fp) {
+            aopt.fail_below = cf::parse_gates(a_gates, "--fail-below");
             const cf::FootprintAuditReport r = cf::audit_footprints(a_pred, a_ref, a_out, aopt);
             const auto& s = r.scores;
             std::printf("precision %.4f recall %.4f F1 %.4f mean IoU %.4f mean |area error| %.2f %% (TP %zu of %zu predicted, %zu reference)%s\n",
                         s.precision, s.recall, s.f1, s.mean_iou, s.mean_abs_area_error_pct, s.true_positives, s.predicted,
                         s.reference, r.reprojected ? "; prediction reprojected" : "");
+            if (!r.passed) {
+                std::string why;
+                for (const auto& f : r.failed) why += (why.empty() ? "" : ", ") + f;
+                std::fprintf(stderr, "cityforge: audit failed its gates: %s\n", why.c_str());
+                return 4;
+            }
         } else if (*audit_h) {
             const cf::HeightAuditReport r = cf::audit_heights(h_pred, h_ref, h_aout, hao);
             std::printf("MAE %.3f m RMSE %.3f m bias %+.3f m max %.3f m over %zu buildings (%zu matched of %zu reference)\n", r.mae, r.rmse,

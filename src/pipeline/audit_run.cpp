@@ -1,5 +1,6 @@
 #include "pipeline/audit_run.hpp"
 
+#include <algorithm>
 #include <cmath>
 #include <filesystem>
 #include <optional>
@@ -15,8 +16,29 @@
 
 namespace cityforge {
 
+std::vector<std::pair<std::string, double>> parse_gates(const std::string& text, const std::string& option) {
+    std::vector<std::pair<std::string, double>> gates;
+    std::stringstream ss(text);
+    std::string item;
+    while (std::getline(ss, item, ',')) {
+        if (item.empty()) continue;
+        const auto eq = item.find('=');
+        if (eq == std::string::npos) throw Error(option, "expected NAME=VALUE, got '" + item + "'");
+        try {
+            gates.emplace_back(item.substr(0, eq), std::stod(item.substr(eq + 1)));
+        } catch (const std::exception&) {
+            throw Error(option, "bad number in '" + item + "'");
+        }
+    }
+    return gates;
+}
+
 void FootprintAuditOptions::validate() const {
     if (!(iou_threshold > 0.0 && iou_threshold <= 1.0)) throw Error("--iou", "must be in (0, 1]");
+    static const char* known[] = {"precision", "recall", "f1", "iou", "completeness", "correctness", "quality"};
+    for (const auto& [name, value] : fail_below)
+        if (std::find(std::begin(known), std::end(known), name) == std::end(known))
+            throw Error("--fail-below", "unknown measure '" + name + "' (precision, recall, f1, iou, completeness, correctness, quality)");
 }
 
 namespace {
@@ -84,12 +106,24 @@ FootprintAuditReport audit_footprints(const std::string& pred_path, const std::s
     rep.crs = ref.crs.label();
     rep.scores = match_footprints(parts_of(pred), parts_of(ref), o.iou_threshold);
     const FootprintScores& s = rep.scores;
+    for (const auto& [name, minimum] : o.fail_below) {
+        const double v = name == "precision" ? s.precision : name == "recall" ? s.recall : name == "f1" ? s.f1 : name == "iou" ? s.mean_iou
+                       : name == "completeness" ? s.area_completeness : name == "correctness" ? s.area_correctness : s.area_quality;
+        if (v < minimum) {
+            rep.passed = false;
+            std::ostringstream msg;
+            msg << name << " " << v << " < " << minimum;
+            rep.failed.push_back(msg.str());
+        }
+    }
 
     nlohmann::json j;
     j["audit"] = "footprints";
     j["predicted"] = {{"path", pred_path}, {"count", s.predicted}, {"reprojected", rep.reprojected}};
     j["reference"] = {{"path", ref_path}, {"count", s.reference}, {"crs", rep.crs}};
     j["iou_threshold"] = o.iou_threshold;
+    j["passed"] = rep.passed;
+    j["failed_gates"] = rep.failed;
     j["totals"] = {{"true_positives", s.true_positives}, {"false_positives", s.predicted - s.true_positives},
                    {"false_negatives", s.reference - s.true_positives}, {"precision", s.precision}, {"recall", s.recall},
                    {"f1", s.f1}, {"mean_iou", s.mean_iou}, {"mean_abs_area_error_pct", s.mean_abs_area_error_pct},

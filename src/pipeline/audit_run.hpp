@@ -10,14 +10,23 @@
 
 namespace cityforge {
 
+/// Gates for CI: "f1=0.8,iou=0.7" -> {{"f1", 0.8}, {"iou", 0.7}}. Throws Error
+/// naming `option` on malformed text.
+std::vector<std::pair<std::string, double>> parse_gates(const std::string& text, const std::string& option);
+
 struct FootprintAuditOptions {
     double iou_threshold = 0.5;
+    /// Minimum values (precision, recall, f1, iou, completeness, correctness,
+    /// quality); a report below any of them has passed = false.
+    std::vector<std::pair<std::string, double>> fail_below;
     std::string pred_layer, ref_layer;  ///< empty = first layer
     void validate() const;
 };
 
 struct FootprintAuditReport {
     FootprintScores scores;
+    bool passed = true;              ///< false when a fail_below gate is not met
+    std::vector<std::string> failed;  ///< the gates that failed, e.g. "f1 0.71 < 0.8"
     std::string crs;            ///< CRS the scores were computed in (the reference's)
     bool reprojected = false;   ///< the prediction was reprojected to it
     std::string json_path, markdown_path;

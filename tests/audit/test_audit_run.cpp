@@ -31,6 +31,12 @@ TEST_CASE("audit footprints - truth against itself - reprojected copy - report f
     const auto cli = test::run_cli("audit footprints --pred " + moved + " --ref " + s.truth_path + " --out " + (dir / "c"));
     CHECK(cli.exit_code == 0);
     CHECK(cli.out.find("F1 1.0000") != std::string::npos);
+    // CI gates: passing and failing thresholds, and a malformed one.
+    CHECK(test::run_cli("audit footprints --pred " + moved + " --ref " + s.truth_path + " --out " + (dir / "g1") + " --fail-below f1=0.99,iou=0.99").exit_code == 0);
+    const auto gated = test::run_cli("audit footprints --pred " + s.truth_path + " --ref " + moved + " --out " + (dir / "g2") + " --iou 0.5 --fail-below iou=1.01");
+    CHECK(gated.exit_code == 4);
+    CHECK(gated.err.find("audit failed its gates: iou") != std::string::npos);
+    CHECK(test::run_cli("audit footprints --pred " + moved + " --ref " + s.truth_path + " --out " + (dir / "g3") + " --fail-below f1").exit_code == 1);
     const auto bad = test::run_cli("audit footprints --pred " + (dir / "none.gpkg") + " --ref " + s.truth_path + " --out " + (dir / "d"));
     CHECK(bad.exit_code != 0);
     CHECK(bad.err.find("none.gpkg: file not found") != std::string::npos);
