@@ -2,37 +2,17 @@
 
 #include <algorithm>
 #include <cmath>
-#include <nanoflann.hpp>
 #include <tbb/parallel_for.h>
 
+#include "cloud/kd_tree.hpp"
 #include "core/error.hpp"
 
 namespace cityforge {
 namespace {
 
-struct LocalCloud {
-    std::vector<float> xyz;
-    std::size_t kdtree_get_point_count() const { return xyz.size() / 3; }
-    float kdtree_get_pt(std::size_t i, std::size_t d) const { return xyz[3 * i + d]; }
-    template <class BBox>
-    bool kdtree_get_bbox(BBox&) const { return false; }
-};
-using Tree = nanoflann::KDTreeSingleIndexAdaptor<nanoflann::L2_Simple_Adaptor<float, LocalCloud>, LocalCloud, 3>;
-
-LocalCloud local(const PointCloud& c, double ox, double oy, double oz) {
-    LocalCloud l;
-    l.xyz.resize(3 * c.size());
-    for (std::size_t i = 0; i < c.size(); ++i) {
-        l.xyz[3 * i] = static_cast<float>(c.x[i] - ox);
-        l.xyz[3 * i + 1] = static_cast<float>(c.y[i] - oy);
-        l.xyz[3 * i + 2] = static_cast<float>(c.z[i] - oz);
-    }
-    return l;
-}
-
 // Nearest distance from every point of `from` to `to`.
-std::vector<double> nearest(const LocalCloud& from, const LocalCloud& to) {
-    Tree tree(3, to, nanoflann::KDTreeSingleIndexAdaptorParams(16));
+std::vector<double> nearest(const LocalPoints& from, const LocalPoints& to) {
+    PointTree tree(3, to, nanoflann::KDTreeSingleIndexAdaptorParams(16));
     tree.buildIndex();
     const std::size_t n = from.kdtree_get_point_count();
     std::vector<double> d(n);
@@ -56,7 +36,7 @@ CloudComparison compare_clouds(const PointCloud& pred, const PointCloud& ref, co
         if (!(t > 0)) throw Error("--tau", "every tau must be > 0");
     // A common local origin keeps float coordinates exact to ~0.1 mm over 10 km.
     const double ox = ref.x[0], oy = ref.y[0], oz = ref.z[0];
-    const LocalCloud a = local(pred, ox, oy, oz), b = local(ref, ox, oy, oz);
+    const LocalPoints a = local_points(pred, ox, oy, oz), b = local_points(ref, ox, oy, oz);
     const std::vector<double> da = nearest(a, b), db = nearest(b, a);
     CloudComparison c;
     c.predicted_points = pred.size(), c.reference_points = ref.size();

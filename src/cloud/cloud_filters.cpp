@@ -3,10 +3,10 @@
 #include <algorithm>
 #include <cmath>
 #include <limits>
-#include <nanoflann.hpp>
 #include <numeric>
 #include <tbb/parallel_for.h>
 
+#include "cloud/kd_tree.hpp"
 #include "core/error.hpp"
 #include "core/grid_fill.hpp"
 #include "core/morphology.hpp"
@@ -27,20 +27,6 @@ void GroundFilterOptions::validate() const {
     if (!(elevation_threshold > 0.0)) throw Error("--smrf-threshold", "must be > 0");
 }
 
-namespace {
-
-// Points as float xyz relative to the cloud's minimum corner: half the memory
-// of doubles and faster queries; float keeps ~0.1 mm over 10 km.
-struct LocalPoints {
-    std::vector<float> xyz;
-    std::size_t kdtree_get_point_count() const { return xyz.size() / 3; }
-    float kdtree_get_pt(std::size_t i, std::size_t d) const { return xyz[3 * i + d]; }
-    template <class BBox>
-    bool kdtree_get_bbox(BBox&) const { return false; }
-};
-using Tree3 = nanoflann::KDTreeSingleIndexAdaptor<nanoflann::L2_Simple_Adaptor<float, LocalPoints>, LocalPoints, 3>;
-
-}  // namespace
 
 OutlierFilterResult filter_outliers(const PointCloud& c, const OutlierFilterOptions& o) {
     o.validate();
@@ -50,16 +36,10 @@ OutlierFilterResult filter_outliers(const PointCloud& c, const OutlierFilterOpti
     for (std::size_t i = 0; i < n; ++i)
         if (c.classification[i] == las_class::low_noise || c.classification[i] == las_class::high_noise) r.keep[i] = 0, ++r.removed_statistical;
     if (!o.enabled || n < static_cast<std::size_t>(o.k_neighbours) + 1) return r;
-    LocalPoints local;
     double ox = INFINITY, oy = INFINITY, oz = INFINITY;
     for (std::size_t i = 0; i < n; ++i) ox = std::min(ox, c.x[i]), oy = std::min(oy, c.y[i]), oz = std::min(oz, c.z[i]);
-    local.xyz.resize(3 * n);
-    for (std::size_t i = 0; i < n; ++i) {
-        local.xyz[3 * i] = static_cast<float>(c.x[i] - ox);
-        local.xyz[3 * i + 1] = static_cast<float>(c.y[i] - oy);
-        local.xyz[3 * i + 2] = static_cast<float>(c.z[i] - oz);
-    }
-    Tree3 tree(3, local, nanoflann::KDTreeSingleIndexAdaptorParams(16));
+    const LocalPoints local = local_points(c, ox, oy, oz);
+    PointTree tree(3, local, nanoflann::KDTreeSingleIndexAdaptorParams(16));
     tree.buildIndex();
     // One k-nearest-neighbour pass serves both filters: the isolated-point test
     // only needs the distance to the m-th neighbour (m = isolated_min_neighbours).

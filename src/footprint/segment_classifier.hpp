@@ -25,9 +25,7 @@ struct SegmentFeatures {
     double area_m2 = 0.0;
     double brightness = 0.0;        ///< 0..1 relative
     double vegetation_index = 0.0;  ///< ExG, 0 for fewer than 3 bands
-    double rectangularity = 0.0;
-    double elongation = 0.0;
-    bool building = false;
+    bool building = false;          ///< in a component that passed the shape rules
 };
 
 /// Segments are first kept or rejected on their spectra (vegetation,

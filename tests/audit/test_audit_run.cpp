@@ -3,17 +3,16 @@
 
 #include "pipeline/audit_run.hpp"
 #include "synth/synth.hpp"
+#include "synth_fixture.hpp"
 #include "test_support.hpp"
 
 using namespace cityforge;
+using cityforge::test::make_town;
 using cityforge::test::ScratchDir;
 
 TEST_CASE("audit footprints - truth against itself - reprojected copy - report files", "[audit][cli]") {
     ScratchDir dir("audit_fp");
-    SynthOptions so;
-    so.size_m = 150;
-    so.cloud_density_m2 = 0;
-    const SynthResult s = write_synthetic_town(dir.path.string(), so);
+    const SynthResult s = make_town(dir, 150, 1, 0);
     const FootprintAuditReport same = audit_footprints(s.truth_path, s.truth_path, dir / "a", {});
     CHECK(same.scores.f1 == 1.0);
     CHECK(same.scores.mean_iou == Approx(1.0));

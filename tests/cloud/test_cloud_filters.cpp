@@ -4,9 +4,11 @@
 #include "cloud/las.hpp"
 #include "core/random.hpp"
 #include "synth/synth.hpp"
+#include "synth_fixture.hpp"
 #include "test_support.hpp"
 
 using namespace cityforge;
+using cityforge::test::make_town;
 using cityforge::test::ScratchDir;
 
 TEST_CASE("Statistical outlier removal drops far points and keeps a clean surface", "[cloud][filters]") {
@@ -28,11 +30,7 @@ TEST_CASE("Statistical outlier removal drops far points and keeps a clean surfac
 
 TEST_CASE("SMRF ground agrees with the synthetic scene's exact ground class", "[cloud][ground]") {
     ScratchDir dir("smrf");
-    SynthOptions so;
-    so.size_m = 200;
-    so.cloud_density_m2 = 4;
-    so.seed = 4;
-    write_synthetic_town(dir.path.string(), so);
+    make_town(dir, 200, 4, 4);
     const PointCloud c = read_las(dir / "cloud.las");
     GroundFilterOptions go;
     go.trust_classification = false;

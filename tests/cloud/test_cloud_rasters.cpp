@@ -4,17 +4,16 @@
 #include "pipeline/rasterize_run.hpp"
 #include "raster/raster.hpp"
 #include "synth/synth.hpp"
+#include "synth_fixture.hpp"
 #include "test_support.hpp"
 
 using namespace cityforge;
+using cityforge::test::make_town;
 using cityforge::test::ScratchDir;
 
 TEST_CASE("cloud rasterize on the ortho grid - DTM without holes - nDSM shows building heights", "[cloud][rasterize]") {
     ScratchDir dir("rasterize");
-    SynthOptions so;
-    so.size_m = 150;
-    so.seed = 6;
-    const SynthResult s = write_synthetic_town(dir.path.string(), so);
+    const SynthResult s = make_town(dir, 150, 6, 8);
     RasterizeOptions o;
     o.grid_raster = s.ortho_path;
     const RasterizeReport r = rasterize_run(s.cloud_path, dir / "r", o);

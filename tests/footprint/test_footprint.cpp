@@ -10,9 +10,11 @@
 #include "io/vector.hpp"
 #include "raster/raster.hpp"
 #include "synth/synth.hpp"
+#include "synth_fixture.hpp"
 #include "test_support.hpp"
 
 using namespace cityforge;
+using cityforge::test::make_town;
 using cityforge::test::ScratchDir;
 
 namespace {
@@ -103,11 +105,7 @@ TEST_CASE("IoU of a shifted square is known", "[footprint][fit]") {
 
 TEST_CASE("Synthetic truth raster vectorises back to the truth footprints", "[footprint][synth]") {
     ScratchDir dir("vec_synth");
-    SynthOptions so;
-    so.size_m = 200;
-    so.cloud_density_m2 = 0;
-    so.seed = 8;
-    const SynthResult s = write_synthetic_town(dir.path.string(), so);
+    const SynthResult s = make_town(dir, 200, 8, 0);
     RasterReader reader(s.truth_raster_path);
     const auto labels = reader.read_all<uint32_t>();
     const auto polys = vectorize_all(labels, reader.info().transform);

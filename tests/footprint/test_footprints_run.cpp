@@ -9,9 +9,11 @@
 #include "io/vector.hpp"
 #include "pipeline/footprints_run.hpp"
 #include "synth/synth.hpp"
+#include "synth_fixture.hpp"
 #include "test_support.hpp"
 
 using namespace cityforge;
+using cityforge::test::make_town;
 using cityforge::test::ScratchDir;
 
 namespace {
@@ -25,10 +27,7 @@ FootprintScores score(const PolygonLayer& pred, const PolygonLayer& truth) {
 
 TEST_CASE("Cloud-only footprints on a synthetic town match the truth (regression guard)", "[footprint][synth]") {
     ScratchDir dir("fp_run");
-    SynthOptions so;
-    so.size_m = 300;
-    so.seed = 9;
-    const SynthResult s = write_synthetic_town(dir.path.string(), so);
+    const SynthResult s = make_town(dir, 300, 9, 8);
     FootprintsRunOptions o;
     o.cloud = s.cloud_path;
     o.ortho = s.ortho_path;
@@ -106,11 +105,7 @@ TEST_CASE("Delft AHN3 cloud-only footprints against the 135 BGT footprints (regr
 
 TEST_CASE("Ortho-only footprints on a synthetic town (regression guard)", "[footprint][synth]") {
     ScratchDir dir("fp_ortho");
-    SynthOptions so;
-    so.size_m = 300;
-    so.seed = 4;
-    so.cloud_density_m2 = 0;
-    const SynthResult s = write_synthetic_town(dir.path.string(), so);
+    const SynthResult s = make_town(dir, 300, 4, 0);
     FootprintsRunOptions o;
     o.ortho = s.ortho_path;
     const FootprintsReport rep = run_footprints(dir / "fp.gpkg", o);

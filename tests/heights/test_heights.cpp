@@ -10,9 +10,11 @@
 #include "io/vector.hpp"
 #include "pipeline/heights_run.hpp"
 #include "synth/synth.hpp"
+#include "synth_fixture.hpp"
 #include "test_support.hpp"
 
 using namespace cityforge;
+using cityforge::test::make_town;
 using cityforge::test::ScratchDir;
 using cityforge::test::shared_data;
 
@@ -113,10 +115,7 @@ TEST_CASE("Delft AHN3 - roof p90 agrees with 3dfier's reference (median |diff| <
 
 TEST_CASE("Synthetic town - flat roof heights within 0.15 m (lidar) - reprojected footprints give the same heights", "[heights][synth]") {
     ScratchDir dir("synth_heights");
-    SynthOptions so;
-    so.size_m = 300;
-    so.seed = 2;
-    const SynthResult s = write_synthetic_town(dir.path.string(), so);
+    const SynthResult s = make_town(dir, 300, 2, 8);
     const auto rep = run_heights(s.truth_path, s.cloud_path, dir / "h.gpkg", HeightsRunOptions{});
     CHECK_FALSE(rep.reprojected);
     const auto rows = read_rows(dir / "h.gpkg");

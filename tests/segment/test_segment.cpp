@@ -9,9 +9,11 @@
 #include "segment/region_merging.hpp"
 #include "segment/watershed.hpp"
 #include "synth/synth.hpp"
+#include "synth_fixture.hpp"
 #include "test_support.hpp"
 
 using namespace cityforge;
+using cityforge::test::make_town;
 using cityforge::test::ScratchDir;
 using cityforge::test::shared_data;
 
@@ -63,10 +65,7 @@ TEST_CASE("Merging recovers flat-colour regions exactly with every strategy", "[
 
 TEST_CASE("Merging preserves totals and adjacency symmetry - hierarchy consistent - labels contiguous - same labels for every strategy", "[segment]") {
     ScratchDir dir("seg_synth");
-    SynthOptions so;
-    so.size_m = 150;
-    so.cloud_density_m2 = 0;
-    write_synthetic_town(dir.path.string(), so);
+    make_town(dir, 150, 1, 0);
     Image<float> img = RasterReader(dir / "ortho.tif").read_all<float>();
     normalize_bands(img, {});
     const Oversegmentation over = watershed_oversegment(img, {}, WatershedOptions{});
@@ -169,11 +168,7 @@ TEST_CASE("Bad segmentation input is refused before anything is written", "[segm
 
 TEST_CASE("Segmentation gives the same labels with 1 thread and with all threads", "[segment][determinism]") {
     ScratchDir dir("seg_threads");
-    SynthOptions so;
-    so.size_m = 200;
-    so.cloud_density_m2 = 0;
-    so.seed = 11;
-    write_synthetic_town(dir.path.string(), so);
+    make_town(dir, 200, 11, 0);
     auto run = [&] {
         Image<float> img = RasterReader(dir / "ortho.tif").read_all<float>();
         normalize_bands(img, {});
