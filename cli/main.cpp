@@ -10,6 +10,7 @@
 #include "core/error.hpp"
 #include "core/log.hpp"
 #include "core/progress.hpp"
+#include "core/version.hpp"
 #include "io/inspect.hpp"
 #include "pipeline/audit_run.hpp"
 #include "pipeline/footprints_run.hpp"
@@ -20,13 +21,19 @@
 #include <nlohmann/json.hpp>
 #include "synth/synth.hpp"
 
-#ifndef CITYFORGE_VERSION
-#define CITYFORGE_VERSION "0.0.0"
-#endif
 
 namespace cf = cityforge;
 
 namespace {
+
+// Exit status 4 when an audit's gates failed (said on stderr), else 0.
+int gate_exit(const cf::AuditOutput& out) {
+    if (out.gates.passed) return 0;
+    std::string why;
+    for (const auto& f : out.gates.failed) why += (why.empty() ? "" : ", ") + f;
+    std::fprintf(stderr, "cityforge: audit failed its gates: %s\n", why.c_str());
+    return 4;
+}
 
 struct GlobalFlags {
     bool quiet = false;
@@ -43,7 +50,7 @@ cf::Progress make_progress(const GlobalFlags& g) {
 
 int main(int argc, char** argv) {
     CLI::App app{"cityforge: building extraction, heights and city models from aerial images and point clouds"};
-    app.set_version_flag("--version", std::string("cityforge ") + CITYFORGE_VERSION);
+    app.set_version_flag("--version", std::string("cityforge ") + cf::version());
     app.require_subcommand(1);
     app.fallthrough();  // global flags (--quiet, ...) may also follow the subcommand
     app.failure_message([](const CLI::App*, const CLI::Error& e) {
@@ -161,34 +168,67 @@ int main(int argc, char** argv) {
     // audit -----------------------------------------------------------------
     auto* audit = app.add_subcommand("audit", "Accuracy audits");
     audit->require_subcommand(1);
-    auto* audit_fp = audit->add_subcommand("footprints", "Footprints against reference footprints (SpaceNet matching, ISPRS per-area)");
-    std::string a_pred, a_ref, a_out;
+    // Every audit: --out DIR and the CI gates.
+    struct AuditCommon {
+        std::string out, below, above;
+    };
+    auto add_common = [](CLI::App* cmd, AuditCommon& c) {
+        cmd->add_option("--out", c.out, "Report folder (report.json, report.md, report.html)")->required();
+        cmd->add_option("--fail-below", c.below, "Exit with status 4 when a measure is below its minimum, e.g. f1=0.8,iou=0.7");
+        cmd->add_option("--fail-above", c.above, "Exit with status 4 when a measure is above its maximum, e.g. mae=0.5");
+    };
+    auto gates_of = [](const AuditCommon& c) {
+        auto gates = cf::parse_gates(c.below, "--fail-below", true);
+        const auto a = cf::parse_gates(c.above, "--fail-above", false);
+        gates.insert(gates.end(), a.begin(), a.end());
+        return gates;
+    };
+    auto* audit_fp = audit->add_subcommand("footprints", "Footprints against reference footprints (SpaceNet matching, PoLiS, ISPRS per-area)");
+    std::string a_pred, a_ref;
+    AuditCommon a_common;
     cf::FootprintAuditOptions aopt;
     audit_fp->add_option("--pred", a_pred, "Predicted footprints (any OGR polygon layer)")->required();
     audit_fp->add_option("--ref", a_ref, "Reference footprints")->required();
-    audit_fp->add_option("--out", a_out, "Report folder (report.json, report.md)")->required();
     audit_fp->add_option("--iou", aopt.iou_threshold, "IoU threshold of a match")->capture_default_str();
-    std::string a_gates;
-    audit_fp->add_option("--fail-below", a_gates, "Exit with status 4 when a measure is below its minimum, e.g. f1=0.8,iou=0.7");
+    audit_fp->add_option("--ortho", aopt.ortho_path, "Raster drawn under the map in report.html (reference CRS)");
+    add_common(audit_fp, a_common);
+    audit_fp->footer("Measures for gates: precision recall f1 iou completeness correctness quality area_error_pct polis");
+
+    auto* audit_rect = audit->add_subcommand("rectangles", "Fitted footprints: original vs fitted area per building (the study's Table 5)");
+    std::string r_in;
+    AuditCommon r_common;
+    cf::RectangleAuditOptions rao;
+    audit_rect->add_option("--in", r_in, "Fitted footprints (e.g. from `cityforge footprints`)")->required();
+    audit_rect->add_option("--original", rao.original_path, "Original polygons to compare with (matched one to one by IoU)");
+    audit_rect->add_option("--original-area-field", rao.original_area_field, "Attribute with the original area in m² (without --original)")
+        ->capture_default_str();
+    audit_rect->add_option("--iou", rao.iou_threshold, "IoU threshold matching fitted to original polygons")->capture_default_str();
+    add_common(audit_rect, r_common);
+    audit_rect->footer("Measures for gates: mean_abs_error_pct max_abs_error_pct mean_error_pct");
 
     auto* audit_h = audit->add_subcommand("heights", "Heights of matched footprints against reference heights (MAE, RMSE, bias, max)");
-    std::string h_pred, h_ref, h_aout;
+    std::string h_pred, h_ref;
+    AuditCommon h_common;
     cf::HeightAuditOptions hao;
     audit_h->add_option("--pred", h_pred, "Predicted footprints with heights")->required();
     audit_h->add_option("--ref", h_ref, "Reference footprints with heights")->required();
-    audit_h->add_option("--out", h_aout, "Report folder (report.json, report.md)")->required();
     audit_h->add_option("--pred-field", hao.pred_field, "Predicted height attribute")->capture_default_str();
     audit_h->add_option("--ref-field", hao.ref_field, "Reference height attribute")->required();
     audit_h->add_option("--iou", hao.iou_threshold, "IoU threshold of a footprint match")->capture_default_str();
+    add_common(audit_h, h_common);
+    audit_h->footer("Measures for gates: mae rmse bias abs_bias max_abs (metres) coverage (share of references with both heights)");
+
     auto* audit_cl = audit->add_subcommand("clouds", "Point cloud against a reference: precision/recall/F-score within tau, chamfer distance");
-    std::string c_pred, c_ref, c_out;
+    std::string c_pred, c_ref;
+    AuditCommon c_common;
     cf::CloudAuditOptions copt;
     audit_cl->add_option("--pred", c_pred, "Predicted cloud (LAS, PLY, XYZ)")->required();
     audit_cl->add_option("--ref", c_ref, "Reference cloud")->required();
-    audit_cl->add_option("--out", c_out, "Report folder (report.json, report.md)")->required();
     audit_cl->add_option("--tau", copt.taus_m, "Distance thresholds in metres")->delimiter(',')->capture_default_str();
     audit_cl->add_option("--pred-crs", copt.pred_crs, "CRS of the predicted cloud if it has none");
     audit_cl->add_option("--ref-crs", copt.ref_crs, "CRS of the reference cloud if it has none");
+    add_common(audit_cl, c_common);
+    audit_cl->footer("Measures for gates: chamfer chamfer_squared mean_pred_to_ref mean_ref_to_pred, and per tau T: precision@T recall@T f@T");
 
     try {
         app.parse(argc, argv);
@@ -260,28 +300,33 @@ int main(int argc, char** argv) {
                              r.buildings, r.mode.c_str(), r.crs.c_str(), r.used_classes ? "used" : "absent", r.width, r.height,
                              r.seconds, r.mean_abs_fit_area_error_pct, f_out.c_str());
         } else if (*audit_fp) {
-            aopt.fail_below = cf::parse_gates(a_gates, "--fail-below");
-            const cf::FootprintAuditReport r = cf::audit_footprints(a_pred, a_ref, a_out, aopt);
+            aopt.gates = gates_of(a_common);
+            const cf::FootprintAuditReport r = cf::audit_footprints(a_pred, a_ref, a_common.out, aopt);
             const auto& s = r.scores;
-            std::printf("precision %.4f recall %.4f F1 %.4f mean IoU %.4f mean |area error| %.2f %% (TP %zu of %zu predicted, %zu reference)%s\n",
-                        s.precision, s.recall, s.f1, s.mean_iou, s.mean_abs_area_error_pct, s.true_positives, s.predicted,
+            std::printf("precision %.4f recall %.4f F1 %.4f mean IoU %.4f mean |area error| %.2f %% mean PoLiS %.3f (TP %zu of %zu predicted, %zu reference)%s\n",
+                        s.precision, s.recall, s.f1, s.mean_iou, s.mean_abs_area_error_pct, s.mean_polis, s.true_positives, s.predicted,
                         s.reference, r.reprojected ? "; prediction reprojected" : "");
-            if (!r.passed) {
-                std::string why;
-                for (const auto& f : r.failed) why += (why.empty() ? "" : ", ") + f;
-                std::fprintf(stderr, "cityforge: audit failed its gates: %s\n", why.c_str());
-                return 4;
-            }
+            return gate_exit(r.output);
+        } else if (*audit_rect) {
+            rao.gates = gates_of(r_common);
+            const cf::RectangleAuditReport r = cf::audit_rectangles(r_in, r_common.out, rao);
+            std::printf("mean |area error| %.3f %% max %.3f %% mean signed %+.3f %% over %zu of %zu footprints\n", r.mean_abs_error_pct,
+                        r.max_abs_error_pct, r.mean_error_pct, r.rows.size(), r.fitted);
+            return gate_exit(r.output);
         } else if (*audit_h) {
-            const cf::HeightAuditReport r = cf::audit_heights(h_pred, h_ref, h_aout, hao);
+            hao.gates = gates_of(h_common);
+            const cf::HeightAuditReport r = cf::audit_heights(h_pred, h_ref, h_common.out, hao);
             std::printf("MAE %.3f m RMSE %.3f m bias %+.3f m max %.3f m over %zu buildings (%zu matched of %zu reference)\n", r.mae, r.rmse,
                         r.bias, r.max_abs, r.with_values, r.matched, r.reference);
+            return gate_exit(r.output);
         } else if (*audit_cl) {
-            const cf::CloudAuditReport r = cf::audit_clouds(c_pred, c_ref, c_out, copt);
+            copt.gates = gates_of(c_common);
+            const cf::CloudAuditReport r = cf::audit_clouds(c_pred, c_ref, c_common.out, copt);
             const auto& c = r.comparison;
             std::printf("chamfer %.4f m (pred->ref %.4f, ref->pred %.4f)", c.chamfer, c.mean_pred_to_ref, c.mean_ref_to_pred);
             for (const auto& s : c.scores) std::printf("; tau %.2f m: P %.4f R %.4f F %.4f", s.tau, s.precision, s.recall, s.f_score);
             std::printf("\n");
+            return gate_exit(r.output);
         } else if (*synth) {
             if (origin.size() == 2) synth_options.origin_x = origin[0], synth_options.origin_y = origin[1];
             synth_options.cloud_mode = cf::cloud_mode_from_string(cloud_mode);

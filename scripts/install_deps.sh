@@ -20,14 +20,25 @@ for p in "${PACKAGES[@]}"; do
   fi
 done
 
-if [ ${#missing[@]} -eq 0 ]; then
-  echo "cityforge: all build dependencies are installed" >&2
-  exit 0
+# The tests validate our JSON outputs (reports, CityJSON) with ajv from npm.
+if ! command -v node >/dev/null 2>&1 || ! command -v npm >/dev/null 2>&1; then
+  missing+=(nodejs npm)
 fi
 
-SUDO=""
-if [ "$(id -u)" -ne 0 ]; then SUDO="sudo"; fi
-echo "cityforge: installing ${missing[*]}" >&2
-export DEBIAN_FRONTEND=noninteractive
-$SUDO apt-get update -qq
-$SUDO apt-get install -y -qq --no-install-recommends "${missing[@]}" >/dev/null
+if [ ${#missing[@]} -eq 0 ]; then
+  echo "cityforge: all build dependencies are installed" >&2
+else
+  SUDO=""
+  if [ "$(id -u)" -ne 0 ]; then SUDO="sudo"; fi
+  echo "cityforge: installing ${missing[*]}" >&2
+  export DEBIAN_FRONTEND=noninteractive
+  $SUDO apt-get update -qq
+  $SUDO apt-get install -y -qq --no-install-recommends "${missing[@]}" >/dev/null
+fi
+
+# JSON Schema validator for the tests (tools/schema_check, pinned by its lock file).
+here="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
+if [ ! -d "$here/tools/schema_check/node_modules/ajv" ]; then
+  echo "cityforge: installing the JSON Schema validator (npm ci)" >&2
+  (cd "$here/tools/schema_check" && npm ci --no-audit --no-fund --loglevel=error >/dev/null)
+fi

@@ -7,6 +7,7 @@
 #include <fstream>
 #include <sstream>
 #include <string>
+#include <vector>
 #include <unistd.h>
 
 namespace cityforge::test {
@@ -48,13 +49,13 @@ struct CommandResult {
     std::string err;
 };
 
-/// Runs the built `cityforge` with `args` (shell-quoted by the caller).
-inline CommandResult run_cli(const std::string& args) {
+/// Runs a shell command line, capturing its exit status, stdout and stderr.
+inline CommandResult run_command(const std::string& command) {
     static int counter = 0;
     const auto base = std::filesystem::temp_directory_path() /
-                      ("cityforge_cli_" + std::to_string(::getpid()) + "_" + std::to_string(counter++));
+                      ("cityforge_cmd_" + std::to_string(::getpid()) + "_" + std::to_string(counter++));
     const std::string out = base.string() + ".out", err = base.string() + ".err";
-    const std::string cmd = cli() + " " + args + " >" + out + " 2>" + err + " </dev/null";
+    const std::string cmd = command + " >" + out + " 2>" + err + " </dev/null";
     const int status = std::system(cmd.c_str());
     CommandResult r;
     r.exit_code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
@@ -63,6 +64,18 @@ inline CommandResult run_cli(const std::string& args) {
     std::filesystem::remove(out);
     std::filesystem::remove(err);
     return r;
+}
+
+/// Runs the built `cityforge` with `args` (shell-quoted by the caller).
+inline CommandResult run_cli(const std::string& args) { return run_command(cli() + " " + args); }
+
+/// Validates a JSON (or JSON Lines) file against a JSON Schema with ajv
+/// (tools/schema_check, installed by scripts/install_deps.sh). Exit 0 = valid;
+/// `out` lists the errors otherwise.
+inline CommandResult validate_json(const std::string& schema, const std::string& data, const std::vector<std::string>& extra_schemas = {}) {
+    std::string cmd = "node " + source_dir() + "/tools/schema_check/validate.mjs " + schema + " " + data;
+    for (const std::string& e : extra_schemas) cmd += " " + e;
+    return run_command(cmd);
 }
 
 inline int count_lines(const std::string& s) {

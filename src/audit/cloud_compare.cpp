@@ -27,9 +27,16 @@ std::vector<double> nearest(const LocalPoints& from, const LocalPoints& to) {
     return d;
 }
 
+double quantile(std::vector<double> v, double q) {
+    const std::size_t k = std::min(v.size() - 1, static_cast<std::size_t>(q * double(v.size())));
+    std::nth_element(v.begin(), v.begin() + k, v.end());
+    return v[k];
+}
+
 }  // namespace
 
-CloudComparison compare_clouds(const PointCloud& pred, const PointCloud& ref, const std::vector<double>& taus) {
+CloudComparison compare_clouds(const PointCloud& pred, const PointCloud& ref, const std::vector<double>& taus, double histogram_max,
+                                int histogram_bins) {
     if (pred.size() == 0) throw Error("cloud audit", "predicted cloud is empty");
     if (ref.size() == 0) throw Error("cloud audit", "reference cloud is empty");
     for (double t : taus)
@@ -48,6 +55,17 @@ CloudComparison compare_clouds(const PointCloud& pred, const PointCloud& ref, co
     c.mean_ref_to_pred = sb / double(db.size());
     c.chamfer = c.mean_pred_to_ref + c.mean_ref_to_pred;
     c.chamfer_squared = qa / double(da.size()) + qb / double(db.size());
+    c.median_pred_to_ref = quantile(da, 0.5), c.p95_pred_to_ref = quantile(da, 0.95);
+    c.median_ref_to_pred = quantile(db, 0.5), c.p95_ref_to_pred = quantile(db, 0.95);
+    if (!(histogram_max > 0)) histogram_max = taus.empty() ? 1.0 : 2.0 * *std::max_element(taus.begin(), taus.end());
+    histogram_bins = std::max(1, histogram_bins);
+    c.histogram_max = histogram_max;
+    auto histogram = [&](const std::vector<double>& d) {
+        std::vector<uint64_t> h(histogram_bins, 0);
+        for (double x : d) ++h[std::min<std::size_t>(histogram_bins - 1, static_cast<std::size_t>(x / histogram_max * histogram_bins))];
+        return h;
+    };
+    c.histogram_pred_to_ref = histogram(da), c.histogram_ref_to_pred = histogram(db);
     for (double t : taus) {
         CloudFScore s;
         s.tau = t;

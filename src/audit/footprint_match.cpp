@@ -39,7 +39,29 @@ double multi_intersection(const std::vector<Polygon>& a, const std::vector<Polyg
     return inter;
 }
 
+// Mean over the vertices of `from` of the distance to the nearest boundary of `to`.
+double mean_vertex_distance(const std::vector<Polygon>& from, const std::vector<Polygon>& to) {
+    double sum = 0.0;
+    std::size_t n = 0;
+    auto ring = [&](const Ring& r) {
+        for (const MapPoint& v : r) {
+            double best = INFINITY;
+            for (const Polygon& q : to) best = std::min(best, distance_to_boundary(q, v.x, v.y));
+            sum += best, ++n;
+        }
+    };
+    for (const Polygon& p : from) {
+        ring(p.outer);
+        for (const Ring& h : p.holes) ring(h);
+    }
+    return n ? sum / double(n) : 0.0;
+}
+
 }  // namespace
+
+double polis_distance(const std::vector<Polygon>& a, const std::vector<Polygon>& b) {
+    return 0.5 * mean_vertex_distance(a, b) + 0.5 * mean_vertex_distance(b, a);
+}
 
 FootprintScores match_footprints(const std::vector<std::vector<Polygon>>& pred, const std::vector<std::vector<Polygon>>& ref,
                                  double threshold) {
@@ -59,7 +81,7 @@ FootprintScores match_footprints(const std::vector<std::vector<Polygon>>& pred, 
             const double inter = multi_intersection(pred[p], ref[r]);
             inter_of_pred[p] += inter;
             const double uni = ap + area_of(ref[r]) - inter;
-            const double iou = uni > 0 ? inter / uni : 0.0;
+            const double iou = uni > 0 ? std::min(1.0, inter / uni) : 0.0;
             if (iou >= threshold) per_pred[p].push_back({iou, p, r});
         }
     });
@@ -76,18 +98,23 @@ FootprintScores match_footprints(const std::vector<std::vector<Polygon>>& pred, 
         if (pu[c.p] || ru[c.r]) continue;
         pu[c.p] = ru[c.r] = 1;
         const double ar = area_of(ref[c.r]);
-        s.matches.push_back({c.p, c.r, c.iou, ar > 0 ? (area_of(pred[c.p]) - ar) / ar * 100.0 : 0.0});
+        s.matches.push_back({c.p, c.r, c.iou, ar > 0 ? (area_of(pred[c.p]) - ar) / ar * 100.0 : 0.0, polis_distance(pred[c.p], ref[c.r])});
     }
     std::sort(s.matches.begin(), s.matches.end(), [](const FootprintMatch& a, const FootprintMatch& b) { return a.reference < b.reference; });
     s.true_positives = s.matches.size();
     s.precision = pred.empty() ? 0.0 : double(s.true_positives) / double(pred.size());
     s.recall = ref.empty() ? 0.0 : double(s.true_positives) / double(ref.size());
     s.f1 = s.precision + s.recall > 0 ? 2 * s.precision * s.recall / (s.precision + s.recall) : 0.0;
-    for (const FootprintMatch& m : s.matches) s.mean_iou += m.iou, s.mean_abs_area_error_pct += std::abs(m.area_error_pct);
-    if (s.true_positives) s.mean_iou /= double(s.true_positives), s.mean_abs_area_error_pct /= double(s.true_positives);
+    for (const FootprintMatch& m : s.matches)
+        s.mean_iou += m.iou, s.mean_abs_area_error_pct += std::abs(m.area_error_pct), s.mean_polis += m.polis;
+    if (s.true_positives) {
+        const double n = double(s.true_positives);
+        s.mean_iou /= n, s.mean_abs_area_error_pct /= n, s.mean_polis /= n;
+    }
     double inter = 0.0, area_pred = 0.0, area_ref = 0.0;
     for (std::size_t p = 0; p < pred.size(); ++p) inter += inter_of_pred[p], area_pred += area_of(pred[p]);
     for (const auto& r : ref) area_ref += area_of(r);
+    inter = std::min({inter, area_pred, area_ref});  // rounding must not push the ratios above 1
     s.area_completeness = area_ref > 0 ? inter / area_ref : 0.0;
     s.area_correctness = area_pred > 0 ? inter / area_pred : 0.0;
     s.area_quality = area_pred + area_ref - inter > 0 ? inter / (area_pred + area_ref - inter) : 0.0;

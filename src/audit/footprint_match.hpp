@@ -15,6 +15,7 @@ struct FootprintMatch {
     std::size_t reference = 0;  ///< index into the reference list
     double iou = 0.0;
     double area_error_pct = 0.0;  ///< (predicted - reference) / reference * 100
+    double polis = 0.0;           ///< PoLiS distance, CRS units (see polis_distance)
 };
 
 struct FootprintScores {
@@ -22,12 +23,19 @@ struct FootprintScores {
     double precision = 0.0, recall = 0.0, f1 = 0.0;
     double mean_iou = 0.0;                 ///< over matches
     double mean_abs_area_error_pct = 0.0;  ///< over matches
+    double mean_polis = 0.0;               ///< over matches, CRS units
     /// ISPRS per-area measures (footprints of each set assumed not to overlap):
     /// completeness = area(pred ∩ ref) / area(ref), correctness = ... / area(pred),
     /// quality = area(pred ∩ ref) / area(pred ∪ ref).
     double area_completeness = 0.0, area_correctness = 0.0, area_quality = 0.0;
     std::vector<FootprintMatch> matches;   ///< sorted by reference index
 };
+
+/// PoLiS distance (Avbelj et al. 2015) between two footprints: the mean
+/// distance from the vertices of A to the boundary of B and from the vertices
+/// of B to the boundary of A, averaged: 1/(2q) sum_a d(a, dB) + 1/(2r) sum_b d(b, dA).
+/// All rings (holes included) count. CRS units; 0 for identical outlines.
+double polis_distance(const std::vector<Polygon>& a, const std::vector<Polygon>& b);
 
 /// Each footprint may have several parts (a multipolygon). Ties in IoU go to
 /// the lower (predicted, reference) indices, so the result is deterministic.

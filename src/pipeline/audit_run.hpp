@@ -1,48 +1,97 @@
 #pragma once
-// `cityforge audit footprints`: score predicted footprints against reference
-// footprints (any OGR polygon layers), reprojecting the prediction when the
-// CRSs differ, and write report.json + report.md.
+// `cityforge audit footprints|rectangles|heights|clouds`: accuracy audits of
+// our results or anyone's. Each reads its inputs (any OGR polygon layer, or
+// LAS/PLY/XYZ clouds), reprojects the prediction into the reference's CRS
+// when they differ (and says so), and writes DIR/report.json (schema:
+// schemas/audit_report.schema.json), DIR/report.md and DIR/report.html
+// (self-contained, SVG charts). Gates (`--fail-below`, `--fail-above`) turn a
+// report into pass/fail for CI.
+#include <map>
 #include <string>
+#include <vector>
 
 #include "audit/cloud_compare.hpp"
 #include "audit/footprint_match.hpp"
-#include <vector>
+#include "audit/gates.hpp"
 
 namespace cityforge {
 
-/// Gates for CI: "f1=0.8,iou=0.7" -> {{"f1", 0.8}, {"iou", 0.7}}. Throws Error
-/// naming `option` on malformed text.
-std::vector<std::pair<std::string, double>> parse_gates(const std::string& text, const std::string& option);
+/// Files written by an audit, and the verdict of its gates.
+struct AuditOutput {
+    std::string json_path, markdown_path, html_path;
+    std::map<std::string, double> measures;  ///< every gateable measure, by name
+    GateOutcome gates;                       ///< passed unless a gate failed
+};
 
 struct FootprintAuditOptions {
     double iou_threshold = 0.5;
-    /// Minimum values (precision, recall, f1, iou, completeness, correctness,
-    /// quality); a report below any of them has passed = false.
-    std::vector<std::pair<std::string, double>> fail_below;
+    std::vector<AuditGate> gates;  ///< on footprint_audit_measures()
     std::string pred_layer, ref_layer;  ///< empty = first layer
+    /// Raster drawn under the footprint map of report.html (same CRS as the
+    /// reference); empty = no picture.
+    std::string ortho_path;
     void validate() const;
 };
+/// precision, recall, f1, iou (mean), completeness, correctness, quality
+/// (ISPRS per-area), area_error_pct (mean absolute), polis (mean, CRS units).
+std::vector<std::string> footprint_audit_measures();
 
 struct FootprintAuditReport {
     FootprintScores scores;
-    bool passed = true;              ///< false when a fail_below gate is not met
-    std::vector<std::string> failed;  ///< the gates that failed, e.g. "f1 0.71 < 0.8"
     std::string crs;            ///< CRS the scores were computed in (the reference's)
     bool reprojected = false;   ///< the prediction was reprojected to it
-    std::string json_path, markdown_path;
+    AuditOutput output;
 };
 
-/// Writes `out_dir`/report.json and report.md. Throws Error naming the file
-/// for unreadable inputs, missing CRSs or projections PROJ cannot relate.
+/// Throws Error naming the file for unreadable inputs, missing CRSs, a
+/// geographic reference CRS, or projections PROJ cannot relate.
 FootprintAuditReport audit_footprints(const std::string& pred_path, const std::string& ref_path, const std::string& out_dir,
                                       const FootprintAuditOptions& options);
+
+struct RectangleAuditOptions {
+    /// Attribute of the fitted layer holding the original (unfitted) area in
+    /// square metres; used when no original layer is given.
+    std::string original_area_field = "raw_area_m2";
+    /// Optional layer of original polygons: each fitted footprint is matched
+    /// one to one at `iou_threshold` and the areas compared directly.
+    std::string original_path;
+    double iou_threshold = 0.5;
+    std::vector<AuditGate> gates;  ///< on rectangle_audit_measures()
+    void validate() const;
+};
+/// mean_abs_error_pct, max_abs_error_pct, mean_error_pct.
+std::vector<std::string> rectangle_audit_measures();
+
+struct RectangleError {
+    int64_t fid = 0;                  ///< of the fitted footprint
+    double original_m2 = 0.0, fitted_m2 = 0.0;
+    double error_m2 = 0.0;            ///< fitted - original
+    double error_pct = 0.0;           ///< (fitted - original) / original * 100
+    double iou = -1.0;                ///< fitted vs original polygon; -1 when only areas are known
+};
+
+struct RectangleAuditReport {
+    std::size_t fitted = 0;           ///< footprints in the fitted layer
+    std::vector<RectangleError> rows;  ///< those with an original area
+    double mean_abs_error_pct = 0.0, max_abs_error_pct = 0.0, mean_error_pct = 0.0;
+    double mean_abs_error_m2 = 0.0;
+    AuditOutput output;
+};
+
+/// The reference study's Table 5 for any fitted footprints: original vs
+/// fitted area per building. Areas are planar in the layer's projected CRS.
+RectangleAuditReport audit_rectangles(const std::string& fitted_path, const std::string& out_dir, const RectangleAuditOptions& options);
 
 struct HeightAuditOptions {
     std::string pred_field = "height_m";  ///< numeric attribute of the prediction
     std::string ref_field;                ///< numeric attribute of the reference (required)
     double iou_threshold = 0.5;           ///< footprints are matched one to one at this IoU
+    std::vector<AuditGate> gates;         ///< on height_audit_measures()
     void validate() const;
 };
+/// mae, rmse, bias, abs_bias, max_abs (metres), coverage (share of the
+/// reference buildings with both heights).
+std::vector<std::string> height_audit_measures();
 
 struct HeightError {
     int64_t reference_fid = 0, predicted_fid = 0;
@@ -53,7 +102,7 @@ struct HeightAuditReport {
     std::size_t matched = 0, with_values = 0, reference = 0;
     double mae = 0.0, rmse = 0.0, bias = 0.0, max_abs = 0.0;  ///< metres
     std::vector<HeightError> rows;
-    std::string json_path, markdown_path;
+    AuditOutput output;
 };
 
 /// Matches footprints (reprojecting the prediction if needed) and compares the
@@ -65,19 +114,23 @@ HeightAuditReport audit_heights(const std::string& pred_path, const std::string&
 struct CloudAuditOptions {
     std::vector<double> taus_m{1.0, 2.0};  ///< distance thresholds, metres
     std::string pred_crs, ref_crs;         ///< CRS overrides for clouds that carry none
+    std::vector<AuditGate> gates;          ///< on cloud_audit_measures(taus_m)
+    void validate() const;
 };
+/// chamfer, chamfer_squared, mean_pred_to_ref, mean_ref_to_pred, and per tau
+/// T (as written by format_number): precision@T, recall@T, f@T.
+std::vector<std::string> cloud_audit_measures(const std::vector<double>& taus_m);
 
 struct CloudAuditReport {
     CloudComparison comparison;  ///< distances in metres
     std::string crs;
     bool reprojected = false;
-    std::string json_path, markdown_path;
+    AuditOutput output;
 };
 
-/// Compares two clouds (LAS/PLY/XYZ) and writes `out_dir`/report.json and
-/// report.md. The prediction is reprojected into the reference's CRS when
-/// they differ; a cloud without any CRS is assumed to share the other's only
-/// when both have none (said in the report).
+/// Compares two clouds (LAS/PLY/XYZ). The prediction is reprojected into the
+/// reference's CRS when they differ; a cloud without any CRS is assumed to
+/// share the other's only when both have none (said in the report).
 CloudAuditReport audit_clouds(const std::string& pred_path, const std::string& ref_path, const std::string& out_dir,
                               const CloudAuditOptions& options);
 

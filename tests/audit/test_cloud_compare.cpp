@@ -52,11 +52,20 @@ TEST_CASE("audit clouds writes its reports and refuses a cloud without CRS again
     o.taus_m = {0.6};
     const CloudAuditReport r = audit_clouds(dir / "b.xyz", dir / "a.xyz", dir / "out", o);
     CHECK(r.comparison.chamfer == Approx(1.0));
-    CHECK(test::slurp(r.markdown_path).find("chamfer") != std::string::npos);
-    CHECK(test::slurp(r.json_path).find("\"f_score\": 1.0") != std::string::npos);
+    CHECK(test::slurp(r.output.markdown_path).find("chamfer") != std::string::npos);
+    CHECK(test::slurp(r.output.json_path).find("\"f_score\": 1.0") != std::string::npos);
     CHECK_THROWS_WITH(audit_clouds(dir / "b.xyz", test::shared_data("autzen_oregon/autzen_trim.las"), dir / "x", o),
                       Catch::Contains("b.xyz") && Catch::Contains("no CRS"));
     const auto cli = test::run_cli("audit clouds --pred " + (dir / "b.xyz") + " --ref " + (dir / "a.xyz") + " --tau 0.4,0.6 --out " + (dir / "cli"));
     CHECK(cli.exit_code == 0);
     CHECK(cli.out.find("chamfer 1.0000 m") != std::string::npos);
+    CHECK(test::validate_json(test::source_dir() + "/schemas/audit_report.schema.json", dir / "cli/report.json").exit_code == 0);
+    CHECK(test::slurp(dir / "cli/report.html").find("<svg") != std::string::npos);
+    // Gates per tau: every point is 0.5 m from the other cloud.
+    CHECK(test::run_cli("audit clouds --pred " + (dir / "b.xyz") + " --ref " + (dir / "a.xyz") + " --tau 0.4,0.6 --out " + (dir / "g1") +
+                        " --fail-below f@0.6=0.99 --fail-above chamfer=1.01").exit_code == 0);
+    const auto gated = test::run_cli("audit clouds --pred " + (dir / "b.xyz") + " --ref " + (dir / "a.xyz") + " --tau 0.4,0.6 --out " + (dir / "g2") +
+                                     " --fail-below f@0.4=0.5");
+    CHECK(gated.exit_code == 4);
+    CHECK(gated.err.find("f@0.4 0 < 0.5") != std::string::npos);
 }

@@ -1,4 +1,5 @@
 #include <catch2/catch.hpp>
+#include <cmath>
 
 #include "audit/footprint_match.hpp"
 
@@ -8,7 +9,7 @@ namespace {
 std::vector<Polygon> square(double x, double y, double s) { return {Polygon{{{x, y}, {x + s, y}, {x + s, y + s}, {x, y + s}}, {}}}; }
 }  // namespace
 
-TEST_CASE("Footprint matching - identical sets - a shifted square - a missing building", "[audit]") {
+TEST_CASE("Footprint matching - identical sets - a shifted square with its PoLiS - a missing building", "[audit]") {
     const std::vector<std::vector<Polygon>> ref{square(0, 0, 10), square(20, 0, 10), square(40, 0, 10), square(60, 0, 10)};
     const FootprintScores same = match_footprints(ref, ref);
     CHECK(same.f1 == 1.0);
@@ -22,6 +23,13 @@ TEST_CASE("Footprint matching - identical sets - a shifted square - a missing bu
     const FootprintScores sh = match_footprints(shifted, ref);
     REQUIRE(sh.true_positives == 4);
     CHECK(sh.matches[1].iou == Approx(80.0 / 120.0));
+    // PoLiS of a square shifted by d along x is d / 2: two vertices of each
+    // outline lie on the other's boundary, two are d away.
+    CHECK(sh.matches[1].polis == Approx(1.0));
+    CHECK(sh.matches[0].polis == Approx(0.0).margin(1e-12));
+    CHECK(sh.mean_polis == Approx(0.25));
+    // Diagonal shift (0.5, 0.5): one corner 0.5·√2 away, three 0.5 away, both ways.
+    CHECK(polis_distance(square(0, 0, 10), square(0.5, 0.5, 10)) == Approx((std::sqrt(0.5) + 1.5) / 4.0));
     // Missing building: recall 3/4, precision 1.
     const std::vector<std::vector<Polygon>> three(ref.begin(), ref.begin() + 3);
     const FootprintScores miss = match_footprints(three, ref);

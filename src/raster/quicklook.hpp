@@ -1,0 +1,21 @@
+#pragma once
+// A small 8-bit PNG picture of part of a raster, for reports: the window that
+// covers a map extent, resampled so its longer side is at most `max_px`,
+// contrast-stretched (2-98 % per band). RGB from bands 1-3, grey otherwise.
+#include <string>
+
+#include "core/geo_transform.hpp"
+
+namespace cityforge {
+
+struct Quicklook {
+    std::string png;  ///< PNG file bytes
+    Extent extent;    ///< map extent the picture covers (the request clipped to the raster), raster CRS
+    int width = 0, height = 0;  ///< pixels
+};
+
+/// Throws Error naming the file when it cannot be read or does not overlap
+/// `extent` (given in the raster's CRS).
+Quicklook render_quicklook_png(const std::string& raster_path, const Extent& extent, int max_px = 1024);
+
+}  // namespace cityforge
