@@ -192,7 +192,7 @@ int main(int argc, char** argv) {
     audit_fp->add_option("--iou", aopt.iou_threshold, "IoU threshold of a match")->capture_default_str();
     audit_fp->add_option("--ortho", aopt.ortho_path, "Raster drawn under the map in report.html (reference CRS)");
     add_common(audit_fp, a_common);
-    audit_fp->footer("Measures for gates: precision recall f1 iou completeness correctness quality area_error_pct polis");
+    audit_fp->footer("Measures for gates: precision recall f1 object_quality iou completeness correctness quality area_error_pct polis");
 
     auto* audit_rect = audit->add_subcommand("rectangles", "Fitted footprints: original vs fitted area per building (the study's Table 5)");
     std::string r_in;
@@ -203,6 +203,7 @@ int main(int argc, char** argv) {
     audit_rect->add_option("--original-area-field", rao.original_area_field, "Attribute with the original area in m² (without --original)")
         ->capture_default_str();
     audit_rect->add_option("--iou", rao.iou_threshold, "IoU threshold matching fitted to original polygons")->capture_default_str();
+    audit_rect->add_option("--ortho", rao.ortho_path, "Raster drawn under the map in report.html (same CRS)");
     add_common(audit_rect, r_common);
     audit_rect->footer("Measures for gates: mean_abs_error_pct max_abs_error_pct mean_error_pct");
 
@@ -215,6 +216,7 @@ int main(int argc, char** argv) {
     audit_h->add_option("--pred-field", hao.pred_field, "Predicted height attribute")->capture_default_str();
     audit_h->add_option("--ref-field", hao.ref_field, "Reference height attribute")->required();
     audit_h->add_option("--iou", hao.iou_threshold, "IoU threshold of a footprint match")->capture_default_str();
+    audit_h->add_option("--ortho", hao.ortho_path, "Raster drawn under the map in report.html (reference CRS)");
     add_common(audit_h, h_common);
     audit_h->footer("Measures for gates: mae rmse bias abs_bias max_abs (metres) coverage (share of references with both heights)");
 

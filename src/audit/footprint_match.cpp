@@ -104,6 +104,8 @@ FootprintScores match_footprints(const std::vector<std::vector<Polygon>>& pred, 
     s.true_positives = s.matches.size();
     s.precision = pred.empty() ? 0.0 : double(s.true_positives) / double(pred.size());
     s.recall = ref.empty() ? 0.0 : double(s.true_positives) / double(ref.size());
+    const std::size_t union_count = pred.size() + ref.size() - s.true_positives;
+    s.object_quality = union_count ? double(s.true_positives) / double(union_count) : 0.0;
     s.f1 = s.precision + s.recall > 0 ? 2 * s.precision * s.recall / (s.precision + s.recall) : 0.0;
     for (const FootprintMatch& m : s.matches)
         s.mean_iou += m.iou, s.mean_abs_area_error_pct += std::abs(m.area_error_pct), s.mean_polis += m.polis;

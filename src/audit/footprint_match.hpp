@@ -21,6 +21,9 @@ struct FootprintMatch {
 struct FootprintScores {
     std::size_t true_positives = 0, predicted = 0, reference = 0;
     double precision = 0.0, recall = 0.0, f1 = 0.0;
+    /// ISPRS per-object measures: completeness = recall, correctness =
+    /// precision, quality = TP / (TP + FP + FN).
+    double object_quality = 0.0;
     double mean_iou = 0.0;                 ///< over matches
     double mean_abs_area_error_pct = 0.0;  ///< over matches
     double mean_polis = 0.0;               ///< over matches, CRS units

@@ -21,7 +21,7 @@
 namespace cityforge {
 
 std::vector<std::string> footprint_audit_measures() {
-    return {"precision", "recall", "f1", "iou", "completeness", "correctness", "quality", "area_error_pct", "polis"};
+    return {"precision", "recall", "f1", "object_quality", "iou", "completeness", "correctness", "quality", "area_error_pct", "polis"};
 }
 std::vector<std::string> rectangle_audit_measures() { return {"mean_abs_error_pct", "max_abs_error_pct", "mean_error_pct"}; }
 std::vector<std::string> height_audit_measures() { return {"mae", "rmse", "bias", "abs_bias", "max_abs", "coverage"}; }
@@ -198,6 +198,7 @@ FootprintAuditReport audit_footprints(const std::string& pred_path, const std::s
     const FootprintScores& s = rep.scores;
     std::map<std::string, double> measures{{"precision", s.precision},        {"recall", s.recall},
                                            {"f1", s.f1},                      {"completeness", s.area_completeness},
+                                           {"object_quality", s.object_quality},
                                            {"correctness", s.area_correctness}, {"quality", s.area_quality}};
     if (s.true_positives) measures["iou"] = s.mean_iou, measures["area_error_pct"] = s.mean_abs_area_error_pct, measures["polis"] = s.mean_polis;
 
@@ -208,7 +209,7 @@ FootprintAuditReport audit_footprints(const std::string& pred_path, const std::s
     j["iou_threshold"] = o.iou_threshold;
     j["totals"] = {{"true_positives", s.true_positives}, {"false_positives", s.predicted - s.true_positives},
                    {"false_negatives", s.reference - s.true_positives}, {"precision", s.precision}, {"recall", s.recall},
-                   {"f1", s.f1}, {"mean_iou", s.mean_iou}, {"mean_abs_area_error_pct", s.mean_abs_area_error_pct},
+                   {"f1", s.f1}, {"object_quality", s.object_quality}, {"mean_iou", s.mean_iou}, {"mean_abs_area_error_pct", s.mean_abs_area_error_pct},
                    {"mean_polis", s.mean_polis}, {"polis_unit", "CRS units (" + std::to_string(ref.crs.linear_unit_m) + " m)"},
                    {"area_completeness", s.area_completeness}, {"area_correctness", s.area_correctness}, {"area_quality", s.area_quality}};
     nlohmann::json rows = nlohmann::json::array();
@@ -239,7 +240,8 @@ FootprintAuditReport audit_footprints(const std::string& pred_path, const std::s
         {"true positives", std::to_string(s.true_positives)},
         {"false positives", std::to_string(s.predicted - s.true_positives)},
         {"false negatives", std::to_string(s.reference - s.true_positives)},
-        {"precision", fmt(s.precision)}, {"recall", fmt(s.recall)}, {"F1", fmt(s.f1)}, {"mean IoU", fmt(s.mean_iou)},
+        {"precision (per-object correctness)", fmt(s.precision)}, {"recall (per-object completeness)", fmt(s.recall)}, {"F1", fmt(s.f1)},
+        {"per-object quality", fmt(s.object_quality)}, {"mean IoU", fmt(s.mean_iou)},
         {"mean |area error| (%)", fmt(s.mean_abs_area_error_pct)}, {"mean PoLiS (CRS units)", fmt(s.mean_polis)},
         {"per-area completeness", fmt(s.area_completeness)}, {"per-area correctness", fmt(s.area_correctness)},
         {"per-area quality", fmt(s.area_quality)}};
@@ -276,10 +278,11 @@ RectangleAuditReport audit_rectangles(const std::string& fitted_path, const std:
     o.validate();
     RectangleAuditReport rep;
     std::string crs_label;
+    CrsInfo layer_crs;
     Parts fitted_shapes;
     if (!o.original_path.empty()) {
         const LayerPair lp = read_pair(fitted_path, o.original_path, "", "");
-        crs_label = lp.ref.crs.label();
+        crs_label = lp.ref.crs.label(), layer_crs = lp.ref.crs;
         const Parts fp = parts_of(lp.pred), op = parts_of(lp.ref);
         fitted_shapes = fp;
         rep.fitted = fp.size();
@@ -293,7 +296,7 @@ RectangleAuditReport audit_rectangles(const std::string& fitted_path, const std:
         const PolygonLayer layer = read_polygon_layer(fitted_path);
         if (layer.crs.empty()) throw Error(fitted_path, "fitted footprints have no CRS");
         if (layer.crs.geographic) throw Error(fitted_path, "fitted footprints are in a geographic CRS; areas need a projected CRS");
-        crs_label = layer.crs.label();
+        crs_label = layer.crs.label(), layer_crs = layer.crs;
         const int field = field_index(layer, o.original_area_field, fitted_path);
         const double unit2 = layer.crs.linear_unit_m * layer.crs.linear_unit_m;
         rep.fitted = layer.features.size();
@@ -356,7 +359,8 @@ RectangleAuditReport audit_rectangles(const std::string& fitted_path, const std:
     double emax = 0;
     for (double e : errs)
         if (std::isfinite(e)) emax = std::max(emax, std::abs(e));
-    html.figure(svg_footprint_map(fitted_shapes, errs, -std::max(emax, 1e-6), std::max(emax, 1e-6), "area error (%)"),
+    const std::optional<MapPicture> bg = background_for(o.ortho_path, layer_crs, fitted_shapes);
+    html.figure(svg_footprint_map(fitted_shapes, errs, -std::max(emax, 1e-6), std::max(emax, 1e-6), "area error (%)", {}, bg ? &*bg : nullptr),
                 "Fitted footprints coloured by their area error");
     html.figure(svg_histogram(errs, "area error (%)"), "Fitted minus original area, percent of the original");
     html.figure(svg_scatter(a0s, a1s, "original area (m²)", "fitted area (m²)"), "Dashed: y = x");
@@ -429,7 +433,8 @@ HeightAuditReport audit_heights(const std::string& pred_path, const std::string&
     html.table({"measure", "value"}, totals);
     double emax = 0;
     for (double e : errs) emax = std::max(emax, std::abs(e));
-    html.figure(svg_footprint_map(r, err_of_ref, -std::max(emax, 1e-6), std::max(emax, 1e-6), "height error (m)"),
+    const std::optional<MapPicture> bg = background_for(o.ortho_path, lp.ref.crs, r);
+    html.figure(svg_footprint_map(r, err_of_ref, -std::max(emax, 1e-6), std::max(emax, 1e-6), "height error (m)", {}, bg ? &*bg : nullptr),
                 "Reference footprints coloured by height error (predicted - reference); red outline: no matched height");
     html.figure(svg_histogram(errs, "height error (m)"), "Predicted minus reference height");
     html.figure(svg_scatter(rv, pv, "reference height (m)", "predicted height (m)"), "Dashed: y = x");

@@ -32,8 +32,9 @@ struct FootprintAuditOptions {
     std::string ortho_path;
     void validate() const;
 };
-/// precision, recall, f1, iou (mean), completeness, correctness, quality
-/// (ISPRS per-area), area_error_pct (mean absolute), polis (mean, CRS units).
+/// precision, recall, f1, object_quality (ISPRS per-object), iou (mean),
+/// completeness, correctness, quality (ISPRS per-area), area_error_pct (mean
+/// absolute), polis (mean, CRS units).
 std::vector<std::string> footprint_audit_measures();
 
 struct FootprintAuditReport {
@@ -57,6 +58,7 @@ struct RectangleAuditOptions {
     std::string original_path;
     double iou_threshold = 0.5;
     std::vector<AuditGate> gates;  ///< on rectangle_audit_measures()
+    std::string ortho_path;        ///< raster under the report map (same CRS); empty = none
     void validate() const;
 };
 /// mean_abs_error_pct, max_abs_error_pct, mean_error_pct.
@@ -87,6 +89,7 @@ struct HeightAuditOptions {
     std::string ref_field;                ///< numeric attribute of the reference (required)
     double iou_threshold = 0.5;           ///< footprints are matched one to one at this IoU
     std::vector<AuditGate> gates;         ///< on height_audit_measures()
+    std::string ortho_path;               ///< raster under the report map (reference CRS); empty = none
     void validate() const;
 };
 /// mae, rmse, bias, abs_bias, max_abs (metres), coverage (share of the

@@ -36,6 +36,7 @@ TEST_CASE("Footprint matching - identical sets - a shifted square with its PoLiS
     CHECK(miss.recall == Approx(0.75));
     CHECK(miss.precision == Approx(1.0));
     CHECK(miss.f1 == Approx(2 * 0.75 / 1.75));
+    CHECK(miss.object_quality == Approx(0.75));  // 3 / (3 + 0 + 1)
     CHECK(miss.area_completeness == Approx(0.75));
     CHECK(miss.area_correctness == Approx(1.0));
     // A 2x-too-big prediction has IoU 0.5 exactly and area error +100 %.
