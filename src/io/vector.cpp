@@ -145,7 +145,15 @@ PolygonLayer read_polygon_layer(const std::string& path, const std::string& laye
     PolygonLayer out;
     out.crs = crs_from_ogr(layer->GetSpatialRef(), path);
     OGRFeatureDefn* defn = layer->GetLayerDefn();
-    for (int i = 0; i < defn->GetFieldCount(); ++i) out.field_names.emplace_back(defn->GetFieldDefn(i)->GetNameRef());
+    for (int i = 0; i < defn->GetFieldCount(); ++i) {
+        const OGRFieldDefn* fd = defn->GetFieldDefn(i);
+        out.field_names.emplace_back(fd->GetNameRef());
+        const OGRFieldType t = fd->GetType();
+        // Booleans and other subtypes stay text: their meaning survives a round trip as text.
+        out.field_types.push_back(fd->GetSubType() != OFSTNone ? FieldType::string
+                                  : (t == OFTInteger || t == OFTInteger64) ? FieldType::integer
+                                  : t == OFTReal ? FieldType::real : FieldType::string);
+    }
     layer->ResetReading();
     for (auto& f : *layer) {
         const OGRGeometry* g = f->GetGeometryRef();
@@ -159,8 +167,12 @@ PolygonLayer read_polygon_layer(const std::string& path, const std::string& laye
         else throw Error(where, std::string("is a ") + OGRGeometryTypeToName(g->getGeometryType()) + ", not a polygon");
         if (!g->IsValid()) throw Error(where, "is an invalid polygon (self-intersection or bad ring); repair it first, e.g. ogr2ogr -makevalid");
         for (Polygon& p : feature.geometry) orient_polygon(p);
-        for (int i = 0; i < defn->GetFieldCount(); ++i)
-            feature.values.push_back(f->IsFieldSetAndNotNull(i) ? AttributeValue(std::string(f->GetFieldAsString(i))) : AttributeValue());
+        for (int i = 0; i < defn->GetFieldCount(); ++i) {
+            if (!f->IsFieldSetAndNotNull(i)) feature.values.emplace_back();
+            else if (out.field_types[i] == FieldType::integer) feature.values.emplace_back(int64_t(f->GetFieldAsInteger64(i)));
+            else if (out.field_types[i] == FieldType::real) feature.values.emplace_back(f->GetFieldAsDouble(i));
+            else feature.values.emplace_back(std::string(f->GetFieldAsString(i)));
+        }
         out.fids.push_back(f->GetFID());
         out.features.push_back(std::move(feature));
     }

@@ -61,7 +61,8 @@ struct VectorWriteOptions {
 struct PolygonLayer {
     CrsInfo crs;
     std::vector<std::string> field_names;
-    std::vector<Feature> features;  ///< values are std::string (or null)
+    std::vector<FieldType> field_types;  ///< one per field: OGR integers -> integer, reals -> real, anything else -> string
+    std::vector<Feature> features;  ///< values typed by field_types (int64_t, double, std::string) or null
     std::vector<int64_t> fids;      ///< OGR feature ids, same order
 };
 

@@ -48,7 +48,7 @@ HeightsRunReport run_heights(const std::string& footprints_path, const std::stri
     // Output: the source attributes (as text), then ours.
     std::vector<FieldDefinition> fields;
     fields.push_back({"source_fid", FieldType::integer});
-    for (const std::string& name : footprints.field_names) fields.push_back({name, FieldType::string});
+    for (std::size_t i = 0; i < footprints.field_names.size(); ++i) fields.push_back({footprints.field_names[i], footprints.field_types[i]});
     const char* real_fields[] = {"ground_z", "roof_z_min", "roof_z_50p", "roof_z_70p", "roof_z_90p", "roof_z_max", "height_m",
                                  "point_density_m2", "nodata_fraction", "ground_buffer_m"};
     for (const char* n : real_fields) fields.push_back({n, FieldType::real});

@@ -112,7 +112,7 @@ TEST_CASE("Synthetic truth raster vectorises back to the truth footprints", "[fo
     const PolygonLayer truth = read_polygon_layer(s.truth_path);
     int checked = 0;
     for (std::size_t i = 0; i < truth.features.size(); ++i) {
-        const auto id = static_cast<uint32_t>(std::stoul(std::get<std::string>(truth.features[i].values[0])));
+        const auto id = static_cast<uint32_t>(std::get<int64_t>(truth.features[i].values[0]));
         REQUIRE(id < polys.size());
         REQUIRE(polys[id].size() == 1);
         const Polygon& t = truth.features[i].geometry[0];
