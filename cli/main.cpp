@@ -5,6 +5,7 @@
 #include <cstdio>
 #include <iostream>
 #include <optional>
+#include <sstream>
 #include <string>
 
 #include "core/error.hpp"
@@ -13,6 +14,7 @@
 #include "core/version.hpp"
 #include "io/inspect.hpp"
 #include "pipeline/audit_run.hpp"
+#include "pipeline/export_run.hpp"
 #include "pipeline/footprints_run.hpp"
 #include "pipeline/heights_run.hpp"
 #include "pipeline/rasterize_run.hpp"
@@ -25,6 +27,16 @@
 namespace cf = cityforge;
 
 namespace {
+
+// "a,b,,c" -> {"a", "b", "c"}.
+std::vector<std::string> split_list(const std::string& text) {
+    std::vector<std::string> out;
+    std::string item;
+    std::stringstream ss(text);
+    while (std::getline(ss, item, ','))
+        if (!item.empty()) out.push_back(item);
+    return out;
+}
 
 // Exit status 4 when an audit's gates failed (said on stderr), else 0.
 int gate_exit(const cf::AuditOutput& out) {
@@ -165,6 +177,25 @@ int main(int argc, char** argv) {
     footprints->add_option("--fit-tolerance-pct", fopt.recursive.tolerance_pct, "Recursive fit: stop below this area error, percent")->capture_default_str();
     footprints->add_option("--simplify-m", fopt.simplify_m, "Douglas-Peucker tolerance of the outline, metres")->capture_default_str();
 
+    // export ----------------------------------------------------------------
+    auto* exporter = app.add_subcommand("export", "City models: GeoJSON, GeoPackage, CityGML 2.0, CityJSON 2.0 / CityJSONSeq");
+    std::string x_in, x_out, x_formats = "geojson,gpkg,citygml,cityjson,cityjsonseq", x_lods = "0,1,2";
+    cf::ExportOptions xopt;
+    exporter->add_option("--in", x_in, "Buildings with heights (e.g. from `cityforge heights`), any OGR polygon layer")->required();
+    exporter->add_option("--out", x_out, "Output folder")->required();
+    exporter->add_option("--formats", x_formats, "Comma-separated: geojson, gpkg, citygml, cityjson, cityjsonseq")->capture_default_str();
+    exporter->add_option("--lod", x_lods, "Comma-separated levels of detail: 0 (footprint), 1 (block), 2 (roofs)")->capture_default_str();
+    exporter->add_option("--geojson-crs", xopt.geojson_crs, "rfc7946 (WGS84 lon/lat) or native (real CRS, non-standard crs member)")
+        ->check(CLI::IsMember({"rfc7946", "native"}))
+        ->capture_default_str();
+    exporter->add_option("--vertical-crs", xopt.vertical_crs, "Vertical CRS of the heights when the input names none, e.g. EPSG:5709");
+    exporter->add_option("--layer", xopt.layer, "Input layer (default: the first)");
+    exporter->add_option("--id-field", xopt.id_field, "Building id attribute (absent: the feature id)")->capture_default_str();
+    exporter->add_option("--ground-field", xopt.ground_field, "Ground height attribute (vertical CRS units)")->capture_default_str();
+    exporter->add_option("--height-field", xopt.height_field, "LOD1 height above ground attribute (metres)")->capture_default_str();
+    exporter->add_option("--planarity-tolerance", xopt.validity.planarity_tolerance, "Validity: max vertex distance to its face plane (CRS units)")
+        ->capture_default_str();
+
     // audit -----------------------------------------------------------------
     auto* audit = app.add_subcommand("audit", "Accuracy audits");
     audit->require_subcommand(1);
@@ -301,6 +332,22 @@ int main(int argc, char** argv) {
                 std::fprintf(stderr, "cityforge: %zu footprints (%s, %s, classes %s) on %d x %d cells in %.1f s; mean |fit area error| %.2f %% -> %s\n",
                              r.buildings, r.mode.c_str(), r.crs.c_str(), r.used_classes ? "used" : "absent", r.width, r.height,
                              r.seconds, r.mean_abs_fit_area_error_pct, f_out.c_str());
+        } else if (*exporter) {
+            xopt.formats = split_list(x_formats);
+            xopt.lods.clear();
+            for (const std::string& l : split_list(x_lods)) {
+                if (l != "0" && l != "1" && l != "2") throw cf::Error("--lod", "levels of detail are 0, 1 and 2, got '" + l + "'");
+                xopt.lods.push_back(std::stoi(l));
+            }
+            const cf::ExportReport r = cf::run_export(x_in, x_out, xopt, make_progress(g));
+            if (!g.quiet) {
+                std::string files, statuses;
+                for (const auto& [format, path] : r.files) files += " " + format + " (" + std::to_string(r.seconds.at(format)).substr(0, 5) + " s)";
+                for (const auto& [k, v] : r.status_counts) statuses += " " + k + "=" + std::to_string(v);
+                std::fprintf(stderr, "cityforge: %zu buildings (%s%s); LOD1 %zu (%zu valid), LOD2 %zu (%zu valid); status:%s; wrote%s -> %s\n",
+                             r.buildings, r.crs.c_str(), r.vertical_known ? "" : ", no vertical datum", r.with_lod1, r.valid_lod1,
+                             r.with_lod2, r.valid_lod2, statuses.c_str(), files.c_str(), x_out.c_str());
+            }
         } else if (*audit_fp) {
             aopt.gates = gates_of(a_common);
             const cf::FootprintAuditReport r = cf::audit_footprints(a_pred, a_ref, a_common.out, aopt);

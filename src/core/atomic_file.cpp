@@ -30,19 +30,34 @@ void discard_file(const fs::path& tmp) noexcept {
 }
 
 void write_text_file(const fs::path& path, const std::string& content) {
-    const fs::path tmp = temporary_path_for(path);
-    {
-        std::ofstream out(tmp, std::ios::binary);
-        if (!out) throw Error(path.string(), "cannot open for writing");
-        out << content;
-        out.flush();
-        if (!out) {
-            out.close();
-            discard_file(tmp);
-            throw Error(path.string(), "write failed (disk full?)");
-        }
+    AtomicTextFile file(path);
+    file.stream() << content;
+    file.commit();
+}
+
+AtomicTextFile::AtomicTextFile(fs::path final_path) : final_(std::move(final_path)), tmp_(temporary_path_for(final_)) {
+    out_.open(tmp_, std::ios::binary);
+    if (!out_) throw Error(final_.string(), "cannot open for writing");
+}
+
+AtomicTextFile::~AtomicTextFile() {
+    if (!committed_) {
+        out_.close();
+        discard_file(tmp_);
     }
-    commit_file(tmp, path);
+}
+
+void AtomicTextFile::commit() {
+    out_.flush();
+    const bool ok = static_cast<bool>(out_);
+    out_.close();
+    if (!ok || out_.fail()) {
+        discard_file(tmp_);
+        committed_ = true;  // nothing left to clean up
+        throw Error(final_.string(), "write failed (disk full?)");
+    }
+    committed_ = true;
+    commit_file(tmp_, final_);
 }
 
 void ensure_directory(const fs::path& dir) {

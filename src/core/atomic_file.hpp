@@ -1,6 +1,7 @@
 #pragma once
 // Write-then-rename so that a failure never leaves a half-written output.
 #include <filesystem>
+#include <fstream>
 #include <string>
 
 namespace cityforge {
@@ -20,5 +21,24 @@ void write_text_file(const std::filesystem::path& path, const std::string& conte
 
 /// Creates `dir` (and parents) or throws Error naming it.
 void ensure_directory(const std::filesystem::path& dir);
+
+/// A text file written as a stream to a temporary sibling and renamed onto
+/// its final path by commit(); destroyed without commit(), it leaves nothing.
+class AtomicTextFile {
+public:
+    /// Opens the temporary file; throws Error naming `final_path` on failure.
+    explicit AtomicTextFile(std::filesystem::path final_path);
+    ~AtomicTextFile();
+    AtomicTextFile(const AtomicTextFile&) = delete;
+    AtomicTextFile& operator=(const AtomicTextFile&) = delete;
+    std::ostream& stream() { return out_; }
+    /// Flushes, checks for write errors and renames. Throws Error naming the path.
+    void commit();
+
+private:
+    std::filesystem::path final_, tmp_;
+    std::ofstream out_;
+    bool committed_ = false;
+};
 
 }  // namespace cityforge

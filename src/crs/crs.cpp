@@ -66,6 +66,7 @@ CrsInfo describe(OGRSpatialReference& srs) {
         const double vu = srs.GetTargetLinearUnits("VERT_CS");
         if (vu > 0.0) info.z_unit_m = vu;
         info.epsg = authority_code(srs, nullptr);
+        if (!info.epsg) info.epsg = identify_epsg(srs);  // e.g. 28992 + 5709 is EPSG:7415
         OGRSpatialReference horizontal(srs);
         horizontal.StripVertical();
         info.horizontal_epsg = authority_code(horizontal, nullptr);
@@ -73,6 +74,10 @@ CrsInfo describe(OGRSpatialReference& srs) {
         info.vertical_epsg = authority_code(srs, "VERT_CS");
         const char* vname = srs.GetAttrValue("VERT_CS");
         info.vertical_name = vname ? vname : "";
+    } else if (srs.IsVertical()) {
+        info.epsg = authority_code(srs, nullptr);
+        info.vertical_epsg = info.epsg;
+        info.vertical_name = info.name;
     } else {
         info.epsg = authority_code(srs, nullptr);
         if (!info.epsg) info.epsg = identify_epsg(srs);

@@ -8,6 +8,7 @@
 #include <variant>
 #include <vector>
 
+#include "core/attribute.hpp"
 #include "core/geo_transform.hpp"
 #include "core/geometry.hpp"
 #include "crs/crs.hpp"
@@ -33,8 +34,6 @@ struct VectorInfo {
 /// file when it is missing or not a vector dataset.
 VectorInfo read_vector_info(const std::string& path);
 
-/// Attribute value of a feature (null = std::monostate).
-using AttributeValue = std::variant<std::monostate, int64_t, double, std::string>;
 
 /// A (multi)polygon feature: one Polygon per part.
 struct Feature {

@@ -1,0 +1,13 @@
+#pragma once
+// A typed attribute value of a feature: null, integer, real or text. Shared
+// by the vector I/O, the building model and its exporters.
+#include <cstdint>
+#include <string>
+#include <variant>
+
+namespace cityforge {
+
+/// Attribute value of a feature (null = std::monostate).
+using AttributeValue = std::variant<std::monostate, int64_t, double, std::string>;
+
+}  // namespace cityforge

@@ -1,0 +1,66 @@
+#pragma once
+// Boundary-represented 3-D solids of buildings (one closed shell of planar
+// polygons with semantics) and their validity checks. Coordinates are in the
+// model's CRS: x, y in the horizontal CRS units, z in the vertical CRS units.
+// No GDAL.
+#include <string>
+#include <vector>
+
+#include "core/geometry.hpp"
+
+namespace cityforge {
+
+struct Point3 {
+    double x = 0.0, y = 0.0, z = 0.0;
+    bool operator==(const Point3&) const = default;
+};
+/// A polygon ring; the first vertex is not repeated at the end.
+using Ring3 = std::vector<Point3>;
+
+/// Semantic class of a boundary surface (CityGML / CityJSON names).
+enum class SurfaceType { ground, wall, roof };
+const char* citygml_name(SurfaceType t);  ///< "GroundSurface", "WallSurface", "RoofSurface"
+
+/// A planar face: outer ring counter-clockwise seen from outside the solid
+/// (normal pointing out), inner rings clockwise.
+struct Face {
+    Ring3 outer;
+    std::vector<Ring3> holes;
+    SurfaceType type = SurfaceType::wall;
+};
+
+/// One closed shell; faces oriented outwards.
+struct Solid {
+    std::vector<Face> faces;
+};
+
+/// A prism over a footprint part (outer ring counter-clockwise, holes
+/// clockwise, as orient_polygon leaves them): ground face at z_bottom, roof
+/// face at z_top, one vertical wall per ring edge (courtyard walls included).
+/// Requires z_top > z_bottom.
+Solid extrude_prism(const Polygon& footprint, double z_bottom, double z_top);
+
+/// Area of a planar face (holes subtracted), CRS units².
+double face_area(const Face& face);
+
+/// Signed volume (divergence theorem); positive for an outward-oriented closed
+/// shell. CRS units³ (x, y and z units multiplied).
+double solid_volume(const Solid& solid);
+
+struct SolidValidityOptions {
+    double planarity_tolerance = 0.01;  ///< max distance of a vertex to its face's plane, CRS units
+    double snap_tolerance = 1e-6;       ///< vertices closer than this are the same vertex, CRS units
+    double min_face_area = 1e-6;        ///< smaller faces are degenerate, CRS units²
+};
+
+/// Checks a solid the way val3dity does and returns one message per problem,
+/// prefixed with val3dity's error code where one exists: 101 TOO_FEW_POINTS,
+/// 102 CONSECUTIVE_POINTS_SAME, 104 RING_SELF_INTERSECTION, 203
+/// NON_PLANAR_POLYGON_DISTANCE_PLANE, 301 TOO_FEW_POLYGONS, 302
+/// SHELL_NOT_CLOSED, 303 NON_MANIFOLD_CASE, 307 POLYGON_WRONG_ORIENTATION,
+/// and DEGENERATE_POLYGON (zero area). Empty = valid. Shell
+/// self-intersections between non-adjacent faces (306) are not tested; a
+/// 2.5-D solid over a valid footprint cannot have them.
+std::vector<std::string> validate_solid(const Solid& solid, const SolidValidityOptions& options = {});
+
+}  // namespace cityforge

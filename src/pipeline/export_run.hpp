@@ -1,0 +1,59 @@
+#pragma once
+// `cityforge export`: buildings with heights (any OGR polygon layer, e.g. the
+// output of `cityforge heights`) -> GeoJSON (RFC 7946 or native CRS),
+// GeoPackage, CityGML 2.0 (LOD0+1, LOD0+2), CityJSON 2.0 and CityJSONSeq, all
+// from one building model, each solid validated and its errors reported.
+#include <map>
+#include <string>
+#include <vector>
+
+#include "core/progress.hpp"
+#include "model/building_model.hpp"
+
+namespace cityforge {
+
+struct PolygonLayer;
+struct CrsInfo;
+
+struct ExportOptions {
+    /// Any of geojson, gpkg, citygml, cityjson, cityjsonseq.
+    std::vector<std::string> formats{"geojson", "gpkg", "citygml", "cityjson", "cityjsonseq"};
+    std::vector<int> lods{0, 1, 2};          ///< levels of detail written where the format has them
+    std::string geojson_crs = "rfc7946";     ///< "rfc7946" (WGS84 lon/lat, 7 decimals) or "native" (non-standard `crs` member)
+    std::string vertical_crs;                ///< supplies the vertical CRS when the input has none ("EPSG:5709")
+    std::string layer;                       ///< input layer (empty = first)
+    std::string id_field = "id";             ///< building id attribute; absent -> the feature id
+    std::string ground_field = "ground_z";   ///< ground height attribute, vertical CRS units
+    std::string height_field = "height_m";   ///< LOD1 height above ground attribute, metres
+    SolidValidityOptions validity;
+    void validate() const;
+};
+
+struct ExportReport {
+    std::string crs;                         ///< label of the model CRS (horizontal + vertical)
+    bool vertical_known = false;             ///< false: heights have no named vertical datum
+    std::size_t buildings = 0, with_lod1 = 0, valid_lod1 = 0, with_lod2 = 0, valid_lod2 = 0;
+    std::map<std::string, std::size_t> status_counts;
+    std::map<std::string, std::string> files;     ///< format -> path written
+    std::map<std::string, double> seconds;        ///< format -> seconds spent writing
+};
+
+/// Builds the city model of a polygon layer: ids (unique), heights from the
+/// named fields, attributes, status carried over from a source `status` /
+/// `reason`, LOD1 prisms and their validity. `crs` is the layer's, with a
+/// vertical part when known.
+CityModel build_city_model(const PolygonLayer& layer, const CrsInfo& crs, const ExportOptions& options, const std::string& path);
+
+/// Reads `in_path`, builds the model and writes `out_dir`/buildings.geojson,
+/// buildings.gpkg, buildings_lod1.gml, buildings_lod2.gml (when LOD 2 is
+/// asked for), buildings.city.json and buildings.city.jsonl. Throws Error
+/// naming the file for unreadable input, a missing CRS, a geographic CRS, or
+/// a height field of the wrong type.
+ExportReport run_export(const std::string& in_path, const std::string& out_dir, const ExportOptions& options,
+                        const Progress& progress = {});
+
+/// Writes the chosen formats of an already built model into `out_dir`.
+ExportReport write_city_model(const CityModel& model, const CrsInfo& crs, const std::string& out_dir, const ExportOptions& options,
+                              const Progress& progress = {});
+
+}  // namespace cityforge
