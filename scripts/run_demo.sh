@@ -18,4 +18,10 @@ cf="$here/build/bin/cityforge"
 # Footprints from the cloud on the ortho's grid, then their heights.
 "$cf" footprints --cloud "$out/scene/cloud.las" --ortho "$out/scene/ortho.tif" --out "$out/footprints.gpkg"
 "$cf" heights --footprints "$out/footprints.gpkg" --cloud "$out/scene/cloud.las" --out "$out/buildings.gpkg"
+# City models in every format. The synthetic cloud names no vertical datum;
+# EGM96 height is named so that CityGML and CityJSON carry one.
+"$cf" export --in "$out/buildings.gpkg" --out "$out/model" --vertical-crs EPSG:5773
+# Audits of the footprints (against the scene's truth) and of their rectangle fits.
+"$cf" audit footprints --pred "$out/footprints.gpkg" --ref "$out/scene/truth.geojson" --ortho "$out/scene/ortho.tif" --out "$out/audit_footprints"
+"$cf" audit rectangles --in "$out/footprints.gpkg" --out "$out/audit_rectangles"
 echo "cityforge demo: outputs in $out" >&2

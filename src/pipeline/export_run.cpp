@@ -23,6 +23,8 @@ const std::set<std::string> kOwnFields{"status", "reason", "lod1_valid", "lod1_e
 bool wants(const std::vector<std::string>& v, const std::string& s) { return std::find(v.begin(), v.end(), s) != v.end(); }
 bool wants(const std::vector<int>& v, int s) { return std::find(v.begin(), v.end(), s) != v.end(); }
 
+}  // namespace
+
 ModelCrs model_crs_of(const CrsInfo& c) {
     ModelCrs m;
     m.label = c.label();
@@ -33,6 +35,8 @@ ModelCrs model_crs_of(const CrsInfo& c) {
     m.z_unit_m = c.z_unit_m;
     return m;
 }
+
+namespace {
 
 std::string join(const std::vector<std::string>& v) {
     std::string s;

@@ -38,6 +38,9 @@ struct ExportReport {
     std::map<std::string, double> seconds;        ///< format -> seconds spent writing
 };
 
+/// The exporters' view of a CRS: EPSG codes of the parts and of the compound, units.
+ModelCrs model_crs_of(const CrsInfo& crs);
+
 /// Builds the city model of a polygon layer: ids (unique), heights from the
 /// named fields, attributes, status carried over from a source `status` /
 /// `reason`, LOD1 prisms and their validity. `crs` is the layer's, with a
