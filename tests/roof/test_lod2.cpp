@@ -1,0 +1,88 @@
+#include <catch2/catch.hpp>
+#include <cmath>
+#include <cstdio>
+#include <map>
+
+#include "roof/lod2_builder.hpp"
+#include "roof/roof_planes.hpp"
+#include "roof_scene.hpp"
+
+using namespace cityforge;
+
+namespace {
+// Vertical RMS distance of the model's roof faces to the scene's exact roof, on a 0.5 m grid.
+double rmse_to_truth(const Lod2Result& r, const synth::SceneBuilding& b, const std::vector<Polygon>& footprint) {
+    double s2 = 0;
+    std::size_t n = 0;
+    const Extent e = polygon_extent(footprint[0]);
+    for (double y = e.min_y + 0.25; y < e.max_y; y += 0.5)
+        for (double x = e.min_x + 0.25; x < e.max_x; x += 0.5) {
+            if (!point_in_polygon(footprint[0], x, y)) continue;
+            for (const Solid& s : r.solids)
+                for (const Face& f : s.faces) {
+                    if (f.type != SurfaceType::roof) continue;
+                    Polygon p;
+                    for (const Point3& v : f.outer) p.outer.push_back({v.x, v.y});
+                    for (const Ring3& h : f.holes) {
+                        p.holes.emplace_back();
+                        for (const Point3& v : h) p.holes.back().push_back({v.x, v.y});
+                    }
+                    if (!point_in_polygon(p, x, y)) continue;
+                    // Interpolate the face's plane from three of its vertices.
+                    const Point3 &a = f.outer[0], &c1 = f.outer[1];
+                    Point3 c2 = f.outer[2];
+                    for (std::size_t k = 2; k < f.outer.size(); ++k) {
+                        const double cross = (c1.x - a.x) * (f.outer[k].y - a.y) - (c1.y - a.y) * (f.outer[k].x - a.x);
+                        if (std::abs(cross) > 1e-3) {
+                            c2 = f.outer[k];
+                            break;
+                        }
+                    }
+                    const double det = (c1.x - a.x) * (c2.y - a.y) - (c1.y - a.y) * (c2.x - a.x);
+                    const double u = ((x - a.x) * (c2.y - a.y) - (y - a.y) * (c2.x - a.x)) / det;
+                    const double v = ((c1.x - a.x) * (y - a.y) - (c1.y - a.y) * (x - a.x)) / det;
+                    const double z = a.z + u * (c1.z - a.z) + v * (c2.z - a.z);
+                    const double t = b.ground_z + b.roof_height(x, y);
+                    s2 += (z - t) * (z - t), ++n;
+                    goto next;
+                }
+        next:;
+        }
+    return n ? std::sqrt(s2 / double(n)) : INFINITY;
+}
+}  // namespace
+
+TEST_CASE("LOD2 on synthetic roofs - roof types - RMSE to the exact planes - valid solids", "[roof][synth]") {
+    synth::SceneLayout layout;
+    layout.size_m = 600;
+    layout.seed = 11;
+    const synth::Scene scene = synth::generate_scene(layout);
+    std::map<std::string, std::pair<int, int>> per_type;  // truth type -> (correct, total)
+    int correct = 0, total = 0, valid = 0, fallbacks = 0;
+    double rmse_sum = 0;
+    for (const synth::SceneBuilding& b : scene.buildings) {
+        const test::RoofSample s = test::sample_roof(b, 8.0, 0.03, 5);
+        const Lod2Result r = reconstruct_lod2(s.footprint, s.points, s.ground_z, s.ground_z + b.eave_height_m);
+        const std::string truth = synth::to_string(b.roof);
+        ++total;
+        auto& pt = per_type[truth + "/" + synth::to_string(b.shape)];
+        ++pt.second;
+        if (r.roof_type == truth) ++correct, ++pt.first;
+        bool ok = true;
+        for (const Solid& solid : r.solids) ok = ok && validate_solid(solid).empty();
+        valid += ok;
+        fallbacks += r.fallback;
+        const double e = rmse_to_truth(r, b, s.footprint);
+        rmse_sum += e;
+        if (r.roof_type != truth || e > 0.3)
+            std::printf("building %d %s/%s -> %s planes %d fallback %d (%s) rmse %.3f truth-rmse %.3f\n", b.id, truth.c_str(),
+                        synth::to_string(b.shape).c_str(), r.roof_type.c_str(), r.roof_planes, int(r.fallback), r.fallback_reason.c_str(),
+                        r.rmse_m, e);
+    }
+    for (const auto& [k, v] : per_type) std::printf("%-20s %d / %d\n", k.c_str(), v.first, v.second);
+    std::printf("roof type accuracy %d / %d, valid %d, fallbacks %d, mean RMSE to truth %.3f m\n", correct, total, valid, fallbacks,
+                rmse_sum / total);
+    CHECK(valid == total);
+    CHECK(double(correct) / total >= 0.9);
+    CHECK(rmse_sum / total <= 0.15);
+}
