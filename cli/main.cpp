@@ -18,6 +18,7 @@
 #include "pipeline/footprints_run.hpp"
 #include "pipeline/heights_run.hpp"
 #include "pipeline/rasterize_run.hpp"
+#include "pipeline/roofs_run.hpp"
 #include "pipeline/segment_raster.hpp"
 #include <fstream>
 #include <nlohmann/json.hpp>
@@ -36,6 +37,16 @@ std::vector<std::string> split_list(const std::string& text) {
     while (std::getline(ss, item, ','))
         if (!item.empty()) out.push_back(item);
     return out;
+}
+
+// "0,1,2" -> {0, 1, 2}; anything else is refused.
+std::vector<int> parse_lods(const std::string& text) {
+    std::vector<int> lods;
+    for (const std::string& l : split_list(text)) {
+        if (l != "0" && l != "1" && l != "2") throw cf::Error("--lod", "levels of detail are 0, 1 and 2, got '" + l + "'");
+        lods.push_back(std::stoi(l));
+    }
+    return lods;
 }
 
 // Exit status 4 when an audit's gates failed (said on stderr), else 0.
@@ -196,6 +207,29 @@ int main(int argc, char** argv) {
     exporter->add_option("--planarity-tolerance", xopt.validity.planarity_tolerance, "Validity: max vertex distance to its face plane (CRS units)")
         ->capture_default_str();
 
+    // roofs -----------------------------------------------------------------
+    auto* roofs = app.add_subcommand("roofs", "LOD2 buildings (roof planes, walls, ground) from footprints and a dense cloud, written as city models");
+    std::string rf_footprints, rf_cloud, rf_out, rf_formats = "geojson,gpkg,citygml,cityjson,cityjsonseq", rf_lods = "0,1,2";
+    cf::RoofsRunOptions ropts;
+    bool rf_recompute_ground = false, rf_no_outliers = false;
+    roofs->add_option("--footprints", rf_footprints, "Footprint polygons (any OGR layer)")->required();
+    roofs->add_option("--cloud", rf_cloud, "Point cloud (LAS 1.0-1.4, PLY, XYZ/CSV)")->required();
+    roofs->add_option("--out", rf_out, "Output folder (buildings.gpkg, .geojson, _lod1.gml, _lod2.gml, .city.json, .city.jsonl)")->required();
+    roofs->add_option("--cloud-crs", ropts.heights.cloud_crs, "CRS of the cloud, e.g. EPSG:7415 (overrides the file's)");
+    roofs->add_option("--layer", ropts.heights.footprint_layer, "Footprint layer name (default: first)");
+    roofs->add_option("--formats", rf_formats, "Comma-separated: geojson, gpkg, citygml, cityjson, cityjsonseq")->capture_default_str();
+    roofs->add_option("--lod", rf_lods, "Comma-separated levels of detail: 0, 1, 2")->capture_default_str();
+    roofs->add_option("--id-field", ropts.model.id_field, "Building id attribute (absent: the feature id)")->capture_default_str();
+    roofs->add_option("--vertical-crs", ropts.model.vertical_crs, "Vertical CRS of the heights when the cloud names none, e.g. EPSG:5709");
+    roofs->add_option("--roof-percentile", ropts.heights.heights.roof_percentile, "Roof percentile of the LOD1 height and the flat fallback")
+        ->capture_default_str();
+    roofs->add_option("--plane-distance-m", ropts.lod2.planes.distance_tolerance_m, "Roof planes: max point-to-plane distance, metres")->capture_default_str();
+    roofs->add_option("--plane-normal-deg", ropts.lod2.planes.normal_tolerance_deg, "Roof planes: max normal deviation, degrees")->capture_default_str();
+    roofs->add_option("--plane-min-points", ropts.lod2.planes.min_points, "Roof planes: minimum support")->capture_default_str();
+    roofs->add_option("--lod2-min-points", ropts.lod2.min_points, "Fewer roof points -> flat roof (LOD1.2)")->capture_default_str();
+    roofs->add_flag("--recompute-ground", rf_recompute_ground, "Ignore class 2 and classify ground with SMRF");
+    roofs->add_flag("--no-outlier-filter", rf_no_outliers, "Skip statistical outlier removal");
+
     // audit -----------------------------------------------------------------
     auto* audit = app.add_subcommand("audit", "Accuracy audits");
     audit->require_subcommand(1);
@@ -334,11 +368,7 @@ int main(int argc, char** argv) {
                              r.seconds, r.mean_abs_fit_area_error_pct, f_out.c_str());
         } else if (*exporter) {
             xopt.formats = split_list(x_formats);
-            xopt.lods.clear();
-            for (const std::string& l : split_list(x_lods)) {
-                if (l != "0" && l != "1" && l != "2") throw cf::Error("--lod", "levels of detail are 0, 1 and 2, got '" + l + "'");
-                xopt.lods.push_back(std::stoi(l));
-            }
+            xopt.lods = parse_lods(x_lods);
             const cf::ExportReport r = cf::run_export(x_in, x_out, xopt, make_progress(g));
             if (!g.quiet) {
                 std::string files, statuses;
@@ -347,6 +377,19 @@ int main(int argc, char** argv) {
                 std::fprintf(stderr, "cityforge: %zu buildings (%s%s); LOD1 %zu (%zu valid), LOD2 %zu (%zu valid); status:%s; wrote%s -> %s\n",
                              r.buildings, r.crs.c_str(), r.vertical_known ? "" : ", no vertical datum", r.with_lod1, r.valid_lod1,
                              r.with_lod2, r.valid_lod2, statuses.c_str(), files.c_str(), x_out.c_str());
+            }
+        } else if (*roofs) {
+            ropts.heights.ground.trust_classification = !rf_recompute_ground;
+            ropts.heights.outliers.enabled = !rf_no_outliers;
+            ropts.model.formats = split_list(rf_formats);
+            ropts.model.lods = parse_lods(rf_lods);
+            const cf::RoofsRunReport r = cf::run_roofs(rf_footprints, rf_cloud, rf_out, ropts, make_progress(g));
+            if (!g.quiet) {
+                std::string types;
+                for (const auto& [k, v] : r.roof_types) types += " " + k + "=" + std::to_string(v);
+                std::fprintf(stderr, "cityforge: %zu buildings (%s): LOD2 roof planes %zu, flat fallback %zu, valid LOD2 %zu of %zu; roofs:%s; mean RMSE %.3f m; roofs %.1f s, total %.1f s -> %s\n",
+                             r.model.buildings, r.model.crs.c_str(), r.lod2, r.fallbacks, r.model.valid_lod2, r.model.with_lod2, types.c_str(),
+                             r.mean_rmse_m, r.lod2_seconds, r.seconds, rf_out.c_str());
             }
         } else if (*audit_fp) {
             aopt.gates = gates_of(a_common);

@@ -127,6 +127,7 @@ std::vector<BuildingHeight> compute_building_heights(const PointCloud& c, const 
         // Candidates: points in the bounding box grown by the widest ground ring.
         std::vector<double> roof, ground_dist, ground_z;
         std::vector<std::pair<double, double>> roof_xy;
+        std::vector<uint32_t> roof_id;
         std::vector<uint8_t> roof_is_building;
         grid.for_each_in(extent_of(parts, max_buffer), [&](uint32_t i) {
             const double x = c.x[i], y = c.y[i];
@@ -139,6 +140,7 @@ std::vector<BuildingHeight> compute_building_heights(const PointCloud& c, const 
             } else if (inside && is_roof_candidate(c.classification[i])) {
                 roof.push_back(c.z[i]);
                 roof_xy.emplace_back(x, y);
+                roof_id.push_back(i);
                 roof_is_building.push_back(c.classification[i] == las_class::building);
             }
         });
@@ -168,7 +170,10 @@ std::vector<BuildingHeight> compute_building_heights(const PointCloud& c, const 
         const bool only_building = o.prefer_building_class && static_cast<int>(building_points) >= o.min_roof_points;
         for (std::size_t k = 0; k < roof.size(); ++k)
             if ((!only_building || roof_is_building[k]) && (!b.ground_z || roof[k] > *b.ground_z + margin))
+            {
                 roof_kept.push_back(roof[k]), roof_kept_xy.push_back(roof_xy[k]);
+                if (o.keep_roof_points) b.roof_points.push_back(roof_id[k]);
+            }
         b.n_points_roof = static_cast<int64_t>(roof_kept.size());
         b.point_density_m2 = area_m2 > 0 ? static_cast<double>(roof_kept.size()) / area_m2 : 0.0;
         // Coverage: cells of coverage_cell_m whose centre is inside the footprint.

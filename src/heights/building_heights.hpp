@@ -31,6 +31,7 @@ struct HeightOptions {
     double coverage_cell_m = 1.0;          ///< cell size of the nodata_fraction grid
     double unit_m = 1.0;                   ///< metres per horizontal CRS unit
     double z_unit_m = 1.0;                 ///< metres per z unit
+    bool keep_roof_points = false;         ///< fill BuildingHeight::roof_points (for LOD2 roofs)
     /// Throws Error naming the option on bad values.
     void validate() const;
 };
@@ -50,6 +51,7 @@ struct BuildingHeight {
     /// "good", "ground_buffer_widened", "few_ground_points", "no_ground",
     /// "few_roof_points", "no_roof_points", "sparse" (< 1 roof point per m2).
     std::string height_quality;
+    std::vector<uint32_t> roof_points;  ///< indices of the roof points in the cloud (only with keep_roof_points)
 };
 
 /// Percentile (0..100) by linear interpolation between order statistics

@@ -10,20 +10,20 @@
 
 namespace cityforge {
 
-HeightsRunReport run_heights(const std::string& footprints_path, const std::string& cloud_path,
-                             const std::string& output_path, const HeightsRunOptions& o, const Progress& progress) {
+HeightsStage compute_heights_stage(const std::string& footprints_path, const std::string& cloud_path, const HeightsRunOptions& o,
+                                   const Progress& progress) {
     const auto t0 = std::chrono::steady_clock::now();
     o.heights.validate();
-    const std::string driver = vector_driver_for(output_path);
-    HeightsRunReport rep;
-    rep.output_path = output_path;
-
-    const PolygonLayer footprints = read_polygon_layer(footprints_path, o.footprint_layer);
+    HeightsStage st;
+    HeightsRunReport& rep = st.report;
+    st.footprints = read_polygon_layer(footprints_path, o.footprint_layer);
+    const PolygonLayer& footprints = st.footprints;
     if (footprints.crs.empty()) throw Error(footprints_path, "footprints have no coordinate reference system");
     if (footprints.crs.geographic) throw Error(footprints_path, "footprints are in a geographic CRS; reproject them to a projected CRS first");
     progress(0.05, "footprints");
 
-    const PreparedCloud pc = prepare_cloud(cloud_path, o.cloud_crs, footprints.crs, o.outliers, o.ground);
+    st.cloud = prepare_cloud(cloud_path, o.cloud_crs, footprints.crs, o.outliers, o.ground);
+    const PreparedCloud& pc = st.cloud;
     rep.points_read = pc.cloud.size();
     rep.reprojected = pc.reprojected;
     rep.removed_statistical = pc.removed_statistical;
@@ -31,21 +31,22 @@ HeightsRunReport run_heights(const std::string& footprints_path, const std::stri
     rep.ground_points = pc.ground_points;
     rep.ground_from_classification = pc.ground_from_classification;
     const CrsInfo& cloud_crs = pc.source_crs;
-    const CrsInfo& out_crs = pc.crs;
-    rep.crs = out_crs.label();
-    const double unit = footprints.crs.linear_unit_m;
+    rep.crs = pc.crs.label();
     progress(0.5, "ground");
 
     HeightOptions ho = o.heights;
-    ho.unit_m = unit;
+    ho.unit_m = footprints.crs.linear_unit_m;
     ho.z_unit_m = cloud_crs.z_unit_m;
     std::vector<std::vector<Polygon>> parts;
     parts.reserve(footprints.features.size());
     for (const Feature& f : footprints.features) parts.push_back(f.geometry);
-    const std::vector<BuildingHeight> heights = compute_building_heights(pc.cloud, pc.keep, pc.is_ground, parts, ho, progress.sub(0.5, 0.9));
+    st.heights = compute_building_heights(pc.cloud, pc.keep, pc.is_ground, parts, ho, progress.sub(0.5, 0.9));
+    const std::vector<BuildingHeight>& heights = st.heights;
     rep.buildings = heights.size();
 
-    // Output: the source attributes (as text), then ours.
+    // Output: the source attributes, then ours.
+    PolygonLayer& t = st.table;
+    t.crs = pc.crs;
     std::vector<FieldDefinition> fields;
     fields.push_back({"source_fid", FieldType::integer});
     for (std::size_t i = 0; i < footprints.field_names.size(); ++i) fields.push_back({footprints.field_names[i], footprints.field_types[i]});
@@ -56,9 +57,9 @@ HeightsRunReport run_heights(const std::string& footprints_path, const std::stri
     fields.push_back({"n_points_ground", FieldType::integer});
     fields.push_back({"height_quality", FieldType::string});
     fields.push_back({"z_crs", FieldType::string});
+    for (const FieldDefinition& f : fields) t.field_names.push_back(f.name), t.field_types.push_back(f.type);
     const std::string z_crs = cloud_crs.vertical_epsg ? "EPSG:" + std::to_string(*cloud_crs.vertical_epsg) : cloud_crs.label();
-    std::vector<Feature> out;
-    out.reserve(heights.size());
+    t.features.reserve(heights.size());
     auto opt = [](const std::optional<double>& v) { return v ? AttributeValue(*v) : AttributeValue(); };
     for (std::size_t i = 0; i < heights.size(); ++i) {
         const BuildingHeight& h = heights[i];
@@ -75,11 +76,25 @@ HeightsRunReport run_heights(const std::string& footprints_path, const std::stri
         f.values.push_back(h.height_quality);
         f.values.push_back(z_crs);
         ++rep.quality_counts[h.height_quality];
-        out.push_back(std::move(f));
+        t.features.push_back(std::move(f));
+        t.fids.push_back(footprints.fids[i]);
     }
+    rep.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    return st;
+}
+
+HeightsRunReport run_heights(const std::string& footprints_path, const std::string& cloud_path,
+                             const std::string& output_path, const HeightsRunOptions& o, const Progress& progress) {
+    const auto t0 = std::chrono::steady_clock::now();
+    const std::string driver = vector_driver_for(output_path);
+    HeightsStage st = compute_heights_stage(footprints_path, cloud_path, o, progress.sub(0.0, 0.95));
+    HeightsRunReport rep = st.report;
+    rep.output_path = output_path;
+    std::vector<FieldDefinition> fields;
+    for (std::size_t i = 0; i < st.table.field_names.size(); ++i) fields.push_back({st.table.field_names[i], st.table.field_types[i]});
     VectorWriteOptions wo;
     wo.driver = driver;
-    write_polygon_features(output_path, out_crs, fields, out, wo);
+    write_polygon_features(output_path, st.table.crs, fields, st.table.features, wo);
     progress(1.0, "written");
     rep.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
     return rep;

@@ -8,6 +8,8 @@
 #include "cloud/cloud_filters.hpp"
 #include "core/progress.hpp"
 #include "heights/building_heights.hpp"
+#include "io/vector.hpp"
+#include "pipeline/prepared_cloud.hpp"
 
 namespace cityforge {
 
@@ -31,6 +33,19 @@ struct HeightsRunReport {
     std::map<std::string, std::size_t> quality_counts;
     double seconds = 0.0;
 };
+
+/// The heights stage without writing: footprints read, cloud prepared,
+/// heights computed and the output table built (the footprints' fields, then
+/// source_fid, ground_z, roof_z_*, height_m, ... as `cityforge heights` writes).
+struct HeightsStage {
+    PolygonLayer footprints;
+    PreparedCloud cloud;
+    std::vector<BuildingHeight> heights;
+    PolygonLayer table;  ///< output rows in `cloud.crs`; fids = the footprints' fids
+    HeightsRunReport report;
+};
+HeightsStage compute_heights_stage(const std::string& footprints_path, const std::string& cloud_path, const HeightsRunOptions& options,
+                                   const Progress& progress = {});
 
 /// Runs the whole height tool. Throws Error naming the file on a missing or
 /// empty cloud, a cloud without CRS (and no cloud_crs), footprints without

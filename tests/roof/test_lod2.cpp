@@ -86,3 +86,39 @@ TEST_CASE("LOD2 on synthetic roofs - roof types - RMSE to the exact planes - val
     CHECK(double(correct) / total >= 0.9);
     CHECK(rmse_sum / total <= 0.15);
 }
+
+TEST_CASE("Roof planes of a gable - two planes with the right slope and azimuths - thin clouds fall back to a flat roof", "[roof]") {
+    // Gable 12 m (east-west) x 8 m, ridge along x at y = 4, 30 degree pitch, eaves at 6 m.
+    const double t = std::tan(30.0 * 3.14159265358979 / 180.0);
+    std::vector<std::array<double, 3>> pts;
+    Rng rng(3);
+    for (double y = 0.1; y < 8; y += 0.35)
+        for (double x = 0.1; x < 12; x += 0.35) pts.push_back({x, y, 6.0 + t * (4.0 - std::abs(y - 4.0)) + 0.02 * rng.normal()});
+    const std::vector<RoofPlane> planes = detect_roof_planes(pts);
+    REQUIRE(planes.size() == 2);
+    for (const RoofPlane& p : planes) {
+        CHECK(p.slope_deg == Approx(30.0).margin(1.0));
+        CHECK(p.rmse_m < 0.05);
+    }
+    // One slope faces north (azimuth 0 / 360), the other south (180).
+    auto from_north = [](double az) { return std::min(az, 360.0 - az); };
+    const double n0 = from_north(planes[0].azimuth_deg), n1 = from_north(planes[1].azimuth_deg);
+    CHECK(std::min(n0, n1) == Approx(0.0).margin(2.0));
+    CHECK(std::max(n0, n1) == Approx(180.0).margin(2.0));
+    const std::vector<Polygon> footprint{Polygon{{{0, 0}, {12, 0}, {12, 8}, {0, 8}}, {}}};
+    const Lod2Result r = reconstruct_lod2(footprint, pts, 0.0, 7.0);
+    CHECK_FALSE(r.fallback);
+    CHECK(r.roof_type == "gable");
+    CHECK(r.roof_planes == 2);
+    REQUIRE(r.solids.size() == 1);
+    CHECK(validate_solid(r.solids[0]).empty());
+    // Volume: box 12 x 8 x 6 plus the gable prism 12 x (8 x 4 t / 2), within the ridge's fitting error.
+    CHECK(solid_volume(r.solids[0]) == Approx(12 * 8 * 6.0 + 12 * 8 * 4 * t / 2).epsilon(0.02));
+    const std::vector<std::array<double, 3>> few(pts.begin(), pts.begin() + 10);
+    const Lod2Result thin = reconstruct_lod2(footprint, few, 0.0, 7.0);
+    CHECK(thin.fallback);
+    CHECK(thin.fallback_reason == "too few roof points for planes");
+    CHECK(thin.roof_type == "flat");
+    REQUIRE(thin.solids.size() == 1);
+    CHECK(solid_volume(thin.solids[0]) == Approx(12 * 8 * 7.0));
+}
