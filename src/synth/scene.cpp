@@ -357,4 +357,22 @@ Scene generate_scene(const SceneLayout& layout) {
     return scene;
 }
 
+std::vector<std::array<double, 3>> sample_roof_points(const SceneBuilding& b, double density, double sigma, uint64_t seed) {
+    std::vector<std::array<double, 3>> pts;
+    double x0 = INFINITY, y0 = INFINITY, x1 = -INFINITY, y1 = -INFINITY;
+    for (const LocalPoint& q : b.outline) {
+        const auto xy = b.to_scene(q);
+        x0 = std::min(x0, xy[0]), x1 = std::max(x1, xy[0]), y0 = std::min(y0, xy[1]), y1 = std::max(y1, xy[1]);
+    }
+    const double step = 1.0 / std::sqrt(density);
+    Rng rng(seed, static_cast<uint64_t>(b.id));
+    for (double y = y0; y < y1; y += step)
+        for (double x = x0; x < x1; x += step) {
+            const double px = x + rng.uniform(0, step), py = y + rng.uniform(0, step);
+            if (!b.contains(px, py)) continue;
+            pts.push_back({px, py, b.ground_z + b.roof_height(px, py) + sigma * rng.normal()});
+        }
+    return pts;
+}
+
 }  // namespace cityforge::synth

@@ -86,4 +86,9 @@ struct Scene {
 /// Generates the scene for `layout` deterministically (same seed, same scene).
 Scene generate_scene(const SceneLayout& layout);
 
+/// Points on a building's exact roof: a jittered grid of `density` points per
+/// m² inside its footprint, z noise of `sigma` metres, scene-local x, y and
+/// absolute z. Deterministic in (seed, building id). For LOD2 tests and benchmarks.
+std::vector<std::array<double, 3>> sample_roof_points(const SceneBuilding& building, double density, double sigma, uint64_t seed);
+
 }  // namespace cityforge::synth

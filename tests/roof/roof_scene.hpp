@@ -5,7 +5,6 @@
 #include <vector>
 
 #include "core/geometry.hpp"
-#include "core/random.hpp"
 #include "synth/scene.hpp"
 
 namespace cityforge::test {
@@ -33,15 +32,7 @@ inline RoofSample sample_roof(const synth::SceneBuilding& b, double density, dou
     orient_polygon(p);
     s.footprint = {p};
     s.ground_z = b.ground_z;
-    const Extent e = polygon_extent(p);
-    const double step = 1.0 / std::sqrt(density);
-    Rng rng(seed, static_cast<uint64_t>(b.id));
-    for (double y = e.min_y; y < e.max_y; y += step)
-        for (double x = e.min_x; x < e.max_x; x += step) {
-            const double px = x + rng.uniform(0, step), py = y + rng.uniform(0, step);
-            if (!point_in_polygon(p, px, py)) continue;
-            s.points.push_back({px, py, b.ground_z + b.roof_height(px, py) + sigma * rng.normal()});
-        }
+    s.points = synth::sample_roof_points(b, density, sigma, seed);
     return s;
 }
 

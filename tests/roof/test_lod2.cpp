@@ -5,6 +5,7 @@
 
 #include "roof/lod2_builder.hpp"
 #include "roof/roof_planes.hpp"
+#include "core/random.hpp"
 #include "roof_scene.hpp"
 
 using namespace cityforge;
