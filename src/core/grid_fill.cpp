@@ -1,61 +1,63 @@
 #include "core/grid_fill.hpp"
 
-#include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstdint>
 
 namespace cityforge {
 
+// Directional inverse-distance fill: every gap cell takes the 1/d² weighted
+// mean of the nearest valid cell along each of the 8 compass directions. One
+// sweep per direction finds them all (O(cells)). The value of a cell depends
+// only on cells up to its gap's edge, so filling a window of a larger grid
+// gives the same values wherever the window's border is farther than the
+// gap's extent: what tiled processing needs.
 void fill_gaps(std::vector<double>& g, int w, int h) {
     bool any_gap = false, any_valid = false;
-    for (double v : g) (std::isnan(v) ? any_gap : any_valid) = true;
+    double sum = 0.0;
+    std::size_t n_valid = 0;
+    for (double v : g) {
+        if (std::isnan(v)) any_gap = true;
+        else any_valid = true, sum += v, ++n_valid;
+    }
     if (!any_gap || !any_valid) return;
-    if (w <= 1 && h <= 1) return;
-    // Coarser level: 2x2 averages of valid cells.
-    const int cw = (w + 1) / 2, ch = (h + 1) / 2;
-    std::vector<double> coarse(static_cast<std::size_t>(cw) * ch, NAN);
-    for (int y = 0; y < ch; ++y)
-        for (int x = 0; x < cw; ++x) {
-            double s = 0.0;
-            int n = 0;
-            for (int dy = 0; dy < 2; ++dy)
-                for (int dx = 0; dx < 2; ++dx) {
-                    const int xx = 2 * x + dx, yy = 2 * y + dy;
-                    if (xx >= w || yy >= h) continue;
-                    const double v = g[static_cast<std::size_t>(yy) * w + xx];
-                    if (!std::isnan(v)) s += v, ++n;
-                }
-            if (n) coarse[static_cast<std::size_t>(y) * cw + x] = s / n;
-        }
-    fill_gaps(coarse, cw, ch);
-    std::vector<uint8_t> was_gap(g.size(), 0);
-    for (int y = 0; y < h; ++y)
-        for (int x = 0; x < w; ++x) {
-            const std::size_t k = static_cast<std::size_t>(y) * w + x;
-            if (!std::isnan(g[k])) continue;
-            was_gap[k] = 1;
-            // Bilinear interpolation of the coarse level at this cell's centre.
-            const double fx = std::clamp((x + 0.5) / 2.0 - 0.5, 0.0, cw - 1.0), fy = std::clamp((y + 0.5) / 2.0 - 0.5, 0.0, ch - 1.0);
-            const int x0 = static_cast<int>(fx), y0 = static_cast<int>(fy);
-            const int x1 = std::min(x0 + 1, cw - 1), y1 = std::min(y0 + 1, ch - 1);
-            const double tx = fx - x0, ty = fy - y0;
-            auto c = [&](int xx, int yy) { return coarse[static_cast<std::size_t>(yy) * cw + xx]; };
-            g[k] = (c(x0, y0) * (1 - tx) + c(x1, y0) * tx) * (1 - ty) + (c(x0, y1) * (1 - tx) + c(x1, y1) * tx) * ty;
-        }
-    // Relaxation of the filled cells towards the mean of their 4 neighbours.
-    for (int pass = 0; pass < 4; ++pass)
-        for (int y = 0; y < h; ++y)
-            for (int x = 0; x < w; ++x) {
+    const std::size_t cells = static_cast<std::size_t>(w) * h;
+    std::vector<double> num(cells, 0.0), den(cells, 0.0);
+    static const std::array<std::array<int, 2>, 8> dirs{{{1, 0}, {-1, 0}, {0, 1}, {0, -1}, {1, 1}, {-1, -1}, {1, -1}, {-1, 1}}};
+    // Last valid value and its position seen when walking against the direction.
+    std::vector<double> last_v(cells);
+    std::vector<int32_t> last_d(cells);
+    for (const auto& d : dirs) {
+        const int dx = d[0], dy = d[1];
+        const double step = (dx && dy) ? std::sqrt(2.0) : 1.0;
+        // Visit cells so that (x - dx, y - dy) comes before (x, y).
+        const int y0 = dy >= 0 ? 0 : h - 1, y1 = dy >= 0 ? h : -1, ys = dy >= 0 ? 1 : -1;
+        const int x0 = dx >= 0 ? 0 : w - 1, x1 = dx >= 0 ? w : -1, xs = dx >= 0 ? 1 : -1;
+        for (int y = y0; y != y1; y += ys)
+            for (int x = x0; x != x1; x += xs) {
                 const std::size_t k = static_cast<std::size_t>(y) * w + x;
-                if (!was_gap[k]) continue;
-                double s = 0.0;
-                int n = 0;
-                if (x > 0) s += g[k - 1], ++n;
-                if (x < w - 1) s += g[k + 1], ++n;
-                if (y > 0) s += g[k - static_cast<std::size_t>(w)], ++n;
-                if (y < h - 1) s += g[k + static_cast<std::size_t>(w)], ++n;
-                if (n) g[k] = s / n;
+                if (!std::isnan(g[k])) {
+                    last_v[k] = g[k], last_d[k] = 0;
+                    continue;
+                }
+                const int px = x - dx, py = y - dy;
+                if (px < 0 || py < 0 || px >= w || py >= h) {
+                    last_d[k] = -1;
+                    continue;
+                }
+                const std::size_t pk = static_cast<std::size_t>(py) * w + px;
+                if (last_d[pk] < 0) {
+                    last_d[k] = -1;
+                    continue;
+                }
+                last_d[k] = last_d[pk] + 1, last_v[k] = last_v[pk];
+                const double dist = last_d[k] * step, wgt = 1.0 / (dist * dist);
+                num[k] += wgt * last_v[k], den[k] += wgt;
             }
+    }
+    const double mean = sum / double(n_valid);
+    for (std::size_t k = 0; k < cells; ++k)
+        if (std::isnan(g[k])) g[k] = den[k] > 0 ? num[k] / den[k] : mean;  // enclosed on all 8 rays: the mean ground
 }
 
 }  // namespace cityforge

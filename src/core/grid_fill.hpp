@@ -1,8 +1,8 @@
 #pragma once
 // Filling gaps (NaN cells) of a regular grid, e.g. a DTM under buildings.
-// Pyramid fill: each coarser level averages the valid cells below it; gaps
-// take the value of the finest level that has one, then a few relaxation
-// passes smooth the filled cells. O(cells), no GDAL.
+// Directional inverse-distance fill: each gap takes the 1/d² weighted mean of
+// the nearest valid cell in each of the 8 compass directions; local (a cell
+// depends only on its gap), so windows of a grid fill alike. O(cells), no GDAL.
 #include <cstddef>
 #include <vector>
 
