@@ -52,4 +52,10 @@ private:
 /// naming the file if it holds no point at all.
 PointCloud read_point_cloud(const std::string& path, std::string* crs_wkt = nullptr);
 
+/// Reads only the points with min_x <= x < max_x and min_y <= y < max_y (file
+/// CRS), streaming, so memory follows the box, not the file. May return an
+/// empty cloud.
+PointCloud read_point_cloud_in(const std::string& path, double min_x, double min_y, double max_x, double max_y,
+                               std::string* crs_wkt = nullptr);
+
 }  // namespace cityforge

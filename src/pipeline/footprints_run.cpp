@@ -39,6 +39,92 @@ void FootprintsRunOptions::validate() const {
     mask.validate();
 }
 
+std::vector<std::vector<Polygon>> vectorize_window(const Image<uint32_t>& labels, const GeoTransform& grid, int col0, int row0) {
+    // Traced in pixel units, then placed with integer pixel offsets: every
+    // window of a grid gives the very same coordinates for the same pixels.
+    std::vector<std::vector<Polygon>> polys = vectorize_all(labels, GeoTransform{0.0, 1.0, 0.0, -1.0});
+    auto place = [&](Ring& r) {
+        for (MapPoint& q : r) q = grid.pixel_to_map({double(col0) + q.x, double(row0) - q.y});
+    };
+    for (auto& parts : polys)
+        for (Polygon& p : parts) {
+            place(p.outer);
+            for (Ring& h : p.holes) place(h);
+        }
+    return polys;
+}
+
+FootprintTable footprint_table(const BuildingMask& mask, const Image<float>& ndsm, const GeoTransform& grid, int col0, int row0,
+                               const std::vector<int64_t>& ids, const std::string& mode, double unit, double z_unit, const CrsInfo& crs,
+                               const FootprintsRunOptions& o) {
+    FootprintTable table;
+    const auto polygons = vectorize_window(mask.labels, grid, col0, row0);
+    // Median nDSM per building, a first height cue for the output.
+    std::vector<std::vector<double>> heights(mask.count + 1);
+    for (std::size_t k = 0; k < mask.labels.data.size(); ++k)
+        if (const uint32_t id = mask.labels.data[k]; id && !ndsm.data.empty() && !std::isnan(ndsm.data[k])) heights[id].push_back(ndsm.data[k]);
+    table.fields = {
+        {"id", FieldType::integer},           {"mode", FieldType::string},         {"fit", FieldType::string},
+        {"status", FieldType::string},        {"reason", FieldType::string},       {"area_m2", FieldType::real},
+        {"raw_area_m2", FieldType::real},     {"geodesic_area_m2", FieldType::real}, {"perimeter_m", FieldType::real},
+        {"orientation_deg", FieldType::real}, {"fit_area_error_pct", FieldType::real}, {"fit_iou", FieldType::real},
+        {"n_vertices", FieldType::integer},   {"height_p50_m", FieldType::real}};
+    std::vector<Feature>& features = table.features;
+    const std::string& rep_mode = mode;
+    const GeoTransform& grid_transform = grid;
+    double error_sum = 0.0;
+    for (uint32_t id = 1; id <= mask.count; ++id) {
+        if (polygons[id].empty()) continue;
+        const Polygon raw = simplify_polygon(polygons[id][0], o.simplify_m / unit);
+        Feature f;
+        std::string status = "ok", reason;
+        Polygon out = raw;
+        double orientation = 0.0, err = 0.0, iou = 1.0;
+        try {
+            const OrientedRectangle rect = minimum_area_rectangle(raw);
+            orientation = rect.orientation_deg;
+            if (o.fit == FootprintFit::rectangle) {
+                out = rect.polygon();
+                const FitAccuracy acc = fit_accuracy(raw, out);
+                err = acc.area_error_pct, iou = acc.iou;
+            } else if (o.fit == FootprintFit::regularised) {
+                RegularizeOptions go = o.regularize;
+                go.merge_offset /= unit, go.min_edge /= unit;
+                // Pixel staircases must be straightened before edges can be
+                // snapped: simplify with at least 1.5 pixels.
+                const double straighten = std::max(o.simplify_m / unit, 1.5 * std::abs(grid_transform.pixel_width));
+                out = regularize_polygon(simplify_polygon(polygons[id][0], straighten), rect.orientation_deg, go);
+                const FitAccuracy acc = fit_accuracy(raw, out);
+                err = acc.area_error_pct, iou = acc.iou;
+            } else if (o.fit == FootprintFit::recursive) {
+                RecursiveFitOptions ro = o.recursive;
+                ro.min_rectangle_area /= unit * unit;
+                const RecursiveFit rf = recursive_rectangle_fit(raw, ro);
+                out = rf.polygon;
+                err = rf.accuracy.area_error_pct, iou = rf.accuracy.iou;
+            }
+        } catch (const Error& e) {
+            status = "fit_failed", reason = e.what();
+        }
+        orient_polygon(out);
+        std::vector<Ring> rings{out.outer};
+        for (const Ring& h : out.holes) rings.push_back(h);
+        std::size_t vertices = out.outer.size();
+        for (const Ring& h : out.holes) vertices += h.size();
+        std::vector<double>& hv = heights[id];
+        const std::optional<double> h50 = percentile(hv, 50.0);
+        f.geometry = {out};
+        f.values = {ids.empty() ? int64_t(features.size() + 1) : ids[id], rep_mode, to_string(o.fit), status, reason,
+                    polygon_area(out) * unit * unit, polygon_area(raw) * unit * unit, geodesic_area_m2(rings, crs),
+                    polygon_perimeter(out) * unit, orientation, err, iou, int64_t(vertices),
+                    h50 ? AttributeValue(*h50 * z_unit) : AttributeValue()};
+        error_sum += std::abs(err);
+        features.push_back(std::move(f));
+    }
+    table.mean_abs_fit_area_error_pct = features.empty() ? 0.0 : error_sum / static_cast<double>(features.size());
+    return table;
+}
+
 FootprintsReport run_footprints(const std::string& output_path, const FootprintsRunOptions& o, const Progress& progress) {
     const auto t0 = std::chrono::steady_clock::now();
     o.validate();
@@ -100,73 +186,12 @@ FootprintsReport run_footprints(const std::string& output_path, const Footprints
     rep.width = grid.width, rep.height = grid.height;
     rep.used_classes = mask.used_classes;
     progress(0.6, "detection");
-    const auto polygons = vectorize_all(mask.labels, grid.transform);
-    // Median nDSM per building, a first height cue for the output.
-    std::vector<std::vector<double>> heights(mask.count + 1);
-    for (std::size_t k = 0; k < mask.labels.data.size(); ++k)
-        if (const uint32_t id = mask.labels.data[k]; id && !ndsm.data.empty() && !std::isnan(ndsm.data[k])) heights[id].push_back(ndsm.data[k]);
-
-    const std::vector<FieldDefinition> fields{
-        {"id", FieldType::integer},           {"mode", FieldType::string},         {"fit", FieldType::string},
-        {"status", FieldType::string},        {"reason", FieldType::string},       {"area_m2", FieldType::real},
-        {"raw_area_m2", FieldType::real},     {"geodesic_area_m2", FieldType::real}, {"perimeter_m", FieldType::real},
-        {"orientation_deg", FieldType::real}, {"fit_area_error_pct", FieldType::real}, {"fit_iou", FieldType::real},
-        {"n_vertices", FieldType::integer},   {"height_p50_m", FieldType::real}};
-    std::vector<Feature> features;
-    double error_sum = 0.0;
-    for (uint32_t id = 1; id <= mask.count; ++id) {
-        if (polygons[id].empty()) continue;
-        const Polygon raw = simplify_polygon(polygons[id][0], o.simplify_m / unit);
-        Feature f;
-        std::string status = "ok", reason;
-        Polygon out = raw;
-        double orientation = 0.0, err = 0.0, iou = 1.0;
-        try {
-            const OrientedRectangle rect = minimum_area_rectangle(raw);
-            orientation = rect.orientation_deg;
-            if (o.fit == FootprintFit::rectangle) {
-                out = rect.polygon();
-                const FitAccuracy acc = fit_accuracy(raw, out);
-                err = acc.area_error_pct, iou = acc.iou;
-            } else if (o.fit == FootprintFit::regularised) {
-                RegularizeOptions go = o.regularize;
-                go.merge_offset /= unit, go.min_edge /= unit;
-                // Pixel staircases must be straightened before edges can be
-                // snapped: simplify with at least 1.5 pixels.
-                const double straighten = std::max(o.simplify_m / unit, 1.5 * std::abs(grid.transform.pixel_width));
-                out = regularize_polygon(simplify_polygon(polygons[id][0], straighten), rect.orientation_deg, go);
-                const FitAccuracy acc = fit_accuracy(raw, out);
-                err = acc.area_error_pct, iou = acc.iou;
-            } else if (o.fit == FootprintFit::recursive) {
-                RecursiveFitOptions ro = o.recursive;
-                ro.min_rectangle_area /= unit * unit;
-                const RecursiveFit rf = recursive_rectangle_fit(raw, ro);
-                out = rf.polygon;
-                err = rf.accuracy.area_error_pct, iou = rf.accuracy.iou;
-            }
-        } catch (const Error& e) {
-            status = "fit_failed", reason = e.what();
-        }
-        orient_polygon(out);
-        std::vector<Ring> rings{out.outer};
-        for (const Ring& h : out.holes) rings.push_back(h);
-        std::size_t vertices = out.outer.size();
-        for (const Ring& h : out.holes) vertices += h.size();
-        std::vector<double>& hv = heights[id];
-        const std::optional<double> h50 = percentile(hv, 50.0);
-        f.geometry = {out};
-        f.values = {int64_t(features.size() + 1), rep.mode, to_string(o.fit), status, reason,
-                    polygon_area(out) * unit * unit, polygon_area(raw) * unit * unit, geodesic_area_m2(rings, crs),
-                    polygon_perimeter(out) * unit, orientation, err, iou, int64_t(vertices),
-                    h50 ? AttributeValue(*h50 * z_unit) : AttributeValue()};
-        error_sum += std::abs(err);
-        features.push_back(std::move(f));
-    }
-    rep.buildings = features.size();
-    rep.mean_abs_fit_area_error_pct = features.empty() ? 0.0 : error_sum / static_cast<double>(features.size());
+    FootprintTable table = footprint_table(mask, ndsm, grid.transform, 0, 0, {}, rep.mode, unit, z_unit, crs, o);
+    rep.buildings = table.features.size();
+    rep.mean_abs_fit_area_error_pct = table.mean_abs_fit_area_error_pct;
     VectorWriteOptions wo;
     wo.driver = driver;
-    write_polygon_features(output_path, crs, fields, features, wo);
+    write_polygon_features(output_path, crs, table.fields, table.features, wo);
     rep.crs = crs.label();
     rep.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
     progress(1.0, "written");

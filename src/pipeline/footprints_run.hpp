@@ -6,6 +6,9 @@
 #include <string>
 
 #include "cloud/cloud_filters.hpp"
+#include "core/image.hpp"
+#include "crs/crs.hpp"
+#include "io/vector.hpp"
 #include "core/progress.hpp"
 #include "footprint/building_mask.hpp"
 #include "footprint/rectangle_fit.hpp"
@@ -35,6 +38,25 @@ struct FootprintsRunOptions {
     GroundFilterOptions ground;
     void validate() const;
 };
+
+/// Every region of a label raster as polygons in map coordinates, index =
+/// label. `labels` is the window of `grid` starting at pixel (col0, row0);
+/// coordinates are computed from global pixel indices, so the same pixels give
+/// the same coordinates in any window.
+std::vector<std::vector<Polygon>> vectorize_window(const Image<uint32_t>& labels, const GeoTransform& grid, int col0, int row0);
+
+/// The rows of `cityforge footprints` for the buildings of a mask: simplified
+/// outline, fit, areas, orientation, fit error and IoU, median nDSM height.
+struct FootprintTable {
+    std::vector<FieldDefinition> fields;
+    std::vector<Feature> features;
+    double mean_abs_fit_area_error_pct = 0.0;
+};
+/// `ids[label]` names each building (empty: 1, 2, ... in label order);
+/// `ndsm` may be empty (no height cue).
+FootprintTable footprint_table(const BuildingMask& mask, const Image<float>& ndsm, const GeoTransform& grid, int col0, int row0,
+                               const std::vector<int64_t>& ids, const std::string& mode, double unit, double z_unit, const CrsInfo& crs,
+                               const FootprintsRunOptions& options);
 
 struct FootprintsReport {
     std::string mode;              ///< "cloud_only" or "ortho_only" (the combined mode is not implemented yet)

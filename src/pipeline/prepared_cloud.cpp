@@ -7,15 +7,19 @@
 namespace cityforge {
 
 PreparedCloud prepare_cloud(const std::string& cloud_path, const std::string& cloud_crs_override, const CrsInfo& target,
-                            const OutlierFilterOptions& outliers, const GroundFilterOptions& ground) {
+                            const OutlierFilterOptions& outliers, const GroundFilterOptions& ground, const Extent* crop) {
     outliers.validate();
     ground.validate();
     PreparedCloud p;
     std::string file_wkt;
-    p.cloud = read_point_cloud(cloud_path, &file_wkt);
+    // The CRS first (from the header), so that a crop can be applied while reading.
+    const std::string header_wkt = CloudReader(cloud_path).crs_wkt();
     if (!cloud_crs_override.empty()) p.source_crs = crs_from_user_input(cloud_crs_override, "--cloud-crs");
-    else if (!file_wkt.empty()) p.source_crs = crs_from_wkt(file_wkt, cloud_path);
+    else if (!header_wkt.empty()) p.source_crs = crs_from_wkt(header_wkt, cloud_path);
     else throw Error(cloud_path, "point cloud has no CRS; give it with --cloud-crs (e.g. EPSG:7415)");
+    const bool same = target.empty() || same_horizontal_crs(p.source_crs, target);
+    if (crop && same) p.cloud = read_point_cloud_in(cloud_path, crop->min_x, crop->min_y, crop->max_x, crop->max_y, &file_wkt);
+    else p.cloud = read_point_cloud(cloud_path, &file_wkt);
     if (p.source_crs.geographic) throw Error(cloud_path, "point cloud is in a geographic CRS; a projected CRS is needed");
     p.crs = p.source_crs;
     if (!target.empty() && !same_horizontal_crs(p.source_crs, target)) {
@@ -25,6 +29,23 @@ PreparedCloud prepare_cloud(const std::string& cloud_path, const std::string& cl
         p.reprojected = true;
     } else if (!target.empty()) {
         p.crs = combine_with_vertical(target, p.source_crs);
+    }
+    if (crop && !same) {
+        PointCloud kept;
+        std::vector<std::size_t> idx;
+        for (std::size_t i = 0; i < p.cloud.size(); ++i)
+            if (p.cloud.x[i] >= crop->min_x && p.cloud.x[i] < crop->max_x && p.cloud.y[i] >= crop->min_y && p.cloud.y[i] < crop->max_y) idx.push_back(i);
+        kept.x.reserve(idx.size());
+        for (std::size_t i : idx) {
+            kept.x.push_back(p.cloud.x[i]), kept.y.push_back(p.cloud.y[i]), kept.z.push_back(p.cloud.z[i]);
+            kept.intensity.push_back(p.cloud.intensity[i]), kept.classification.push_back(p.cloud.classification[i]);
+            kept.return_number.push_back(p.cloud.return_number[i]), kept.number_of_returns.push_back(p.cloud.number_of_returns[i]);
+        }
+        p.cloud = std::move(kept);
+    }
+    if (p.cloud.size() == 0) {
+        if (!crop) throw Error(cloud_path, "point cloud is empty");
+        return p;  // a tile without points: nothing to clean or classify
     }
     const double unit = p.crs.linear_unit_m;
     OutlierFilterOptions oo = outliers;

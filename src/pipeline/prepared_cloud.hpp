@@ -7,6 +7,7 @@
 
 #include "cloud/cloud_filters.hpp"
 #include "cloud/point_cloud.hpp"
+#include "core/geo_transform.hpp"
 #include "crs/crs.hpp"
 
 namespace cityforge {
@@ -25,7 +26,10 @@ struct PreparedCloud {
 /// `target` may be empty (keep the cloud's CRS). Throws Error naming the file
 /// for a missing/empty cloud, a cloud without CRS and no override, or CRSs
 /// PROJ cannot relate.
+/// With `crop` (target CRS units), only points inside it are kept: read
+/// streaming when the cloud is already in the target CRS, else cropped after
+/// reprojection. An empty crop result is not an error (a tile without points).
 PreparedCloud prepare_cloud(const std::string& cloud_path, const std::string& cloud_crs_override, const CrsInfo& target,
-                            const OutlierFilterOptions& outliers, const GroundFilterOptions& ground);
+                            const OutlierFilterOptions& outliers, const GroundFilterOptions& ground, const Extent* crop = nullptr);
 
 }  // namespace cityforge
