@@ -3,6 +3,7 @@
 // algorithm lives here.
 #include <CLI/CLI.hpp>
 #include <cstdio>
+#include <cstdlib>
 #include <iostream>
 #include <optional>
 #include <sstream>
@@ -14,6 +15,7 @@
 #include "core/version.hpp"
 #include "io/inspect.hpp"
 #include "pipeline/audit_run.hpp"
+#include "pipeline/city_run.hpp"
 #include "pipeline/export_run.hpp"
 #include "pipeline/footprints_run.hpp"
 #include "pipeline/heights_run.hpp"
@@ -37,6 +39,32 @@ std::vector<std::string> split_list(const std::string& text) {
     while (std::getline(ss, item, ','))
         if (!item.empty()) out.push_back(item);
     return out;
+}
+
+// The rank and size of this process under mpirun (Open MPI, MPICH/PMI, PMIx).
+cf::RunShare mpi_share() {
+    auto env = [](const char* a, const char* b, const char* c) -> const char* {
+        for (const char* k : {a, b, c})
+            if (const char* v = std::getenv(k)) return v;
+        return nullptr;
+    };
+    const char* rank = env("OMPI_COMM_WORLD_RANK", "PMI_RANK", "PMIX_RANK");
+    const char* size = env("OMPI_COMM_WORLD_SIZE", "PMI_SIZE", "MPI_LOCALNRANKS");
+    if (!rank || !size) throw cf::Error("--mpi", "no MPI rank in the environment; start with mpirun -np N");
+    cf::RunShare s;
+    s.rank = std::atoi(rank), s.size = std::atoi(size);
+    return s;
+}
+
+// Parses a JSON file or throws Error naming it.
+nlohmann::json read_json_file(const std::string& path) {
+    std::ifstream in(path);
+    if (!in) throw cf::Error(path, "cannot open config file");
+    try {
+        return nlohmann::json::parse(in);
+    } catch (const nlohmann::json::exception& e) {
+        throw cf::Error(path, std::string("invalid JSON: ") + e.what());
+    }
 }
 
 // "0,1,2" -> {0, 1, 2}; anything else is refused.
@@ -230,6 +258,47 @@ int main(int argc, char** argv) {
     roofs->add_flag("--recompute-ground", rf_recompute_ground, "Ignore class 2 and classify ground with SMRF");
     roofs->add_flag("--no-outlier-filter", rf_no_outliers, "Skip statistical outlier removal");
 
+    // run / plan / merge-tiles -----------------------------------------------
+    struct RunCli {
+        std::string ortho, cloud, cloud_crs, footprints, config, formats, lods, vertical_crs, id_field, fit;
+        int tile_size = 0, threads = -1;
+        double overlap_m = -1;
+    };
+    auto add_run_inputs = [](CLI::App* cmd, RunCli& r) {
+        cmd->add_option("--ortho", r.ortho, "Ortho: the pixel grid and CRS of the run");
+        cmd->add_option("--cloud", r.cloud, "Dense point cloud (LAS, PLY, XYZ)");
+        cmd->add_option("--cloud-crs", r.cloud_crs, "CRS of the cloud, e.g. EPSG:7415");
+        cmd->add_option("--footprints", r.footprints, "Existing footprints: skip extraction, compute heights, roofs and models");
+        cmd->add_option("--config", r.config, "JSON config (schemas/run_config.schema.json); command-line options override it");
+        cmd->add_option("--tile-size", r.tile_size, "Tile core edge in pixels (default 4000)");
+        cmd->add_option("--overlap-m", r.overlap_m, "Context around each tile, metres (default 100)");
+        cmd->add_option("--threads", r.threads, "Threads (default: all cores)");
+        cmd->add_option("--formats", r.formats, "Comma-separated: geojson, gpkg, citygml, cityjson, cityjsonseq");
+        cmd->add_option("--lod", r.lods, "Comma-separated levels of detail: 0, 1, 2");
+        cmd->add_option("--vertical-crs", r.vertical_crs, "Vertical CRS when the cloud names none, e.g. EPSG:5709");
+        cmd->add_option("--id-field", r.id_field, "Building id attribute of given footprints");
+        cmd->add_option("--fit", r.fit, "Footprint geometry: recursive, regularised, rectangle or raw");
+    };
+    auto* run_cmd = app.add_subcommand("run", "The whole chain in tiles: cloud -> footprints -> heights -> LOD2 roofs -> city models");
+    RunCli run_cli;
+    std::string run_out, run_manifest;
+    int run_tile_k = -1;
+    bool run_mpi = false;
+    add_run_inputs(run_cmd, run_cli);
+    run_cmd->add_option("--out", run_out, "Output folder (buildings.*, run_report.json, tiles/)")->required();
+    run_cmd->add_option("--manifest", run_manifest, "Run the tiles of a manifest from `cityforge plan`");
+    run_cmd->add_option("--tile", run_tile_k, "Run only this tile of the manifest (Slurm arrays: $SLURM_ARRAY_TASK_ID); merge with merge-tiles");
+    run_cmd->add_flag("--mpi", run_mpi, "Share the tiles among MPI ranks (mpirun -np N); rank 0 merges");
+    auto* plan_cmd = app.add_subcommand("plan", "Write the tile manifest of a run (for --tile, --mpi or Slurm)");
+    RunCli plan_cli;
+    std::string plan_out;
+    add_run_inputs(plan_cmd, plan_cli);
+    plan_cmd->add_option("--out", plan_out, "Manifest file (.json)")->required();
+    auto* merge_cmd = app.add_subcommand("merge-tiles", "Assemble the finished tiles of a run into its city models");
+    std::string merge_manifest, merge_out;
+    merge_cmd->add_option("--manifest", merge_manifest, "The run's manifest")->required();
+    merge_cmd->add_option("--out", merge_out, "The run's output folder")->required();
+
     // audit -----------------------------------------------------------------
     auto* audit = app.add_subcommand("audit", "Accuracy audits");
     audit->require_subcommand(1);
@@ -391,6 +460,52 @@ int main(int argc, char** argv) {
                              r.model.buildings, r.model.crs.c_str(), r.lod2, r.fallbacks, r.model.valid_lod2, r.model.with_lod2, types.c_str(),
                              r.mean_rmse_m, r.lod2_seconds, r.seconds, rf_out.c_str());
             }
+        } else if (*run_cmd || *plan_cmd) {
+            const RunCli& rc = *run_cmd ? run_cli : plan_cli;
+            cf::RunManifest manifest;
+            if (!run_manifest.empty() && *run_cmd) {
+                manifest = cf::read_manifest(run_manifest);
+            } else {
+                cf::RunOptions ro;
+                if (!rc.config.empty()) ro = cf::run_options_from_json(read_json_file(rc.config), rc.config);
+                if (!rc.ortho.empty()) ro.ortho = rc.ortho;
+                if (!rc.cloud.empty()) ro.cloud = rc.cloud;
+                if (!rc.cloud_crs.empty()) ro.cloud_crs = rc.cloud_crs;
+                if (!rc.footprints.empty()) ro.footprints = rc.footprints;
+                if (rc.tile_size > 0) ro.tile_size_px = rc.tile_size;
+                if (rc.overlap_m >= 0) ro.overlap_m = rc.overlap_m;
+                if (rc.threads >= 0) ro.threads = rc.threads;
+                if (!rc.formats.empty()) ro.buildings.model.formats = split_list(rc.formats);
+                if (!rc.lods.empty()) ro.buildings.model.lods = parse_lods(rc.lods);
+                if (!rc.vertical_crs.empty()) ro.buildings.model.vertical_crs = rc.vertical_crs;
+                if (!rc.id_field.empty()) ro.buildings.model.id_field = rc.id_field;
+                if (!rc.fit.empty()) ro.extraction.fit = cf::footprint_fit_from_string(rc.fit);
+                manifest = cf::plan_run(ro);
+            }
+            if (*plan_cmd) {
+                cf::write_manifest(plan_out, manifest);
+                if (!g.quiet) std::fprintf(stderr, "cityforge: %zu tiles of %d px (+%d px overlap) over %d x %d px -> %s\n", manifest.tiles.size(),
+                                           manifest.options.tile_size_px, manifest.overlap_px, manifest.grid.width, manifest.grid.height, plan_out.c_str());
+            } else if (run_tile_k >= 0) {
+                const cf::TileReport r = cf::run_tile(manifest, run_tile_k, run_out, make_progress(g));
+                if (!g.quiet) std::fprintf(stderr, "cityforge: tile %d %s: %zu buildings%s%s\n", r.index, r.status.c_str(), r.buildings,
+                                           r.reason.empty() ? "" : ": ", r.reason.c_str());
+                if (r.status == "failed") return 1;
+            } else {
+                cf::RunShare share;
+                if (run_mpi) share = mpi_share();
+                const cf::RunReport r = cf::run_city(manifest, run_out, share, make_progress(g));
+                if (!g.quiet && share.rank == 0) {
+                    std::size_t failed = 0;
+                    for (const auto& t : r.tiles) failed += t.status == "failed";
+                    std::fprintf(stderr, "cityforge: %zu buildings from %zu tiles (%zu failed); LOD1 valid %zu, LOD2 valid %zu; %zu warnings; %.1f s, peak %.0f MB -> %s\n",
+                                 r.buildings, r.tiles.size(), failed, r.valid_lod1, r.valid_lod2, r.warnings.size(), r.seconds, r.peak_memory_mb,
+                                 r.report_path.c_str());
+                }
+            }
+        } else if (*merge_cmd) {
+            const cf::RunReport r = cf::merge_tiles(cf::read_manifest(merge_manifest), merge_out, make_progress(g));
+            if (!g.quiet) std::fprintf(stderr, "cityforge: %zu buildings from %zu tiles -> %s\n", r.buildings, r.tiles.size(), r.report_path.c_str());
         } else if (*audit_fp) {
             aopt.gates = gates_of(a_common);
             const cf::FootprintAuditReport r = cf::audit_footprints(a_pred, a_ref, a_common.out, aopt);

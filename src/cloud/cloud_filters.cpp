@@ -16,6 +16,7 @@ namespace cityforge {
 void OutlierFilterOptions::validate() const {
     if (k_neighbours < 1 || k_neighbours > 100) throw Error("--sor-k", "must be between 1 and 100");
     if (!(std_multiplier > 0.0)) throw Error("--sor-std", "must be > 0");
+    if (!(max_mean_distance >= 0.0)) throw Error("outlier_limit_m", "must be >= 0");
     if (!(isolated_radius >= 0.0)) throw Error("--isolated-radius", "must be >= 0");
     if (isolated_min_neighbours < 0) throw Error("--isolated-min", "must be >= 0");
 }
@@ -55,7 +56,13 @@ OutlierFilterResult filter_outliers(const PointCloud& c, const OutlierFilterOpti
             const std::size_t found = tree.knnSearch(q, k, idx.data(), d2.data());
             double s = 0.0;
             const std::size_t used = std::min(found, static_cast<std::size_t>(o.k_neighbours) + 1);
-            for (std::size_t j = 1; j < used; ++j) s += std::sqrt(d2[j]);
+            // Distances again in double from the source coordinates: the float
+            // tree's rounding depends on the local origin (the cloud's extent).
+            for (std::size_t j = 1; j < used; ++j) {
+                const std::size_t a = idx[j];
+                const double dx = c.x[a] - c.x[i], dy = c.y[a] - c.y[i], dz = c.z[a] - c.z[i];
+                s += std::sqrt(dx * dx + dy * dy + dz * dz);
+            }
             mean_dist[i] = used > 1 ? s / static_cast<double>(used - 1) : 0.0;
             if (o.isolated_radius > 0.0 && m > 0)
                 isolated[i] = found <= m || d2[m] > o.isolated_radius * o.isolated_radius;
@@ -66,7 +73,8 @@ OutlierFilterResult filter_outliers(const PointCloud& c, const OutlierFilterOpti
     for (double d : mean_dist) sum += d, sum2 += d * d;
     const double mean = sum / static_cast<double>(n);
     const double sigma = std::sqrt(std::max(0.0, sum2 / static_cast<double>(n) - mean * mean));
-    const double limit = mean + o.std_multiplier * sigma;
+    const double limit = o.max_mean_distance > 0 ? o.max_mean_distance : mean + o.std_multiplier * sigma;
+    r.limit = limit;
     for (std::size_t i = 0; i < n; ++i)
         if (r.keep[i] && mean_dist[i] > limit) r.keep[i] = 0, ++r.removed_statistical;
     for (std::size_t i = 0; i < n; ++i)

@@ -15,6 +15,10 @@ struct OutlierFilterOptions {
     double std_multiplier = 3.0;     ///< remove when mean kNN distance > mean + m * sigma
     double isolated_radius = 2.0;    ///< isolated-point filter radius, CRS units (0 = off)
     int isolated_min_neighbours = 2; ///< fewer neighbours than this within the radius = isolated
+    /// Absolute limit of the mean kNN distance (CRS units; metres in the
+    /// commands' options). 0 = mean + std_multiplier * sigma of this cloud.
+    /// Tiled runs fix it once so that every tile filters alike.
+    double max_mean_distance = 0.0;
     /// Throws Error naming the option on bad values.
     void validate() const;
 };
@@ -23,6 +27,7 @@ struct OutlierFilterResult {
     std::vector<uint8_t> keep;          ///< 1 = kept, one per point
     std::size_t removed_statistical = 0;
     std::size_t removed_isolated = 0;
+    double limit = 0.0;                 ///< mean kNN distance limit used (CRS units)
 };
 
 /// Statistical outlier removal (3D k nearest neighbours) followed by an

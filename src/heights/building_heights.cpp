@@ -174,6 +174,7 @@ std::vector<BuildingHeight> compute_building_heights(const PointCloud& c, const 
                 roof_kept.push_back(roof[k]), roof_kept_xy.push_back(roof_xy[k]);
                 if (o.keep_roof_points) b.roof_points.push_back(roof_id[k]);
             }
+        std::sort(b.roof_points.begin(), b.roof_points.end());  // cloud order, whatever the index's cells
         b.n_points_roof = static_cast<int64_t>(roof_kept.size());
         b.point_density_m2 = area_m2 > 0 ? static_cast<double>(roof_kept.size()) / area_m2 : 0.0;
         // Coverage: cells of coverage_cell_m whose centre is inside the footprint.

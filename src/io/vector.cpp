@@ -1,5 +1,8 @@
 #include "io/vector.hpp"
 
+#include <cstdlib>
+#include <ctime>
+
 #include <algorithm>
 #include <cmath>
 #include <cpl_string.h>
@@ -60,6 +63,18 @@ void write_polygon_features(const std::string& path, const CrsInfo& crs, const s
         discard_file(tmp);
         throw Error(path, what + why);
     };
+    // GeoPackages record a last-change time; SOURCE_DATE_EPOCH (the
+    // reproducible-builds convention) fixes it so that reruns give the same bytes.
+    std::string stamp;
+    if (const char* epoch = std::getenv("SOURCE_DATE_EPOCH")) {
+        const std::time_t t = static_cast<std::time_t>(std::atoll(epoch));
+        std::tm tm{};
+        gmtime_r(&t, &tm);
+        char buf[32];
+        std::strftime(buf, sizeof buf, "%Y-%m-%dT%H:%M:%SZ", &tm);
+        stamp = buf;
+    }
+    CPLSetThreadLocalConfigOption("OGR_CURRENT_DATE", stamp.empty() ? nullptr : stamp.c_str());
     GDALDataset* ds = driver->Create(tmp.c_str(), 0, 0, 0, GDT_Unknown, nullptr);
     if (!ds) fail("cannot create vector file");
     OGRSpatialReference srs;

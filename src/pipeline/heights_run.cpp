@@ -12,17 +12,24 @@ namespace cityforge {
 
 HeightsStage compute_heights_stage(const std::string& footprints_path, const std::string& cloud_path, const HeightsRunOptions& o,
                                    const Progress& progress) {
+    o.heights.validate();
+    PolygonLayer footprints = read_polygon_layer(footprints_path, o.footprint_layer);
+    if (footprints.crs.empty()) throw Error(footprints_path, "footprints have no coordinate reference system");
+    if (footprints.crs.geographic) throw Error(footprints_path, "footprints are in a geographic CRS; reproject them to a projected CRS first");
+    progress(0.05, "footprints");
+    PreparedCloud cloud = prepare_cloud(cloud_path, o.cloud_crs, footprints.crs, o.outliers, o.ground);
+    progress(0.5, "ground");
+    return compute_heights_stage(std::move(footprints), std::move(cloud), o, progress.sub(0.5, 1.0));
+}
+
+HeightsStage compute_heights_stage(PolygonLayer footprints_in, PreparedCloud cloud, const HeightsRunOptions& o, const Progress& progress) {
     const auto t0 = std::chrono::steady_clock::now();
     o.heights.validate();
     HeightsStage st;
     HeightsRunReport& rep = st.report;
-    st.footprints = read_polygon_layer(footprints_path, o.footprint_layer);
+    st.footprints = std::move(footprints_in);
     const PolygonLayer& footprints = st.footprints;
-    if (footprints.crs.empty()) throw Error(footprints_path, "footprints have no coordinate reference system");
-    if (footprints.crs.geographic) throw Error(footprints_path, "footprints are in a geographic CRS; reproject them to a projected CRS first");
-    progress(0.05, "footprints");
-
-    st.cloud = prepare_cloud(cloud_path, o.cloud_crs, footprints.crs, o.outliers, o.ground);
+    st.cloud = std::move(cloud);
     const PreparedCloud& pc = st.cloud;
     rep.points_read = pc.cloud.size();
     rep.reprojected = pc.reprojected;
@@ -32,7 +39,6 @@ HeightsStage compute_heights_stage(const std::string& footprints_path, const std
     rep.ground_from_classification = pc.ground_from_classification;
     const CrsInfo& cloud_crs = pc.source_crs;
     rep.crs = pc.crs.label();
-    progress(0.5, "ground");
 
     HeightOptions ho = o.heights;
     ho.unit_m = footprints.crs.linear_unit_m;
@@ -40,7 +46,7 @@ HeightsStage compute_heights_stage(const std::string& footprints_path, const std
     std::vector<std::vector<Polygon>> parts;
     parts.reserve(footprints.features.size());
     for (const Feature& f : footprints.features) parts.push_back(f.geometry);
-    st.heights = compute_building_heights(pc.cloud, pc.keep, pc.is_ground, parts, ho, progress.sub(0.5, 0.9));
+    st.heights = compute_building_heights(pc.cloud, pc.keep, pc.is_ground, parts, ho, progress);
     const std::vector<BuildingHeight>& heights = st.heights;
     rep.buildings = heights.size();
 

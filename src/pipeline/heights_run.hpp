@@ -46,6 +46,10 @@ struct HeightsStage {
 };
 HeightsStage compute_heights_stage(const std::string& footprints_path, const std::string& cloud_path, const HeightsRunOptions& options,
                                    const Progress& progress = {});
+/// The same on footprints and a cloud already in memory (the cloud prepared
+/// in the footprints' CRS), e.g. one tile of `cityforge run`.
+HeightsStage compute_heights_stage(PolygonLayer footprints, PreparedCloud cloud, const HeightsRunOptions& options,
+                                   const Progress& progress = {});
 
 /// Runs the whole height tool. Throws Error naming the file on a missing or
 /// empty cloud, a cloud without CRS (and no cloud_crs), footprints without

@@ -50,10 +50,12 @@ PreparedCloud prepare_cloud(const std::string& cloud_path, const std::string& cl
     const double unit = p.crs.linear_unit_m;
     OutlierFilterOptions oo = outliers;
     oo.isolated_radius /= unit;
+    oo.max_mean_distance /= unit;
     const OutlierFilterResult cleaned = filter_outliers(p.cloud, oo);
     p.keep = cleaned.keep;
     p.removed_statistical = cleaned.removed_statistical;
     p.removed_isolated = cleaned.removed_isolated;
+    p.outlier_limit_m = cleaned.limit * unit;
     GroundFilterOptions go = ground;
     go.cell /= unit, go.window /= unit, go.elevation_threshold /= p.source_crs.z_unit_m;
     GroundResult g = classify_ground(p.cloud, p.keep, go);

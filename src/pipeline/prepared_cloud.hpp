@@ -21,6 +21,7 @@ struct PreparedCloud {
     bool reprojected = false;
     std::size_t removed_statistical = 0, removed_isolated = 0, ground_points = 0;
     bool ground_from_classification = false;
+    double outlier_limit_m = 0.0;  ///< mean kNN distance limit the outlier filter used, metres
 };
 
 /// `target` may be empty (keep the cloud's CRS). Throws Error naming the file

@@ -15,19 +15,9 @@ void RoofsRunOptions::validate() const {
     model.validate();
 }
 
-RoofsRunReport run_roofs(const std::string& footprints_path, const std::string& cloud_path, const std::string& out_dir,
-                         const RoofsRunOptions& o, const Progress& progress) {
-    const auto t0 = std::chrono::steady_clock::now();
-    o.validate();
-    RoofsRunReport rep;
-    HeightsRunOptions ho = o.heights;
-    ho.heights.keep_roof_points = true;
-    HeightsStage st = compute_heights_stage(footprints_path, cloud_path, ho, progress.sub(0.0, 0.6));
-    rep.heights = st.report;
-    CrsInfo crs = st.table.crs;
-    if (!o.model.vertical_crs.empty() && !crs.vertical_epsg)
-        crs = combine_with_vertical(crs, crs_from_user_input(o.model.vertical_crs, "--vertical-crs"));
-    CityModel model = build_city_model(st.table, crs, o.model, footprints_path);
+CityModel build_lod2_model(const HeightsStage& st, const CrsInfo& crs, const RoofsRunOptions& o, const std::string& source,
+                           RoofsRunReport& rep) {
+    CityModel model = build_city_model(st.table, crs, o.model, source);
 
     const auto t1 = std::chrono::steady_clock::now();
     Lod2Options lo = o.lod2;
@@ -46,7 +36,6 @@ RoofsRunReport run_roofs(const std::string& footprints_path, const std::string& 
         results[i] = reconstruct_lod2(b.footprint, pts, *h.ground_z, flat, lo);
     });
     rep.lod2_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t1).count();
-    progress(0.8, "roofs");
     double rmse_sum = 0;
     for (std::size_t i = 0; i < model.buildings.size(); ++i) {
         Building& b = model.buildings[i];
@@ -69,6 +58,23 @@ RoofsRunReport run_roofs(const std::string& footprints_path, const std::string& 
         complete_building(b, model.crs, o.model.validity);
     }
     rep.mean_rmse_m = rep.lod2 ? rmse_sum / double(rep.lod2) : 0.0;
+    return model;
+}
+
+RoofsRunReport run_roofs(const std::string& footprints_path, const std::string& cloud_path, const std::string& out_dir,
+                         const RoofsRunOptions& o, const Progress& progress) {
+    const auto t0 = std::chrono::steady_clock::now();
+    o.validate();
+    RoofsRunReport rep;
+    HeightsRunOptions ho = o.heights;
+    ho.heights.keep_roof_points = true;
+    HeightsStage st = compute_heights_stage(footprints_path, cloud_path, ho, progress.sub(0.0, 0.6));
+    rep.heights = st.report;
+    CrsInfo crs = st.table.crs;
+    if (!o.model.vertical_crs.empty() && !crs.vertical_epsg)
+        crs = combine_with_vertical(crs, crs_from_user_input(o.model.vertical_crs, "--vertical-crs"));
+    const CityModel model = build_lod2_model(st, crs, o, footprints_path, rep);
+    progress(0.8, "roofs");
     rep.model = write_city_model(model, crs, out_dir, o.model, progress.sub(0.8, 1.0));
     rep.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
     return rep;

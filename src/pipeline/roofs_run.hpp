@@ -30,6 +30,12 @@ struct RoofsRunReport {
     double seconds = 0.0;
 };
 
+/// The LOD2 stage on computed heights (made with keep_roof_points): the city
+/// model of the footprints with LOD1 and LOD2 solids and the roof
+/// attributes; fills the roof counts of `report`. `source` names the input in messages.
+CityModel build_lod2_model(const HeightsStage& stage, const CrsInfo& crs, const RoofsRunOptions& options, const std::string& source,
+                           RoofsRunReport& report);
+
 /// Writes into `out_dir` what `cityforge export` writes, with LOD2. Throws
 /// Error naming the file for the errors of `cityforge heights` and `export`.
 RoofsRunReport run_roofs(const std::string& footprints_path, const std::string& cloud_path, const std::string& out_dir,

@@ -322,10 +322,12 @@ PartResult build_part(const Polygon& part, const std::vector<std::array<double, 
     // partition lines would otherwise leave micro-edges): every face maps its
     // vertices through the same representative, so shared edges still pair.
     constexpr double snap_m = 0.005;
+    // Keyed by handle for lookup only; every loop runs in the arrangement's
+    // vertex order (`vs`), never in the map's (address) order.
     std::map<Arr::Vertex_const_handle, int> rep;
     std::vector<XY> rep_xy;
+    std::vector<Arr::Vertex_const_handle> vs;
     {
-        std::vector<Arr::Vertex_const_handle> vs;
         for (auto v = arr.vertices_begin(); v != arr.vertices_end(); ++v)
             if (!v->is_isolated()) vs.push_back(v);
         for (auto v : vs) {
@@ -415,7 +417,8 @@ PartResult build_part(const Polygon& part, const std::vector<std::array<double, 
                 heights[v].unify(A.z(rep_xy[v].x, rep_xy[v].y), B.z(rep_xy[v].x, rep_xy[v].y));
             }
         });
-    for (const auto& [v, r] : rep) {
+    for (auto v : vs) {
+        const int r = rep.at(v);
         auto start = v->incident_halfedges(), h = start;
         do {
             const int l = h->face()->data();

@@ -1,0 +1,566 @@
+#include "pipeline/city_run.hpp"
+
+#include <algorithm>
+#include <chrono>
+#include <climits>
+#include <cmath>
+#include <filesystem>
+#include <fstream>
+#include <set>
+#include <sstream>
+#include <sys/resource.h>
+#include <tbb/global_control.h>
+#include <thread>
+
+#include "cloud/cloud_reader.hpp"
+#include "core/atomic_file.hpp"
+#include "core/error.hpp"
+#include "core/log.hpp"
+#include "core/version.hpp"
+#include "crs/crs.hpp"
+#include "footprint/building_mask.hpp"
+#include "io/vector.hpp"
+#include "model/building_json.hpp"
+#include "pipeline/prepared_cloud.hpp"
+
+namespace cityforge {
+
+namespace fs = std::filesystem;
+using json = nlohmann::json;
+
+namespace {
+
+double peak_memory_mb() {
+    rusage ru{};
+    getrusage(RUSAGE_SELF, &ru);
+    return double(ru.ru_maxrss) / 1024.0;
+}
+
+double since(std::chrono::steady_clock::time_point t) {
+    return std::chrono::duration<double>(std::chrono::steady_clock::now() - t).count();
+}
+
+// Refuses keys of `j` not in `allowed`, naming their path.
+void check_keys(const json& j, const std::set<std::string>& allowed, const std::string& where) {
+    if (!j.is_object()) throw Error(where, "must be a JSON object");
+    for (const auto& [k, v] : j.items())
+        if (!allowed.count(k)) throw Error(where, "unknown key '" + k + "'");
+}
+
+template <typename T>
+void take(const json& j, const char* key, T& out, const std::string& where) {
+    if (!j.contains(key)) return;
+    try {
+        out = j.at(key).get<T>();
+    } catch (const json::exception&) {
+        throw Error(where + "." + key, "has the wrong type");
+    }
+}
+
+std::string tile_name(int k) {
+    char buf[32];
+    std::snprintf(buf, sizeof buf, "tile_%05d", k);
+    return buf;
+}
+
+}  // namespace
+
+void RunOptions::validate() const {
+    if (cloud.empty()) throw Error("--cloud", "cityforge run needs a dense point cloud (ortho-only extraction: `cityforge footprints`)");
+    if (ortho.empty() && footprints.empty()) throw Error("--ortho", "give the ortho (its grid and CRS) or existing --footprints");
+    if (tile_size_px < 64) throw Error("--tile-size", "must be at least 64 pixels");
+    if (!(overlap_m >= 0)) throw Error("--overlap-m", "must be >= 0");
+    if (threads < 0) throw Error("--threads", "must be >= 0");
+    if (!(footprint_grid_m > 0)) throw Error("footprint_grid_m", "must be > 0");
+    buildings.validate();
+    if (footprints.empty()) extraction.mask.validate();
+}
+
+json to_json(const RunOptions& o) {
+    const auto& m = o.extraction.mask;
+    const auto& h = o.buildings.heights.heights;
+    const auto& l = o.buildings.lod2;
+    const auto& e = o.buildings.model;
+    return {{"ortho", o.ortho},
+            {"cloud", o.cloud},
+            {"cloud_crs", o.cloud_crs},
+            {"footprints", o.footprints},
+            {"tile_size_px", o.tile_size_px},
+            {"overlap_m", o.overlap_m},
+            {"threads", o.threads},
+            {"extraction",
+             {{"min_height_m", m.min_height_m},
+              {"min_area_m2", m.min_area_m2},
+              {"min_hole_m2", m.min_hole_m2},
+              {"opening_px", m.opening_radius_px},
+              {"fit", to_string(o.extraction.fit)},
+              {"fit_tolerance_pct", o.extraction.recursive.tolerance_pct},
+              {"simplify_m", o.extraction.simplify_m},
+              {"footprint_grid_m", o.footprint_grid_m}}},
+            {"cleaning",
+             {{"outlier_filter", o.buildings.heights.outliers.enabled},
+              {"recompute_ground", !o.buildings.heights.ground.trust_classification},
+              {"outlier_limit_m", o.buildings.heights.outliers.max_mean_distance}}},
+            {"heights",
+             {{"roof_percentile", h.roof_percentile},
+              {"ground_percentile", h.ground_percentile},
+              {"ground_buffer_m", h.ground_buffer_m},
+              {"min_height_m", h.min_height_above_ground_m},
+              {"min_roof_points", h.min_roof_points}}},
+            {"roofs",
+             {{"plane_distance_m", l.planes.distance_tolerance_m},
+              {"plane_normal_deg", l.planes.normal_tolerance_deg},
+              {"plane_min_points", l.planes.min_points},
+              {"lod2_min_points", l.min_points}}},
+            {"export",
+             {{"formats", e.formats}, {"lods", e.lods}, {"geojson_crs", e.geojson_crs}, {"vertical_crs", e.vertical_crs}, {"id_field", e.id_field}}}};
+}
+
+RunOptions run_options_from_json(const json& j, const std::string& where, RunOptions o) {
+    check_keys(j, {"ortho", "cloud", "cloud_crs", "footprints", "tile_size_px", "overlap_m", "threads", "extraction", "cleaning", "heights", "roofs", "export"},
+               where);
+    take(j, "ortho", o.ortho, where), take(j, "cloud", o.cloud, where), take(j, "cloud_crs", o.cloud_crs, where);
+    take(j, "footprints", o.footprints, where), take(j, "tile_size_px", o.tile_size_px, where);
+    take(j, "overlap_m", o.overlap_m, where), take(j, "threads", o.threads, where);
+    if (j.contains("extraction")) {
+        const json& x = j["extraction"];
+        const std::string w = where + ": extraction";
+        check_keys(x, {"min_height_m", "min_area_m2", "min_hole_m2", "opening_px", "fit", "fit_tolerance_pct", "simplify_m", "footprint_grid_m"}, w);
+        take(x, "min_height_m", o.extraction.mask.min_height_m, w), take(x, "min_area_m2", o.extraction.mask.min_area_m2, w);
+        take(x, "min_hole_m2", o.extraction.mask.min_hole_m2, w), take(x, "opening_px", o.extraction.mask.opening_radius_px, w);
+        take(x, "fit_tolerance_pct", o.extraction.recursive.tolerance_pct, w), take(x, "simplify_m", o.extraction.simplify_m, w);
+        take(x, "footprint_grid_m", o.footprint_grid_m, w);
+        if (x.contains("fit")) {
+            std::string fit;
+            take(x, "fit", fit, w);
+            o.extraction.fit = footprint_fit_from_string(fit);
+        }
+    }
+    if (j.contains("cleaning")) {
+        const json& x = j["cleaning"];
+        const std::string w = where + ": cleaning";
+        check_keys(x, {"outlier_filter", "recompute_ground", "outlier_limit_m"}, w);
+        take(x, "outlier_filter", o.buildings.heights.outliers.enabled, w);
+        take(x, "outlier_limit_m", o.buildings.heights.outliers.max_mean_distance, w);
+        bool recompute = !o.buildings.heights.ground.trust_classification;
+        take(x, "recompute_ground", recompute, w);
+        o.buildings.heights.ground.trust_classification = !recompute;
+    }
+    if (j.contains("heights")) {
+        const json& x = j["heights"];
+        const std::string w = where + ": heights";
+        auto& h = o.buildings.heights.heights;
+        check_keys(x, {"roof_percentile", "ground_percentile", "ground_buffer_m", "min_height_m", "min_roof_points"}, w);
+        take(x, "roof_percentile", h.roof_percentile, w), take(x, "ground_percentile", h.ground_percentile, w);
+        take(x, "ground_buffer_m", h.ground_buffer_m, w), take(x, "min_height_m", h.min_height_above_ground_m, w);
+        take(x, "min_roof_points", h.min_roof_points, w);
+    }
+    if (j.contains("roofs")) {
+        const json& x = j["roofs"];
+        const std::string w = where + ": roofs";
+        auto& l = o.buildings.lod2;
+        check_keys(x, {"plane_distance_m", "plane_normal_deg", "plane_min_points", "lod2_min_points"}, w);
+        take(x, "plane_distance_m", l.planes.distance_tolerance_m, w), take(x, "plane_normal_deg", l.planes.normal_tolerance_deg, w);
+        take(x, "plane_min_points", l.planes.min_points, w), take(x, "lod2_min_points", l.min_points, w);
+    }
+    if (j.contains("export")) {
+        const json& x = j["export"];
+        const std::string w = where + ": export";
+        auto& e = o.buildings.model;
+        check_keys(x, {"formats", "lods", "geojson_crs", "vertical_crs", "id_field"}, w);
+        take(x, "formats", e.formats, w), take(x, "lods", e.lods, w), take(x, "geojson_crs", e.geojson_crs, w);
+        take(x, "vertical_crs", e.vertical_crs, w), take(x, "id_field", e.id_field, w);
+    }
+    // The cleaning options serve the extraction as well: one cloud, one cleaning.
+    o.extraction.outliers = o.buildings.heights.outliers;
+    o.extraction.ground = o.buildings.heights.ground;
+    o.extraction.cloud = o.cloud, o.extraction.cloud_crs = o.cloud_crs;
+    o.buildings.heights.cloud_crs = o.cloud_crs;
+    return o;
+}
+
+RunManifest plan_run(const RunOptions& in) {
+    RunOptions o = run_options_from_json(to_json(in), "options", in);  // normalised: shared cleaning options
+    o.validate();
+    RunManifest m;
+    m.options = o;
+    double gsd_m = 0.0;
+    if (!o.ortho.empty()) {
+        const RasterInfo info = read_raster_info(o.ortho);
+        if (info.crs.geographic) throw Error(o.ortho, "the ortho is in a geographic CRS; city models need a projected CRS");
+        m.grid = {info.transform, info.width, info.height};
+        m.crs_wkt = info.crs.wkt;
+        gsd_m = std::abs(info.transform.pixel_width) * info.crs.linear_unit_m;
+    } else {
+        const PolygonLayer fp = read_polygon_layer(o.footprints, o.buildings.heights.footprint_layer);
+        if (fp.crs.empty() || fp.crs.geographic) throw Error(o.footprints, "footprints need a projected CRS");
+        Extent e{INFINITY, INFINITY, -INFINITY, -INFINITY};
+        for (const Feature& f : fp.features)
+            for (const Polygon& p : f.geometry) {
+                const Extent q = polygon_extent(p);
+                e.min_x = std::min(e.min_x, q.min_x), e.min_y = std::min(e.min_y, q.min_y);
+                e.max_x = std::max(e.max_x, q.max_x), e.max_y = std::max(e.max_y, q.max_y);
+            }
+        const double cell = o.footprint_grid_m / fp.crs.linear_unit_m;
+        const double x0 = std::floor(e.min_x / cell) * cell, y1 = std::ceil(e.max_y / cell) * cell;
+        m.grid = {GeoTransform{x0, cell, y1, -cell}, static_cast<int>(std::ceil((e.max_x - x0) / cell)) + 1,
+                  static_cast<int>(std::ceil((y1 - e.min_y) / cell)) + 1};
+        m.crs_wkt = fp.crs.wkt;
+        gsd_m = o.footprint_grid_m;
+    }
+    m.overlap_px = static_cast<int>(std::ceil(o.overlap_m / gsd_m));
+    // The outlier filter's limit, measured once on a sample fixed by the grid
+    // (its central 400 m square), so that every tile filters alike.
+    if (m.options.buildings.heights.outliers.enabled && !(m.options.buildings.heights.outliers.max_mean_distance > 0)) {
+        const CrsInfo grid_crs = crs_from_wkt(m.crs_wkt, "grid");
+        const double half = 200.0 / grid_crs.linear_unit_m;
+        const MapPoint c = m.grid.transform.pixel_to_map({m.grid.width / 2.0, m.grid.height / 2.0});
+        const Extent box{c.x - half, c.y - half, c.x + half, c.y + half};
+        GroundFilterOptions trust = o.buildings.heights.ground;
+        trust.trust_classification = true;
+        const PreparedCloud sample = prepare_cloud(o.cloud, o.cloud_crs, grid_crs, o.buildings.heights.outliers, trust, &box);
+        if (sample.cloud.size() == 0) throw Error(o.cloud, "no points in the centre of the grid; is the cloud over the ortho?");
+        m.options.buildings.heights.outliers.max_mean_distance = sample.outlier_limit_m;
+        m.options.extraction.outliers.max_mean_distance = sample.outlier_limit_m;
+    }
+    const int ts = o.tile_size_px;
+    int k = 0;
+    for (int r = 0; r < m.grid.height; r += ts)
+        for (int c = 0; c < m.grid.width; c += ts) {
+            TileSpec t;
+            t.index = k++;
+            t.core = {c, r, std::min(ts, m.grid.width - c), std::min(ts, m.grid.height - r)};
+            const int c0 = std::max(0, c - m.overlap_px), r0 = std::max(0, r - m.overlap_px);
+            const int c1 = std::min(m.grid.width, c + t.core.width + m.overlap_px), r1 = std::min(m.grid.height, r + t.core.height + m.overlap_px);
+            t.window = {c0, r0, c1 - c0, r1 - r0};
+            m.tiles.push_back(t);
+        }
+    return m;
+}
+
+void write_manifest(const std::string& path, const RunManifest& m) {
+    json j;
+    j["cityforge_manifest"] = 1;
+    j["cityforge_version"] = version();
+    j["options"] = to_json(m.options);
+    j["grid"] = {{"geotransform", m.grid.transform.to_gdal()}, {"width", m.grid.width}, {"height", m.grid.height}, {"crs_wkt", m.crs_wkt}};
+    j["overlap_px"] = m.overlap_px;
+    json tiles = json::array();
+    for (const TileSpec& t : m.tiles)
+        tiles.push_back({{"index", t.index},
+                         {"core", {t.core.col, t.core.row, t.core.width, t.core.height}},
+                         {"window", {t.window.col, t.window.row, t.window.width, t.window.height}}});
+    j["tiles"] = tiles;
+    write_text_file(path, j.dump(2) + "\n");
+}
+
+RunManifest read_manifest(const std::string& path) {
+    std::ifstream in(path);
+    if (!in) throw Error(path, "cannot open the manifest");
+    json j;
+    try {
+        j = json::parse(in);
+    } catch (const json::exception& e) {
+        throw Error(path, std::string("invalid JSON: ") + e.what());
+    }
+    if (!j.contains("cityforge_manifest")) throw Error(path, "not a cityforge manifest (make one with `cityforge plan`)");
+    try {
+        RunManifest m;
+        m.options = run_options_from_json(j.at("options"), path + ": options");
+        const auto gt = j.at("grid").at("geotransform").get<std::array<double, 6>>();
+        m.grid = {GeoTransform::from_gdal(gt), j["grid"].at("width").get<int>(), j["grid"].at("height").get<int>()};
+        m.crs_wkt = j["grid"].at("crs_wkt").get<std::string>();
+        m.overlap_px = j.at("overlap_px").get<int>();
+        for (const auto& t : j.at("tiles")) {
+            const auto c = t.at("core").get<std::array<int, 4>>(), w = t.at("window").get<std::array<int, 4>>();
+            m.tiles.push_back({t.at("index").get<int>(), {c[0], c[1], c[2], c[3]}, {w[0], w[1], w[2], w[3]}});
+        }
+        return m;
+    } catch (const json::exception& e) {
+        throw Error(path, std::string("malformed manifest: ") + e.what());
+    }
+}
+
+namespace {
+
+// The buildings one tile owns, with their heights and LOD2, as building lines.
+std::vector<Building> tile_buildings(const RunManifest& m, const TileSpec& t, TileReport& rep, std::vector<std::string>& warnings) {
+    const RunOptions& o = m.options;
+    const CrsInfo grid_crs = crs_from_wkt(m.crs_wkt, "manifest");
+    const double unit = grid_crs.linear_unit_m;
+    const GeoTransform& gt = m.grid.transform;
+    const MapPoint a = gt.pixel_to_map({double(t.window.col), double(t.window.row)});
+    const MapPoint b = gt.pixel_to_map({double(t.window.col + t.window.width), double(t.window.row + t.window.height)});
+    const Extent window_extent{std::min(a.x, b.x), std::min(a.y, b.y), std::max(a.x, b.x), std::max(a.y, b.y)};
+    const MapPoint ca = gt.pixel_to_map({double(t.core.col), double(t.core.row)});
+    const MapPoint cb = gt.pixel_to_map({double(t.core.col + t.core.width), double(t.core.row + t.core.height)});
+
+    auto t0 = std::chrono::steady_clock::now();
+    PreparedCloud pc = prepare_cloud(o.cloud, o.cloud_crs, grid_crs, o.buildings.heights.outliers, o.buildings.heights.ground, &window_extent);
+    rep.seconds["cloud"] = since(t0);
+    PolygonLayer footprints;
+    footprints.crs = pc.crs.empty() ? grid_crs : pc.crs;
+    if (!o.footprints.empty()) {
+        // Given footprints: those whose bounding-box centre lies in the core.
+        t0 = std::chrono::steady_clock::now();
+        PolygonLayer all = read_polygon_layer(o.footprints, o.buildings.heights.footprint_layer);
+        if (!same_horizontal_crs(all.crs, grid_crs)) throw Error(o.footprints, "footprints are not in the grid's CRS");
+        footprints.field_names = all.field_names, footprints.field_types = all.field_types;
+        const double cx0 = std::min(ca.x, cb.x), cx1 = std::max(ca.x, cb.x), cy0 = std::min(ca.y, cb.y), cy1 = std::max(ca.y, cb.y);
+        const bool last_col = t.core.col + t.core.width == m.grid.width, last_row = t.core.row + t.core.height == m.grid.height;
+        for (std::size_t i = 0; i < all.features.size(); ++i) {
+            Extent e{INFINITY, INFINITY, -INFINITY, -INFINITY};
+            for (const Polygon& p : all.features[i].geometry) {
+                const Extent q = polygon_extent(p);
+                e.min_x = std::min(e.min_x, q.min_x), e.min_y = std::min(e.min_y, q.min_y);
+                e.max_x = std::max(e.max_x, q.max_x), e.max_y = std::max(e.max_y, q.max_y);
+            }
+            const double x = 0.5 * (e.min_x + e.max_x), y = 0.5 * (e.min_y + e.max_y);
+            // Half-open cores (the grid's last row and column closed) own every point exactly once.
+            const bool in_x = x >= cx0 && (x < cx1 || (last_col && x <= cx1));
+            const bool in_y = y <= cy1 && (y > cy0 || (last_row && y >= cy0));
+            if (!in_x || !in_y) continue;
+            footprints.features.push_back(all.features[i]);
+            footprints.fids.push_back(all.fids[i]);
+            if (e.min_x < window_extent.min_x || e.max_x > window_extent.max_x || e.min_y < window_extent.min_y || e.max_y > window_extent.max_y)
+                warnings.push_back("building fid " + std::to_string(all.fids[i]) + " is larger than the tile overlap; its points may be cut");
+        }
+        rep.seconds["footprints"] = since(t0);
+    } else {
+        // Extraction on the window: rasters, buildings, then only the buildings whose first pixel is in the core.
+        t0 = std::chrono::steady_clock::now();
+        const GridSpec wg{gt.window(t.window.col, t.window.row), t.window.width, t.window.height};
+        if (pc.cloud.size() == 0) throw Error(o.cloud, "no points in tile " + std::to_string(t.index));
+        CloudRasters rasters = rasterize_cloud(pc.cloud, pc.keep, pc.is_ground, wg, unit);
+        BuildingMaskOptions mo = o.extraction.mask;
+        mo.gsd_m = std::abs(gt.pixel_width) * unit;
+        mo.min_height_m /= pc.crs.z_unit_m;
+        const BuildingMask mask = detect_buildings(rasters.ndsm, rasters.dsm, rasters.building_share, rasters.vegetation_share, mo);
+        rep.seconds["detection"] = since(t0);
+        t0 = std::chrono::steady_clock::now();
+        const int w = t.window.width, h = t.window.height;
+        std::vector<int64_t> ids(mask.count + 1, 0);
+        std::vector<uint8_t> owned(mask.count + 1, 0), cut(mask.count + 1, 0);
+        for (int r = 0; r < h; ++r)
+            for (int c = 0; c < w; ++c) {
+                const uint32_t l = mask.labels.data[static_cast<std::size_t>(r) * w + c];
+                if (!l) continue;
+                if (r == 0 || c == 0 || r == h - 1 || c == w - 1) cut[l] = 1;
+                if (ids[l]) continue;
+                const int gc = t.window.col + c, gr = t.window.row + r;
+                ids[l] = int64_t(gr) * m.grid.width + gc + 1;
+                owned[l] = gc >= t.core.col && gc < t.core.col + t.core.width && gr >= t.core.row && gr < t.core.row + t.core.height;
+            }
+        FootprintsRunOptions fo = o.extraction;
+        const FootprintTable table = footprint_table(mask, rasters.ndsm, gt, t.window.col, t.window.row, ids, "cloud_only", unit,
+                                                     pc.crs.z_unit_m, footprints.crs, fo);
+        rasters = CloudRasters{};  // free the window's rasters before the heights
+        std::set<int64_t> keep;
+        for (uint32_t l = 1; l <= mask.count; ++l)
+            if (owned[l]) {
+                keep.insert(ids[l]);
+                // Touching the window's edge (not the grid's): larger than the overlap, cut.
+                if (cut[l]) warnings.push_back("building " + std::to_string(ids[l]) + " in tile " + std::to_string(t.index) +
+                                               " reaches the edge of the tile's overlap; raise --overlap-m");
+            }
+        for (const FieldDefinition& f : table.fields) footprints.field_names.push_back(f.name), footprints.field_types.push_back(f.type);
+        for (const Feature& f : table.features) {
+            const int64_t id = std::get<int64_t>(f.values[0]);
+            if (!keep.count(id)) continue;
+            footprints.features.push_back(f);
+            footprints.fids.push_back(id);
+        }
+        rep.seconds["footprints"] = since(t0);
+    }
+    t0 = std::chrono::steady_clock::now();
+    HeightsRunOptions ho = o.buildings.heights;
+    ho.heights.keep_roof_points = true;
+    const std::size_t n = footprints.features.size();
+    const HeightsStage st = compute_heights_stage(std::move(footprints), std::move(pc), ho);
+    rep.seconds["heights"] = since(t0);
+    t0 = std::chrono::steady_clock::now();
+    CrsInfo crs = st.table.crs;
+    if (!o.buildings.model.vertical_crs.empty() && !crs.vertical_epsg)
+        crs = combine_with_vertical(crs, crs_from_user_input(o.buildings.model.vertical_crs, "--vertical-crs"));
+    RoofsRunReport rr;
+    RoofsRunOptions ro = o.buildings;
+    if (o.footprints.empty()) ro.model.id_field = "id";
+    std::vector<Building> out;
+    if (n) out = build_lod2_model(st, crs, ro, "tile " + std::to_string(t.index), rr).buildings;
+    rep.seconds["roofs"] = since(t0);
+    rep.buildings = out.size();
+    return out;
+}
+
+}  // namespace
+
+TileReport run_tile(const RunManifest& m, int k, const std::string& out_dir, const Progress& progress) {
+    if (k < 0 || k >= static_cast<int>(m.tiles.size())) throw Error("--tile", "no tile " + std::to_string(k) + " (the manifest has " + std::to_string(m.tiles.size()) + ")");
+    const fs::path dir = fs::path(out_dir) / "tiles";
+    ensure_directory(dir);
+    const fs::path lines = dir / (tile_name(k) + ".jsonl"), summary = dir / (tile_name(k) + ".json");
+    TileReport rep;
+    rep.index = k;
+    if (fs::exists(summary)) {
+        rep.status = "skipped";
+        return rep;
+    }
+    const auto t0 = std::chrono::steady_clock::now();
+    std::vector<std::string> warnings;
+    try {
+        const std::vector<Building> buildings = tile_buildings(m, m.tiles[k], rep, warnings);
+        AtomicTextFile file(lines);
+        for (const Building& b : buildings) file.stream() << building_to_json(b).dump() << '\n';
+        file.commit();
+        rep.status = "done";
+    } catch (const Error& e) {
+        rep.status = "failed", rep.reason = e.what();
+        log::warning("tile " + std::to_string(k) + " failed: " + rep.reason);
+    }
+    rep.seconds["total"] = since(t0);
+    rep.peak_memory_mb = peak_memory_mb();
+    json j{{"index", k}, {"status", rep.status}, {"reason", rep.reason}, {"buildings", rep.buildings}, {"seconds", rep.seconds},
+           {"peak_memory_mb", rep.peak_memory_mb}, {"warnings", warnings}};
+    write_text_file(summary, j.dump(2) + "\n");
+    progress(1.0, tile_name(k));
+    return rep;
+}
+
+RunReport merge_tiles(const RunManifest& m, const std::string& out_dir, const Progress& progress) {
+    const auto t0 = std::chrono::steady_clock::now();
+    RunReport rep;
+    const fs::path dir = fs::path(out_dir) / "tiles";
+    const CrsInfo grid_crs = crs_from_wkt(m.crs_wkt, "manifest");
+    std::vector<Building> buildings;
+    std::map<std::string, double> stage_seconds;
+    for (const TileSpec& t : m.tiles) {
+        const fs::path summary = dir / (tile_name(t.index) + ".json");
+        if (!fs::exists(summary)) throw Error(summary.string(), "tile " + std::to_string(t.index) + " has not run yet");
+        std::ifstream in(summary);
+        json s;
+        try {
+            s = json::parse(in);
+        } catch (const json::exception& e) {
+            throw Error(summary.string(), std::string("invalid tile report: ") + e.what());
+        }
+        TileReport tr;
+        tr.index = t.index, tr.status = s.value("status", ""), tr.reason = s.value("reason", "");
+        tr.buildings = s.value("buildings", std::size_t(0)), tr.peak_memory_mb = s.value("peak_memory_mb", 0.0);
+        tr.seconds = s.value("seconds", std::map<std::string, double>{});
+        for (const auto& [k, v] : tr.seconds) stage_seconds[k] += v;
+        for (const auto& w : s.value("warnings", std::vector<std::string>{})) rep.warnings.push_back(w);
+        if (tr.status == "failed") rep.warnings.push_back("tile " + std::to_string(t.index) + " failed: " + tr.reason);
+        rep.peak_memory_mb = std::max(rep.peak_memory_mb, tr.peak_memory_mb);
+        rep.tiles.push_back(tr);
+        if (tr.status != "done") continue;
+        std::ifstream lines(dir / (tile_name(t.index) + ".jsonl"));
+        std::string line;
+        int n = 0;
+        while (std::getline(lines, line)) {
+            ++n;
+            const std::string where = (dir / (tile_name(t.index) + ".jsonl")).string() + " line " + std::to_string(n);
+            try {
+                buildings.push_back(building_from_json(json::parse(line), where));
+            } catch (const json::exception& e) {
+                throw Error(where, std::string("invalid JSON: ") + e.what());
+            }
+        }
+    }
+    progress(0.3, "tiles read");
+    // One order whatever the tiling: by numeric id when ids are numbers, else as text.
+    auto key = [](const std::string& id) {
+        char* end = nullptr;
+        const long long v = std::strtoll(id.c_str(), &end, 10);
+        return std::pair<long long, std::string>(end && *end == 0 && !id.empty() ? v : LLONG_MAX, id);
+    };
+    std::sort(buildings.begin(), buildings.end(), [&](const Building& a, const Building& b) { return key(a.id) < key(b.id); });
+    CrsInfo crs = grid_crs;
+    // The vertical datum: from the cloud (as the tiles saw it) or the option.
+    const std::string cloud_wkt = m.options.cloud_crs.empty() ? CloudReader(m.options.cloud).crs_wkt() : std::string();
+    const CrsInfo cloud_crs = !m.options.cloud_crs.empty() ? crs_from_user_input(m.options.cloud_crs, "--cloud-crs") : crs_from_wkt(cloud_wkt, m.options.cloud);
+    crs = combine_with_vertical(crs, cloud_crs);
+    if (!m.options.buildings.model.vertical_crs.empty() && !crs.vertical_epsg)
+        crs = combine_with_vertical(crs, crs_from_user_input(m.options.buildings.model.vertical_crs, "--vertical-crs"));
+    CityModel model;
+    model.crs = model_crs_of(crs);
+    model.buildings = std::move(buildings);
+    for (Building& b : model.buildings) complete_building(b, model.crs, m.options.buildings.model.validity);
+    const auto te = std::chrono::steady_clock::now();
+    rep.model = write_city_model(model, crs, out_dir, m.options.buildings.model, progress.sub(0.3, 0.95));
+    stage_seconds["export"] = since(te);
+    rep.buildings = rep.model.buildings, rep.valid_lod1 = rep.model.valid_lod1, rep.valid_lod2 = rep.model.valid_lod2;
+    rep.peak_memory_mb = std::max(rep.peak_memory_mb, peak_memory_mb());
+    rep.seconds = since(t0);
+
+    json j;
+    j["cityforge_version"] = version();
+    j["options"] = to_json(m.options);
+    json inputs = json::object();
+    if (!m.options.ortho.empty()) inputs["ortho"] = {{"path", m.options.ortho}, {"crs", grid_crs.label()}};
+    inputs["cloud"] = {{"path", m.options.cloud}, {"crs", cloud_crs.label()}};
+    if (!m.options.footprints.empty()) inputs["footprints"] = {{"path", m.options.footprints}, {"crs", grid_crs.label()}};
+    j["inputs"] = inputs;
+    j["crs"] = crs.label();
+    j["grid"] = {{"width", m.grid.width}, {"height", m.grid.height}, {"geotransform", m.grid.transform.to_gdal()}};
+    json tiles = json::array();
+    for (const TileReport& t : rep.tiles)
+        tiles.push_back({{"index", t.index}, {"status", t.status}, {"reason", t.reason}, {"buildings", t.buildings}, {"seconds", t.seconds},
+                         {"peak_memory_mb", t.peak_memory_mb}});
+    j["tiles"] = tiles;
+    j["stage_seconds"] = stage_seconds;
+    j["peak_memory_mb"] = rep.peak_memory_mb;
+    j["counts"] = {{"buildings", rep.model.buildings},   {"with_lod1", rep.model.with_lod1}, {"valid_lod1", rep.model.valid_lod1},
+                   {"with_lod2", rep.model.with_lod2},   {"valid_lod2", rep.model.valid_lod2}, {"status", rep.model.status_counts}};
+    j["files"] = rep.model.files;
+    j["warnings"] = rep.warnings;
+    rep.report_path = (fs::path(out_dir) / "run_report.json").string();
+    write_text_file(rep.report_path, j.dump(2) + "\n");
+    progress(1.0, "merged");
+    return rep;
+}
+
+RunReport run_city(const RunManifest& m, const std::string& out_dir, const RunShare& share, const Progress& progress) {
+    if (share.size < 1 || share.rank < 0 || share.rank >= share.size) throw Error("--mpi", "bad rank/size");
+    std::unique_ptr<tbb::global_control> limit;
+    if (m.options.threads > 0) limit = std::make_unique<tbb::global_control>(tbb::global_control::max_allowed_parallelism, m.options.threads);
+    ensure_directory(out_dir);
+    // Resuming reuses finished tiles: only when they were made with the same plan.
+    const fs::path stored = fs::path(out_dir) / "manifest.json";
+    const std::string plan_path = stored.string();
+    if (fs::exists(stored)) {
+        const RunManifest before = read_manifest(plan_path);
+        if (to_json(before.options) != to_json(m.options) || before.tiles.size() != m.tiles.size() || before.overlap_px != m.overlap_px)
+            throw Error(out_dir, "holds a run with other options or tiles; resume with the same options or use a new folder");
+    } else if (share.rank == 0) {
+        write_manifest(plan_path, m);
+    }
+    const auto run_start = std::chrono::steady_clock::now();
+    std::vector<int> mine;
+    for (const TileSpec& t : m.tiles)
+        if (t.index % share.size == share.rank) mine.push_back(t.index);
+    const auto t0 = std::chrono::steady_clock::now();
+    const Progress tiles_progress = progress.sub(0.0, share.rank == 0 ? 0.85 : 1.0);
+    for (std::size_t i = 0; i < mine.size(); ++i) {
+        const TileReport r = run_tile(m, mine[i], out_dir);
+        const double done = double(i + 1) / double(mine.size());
+        const double eta = since(t0) / done * (1.0 - done);
+        std::ostringstream msg;
+        msg << "tile " << i + 1 << "/" << mine.size() << " (" << r.status << "), ETA " << static_cast<int>(eta) << " s";
+        tiles_progress(done, msg.str());
+    }
+    if (share.rank != 0) return {};
+    // Rank 0 merges once every tile has its report.
+    const auto wait0 = std::chrono::steady_clock::now();
+    for (;;) {
+        bool all = true;
+        for (const TileSpec& t : m.tiles) all = all && fs::exists(fs::path(out_dir) / "tiles" / (tile_name(t.index) + ".json"));
+        if (all) break;
+        if (since(wait0) > share.wait_seconds) throw Error(out_dir, "other ranks' tiles did not finish in time");
+        std::this_thread::sleep_for(std::chrono::milliseconds(200));
+    }
+    RunReport rep = merge_tiles(m, out_dir, progress.sub(0.85, 1.0));
+    rep.seconds = since(run_start);
+    return rep;
+}
+
+}  // namespace cityforge

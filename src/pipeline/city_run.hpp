@@ -1,0 +1,101 @@
+#pragma once
+// `cityforge run`, `plan` and `merge-tiles`: the whole chain (cloud ->
+// ground -> nDSM -> buildings -> footprints and fits -> heights -> LOD2 roofs
+// -> city models) over an area of any size, cut into tiles of the ortho's
+// pixel grid with an overlap. A building belongs to the one tile whose core
+// holds its reference pixel (its first pixel in raster order, global
+// coordinates) or, for given footprints, the centre of its bounding box; so
+// buildings across tile edges are whole and never duplicated, and every step
+// that decides a building looks only at data within the overlap: the result
+// does not depend on the tile size or the thread count. Finished tiles are
+// kept in DIR/tiles/ and skipped when the run is resumed.
+#include <map>
+#include <nlohmann/json.hpp>
+#include <string>
+#include <vector>
+
+#include "cloud/cloud_rasters.hpp"
+#include "core/progress.hpp"
+#include "pipeline/footprints_run.hpp"
+#include "pipeline/roofs_run.hpp"
+#include "raster/raster.hpp"
+
+namespace cityforge {
+
+struct RunOptions {
+    std::string ortho;        ///< defines the pixel grid and CRS of the run (required unless footprints are given)
+    std::string cloud;        ///< dense cloud (LAS/PLY/XYZ), required
+    std::string cloud_crs;    ///< overrides/supplies the cloud's CRS
+    std::string footprints;   ///< existing footprints: extraction is skipped
+    int tile_size_px = 4000;  ///< tile core edge, pixels of the grid
+    double overlap_m = 100.0; ///< context around each core; must exceed the largest building plus the ground ring
+    int threads = 0;          ///< 0 = all cores
+    double footprint_grid_m = 1.0;  ///< grid cell when there is no ortho (footprints given), metres
+    FootprintsRunOptions extraction;  ///< detection, outline and fit options (cloud mode)
+    RoofsRunOptions buildings;        ///< heights, LOD2 and export options
+    void validate() const;
+};
+
+/// Options from a JSON config (schemas/run_config.schema.json); unknown keys
+/// are refused with their path. Missing keys keep `base`'s values.
+RunOptions run_options_from_json(const nlohmann::json& config, const std::string& where, RunOptions base = {});
+/// Every option, in the config's shape (what a manifest stores).
+nlohmann::json to_json(const RunOptions& options);
+
+struct TileSpec {
+    int index = 0;
+    PixelWindow core;    ///< pixels this tile owns
+    PixelWindow window;  ///< core + overlap, clipped to the grid
+};
+
+struct RunManifest {
+    RunOptions options;
+    GridSpec grid;          ///< the run's pixel grid (the ortho's, or one over the footprints)
+    std::string crs_wkt;    ///< horizontal CRS of the grid
+    int overlap_px = 0;
+    std::vector<TileSpec> tiles;
+};
+
+/// Reads the inputs' headers and cuts the grid into tiles. Throws Error naming the file.
+RunManifest plan_run(const RunOptions& options);
+void write_manifest(const std::string& path, const RunManifest& manifest);
+RunManifest read_manifest(const std::string& path);
+
+struct TileReport {
+    int index = 0;
+    std::string status;   ///< "done", "skipped" (finished earlier), "failed"
+    std::string reason;   ///< why a tile failed
+    std::size_t buildings = 0;
+    std::map<std::string, double> seconds;  ///< per stage
+    double peak_memory_mb = 0.0;
+};
+
+/// Runs tile `k` into `out_dir`/tiles/ (tile_K.jsonl: one building per line,
+/// tile_K.json: its report). Skips a tile whose report exists. Errors of the
+/// tile's data are caught and reported as a failed tile.
+TileReport run_tile(const RunManifest& manifest, int k, const std::string& out_dir, const Progress& progress = {});
+
+struct RunReport {
+    std::size_t buildings = 0, valid_lod1 = 0, valid_lod2 = 0;
+    std::vector<TileReport> tiles;
+    std::vector<std::string> warnings;
+    ExportReport model;
+    std::string report_path;   ///< DIR/run_report.json
+    double seconds = 0.0, peak_memory_mb = 0.0;
+};
+
+/// Assembles DIR/tiles/* into the city models in DIR and writes
+/// DIR/run_report.json. Throws Error when a tile has not run.
+RunReport merge_tiles(const RunManifest& manifest, const std::string& out_dir, const Progress& progress = {});
+
+/// One process's share of a distributed run: tiles k with k % size == rank.
+struct RunShare {
+    int rank = 0, size = 1;
+    double wait_seconds = 3600.0;  ///< rank 0 waits this long for the others' tiles before merging
+};
+
+/// Plans (or takes) the manifest, runs this share's tiles, and on rank 0
+/// merges when every tile is finished.
+RunReport run_city(const RunManifest& manifest, const std::string& out_dir, const RunShare& share = {}, const Progress& progress = {});
+
+}  // namespace cityforge

@@ -1,0 +1,102 @@
+#include <catch2/catch.hpp>
+#include <filesystem>
+#include <fstream>
+#include <nlohmann/json.hpp>
+
+#include "pipeline/city_run.hpp"
+#include "synth/synth.hpp"
+#include "synth_fixture.hpp"
+#include "test_support.hpp"
+
+using namespace cityforge;
+using test::ScratchDir;
+
+namespace {
+const char* kOutputs[] = {"buildings.geojson", "buildings.gpkg", "buildings_lod1.gml", "buildings_lod2.gml", "buildings.city.json",
+                          "buildings.city.jsonl"};
+bool same_bytes(const std::string& a, const std::string& b) { return test::slurp(a) == test::slurp(b) && !test::slurp(a).empty(); }
+}  // namespace
+
+TEST_CASE("run is tile-invariant and thread-invariant - byte-identical outputs - resumes finished tiles", "[run]") {
+    ScratchDir dir("run_tiles");
+    const SynthResult s = test::make_town(dir, 500, 4, 8.0);
+    const std::string common = "--ortho " + s.ortho_path + " --cloud " + s.cloud_path + " --vertical-crs EPSG:5773 --overlap-m 60 --quiet";
+    const std::string env = "SOURCE_DATE_EPOCH=1700000000 ";
+    // One tile on two threads; 9 tiles of 350 px on one thread.
+    REQUIRE(test::run_command(env + test::cli() + " run " + common + " --tile-size 4000 --threads 2 --out " + (dir / "one")).exit_code == 0);
+    const auto many = test::run_command(env + test::cli() + " run " + common + " --tile-size 350 --threads 1 --out " + (dir / "many"));
+    INFO(many.err);
+    REQUIRE(many.exit_code == 0);
+    for (const char* f : kOutputs) {
+        INFO(f);
+        CHECK(same_bytes(dir / (std::string("one/") + f), dir / (std::string("many/") + f)));
+    }
+    const auto report = nlohmann::json::parse(test::slurp(dir / "many/run_report.json"));
+    CHECK(report["tiles"].size() == 9);
+    CHECK(report["counts"]["buildings"] == s.buildings);
+    CHECK(report["counts"]["valid_lod2"] == s.buildings);
+    CHECK(report["stage_seconds"].contains("roofs"));
+    CHECK(report["peak_memory_mb"].get<double>() > 0);
+    CHECK(report["inputs"]["ortho"]["crs"] == "EPSG:32650");
+    // Footprints match the truth one to one.
+    const auto audit = test::run_cli("audit footprints --pred " + (dir / "many/buildings.gpkg") + " --ref " + s.truth_path + " --out " +
+                                     (dir / "audit") + " --fail-below f1=0.95,iou=0.85");
+    CHECK(audit.exit_code == 0);
+    // Resume: a lost tile is redone, the others are skipped, the result is the same.
+    std::filesystem::remove(dir / "many/tiles/tile_00004.json");
+    std::filesystem::remove(dir / "many/tiles/tile_00004.jsonl");
+    std::filesystem::remove(dir / "many/buildings.city.json");
+    REQUIRE(test::run_command(env + test::cli() + " run " + common + " --tile-size 350 --threads 1 --out " + (dir / "many")).exit_code == 0);
+    CHECK(same_bytes(dir / "one/buildings.city.json", dir / "many/buildings.city.json"));
+    const auto resumed = nlohmann::json::parse(test::slurp(dir / "many/run_report.json"));
+    CHECK(resumed["tiles"].size() == 9);
+    // Other options in the same folder are refused rather than mixed.
+    const auto mixed = test::run_cli("run " + common + " --tile-size 300 --out " + (dir / "many"));
+    CHECK(mixed.exit_code == 1);
+    CHECK(mixed.err.find("holds a run with other options") != std::string::npos);
+}
+
+TEST_CASE("plan - run one tile - merge-tiles - MPI ranks - a failed tile is reported", "[run][mpi]") {
+    ScratchDir dir("run_plan");
+    const SynthResult s = test::make_town(dir, 400, 6, 8.0);
+    const std::string env = "SOURCE_DATE_EPOCH=1700000000 ";
+    REQUIRE(test::run_cli("plan --ortho " + s.ortho_path + " --cloud " + s.cloud_path + " --config " + test::source_dir() +
+                          "/samples/run.json --tile-size 300 --out " + (dir / "m.json") + " --quiet").exit_code == 0);
+    const RunManifest m = read_manifest(dir / "m.json");
+    CHECK(m.tiles.size() == 9);
+    CHECK(m.options.buildings.heights.outliers.max_mean_distance > 0);  // fixed once for every tile
+    for (std::size_t k = 0; k < m.tiles.size(); ++k)
+        REQUIRE(test::run_command(env + test::cli() + " run --manifest " + (dir / "m.json") + " --tile " + std::to_string(k) + " --out " +
+                                  (dir / "slurm") + " --quiet").exit_code == 0);
+    REQUIRE(test::run_command(env + test::cli() + " merge-tiles --manifest " + (dir / "m.json") + " --out " + (dir / "slurm") + " --quiet").exit_code == 0);
+    if (test::run_command("command -v mpirun").exit_code == 0) {
+        const auto mpi = test::run_command(env + "OMPI_ALLOW_RUN_AS_ROOT=1 OMPI_ALLOW_RUN_AS_ROOT_CONFIRM=1 mpirun --oversubscribe -np 2 " +
+                                           test::cli() + " run --manifest " + (dir / "m.json") + " --mpi --out " + (dir / "mpi") + " --quiet");
+        INFO(mpi.out + mpi.err);
+        REQUIRE(mpi.exit_code == 0);
+        for (const char* f : kOutputs) {
+            INFO(f);
+            CHECK(same_bytes(dir / (std::string("slurm/") + f), dir / (std::string("mpi/") + f)));
+        }
+    } else {
+        WARN("mpirun not installed: the MPI path was not exercised");
+    }
+    // The config schema accepts the sample and refuses unknown keys (so does the parser).
+    CHECK(test::validate_json(test::source_dir() + "/schemas/run_config.schema.json", test::source_dir() + "/samples/run.json").exit_code == 0);
+    {
+        std::ofstream bad(dir / "bad.json");
+        bad << R"({"tile_size_px": 500, "extraction": {"fitt": "raw"}})";
+    }
+    CHECK(test::validate_json(test::source_dir() + "/schemas/run_config.schema.json", dir / "bad.json").exit_code == 1);
+    const auto refused = test::run_cli("plan --ortho " + s.ortho_path + " --cloud " + s.cloud_path + " --config " + (dir / "bad.json") + " --out " + (dir / "x.json"));
+    CHECK(refused.exit_code == 1);
+    CHECK(refused.err.find("bad.json: extraction: unknown key 'fitt'") != std::string::npos);
+    // A tile whose data cannot be read fails alone, with its reason in the report.
+    RunManifest broken = m;
+    broken.options.cloud = dir / "missing.las";
+    write_manifest(dir / "broken.json", broken);
+    const auto failed = test::run_cli("run --manifest " + (dir / "broken.json") + " --tile 0 --out " + (dir / "broken"));
+    CHECK(failed.exit_code == 1);
+    CHECK(failed.err.find("missing.las: file not found") != std::string::npos);
+    CHECK(std::filesystem::exists(dir / "broken/tiles/tile_00000.json"));
+}
