@@ -28,18 +28,7 @@ int main(int argc, char** argv) {
     for (const synth::SceneBuilding& sb : scene.buildings) {
         Building b;
         b.id = std::to_string(sb.id);
-        Polygon p;
-        for (const auto& q : sb.outline) {
-            const auto xy = sb.to_scene(q);
-            p.outer.push_back({ox + xy[0], oy + xy[1]});
-        }
-        for (const auto& h : sb.holes) {
-            p.holes.emplace_back();
-            for (const auto& q : h) {
-                const auto xy = sb.to_scene(q);
-                p.holes.back().push_back({ox + xy[0], oy + xy[1]});
-            }
-        }
+        Polygon p = sb.footprint(ox, oy);
         b.footprint = {p};
         b.ground_z = sb.ground_z, b.height_m = sb.eave_height_m;
         b.attributes = {{"shape", synth::to_string(sb.shape)}, {"roof", synth::to_string(sb.roof)}, {"eave_height_m", sb.eave_height_m}};

@@ -30,18 +30,7 @@ int main(int argc, char** argv) {
     std::size_t total_points = 0;
     for (std::size_t i = 0; i < n; ++i) {
         const synth::SceneBuilding& b = scene.buildings[i];
-        Polygon p;
-        for (const auto& q : b.outline) {
-            const auto xy = b.to_scene(q);
-            p.outer.push_back({xy[0], xy[1]});
-        }
-        for (const auto& h : b.holes) {
-            p.holes.emplace_back();
-            for (const auto& q : h) {
-                const auto xy = b.to_scene(q);
-                p.holes.back().push_back({xy[0], xy[1]});
-            }
-        }
+        Polygon p = b.footprint();
         orient_polygon(p);
         footprints[i] = {p};
         points[i] = synth::sample_roof_points(b, density, 0.03, 5);

@@ -24,4 +24,6 @@ cf="$here/build/bin/cityforge"
 # Audits of the footprints (against the scene's truth) and of their rectangle fits.
 "$cf" audit footprints --pred "$out/footprints.gpkg" --ref "$out/scene/truth.geojson" --ortho "$out/scene/ortho.tif" --out "$out/audit_footprints"
 "$cf" audit rectangles --in "$out/footprints.gpkg" --out "$out/audit_rectangles"
+# The whole chain in one command, tiled (400 px tiles, see samples/run.json).
+"$cf" run --ortho "$out/scene/ortho.tif" --cloud "$out/scene/cloud.las" --config "$here/samples/run.json" --out "$out/run"
 echo "cityforge demo: outputs in $out" >&2

@@ -1,5 +1,7 @@
 #include "audit/report_html.hpp"
 
+#include "core/xml_text.hpp"
+
 #include <algorithm>
 #include <array>
 #include <cmath>
@@ -7,21 +9,6 @@
 #include <sstream>
 
 namespace cityforge {
-
-std::string html_escape(const std::string& text) {
-    std::string out;
-    out.reserve(text.size());
-    for (char c : text) {
-        switch (c) {
-            case '&': out += "&amp;"; break;
-            case '<': out += "&lt;"; break;
-            case '>': out += "&gt;"; break;
-            case '"': out += "&quot;"; break;
-            default: out += c;
-        }
-    }
-    return out;
-}
 
 std::string format_number(double v, int digits) {
     if (std::isnan(v)) return "-";
@@ -83,9 +70,9 @@ struct Axes {
               << format_number(std::abs(t) < 1e-12 ? 0.0 : t) << "</text>\n";
         s << "<rect x=\"" << kLeft << "\" y=\"" << kTop << "\" width=\"" << kWidth - kLeft - kRight << "\" height=\""
           << kHeight - kTop - kBottom << "\" fill=\"none\" stroke=\"#333\"/>\n"
-          << "<text x=\"" << (kLeft + kWidth - kRight) / 2 << "\" y=\"" << kHeight - 12 << "\" text-anchor=\"middle\">" << html_escape(x_label)
+          << "<text x=\"" << (kLeft + kWidth - kRight) / 2 << "\" y=\"" << kHeight - 12 << "\" text-anchor=\"middle\">" << xml_escape(x_label)
           << "</text>\n<text transform=\"translate(14," << (kTop + kHeight - kBottom) / 2 << ") rotate(-90)\" text-anchor=\"middle\">"
-          << html_escape(y_label) << "</text>\n";
+          << xml_escape(y_label) << "</text>\n";
         return s.str();
     }
 };
@@ -93,7 +80,7 @@ struct Axes {
 std::string empty_chart(const std::string& what) {
     std::ostringstream s;
     s << "<svg xmlns=\"http://www.w3.org/2000/svg\" viewBox=\"0 0 " << kWidth << " 60\" width=\"" << kWidth
-      << "\" height=\"60\" font-family=\"sans-serif\" font-size=\"12\"><text x=\"10\" y=\"30\">no data for " << html_escape(what)
+      << "\" height=\"60\" font-family=\"sans-serif\" font-size=\"12\"><text x=\"10\" y=\"30\">no data for " << xml_escape(what)
       << "</text></svg>\n";
     return s.str();
 }
@@ -214,10 +201,10 @@ std::string svg_footprint_map(const std::vector<std::vector<Polygon>>& shapes, c
         const double v = i < values.size() ? values[i] : NAN;
         if (std::isnan(v))
             s << "<path d=\"" << path(shapes[i]) << "\" fill=\"none\" stroke=\"#d00\" stroke-width=\"1.5\" fill-rule=\"evenodd\"><title>"
-              << html_escape(value_label) << ": none</title></path>\n";
+              << xml_escape(value_label) << ": none</title></path>\n";
         else
             s << "<path d=\"" << path(shapes[i]) << "\" fill=\"" << ramp_colour((v - low) / span)
-              << "\" fill-opacity=\"0.75\" stroke=\"#222\" stroke-width=\"0.5\" fill-rule=\"evenodd\"><title>" << html_escape(value_label)
+              << "\" fill-opacity=\"0.75\" stroke=\"#222\" stroke-width=\"0.5\" fill-rule=\"evenodd\"><title>" << xml_escape(value_label)
               << ": " << format_number(v) << "</title></path>\n";
     }
     // Legend: colour ramp, its ends, and the scale bar.
@@ -225,7 +212,7 @@ std::string svg_footprint_map(const std::vector<std::vector<Polygon>>& shapes, c
     for (int k = 0; k < 50; ++k)
         s << "<rect x=\"" << 10 + k * 4 << "\" y=\"" << ly << "\" width=\"4\" height=\"12\" fill=\"" << ramp_colour(k / 49.0) << "\"/>";
     s << "\n<text x=\"10\" y=\"" << ly + 26 << "\">" << format_number(low) << "</text><text x=\"210\" y=\"" << ly + 26
-      << "\" text-anchor=\"end\">" << format_number(high) << "</text><text x=\"220\" y=\"" << ly + 10 << "\">" << html_escape(value_label)
+      << "\" text-anchor=\"end\">" << format_number(high) << "</text><text x=\"220\" y=\"" << ly + 10 << "\">" << xml_escape(value_label)
       << " (red outline: none; dashed grey: reference without match)</text>\n";
     const double bar = tick_step(e.width() / 4, 1);
     s << "<line x1=\"" << map_w - 20 - bar * scale << "\" y1=\"" << ly + 20 << "\" x2=\"" << map_w - 20 << "\" y2=\"" << ly + 20
@@ -236,16 +223,16 @@ std::string svg_footprint_map(const std::vector<std::vector<Polygon>>& shapes, c
 
 HtmlReport::HtmlReport(std::string title) : title_(std::move(title)) {}
 
-void HtmlReport::heading(const std::string& text) { body_ += "<h2>" + html_escape(text) + "</h2>\n"; }
-void HtmlReport::paragraph(const std::string& text) { body_ += "<p>" + html_escape(text) + "</p>\n"; }
+void HtmlReport::heading(const std::string& text) { body_ += "<h2>" + xml_escape(text) + "</h2>\n"; }
+void HtmlReport::paragraph(const std::string& text) { body_ += "<p>" + xml_escape(text) + "</p>\n"; }
 
 void HtmlReport::table(const std::vector<std::string>& header, const std::vector<std::vector<std::string>>& rows, std::size_t max_rows) {
     std::string t = "<table>\n<tr>";
-    for (const std::string& h : header) t += "<th>" + html_escape(h) + "</th>";
+    for (const std::string& h : header) t += "<th>" + xml_escape(h) + "</th>";
     t += "</tr>\n";
     for (std::size_t i = 0; i < std::min(rows.size(), max_rows); ++i) {
         t += "<tr>";
-        for (const std::string& c : rows[i]) t += "<td>" + html_escape(c) + "</td>";
+        for (const std::string& c : rows[i]) t += "<td>" + xml_escape(c) + "</td>";
         t += "</tr>\n";
     }
     t += "</table>\n";
@@ -254,15 +241,15 @@ void HtmlReport::table(const std::vector<std::string>& header, const std::vector
 }
 
 void HtmlReport::figure(const std::string& svg, const std::string& caption) {
-    body_ += "<figure>\n" + svg + "<figcaption>" + html_escape(caption) + "</figcaption>\n</figure>\n";
+    body_ += "<figure>\n" + svg + "<figcaption>" + xml_escape(caption) + "</figcaption>\n</figure>\n";
 }
 
 std::string HtmlReport::render() const {
-    return "<!DOCTYPE html>\n<html lang=\"en\">\n<head>\n<meta charset=\"utf-8\">\n<title>" + html_escape(title_) +
+    return "<!DOCTYPE html>\n<html lang=\"en\">\n<head>\n<meta charset=\"utf-8\">\n<title>" + xml_escape(title_) +
            "</title>\n<style>\nbody{font-family:sans-serif;margin:2em;max-width:1000px;color:#222}\n"
            "table{border-collapse:collapse;margin:1em 0}td,th{border:1px solid #ccc;padding:2px 8px;text-align:right}\n"
            "th{background:#f0f0f0}figure{margin:1em 0}figcaption{color:#555;font-size:90%}\n</style>\n</head>\n<body>\n<h1>" +
-           html_escape(title_) + "</h1>\n" + body_ + "</body>\n</html>\n";
+           xml_escape(title_) + "</h1>\n" + body_ + "</body>\n</html>\n";
 }
 
 }  // namespace cityforge

@@ -50,8 +50,6 @@ private:
     std::string title_, body_;
 };
 
-/// Text with &, <, >, " escaped for HTML and SVG.
-std::string html_escape(const std::string& text);
 /// Formats a number with `digits` significant digits ("-" for NaN).
 std::string format_number(double v, int digits = 4);
 

@@ -4,6 +4,7 @@
 #include <cmath>
 
 #include "core/atomic_file.hpp"
+#include "core/xml_text.hpp"
 #include "core/error.hpp"
 #include "core/version.hpp"
 
@@ -16,23 +17,6 @@ std::string gml_id_for(const std::string& id) {
 }
 
 namespace {
-
-std::string xml_escape(const std::string& s) {
-    std::string out;
-    out.reserve(s.size());
-    for (char c : s) {
-        switch (c) {
-            case '&': out += "&amp;"; break;
-            case '<': out += "&lt;"; break;
-            case '>': out += "&gt;"; break;
-            case '"': out += "&quot;"; break;
-            default:
-                // Control characters are not allowed in XML 1.0.
-                if (static_cast<unsigned char>(c) >= 0x20 || c == '\t' || c == '\n' || c == '\r') out += c;
-        }
-    }
-    return out;
-}
 
 class GmlWriter {
 public:

@@ -69,6 +69,28 @@ double norm(const std::array<double, 3>& v) { return std::sqrt(v[0] * v[0] + v[1
 
 }  // namespace
 
+Polygon face_plan(const Face& f) {
+    Polygon p;
+    for (const Point3& v : f.outer) p.outer.push_back({v.x, v.y});
+    for (const Ring3& h : f.holes) {
+        p.holes.emplace_back();
+        for (const Point3& v : h) p.holes.back().push_back({v.x, v.y});
+    }
+    return p;
+}
+
+std::optional<double> face_z_at(const Face& f, double x, double y) {
+    if (f.outer.size() < 3) return std::nullopt;
+    const auto n = newell(f.outer);
+    if (std::abs(n[2]) < 1e-12 * (std::abs(n[0]) + std::abs(n[1]) + 1.0)) return std::nullopt;
+    if (!point_in_polygon(face_plan(f), x, y)) return std::nullopt;
+    double cx = 0, cy = 0, cz = 0;
+    for (const Point3& v : f.outer) cx += v.x, cy += v.y, cz += v.z;
+    const double k = double(f.outer.size());
+    cx /= k, cy /= k, cz /= k;
+    return cz - (n[0] * (x - cx) + n[1] * (y - cy)) / n[2];
+}
+
 double face_area(const Face& f) {
     const auto n = newell(f.outer);
     const double len = norm(n);

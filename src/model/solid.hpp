@@ -3,6 +3,7 @@
 // polygons with semantics) and their validity checks. Coordinates are in the
 // model's CRS: x, y in the horizontal CRS units, z in the vertical CRS units.
 // No GDAL.
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -39,6 +40,13 @@ struct Solid {
 /// face at z_top, one vertical wall per ring edge (courtyard walls included).
 /// Requires z_top > z_bottom.
 Solid extrude_prism(const Polygon& footprint, double z_bottom, double z_top);
+
+/// The face seen from above: its rings' x, y (holes kept).
+Polygon face_plan(const Face& face);
+
+/// z of the face's plane at (x, y) when (x, y) lies inside the face's plan;
+/// nullopt outside it or for vertical faces.
+std::optional<double> face_z_at(const Face& face, double x, double y);
 
 /// Area of a planar face (holes subtracted), CRS units².
 double face_area(const Face& face);

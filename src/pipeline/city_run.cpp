@@ -13,6 +13,7 @@
 #include <thread>
 
 #include "cloud/cloud_reader.hpp"
+#include "cloud/las.hpp"
 #include "core/atomic_file.hpp"
 #include "core/error.hpp"
 #include "core/log.hpp"
@@ -283,8 +284,72 @@ RunManifest read_manifest(const std::string& path) {
 
 namespace {
 
+fs::path tile_cloud_path(const std::string& out_dir, int k) { return fs::path(out_dir) / "cloud_tiles" / (tile_name(k) + ".las"); }
+
+// One streaming pass over a LAS cloud writes each tile window's points (in
+// file order, on the source's integer grid, so coordinates are unchanged) to
+// DIR/cloud_tiles/: each tile then reads its window, not the whole file.
+// Only for LAS clouds already in the grid's CRS; other tiles read the source.
+void split_cloud(const RunManifest& m, const std::string& out_dir) {
+    const RunOptions& o = m.options;
+    const fs::path dir = fs::path(out_dir) / "cloud_tiles";
+    if (fs::exists(dir / "complete") || fs::exists(dir / "not_split")) return;
+    ensure_directory(dir);
+    CloudReader probe(o.cloud);
+    const CrsInfo grid_crs = crs_from_wkt(m.crs_wkt, "manifest");
+    const CrsInfo cloud_crs = !o.cloud_crs.empty() ? crs_from_user_input(o.cloud_crs, "--cloud-crs") : crs_from_wkt(probe.crs_wkt(), o.cloud);
+    if (probe.format() != CloudFormat::las || cloud_crs.empty() || !same_horizontal_crs(cloud_crs, grid_crs)) {
+        write_text_file(dir / "not_split", "tiles read the source cloud (not LAS, or not in the grid's CRS)\n");
+        return;
+    }
+    LasReader reader(o.cloud);
+    const LasHeader header = reader.header();
+    struct Window {
+        Extent e;
+        std::unique_ptr<LasWriter> writer;
+        PointCloud pending;
+    };
+    std::vector<Window> windows;
+    for (const TileSpec& t : m.tiles) {
+        const MapPoint a = m.grid.transform.pixel_to_map({double(t.window.col), double(t.window.row)});
+        const MapPoint b = m.grid.transform.pixel_to_map({double(t.window.col + t.window.width), double(t.window.row + t.window.height)});
+        Window w;
+        w.e = {std::min(a.x, b.x), std::min(a.y, b.y), std::max(a.x, b.x), std::max(a.y, b.y)};
+        w.writer = std::make_unique<LasWriter>(tile_cloud_path(out_dir, t.index).string(), header.scale, header.offset, probe.crs_wkt());
+        windows.push_back(std::move(w));
+    }
+    PointCloud chunk;
+    auto flush = [](Window& w) {
+        w.writer->write(w.pending);
+        w.pending.clear();
+    };
+    while (true) {
+        chunk.clear();
+        if (reader.read_chunk(chunk, 1u << 20) == 0) break;
+        const bool gps = chunk.has_gps_time(), color = chunk.has_color();
+        for (Window& w : windows) {
+            for (std::size_t i = 0; i < chunk.size(); ++i) {
+                if (chunk.x[i] < w.e.min_x || chunk.x[i] >= w.e.max_x || chunk.y[i] < w.e.min_y || chunk.y[i] >= w.e.max_y) continue;
+                PointCloud& p = w.pending;
+                p.x.push_back(chunk.x[i]), p.y.push_back(chunk.y[i]), p.z.push_back(chunk.z[i]);
+                p.intensity.push_back(chunk.intensity[i]), p.classification.push_back(chunk.classification[i]);
+                p.return_number.push_back(chunk.return_number[i]), p.number_of_returns.push_back(chunk.number_of_returns[i]);
+                if (gps) p.gps_time.push_back(chunk.gps_time[i]);
+                if (color) p.red.push_back(chunk.red[i]), p.green.push_back(chunk.green[i]), p.blue.push_back(chunk.blue[i]);
+            }
+            if (w.pending.size() >= (1u << 16)) flush(w);
+        }
+    }
+    for (Window& w : windows) {
+        flush(w);
+        w.writer->close();
+    }
+    write_text_file(dir / "complete", "cloud split into " + std::to_string(windows.size()) + " tile windows\n");
+}
+
 // The buildings one tile owns, with their heights and LOD2, as building lines.
-std::vector<Building> tile_buildings(const RunManifest& m, const TileSpec& t, TileReport& rep, std::vector<std::string>& warnings) {
+std::vector<Building> tile_buildings(const RunManifest& m, const TileSpec& t, const std::string& out_dir, TileReport& rep,
+                                     std::vector<std::string>& warnings) {
     const RunOptions& o = m.options;
     const CrsInfo grid_crs = crs_from_wkt(m.crs_wkt, "manifest");
     const double unit = grid_crs.linear_unit_m;
@@ -296,7 +361,10 @@ std::vector<Building> tile_buildings(const RunManifest& m, const TileSpec& t, Ti
     const MapPoint cb = gt.pixel_to_map({double(t.core.col + t.core.width), double(t.core.row + t.core.height)});
 
     auto t0 = std::chrono::steady_clock::now();
-    PreparedCloud pc = prepare_cloud(o.cloud, o.cloud_crs, grid_crs, o.buildings.heights.outliers, o.buildings.heights.ground, &window_extent);
+    const fs::path part = tile_cloud_path(out_dir, t.index);
+    const bool split = fs::exists(part.parent_path() / "complete");
+    PreparedCloud pc = prepare_cloud(split ? part.string() : o.cloud, o.cloud_crs, grid_crs, o.buildings.heights.outliers,
+                                     o.buildings.heights.ground, &window_extent);
     rep.seconds["cloud"] = since(t0);
     PolygonLayer footprints;
     footprints.crs = pc.crs.empty() ? grid_crs : pc.crs;
@@ -408,7 +476,7 @@ TileReport run_tile(const RunManifest& m, int k, const std::string& out_dir, con
     const auto t0 = std::chrono::steady_clock::now();
     std::vector<std::string> warnings;
     try {
-        const std::vector<Building> buildings = tile_buildings(m, m.tiles[k], rep, warnings);
+        const std::vector<Building> buildings = tile_buildings(m, m.tiles[k], out_dir, rep, warnings);
         AtomicTextFile file(lines);
         for (const Building& b : buildings) file.stream() << building_to_json(b).dump() << '\n';
         file.commit();
@@ -535,11 +603,20 @@ RunReport run_city(const RunManifest& m, const std::string& out_dir, const RunSh
         write_manifest(plan_path, m);
     }
     const auto run_start = std::chrono::steady_clock::now();
+    // One pass over the cloud for all tiles (rank 0); the other ranks wait for it.
+    if (share.rank == 0) {
+        split_cloud(m, out_dir);
+    } else {
+        const fs::path dir = fs::path(out_dir) / "cloud_tiles";
+        while (!fs::exists(dir / "complete") && !fs::exists(dir / "not_split") && since(run_start) < share.wait_seconds)
+            std::this_thread::sleep_for(std::chrono::milliseconds(200));
+    }
+    progress(0.05, "cloud split");
     std::vector<int> mine;
     for (const TileSpec& t : m.tiles)
         if (t.index % share.size == share.rank) mine.push_back(t.index);
     const auto t0 = std::chrono::steady_clock::now();
-    const Progress tiles_progress = progress.sub(0.0, share.rank == 0 ? 0.85 : 1.0);
+    const Progress tiles_progress = progress.sub(0.05, share.rank == 0 ? 0.85 : 1.0);
     for (std::size_t i = 0; i < mine.size(); ++i) {
         const TileReport r = run_tile(m, mine[i], out_dir);
         const double done = double(i + 1) / double(mine.size());

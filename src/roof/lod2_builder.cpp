@@ -621,25 +621,9 @@ Lod2Result reconstruct_lod2(const std::vector<Polygon>& footprint, const std::ve
         for (const auto& q : roof_points) {
             for (const Face& f : s.faces) {
                 if (f.type != SurfaceType::roof) continue;
-                Polygon p;
-                for (const Point3& v : f.outer) p.outer.push_back({v.x, v.y});
-                for (const Ring3& h : f.holes) {
-                    p.holes.emplace_back();
-                    for (const Point3& v : h) p.holes.back().push_back({v.x, v.y});
-                }
-                if (!point_in_polygon(p, q[0], q[1])) continue;
-                // Plane of the face through its Newell normal.
-                double nx = 0, ny = 0, nz = 0, cx = 0, cy = 0, cz = 0;
-                for (std::size_t i = 0; i < f.outer.size(); ++i) {
-                    const Point3& a = f.outer[i];
-                    const Point3& b = f.outer[(i + 1) % f.outer.size()];
-                    nx += (a.y - b.y) * (a.z + b.z), ny += (a.z - b.z) * (a.x + b.x), nz += (a.x - b.x) * (a.y + b.y);
-                    cx += a.x, cy += a.y, cz += a.z;
-                }
-                const double k = double(f.outer.size());
-                if (std::abs(nz) < 1e-12) continue;
-                const double zf = cz / k - (nx * (q[0] - cx / k) + ny * (q[1] - cy / k)) / nz;
-                s2 += (q[2] - zf) * (q[2] - zf), ++n;
+                const std::optional<double> zf = face_z_at(f, q[0], q[1]);
+                if (!zf) continue;
+                s2 += (q[2] - *zf) * (q[2] - *zf), ++n;
                 break;
             }
         }

@@ -125,6 +125,21 @@ LocalPoint SceneBuilding::to_local(double x, double y) const {
     return {c * dx + s * dy, -s * dx + c * dy};
 }
 
+Polygon SceneBuilding::footprint(double ox, double oy) const {
+    auto to_map = [&](const std::vector<LocalPoint>& ring) {
+        Ring out;
+        for (const LocalPoint& p : ring) {
+            const auto xy = to_scene(p);
+            out.push_back({ox + xy[0], oy + xy[1]});
+        }
+        return out;
+    };
+    Polygon p;
+    p.outer = to_map(outline);
+    for (const auto& hole : holes) p.holes.push_back(to_map(hole));
+    return p;
+}
+
 std::array<double, 2> SceneBuilding::to_scene(LocalPoint p) const {
     const double c = std::cos(angle_rad), s = std::sin(angle_rad);
     return {cx + c * p.u - s * p.v, cy + s * p.u + c * p.v};

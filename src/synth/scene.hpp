@@ -8,6 +8,8 @@
 #include <string>
 #include <vector>
 
+#include "core/geometry.hpp"
+
 namespace cityforge::synth {
 
 enum class RoofType { flat, shed, gable, hip };
@@ -50,6 +52,9 @@ struct SceneBuilding {
     /// its gradient in scene axes (dz/dx, dz/dy).
     double roof_height(double x, double y, double* dzdx = nullptr, double* dzdy = nullptr) const;
     double area_m2() const;
+    /// The footprint in map coordinates: scene-local metres shifted by (ox, oy);
+    /// exterior counter-clockwise, courtyards clockwise.
+    Polygon footprint(double ox = 0.0, double oy = 0.0) const;
 };
 
 struct SceneTree {

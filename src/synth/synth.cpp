@@ -337,18 +337,7 @@ SynthResult write_synthetic_town(const std::string& out_dir, const SynthOptions&
     std::map<std::string, int> shape_counts, roof_counts;
     for (const SceneBuilding& b : scene.buildings) {
         Feature f;
-        auto to_map = [&](const std::vector<synth::LocalPoint>& ring) {
-            Ring out;
-            for (const auto& p : ring) {
-                const auto xy = b.to_scene(p);
-                out.push_back({o.origin_x + xy[0], o.origin_y + xy[1]});
-            }
-            return out;
-        };
-        Polygon footprint;
-        footprint.outer = to_map(b.outline);
-        for (const auto& hole : b.holes) footprint.holes.push_back(to_map(hole));
-        f.geometry = {footprint};
+        f.geometry = {b.footprint(o.origin_x, o.origin_y)};
         double orientation = std::fmod(b.angle_rad * 180.0 / std::numbers::pi + 180.0, 180.0);
         f.values = {int64_t(b.id), synth::to_string(b.shape), synth::to_string(b.roof), b.eave_height_m,
                     b.ridge_height_m, b.ground_z, orientation, b.area_m2(), int64_t(b.holes.size())};

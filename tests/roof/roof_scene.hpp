@@ -17,18 +17,7 @@ struct RoofSample {
 
 inline RoofSample sample_roof(const synth::SceneBuilding& b, double density, double sigma, uint64_t seed) {
     RoofSample s;
-    Polygon p;
-    for (const auto& q : b.outline) {
-        const auto xy = b.to_scene(q);
-        p.outer.push_back({xy[0], xy[1]});
-    }
-    for (const auto& h : b.holes) {
-        p.holes.emplace_back();
-        for (const auto& q : h) {
-            const auto xy = b.to_scene(q);
-            p.holes.back().push_back({xy[0], xy[1]});
-        }
-    }
+    Polygon p = b.footprint();
     orient_polygon(p);
     s.footprint = {p};
     s.ground_z = b.ground_z;

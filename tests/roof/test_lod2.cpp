@@ -22,29 +22,10 @@ double rmse_to_truth(const Lod2Result& r, const synth::SceneBuilding& b, const s
             for (const Solid& s : r.solids)
                 for (const Face& f : s.faces) {
                     if (f.type != SurfaceType::roof) continue;
-                    Polygon p;
-                    for (const Point3& v : f.outer) p.outer.push_back({v.x, v.y});
-                    for (const Ring3& h : f.holes) {
-                        p.holes.emplace_back();
-                        for (const Point3& v : h) p.holes.back().push_back({v.x, v.y});
-                    }
-                    if (!point_in_polygon(p, x, y)) continue;
-                    // Interpolate the face's plane from three of its vertices.
-                    const Point3 &a = f.outer[0], &c1 = f.outer[1];
-                    Point3 c2 = f.outer[2];
-                    for (std::size_t k = 2; k < f.outer.size(); ++k) {
-                        const double cross = (c1.x - a.x) * (f.outer[k].y - a.y) - (c1.y - a.y) * (f.outer[k].x - a.x);
-                        if (std::abs(cross) > 1e-3) {
-                            c2 = f.outer[k];
-                            break;
-                        }
-                    }
-                    const double det = (c1.x - a.x) * (c2.y - a.y) - (c1.y - a.y) * (c2.x - a.x);
-                    const double u = ((x - a.x) * (c2.y - a.y) - (y - a.y) * (c2.x - a.x)) / det;
-                    const double v = ((c1.x - a.x) * (y - a.y) - (c1.y - a.y) * (x - a.x)) / det;
-                    const double z = a.z + u * (c1.z - a.z) + v * (c2.z - a.z);
+                    const std::optional<double> z = face_z_at(f, x, y);
+                    if (!z) continue;
                     const double t = b.ground_z + b.roof_height(x, y);
-                    s2 += (z - t) * (z - t), ++n;
+                    s2 += (*z - t) * (*z - t), ++n;
                     goto next;
                 }
         next:;
