@@ -67,7 +67,8 @@ std::string tile_name(int k) {
 }  // namespace
 
 void RunOptions::validate() const {
-    if (cloud.empty()) throw Error("--cloud", "cityforge run needs a dense point cloud (ortho-only extraction: `cityforge footprints`)");
+    if (cloud.empty() && ortho.empty()) throw Error("--ortho", "give an ortho, a cloud, or both");
+    if (cloud.empty() && !footprints.empty()) throw Error("--cloud", "heights for given footprints need a dense point cloud");
     if (ortho.empty() && footprints.empty()) throw Error("--ortho", "give the ortho (its grid and CRS) or existing --footprints");
     if (tile_size_px < 64) throw Error("--tile-size", "must be at least 64 pixels");
     if (!(overlap_m >= 0)) throw Error("--overlap-m", "must be >= 0");
@@ -210,6 +211,13 @@ RunManifest plan_run(const RunOptions& in) {
         gsd_m = o.footprint_grid_m;
     }
     m.overlap_px = static_cast<int>(std::ceil(o.overlap_m / gsd_m));
+    if (o.cloud.empty()) {
+        // Ortho only: segmentation merges regions across the whole raster, so it runs as one tile.
+        m.options.tile_size_px = std::max(m.grid.width, m.grid.height);
+        m.overlap_px = 0;
+        m.tiles.push_back({0, {0, 0, m.grid.width, m.grid.height}, {0, 0, m.grid.width, m.grid.height}});
+        return m;
+    }
     // The outlier filter's limit, measured once on a sample fixed by the grid
     // (its central 400 m square), so that every tile filters alike.
     if (m.options.buildings.heights.outliers.enabled && !(m.options.buildings.heights.outliers.max_mean_distance > 0)) {
@@ -295,6 +303,10 @@ void split_cloud(const RunManifest& m, const std::string& out_dir) {
     const fs::path dir = fs::path(out_dir) / "cloud_tiles";
     if (fs::exists(dir / "complete") || fs::exists(dir / "not_split")) return;
     ensure_directory(dir);
+    if (o.cloud.empty()) {
+        write_text_file(dir / "not_split", "no cloud\n");
+        return;
+    }
     CloudReader probe(o.cloud);
     const CrsInfo grid_crs = crs_from_wkt(m.crs_wkt, "manifest");
     const CrsInfo cloud_crs = !o.cloud_crs.empty() ? crs_from_user_input(o.cloud_crs, "--cloud-crs") : crs_from_wkt(probe.crs_wkt(), o.cloud);
@@ -361,6 +373,22 @@ std::vector<Building> tile_buildings(const RunManifest& m, const TileSpec& t, co
     const MapPoint cb = gt.pixel_to_map({double(t.core.col + t.core.width), double(t.core.row + t.core.height)});
 
     auto t0 = std::chrono::steady_clock::now();
+    if (o.cloud.empty()) {
+        // Ortho-only: footprints from the segmentation, no heights (LOD0 only).
+        const fs::path tmp = fs::path(out_dir) / "tiles" / "ortho_footprints.gpkg";
+        FootprintsRunOptions fo = o.extraction;
+        fo.ortho = o.ortho, fo.cloud.clear();
+        run_footprints(tmp.string(), fo);
+        const PolygonLayer layer = read_polygon_layer(tmp.string());
+        fs::remove(tmp);
+        ExportOptions eo = o.buildings.model;
+        eo.id_field = "id";
+        CityModel model = build_city_model(layer, grid_crs, eo, o.ortho);
+        rep.seconds["footprints"] = since(t0);
+        rep.buildings = model.buildings.size();
+        warnings.push_back("no cloud: footprints from the ortho only (no heights, no LOD1/LOD2); ortho-only runs are not tiled");
+        return std::move(model.buildings);
+    }
     const fs::path part = tile_cloud_path(out_dir, t.index);
     const bool split = fs::exists(part.parent_path() / "complete");
     PreparedCloud pc = prepare_cloud(split ? part.string() : o.cloud, o.cloud_crs, grid_crs, o.buildings.heights.outliers,
@@ -544,7 +572,7 @@ RunReport merge_tiles(const RunManifest& m, const std::string& out_dir, const Pr
     std::sort(buildings.begin(), buildings.end(), [&](const Building& a, const Building& b) { return key(a.id) < key(b.id); });
     CrsInfo crs = grid_crs;
     // The vertical datum: from the cloud (as the tiles saw it) or the option.
-    const std::string cloud_wkt = m.options.cloud_crs.empty() ? CloudReader(m.options.cloud).crs_wkt() : std::string();
+    const std::string cloud_wkt = m.options.cloud_crs.empty() && !m.options.cloud.empty() ? CloudReader(m.options.cloud).crs_wkt() : std::string();
     const CrsInfo cloud_crs = !m.options.cloud_crs.empty() ? crs_from_user_input(m.options.cloud_crs, "--cloud-crs") : crs_from_wkt(cloud_wkt, m.options.cloud);
     crs = combine_with_vertical(crs, cloud_crs);
     if (!m.options.buildings.model.vertical_crs.empty() && !crs.vertical_epsg)
@@ -565,7 +593,7 @@ RunReport merge_tiles(const RunManifest& m, const std::string& out_dir, const Pr
     j["options"] = to_json(m.options);
     json inputs = json::object();
     if (!m.options.ortho.empty()) inputs["ortho"] = {{"path", m.options.ortho}, {"crs", grid_crs.label()}};
-    inputs["cloud"] = {{"path", m.options.cloud}, {"crs", cloud_crs.label()}};
+    if (!m.options.cloud.empty()) inputs["cloud"] = {{"path", m.options.cloud}, {"crs", cloud_crs.label()}};
     if (!m.options.footprints.empty()) inputs["footprints"] = {{"path", m.options.footprints}, {"crs", grid_crs.label()}};
     j["inputs"] = inputs;
     j["crs"] = crs.label();

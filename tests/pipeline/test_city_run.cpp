@@ -100,3 +100,19 @@ TEST_CASE("plan - run one tile - merge-tiles - MPI ranks - a failed tile is repo
     CHECK(failed.err.find("missing.las: file not found") != std::string::npos);
     CHECK(std::filesystem::exists(dir / "broken/tiles/tile_00000.json"));
 }
+
+TEST_CASE("run without a cloud - ortho-only footprints as one tile - no heights said in every row", "[run]") {
+    ScratchDir dir("run_ortho");
+    const SynthResult s = test::make_town(dir, 300, 8, 0.0);
+    const auto cli = test::run_cli("run --ortho " + s.ortho_path + " --out " + (dir / "out") + " --formats geojson,citygml --quiet");
+    INFO(cli.err);
+    REQUIRE(cli.exit_code == 0);
+    const auto report = nlohmann::json::parse(test::slurp(dir / "out/run_report.json"));
+    CHECK(report["tiles"].size() == 1);
+    CHECK(report["counts"]["buildings"].get<int>() > 0);
+    CHECK(report["counts"]["status"].contains("no_height"));
+    CHECK(test::run_command("xmllint --noout --nonet --schema " + test::shared_data("citygml2_schemas/CityGML.xsd") + " " + (dir / "out/buildings_lod1.gml")).exit_code == 0);
+    const auto audit = test::run_cli("audit footprints --pred " + (dir / "out/buildings.geojson") + " --ref " + s.truth_path + " --out " + (dir / "a"));
+    CHECK(audit.exit_code == 0);
+}
+
