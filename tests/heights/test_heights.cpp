@@ -177,7 +177,7 @@ TEST_CASE("audit heights on Delft - our roof p90 against 3dfier's reference", "[
     CHECK(j["totals"]["matched"] == 135);
     CHECK(j["totals"]["with_values"] == 135);
     CHECK(j["totals"]["mae_m"].get<double>() < 0.8);
-    CHECK(j["totals"]["bias_m"].get<double>() > 0.0);  // the systematic +0.25 m against 3dfier, see the note
+    CHECK(std::abs(j["totals"]["bias_m"].get<double>()) < 0.3);  // no systematic offset against 3dfier (+0.01 m when written)
     CHECK(test::validate_json(test::source_dir() + "/schemas/audit_report.schema.json", dir / "audit/report.json").exit_code == 0);
     const auto gated = test::run_cli("audit heights --pred " + (dir / "h.gpkg") + " --ref " + ref +
                                      " --pred-field roof_z_90p --ref-field ref_roof_nap_m --out " + (dir / "g") + " --fail-above mae=0.05");
