@@ -31,6 +31,13 @@ namespace cf = cityforge;
 
 namespace {
 
+// {"a", "b"} -> "a b".
+std::string join_words(const std::vector<std::string>& words) {
+    std::string out;
+    for (const std::string& w : words) out += (out.empty() ? "" : " ") + w;
+    return out;
+}
+
 // "a,b,,c" -> {"a", "b", "c"}.
 std::vector<std::string> split_list(const std::string& text) {
     std::vector<std::string> out;
@@ -326,7 +333,7 @@ int main(int argc, char** argv) {
     audit_fp->add_option("--iou", aopt.iou_threshold, "IoU threshold of a match")->capture_default_str();
     audit_fp->add_option("--ortho", aopt.ortho_path, "Raster drawn under the map in report.html (reference CRS)");
     add_common(audit_fp, a_common);
-    audit_fp->footer("Measures for gates: precision recall f1 object_quality iou completeness correctness quality area_error_pct polis");
+    audit_fp->footer("Measures for gates: " + join_words(cf::footprint_audit_measures()));
 
     auto* audit_rect = audit->add_subcommand("rectangles", "Fitted footprints: original vs fitted area per building (the study's Table 5)");
     std::string r_in;
@@ -339,7 +346,7 @@ int main(int argc, char** argv) {
     audit_rect->add_option("--iou", rao.iou_threshold, "IoU threshold matching fitted to original polygons")->capture_default_str();
     audit_rect->add_option("--ortho", rao.ortho_path, "Raster drawn under the map in report.html (same CRS)");
     add_common(audit_rect, r_common);
-    audit_rect->footer("Measures for gates: mean_abs_error_pct max_abs_error_pct mean_error_pct");
+    audit_rect->footer("Measures for gates: " + join_words(cf::rectangle_audit_measures()));
 
     auto* audit_h = audit->add_subcommand("heights", "Heights of matched footprints against reference heights (MAE, RMSE, bias, max)");
     std::string h_pred, h_ref;
@@ -352,7 +359,7 @@ int main(int argc, char** argv) {
     audit_h->add_option("--iou", hao.iou_threshold, "IoU threshold of a footprint match")->capture_default_str();
     audit_h->add_option("--ortho", hao.ortho_path, "Raster drawn under the map in report.html (reference CRS)");
     add_common(audit_h, h_common);
-    audit_h->footer("Measures for gates: mae rmse bias abs_bias max_abs (metres) coverage (share of references with both heights)");
+    audit_h->footer("Measures for gates: " + join_words(cf::height_audit_measures()) + " (metres; coverage: share of references with both heights)");
 
     auto* audit_cl = audit->add_subcommand("clouds", "Point cloud against a reference: precision/recall/F-score within tau, chamfer distance");
     std::string c_pred, c_ref;
@@ -380,14 +387,7 @@ int main(int argc, char** argv) {
             else std::cout << cf::to_text(d);
         } else if (*segment) {
             if (!seg_config.empty()) {
-                std::ifstream in(seg_config);
-                if (!in) throw cf::Error(seg_config, "cannot open config file");
-                nlohmann::json j;
-                try {
-                    j = nlohmann::json::parse(in);
-                } catch (const nlohmann::json::exception& e) {
-                    throw cf::Error(seg_config, std::string("invalid JSON: ") + e.what());
-                }
+                const nlohmann::json j = read_json_file(seg_config);
                 const bool allow = seg.allow_pixel_coordinates;
                 seg = cf::segment_options_from_json(j, seg_config);
                 seg.allow_pixel_coordinates = allow;
