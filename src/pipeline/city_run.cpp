@@ -492,6 +492,8 @@ std::vector<Building> tile_buildings(const RunManifest& m, const TileSpec& t, co
 
 TileReport run_tile(const RunManifest& m, int k, const std::string& out_dir, const Progress& progress) {
     if (k < 0 || k >= static_cast<int>(m.tiles.size())) throw Error("--tile", "no tile " + std::to_string(k) + " (the manifest has " + std::to_string(m.tiles.size()) + ")");
+    std::unique_ptr<tbb::global_control> limit;
+    if (m.options.threads > 0) limit = std::make_unique<tbb::global_control>(tbb::global_control::max_allowed_parallelism, m.options.threads);
     const fs::path dir = fs::path(out_dir) / "tiles";
     ensure_directory(dir);
     const fs::path lines = dir / (tile_name(k) + ".jsonl"), summary = dir / (tile_name(k) + ".json");
