@@ -46,6 +46,7 @@ CityModel build_lod2_model(const HeightsStage& st, const CrsInfo& crs, const Roo
         b.attributes.emplace_back("roof_slope_deg", num(r.roof_slope_deg));
         b.attributes.emplace_back("roof_azimuth_deg", num(r.roof_azimuth_deg));
         b.attributes.emplace_back("lod2_rmse_m", num(r.rmse_m));
+        b.attributes.emplace_back("lod2_median_residual_m", num(r.median_residual_m));
         b.attributes.emplace_back("lod2_fallback", have && r.fallback ? AttributeValue(r.fallback_reason) : AttributeValue());
         b.attributes.emplace_back("lod2_kind", have ? AttributeValue(std::string(r.fallback ? "LOD1.2 flat roof" : "LOD2.2 roof planes"))
                                                     : AttributeValue());

@@ -617,6 +617,7 @@ Lod2Result reconstruct_lod2(const std::vector<Polygon>& footprint, const std::ve
     // RMSE: each point against the roof surface above it (the highest roof face containing it in plan).
     double s2 = 0;
     std::size_t n = 0;
+    std::vector<double> residuals;
     for (const Solid& s : r.solids)
         for (const auto& q : roof_points) {
             for (const Face& f : s.faces) {
@@ -624,10 +625,15 @@ Lod2Result reconstruct_lod2(const std::vector<Polygon>& footprint, const std::ve
                 const std::optional<double> zf = face_z_at(f, q[0], q[1]);
                 if (!zf) continue;
                 s2 += (q[2] - *zf) * (q[2] - *zf), ++n;
+                residuals.push_back(std::abs(q[2] - *zf));
                 break;
             }
         }
     r.rmse_m = n ? std::sqrt(s2 / double(n)) * o.z_unit_m : 0.0;
+    if (!residuals.empty()) {
+        std::nth_element(residuals.begin(), residuals.begin() + residuals.size() / 2, residuals.end());
+        r.median_residual_m = residuals[residuals.size() / 2] * o.z_unit_m;
+    }
     return r;
 }
 

@@ -38,6 +38,7 @@ struct Lod2Result {
     double roof_slope_deg = 0.0;       ///< of the main (largest) roof plane
     double roof_azimuth_deg = 0.0;     ///< downhill direction of the main plane, clockwise from north
     double rmse_m = 0.0;               ///< vertical RMS distance of the roof points to the model, metres
+    double median_residual_m = 0.0;    ///< median vertical distance (robust to chimneys, trees and wall points), metres
 };
 
 /// `roof_points` are the building's roof points (x, y in the footprint's CRS,

@@ -28,6 +28,7 @@ TEST_CASE("roofs on a synthetic town (lidar) - roof types against the truth - va
         ++total;
         correct += p["roof_type"] == roof_of.at(p["id"].get<int64_t>());
         valid += p["lod2_valid"] == 1;
+        if (p["lod2_kind"] == "LOD2.2 roof planes") CHECK(p["lod2_median_residual_m"].get<double>() < 0.1);
     }
     CHECK(total == s.buildings);
     CHECK(valid == total);
