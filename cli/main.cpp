@@ -262,6 +262,8 @@ int main(int argc, char** argv) {
     roofs->add_option("--plane-normal-deg", ropts.lod2.planes.normal_tolerance_deg, "Roof planes: max normal deviation, degrees")->capture_default_str();
     roofs->add_option("--plane-min-points", ropts.lod2.planes.min_points, "Roof planes: minimum support")->capture_default_str();
     roofs->add_option("--lod2-min-points", ropts.lod2.min_points, "Fewer roof points -> flat roof (LOD1.2)")->capture_default_str();
+    roofs->add_option("--max-median-residual-m", ropts.lod2.max_median_residual_m, "A roof model missing its points by more (median) -> flat roof")
+        ->capture_default_str();
     roofs->add_flag("--recompute-ground", rf_recompute_ground, "Ignore class 2 and classify ground with SMRF");
     roofs->add_flag("--no-outlier-filter", rf_no_outliers, "Skip statistical outlier removal");
 

@@ -113,7 +113,8 @@ json to_json(const RunOptions& o) {
              {{"plane_distance_m", l.planes.distance_tolerance_m},
               {"plane_normal_deg", l.planes.normal_tolerance_deg},
               {"plane_min_points", l.planes.min_points},
-              {"lod2_min_points", l.min_points}}},
+              {"lod2_min_points", l.min_points},
+              {"max_median_residual_m", l.max_median_residual_m}}},
             {"export",
              {{"formats", e.formats}, {"lods", e.lods}, {"geojson_crs", e.geojson_crs}, {"vertical_crs", e.vertical_crs}, {"id_field", e.id_field}}}};
 }
@@ -161,7 +162,8 @@ RunOptions run_options_from_json(const json& j, const std::string& where, RunOpt
         const json& x = j["roofs"];
         const std::string w = where + ": roofs";
         auto& l = o.buildings.lod2;
-        check_keys(x, {"plane_distance_m", "plane_normal_deg", "plane_min_points", "lod2_min_points"}, w);
+        check_keys(x, {"plane_distance_m", "plane_normal_deg", "plane_min_points", "lod2_min_points", "max_median_residual_m"}, w);
+        take(x, "max_median_residual_m", l.max_median_residual_m, w);
         take(x, "plane_distance_m", l.planes.distance_tolerance_m, w), take(x, "plane_normal_deg", l.planes.normal_tolerance_deg, w);
         take(x, "plane_min_points", l.planes.min_points, w), take(x, "lod2_min_points", l.min_points, w);
     }

@@ -9,6 +9,7 @@
 #include <cmath>
 #include <map>
 #include <set>
+#include <sstream>
 
 #include "core/error.hpp"
 
@@ -20,6 +21,7 @@ void Lod2Options::validate() const {
     if (!(ridge_snap_m > 0)) throw Error("--ridge-snap-m", "must be > 0");
     if (!(flat_slope_deg >= 0)) throw Error("--flat-slope-deg", "must be >= 0");
     if (min_points < 3) throw Error("--lod2-min-points", "must be >= 3");
+    if (!(max_median_residual_m > 0)) throw Error("--max-median-residual-m", "must be > 0");
     if (!(unit_m > 0) || !(z_unit_m > 0)) throw Error("units", "CRS units must be > 0 metres");
 }
 
@@ -633,6 +635,11 @@ Lod2Result reconstruct_lod2(const std::vector<Polygon>& footprint, const std::ve
     if (!residuals.empty()) {
         std::nth_element(residuals.begin(), residuals.begin() + residuals.size() / 2, residuals.end());
         r.median_residual_m = residuals[residuals.size() / 2] * o.z_unit_m;
+    }
+    if (r.median_residual_m > o.max_median_residual_m) {
+        std::ostringstream why;
+        why << "roof planes miss their points (median residual " << r.median_residual_m << " m)";
+        return fallback(why.str());
     }
     return r;
 }

@@ -24,6 +24,7 @@ struct Lod2Options {
     double flat_slope_deg = 5.0;       ///< planes flatter than this count as flat for the roof type
     double min_roof_height_m = 0.3;    ///< roof vertices must be at least this far above the ground, else fallback
     int min_points = 30;               ///< fewer roof points -> flat-roof fallback
+    double max_median_residual_m = 0.5;///< a model whose points' median residual is larger -> flat-roof fallback
     double unit_m = 1.0;               ///< metres per horizontal CRS unit
     double z_unit_m = 1.0;             ///< metres per z unit
     void validate() const;             ///< throws Error naming the option
