@@ -23,6 +23,7 @@
 #include "io/vector.hpp"
 #include "model/building_json.hpp"
 #include "pipeline/prepared_cloud.hpp"
+#include "raster/raster.hpp"
 
 namespace cityforge {
 
@@ -90,6 +91,7 @@ json to_json(const RunOptions& o) {
             {"tile_size_px", o.tile_size_px},
             {"overlap_m", o.overlap_m},
             {"threads", o.threads},
+            {"keep_rasters", o.keep_rasters},
             {"extraction",
              {{"min_height_m", m.min_height_m},
               {"min_area_m2", m.min_area_m2},
@@ -120,8 +122,10 @@ json to_json(const RunOptions& o) {
 }
 
 RunOptions run_options_from_json(const json& j, const std::string& where, RunOptions o) {
-    check_keys(j, {"ortho", "cloud", "cloud_crs", "footprints", "tile_size_px", "overlap_m", "threads", "extraction", "cleaning", "heights", "roofs", "export"},
+    check_keys(j, {"ortho", "cloud", "cloud_crs", "footprints", "tile_size_px", "overlap_m", "threads", "keep_rasters", "extraction", "cleaning",
+                   "heights", "roofs", "export"},
                where);
+    take(j, "keep_rasters", o.keep_rasters, where);
     take(j, "ortho", o.ortho, where), take(j, "cloud", o.cloud, where), take(j, "cloud_crs", o.cloud_crs, where);
     take(j, "footprints", o.footprints, where), take(j, "tile_size_px", o.tile_size_px, where);
     take(j, "overlap_m", o.overlap_m, where), take(j, "threads", o.threads, where);
@@ -435,6 +439,24 @@ std::vector<Building> tile_buildings(const RunManifest& m, const TileSpec& t, co
         mo.min_height_m /= pc.crs.z_unit_m;
         const BuildingMask mask = detect_buildings(rasters.ndsm, rasters.dsm, rasters.building_share, rasters.vegetation_share, mo);
         rep.seconds["detection"] = since(t0);
+        if (o.keep_rasters) {
+            // The core of each raster: tiles mosaic without overlap.
+            const fs::path rdir = fs::path(out_dir) / "rasters";
+            ensure_directory(rdir);
+            const int dc = t.core.col - t.window.col, dr = t.core.row - t.window.row;
+            GeoTiffWriteOptions wo;
+            wo.nodata = -9999.0;
+            for (const auto& [name, img] : {std::pair<const char*, const Image<float>*>{"dsm", &rasters.dsm}, {"dtm", &rasters.dtm}, {"ndsm", &rasters.ndsm}}) {
+                Image<float> core(t.core.width, t.core.height, 1);
+                for (int r = 0; r < t.core.height; ++r)
+                    for (int c = 0; c < t.core.width; ++c) {
+                        const float v = img->at(0, c + dc, r + dr);
+                        core.at(0, c, r) = std::isnan(v) ? -9999.0f : v;
+                    }
+                wo.band_descriptions = {std::string(name) + " (z, vertical CRS units)"};
+                write_geotiff((rdir / (tile_name(t.index) + "_" + name + ".tif")).string(), core, gt.window(t.core.col, t.core.row), pc.crs.wkt, wo);
+            }
+        }
         t0 = std::chrono::steady_clock::now();
         const int w = t.window.width, h = t.window.height;
         std::vector<int64_t> ids(mask.count + 1, 0);
@@ -585,6 +607,16 @@ RunReport merge_tiles(const RunManifest& m, const std::string& out_dir, const Pr
     model.crs = model_crs_of(crs);
     model.buildings = std::move(buildings);
     for (Building& b : model.buildings) complete_building(b, model.crs, m.options.buildings.model.validity);
+    if (m.options.keep_rasters && fs::exists(fs::path(out_dir) / "rasters")) {
+        for (const char* name : {"dsm", "dtm", "ndsm"}) {
+            std::vector<std::string> parts;
+            for (const TileSpec& t : m.tiles) {
+                const fs::path f = fs::path(out_dir) / "rasters" / (tile_name(t.index) + "_" + name + ".tif");
+                if (fs::exists(f)) parts.push_back(f.string());
+            }
+            if (!parts.empty()) build_vrt_mosaic((fs::path(out_dir) / (std::string(name) + ".vrt")).string(), parts);
+        }
+    }
     const auto te = std::chrono::steady_clock::now();
     rep.model = write_city_model(model, crs, out_dir, m.options.buildings.model, progress.sub(0.3, 0.95));
     stage_seconds["export"] = since(te);

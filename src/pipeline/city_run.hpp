@@ -31,6 +31,9 @@ struct RunOptions {
     double overlap_m = 100.0; ///< context around each core; must exceed the largest building plus the ground ring
     int threads = 0;          ///< 0 = all cores
     double footprint_grid_m = 1.0;  ///< grid cell when there is no ortho (footprints given), metres
+    /// Write each tile core's DSM, DTM and nDSM (float32 GeoTIFF on the
+    /// run's grid) to DIR/rasters/ and a VRT mosaic of each (cloud runs that extract).
+    bool keep_rasters = false;
     FootprintsRunOptions extraction;  ///< detection, outline and fit options (cloud mode)
     RoofsRunOptions buildings;        ///< heights, LOD2 and export options
     void validate() const;

@@ -4,6 +4,7 @@
 #include <cpl_string.h>
 #include <filesystem>
 #include <gdal_priv.h>
+#include <gdal_utils.h>
 
 #include "core/atomic_file.hpp"
 #include "core/error.hpp"
@@ -228,5 +229,19 @@ template void write_geotiff(const std::string&, const Image<int16_t>&, const Geo
 template void write_geotiff(const std::string&, const Image<uint32_t>&, const GeoTransform&, const std::string&, const GeoTiffWriteOptions&);
 template void write_geotiff(const std::string&, const Image<float>&, const GeoTransform&, const std::string&, const GeoTiffWriteOptions&);
 template void write_geotiff(const std::string&, const Image<double>&, const GeoTransform&, const std::string&, const GeoTiffWriteOptions&);
+
+void build_vrt_mosaic(const std::string& path, const std::vector<std::string>& parts) {
+    ensure_gdal_registered();
+    GdalErrorCapture capture;
+    std::vector<const char*> names;
+    std::vector<std::string> absolute;
+    for (const std::string& p : parts) absolute.push_back(std::filesystem::absolute(p).string());
+    for (const std::string& p : absolute) names.push_back(p.c_str());
+    const std::filesystem::path tmp = temporary_path_for(path);
+    GDALDatasetH vrt = GDALBuildVRT(tmp.string().c_str(), static_cast<int>(names.size()), nullptr, names.data(), nullptr, nullptr);
+    if (!vrt) throw Error(path, "cannot build the VRT mosaic" + capture.suffix());
+    GDALClose(vrt);
+    commit_file(tmp, path);
+}
 
 }  // namespace cityforge

@@ -119,4 +119,8 @@ template <typename T>
 void write_geotiff(const std::string& path, const Image<T>& image, const GeoTransform& transform,
                    const std::string& crs_wkt, const GeoTiffWriteOptions& options = {});
 
+/// A GDAL VRT mosaic of rasters that share a grid and CRS (e.g. the tiles of
+/// a run). Throws Error naming `path` when GDAL cannot build it.
+void build_vrt_mosaic(const std::string& path, const std::vector<std::string>& parts);
+
 }  // namespace cityforge

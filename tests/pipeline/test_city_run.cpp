@@ -54,6 +54,16 @@ TEST_CASE("run is tile-invariant and thread-invariant - byte-identical outputs -
     const auto mixed = test::run_cli("run " + common + " --tile-size 300 --out " + (dir / "many"));
     CHECK(mixed.exit_code == 1);
     CHECK(mixed.err.find("holds a run with other options") != std::string::npos);
+    // Intermediate rasters when asked: tile cores mosaic back onto the ortho's grid.
+    {
+        std::ofstream cfg(dir / "rasters.json");
+        cfg << R"({"keep_rasters": true, "export": {"formats": ["geojson"]}})";
+    }
+    REQUIRE(test::run_cli("run " + common + " --tile-size 350 --config " + (dir / "rasters.json") + " --out " + (dir / "rasters")).exit_code == 0);
+    const auto vrt = test::run_command("gdalinfo " + (dir / "rasters/ndsm.vrt"));
+    CHECK(vrt.out.find("Size is 1000, 1000") != std::string::npos);
+    CHECK(std::filesystem::exists(dir / "rasters/dtm.vrt"));
+    CHECK(same_bytes(dir / "one/buildings.geojson", dir / "rasters/buildings.geojson"));
 }
 
 TEST_CASE("plan - run one tile - merge-tiles - MPI ranks - a failed tile is reported", "[run][mpi]") {
