@@ -68,7 +68,7 @@ int main(int argc, char** argv) {
     for (std::size_t i = 0; i < heights.size(); ++i) {
         const auto& v = truth.features[i].values;
         if (std::get<std::string>(v[2]) != "flat" || !heights[i].height_m) continue;
-        err += std::abs(*heights[i].height_m - std::stod(std::get<std::string>(v[3])));
+        err += std::abs(*heights[i].height_m - std::get<double>(v[3]));
         ++n;
     }
     std::printf("flat roofs: MAE %.3f m over %d buildings\n", n ? err / n : 0.0, n);
