@@ -181,6 +181,9 @@ int main(int argc, char** argv) {
     heights->add_option("--ground-buffer-m", hopt.heights.ground_buffer_m, "Width of the ring searched for ground points, metres")->capture_default_str();
     heights->add_option("--min-height-m", hopt.heights.min_height_above_ground_m, "Roof points must be this far above the ground, metres")->capture_default_str();
     heights->add_option("--min-roof-points", hopt.heights.min_roof_points, "Fewer roof points -> null percentiles")->capture_default_str();
+    heights->add_option("--max-points-in-memory", hopt.max_points_in_memory, "Larger clouds are read window by window (tiles of --tile-m)")
+        ->capture_default_str();
+    heights->add_option("--tile-m", hopt.tile_m, "Tile edge of windowed reading, metres")->capture_default_str();
     heights->add_flag("--recompute-ground", h_recompute_ground, "Ignore class 2 and classify ground with SMRF");
     heights->add_flag("--no-outlier-filter", h_no_outliers, "Skip statistical outlier removal");
     heights->add_option("--sor-k", hopt.outliers.k_neighbours, "Outlier removal: neighbours")->capture_default_str();
@@ -418,8 +421,8 @@ int main(int argc, char** argv) {
             if (!g.quiet) {
                 std::string q;
                 for (const auto& [k, v] : r.quality_counts) q += " " + k + "=" + std::to_string(v);
-                std::fprintf(stderr, "cityforge: heights for %zu buildings in %.1f s (%s; %llu points, %zu outliers + %zu isolated removed, %zu ground points %s%s); quality:%s\n",
-                             r.buildings, r.seconds, r.crs.c_str(), static_cast<unsigned long long>(r.points_read),
+                std::fprintf(stderr, "cityforge: heights for %zu buildings in %.1f s, %zu cloud window(s) (%s; %llu points, %zu outliers + %zu isolated removed, %zu ground points %s%s); quality:%s\n",
+                             r.buildings, r.seconds, r.tiles, r.crs.c_str(), static_cast<unsigned long long>(r.points_read),
                              r.removed_statistical, r.removed_isolated, r.ground_points,
                              r.ground_from_classification ? "from class 2" : "from SMRF", r.reprojected ? ", cloud reprojected" : "", q.c_str());
             }

@@ -3,6 +3,9 @@
 #include <chrono>
 
 #include "pipeline/prepared_cloud.hpp"
+#include "cloud/cloud_reader.hpp"
+#include <cmath>
+#include <map>
 #include "core/error.hpp"
 #include "core/log.hpp"
 #include "crs/crs.hpp"
@@ -89,12 +92,105 @@ HeightsStage compute_heights_stage(PolygonLayer footprints_in, PreparedCloud clo
     return st;
 }
 
+namespace {
+
+// Heights of `footprints` with the cloud read window by window (see
+// HeightsRunOptions::max_points_in_memory); rows in the footprints' order.
+HeightsStage tiled_heights_stage(PolygonLayer footprints, const std::string& cloud_path, const HeightsRunOptions& o, const Progress& progress,
+                                 std::size_t& tiles_used) {
+    const double unit = footprints.crs.linear_unit_m;
+    std::vector<Extent> ext(footprints.features.size());
+    Extent all{INFINITY, INFINITY, -INFINITY, -INFINITY};
+    for (std::size_t i = 0; i < ext.size(); ++i) {
+        Extent e{INFINITY, INFINITY, -INFINITY, -INFINITY};
+        for (const Polygon& p : footprints.features[i].geometry) {
+            const Extent q = polygon_extent(p);
+            e.min_x = std::min(e.min_x, q.min_x), e.min_y = std::min(e.min_y, q.min_y);
+            e.max_x = std::max(e.max_x, q.max_x), e.max_y = std::max(e.max_y, q.max_y);
+        }
+        ext[i] = e;
+        all.min_x = std::min(all.min_x, e.min_x), all.min_y = std::min(all.min_y, e.min_y);
+        all.max_x = std::max(all.max_x, e.max_x), all.max_y = std::max(all.max_y, e.max_y);
+    }
+    HeightsRunOptions ho = o;
+    if (ho.outliers.enabled && !(ho.outliers.max_mean_distance > 0)) {
+        // One outlier limit for every tile, from the footprints' central 400 m.
+        const double half = 200.0 / unit, cx = 0.5 * (all.min_x + all.max_x), cy = 0.5 * (all.min_y + all.max_y);
+        const Extent box{cx - half, cy - half, cx + half, cy + half};
+        GroundFilterOptions trust = o.ground;
+        trust.trust_classification = true;
+        const PreparedCloud sample = prepare_cloud(cloud_path, o.cloud_crs, footprints.crs, o.outliers, trust, &box);
+        if (sample.cloud.size()) ho.outliers.max_mean_distance = sample.outlier_limit_m;
+    }
+    // Footprints grouped by the tile holding their bounding-box centre.
+    const double tile = o.tile_m / unit, margin = o.tile_margin_m / unit;
+    std::map<std::pair<int64_t, int64_t>, std::vector<std::size_t>> groups;
+    for (std::size_t i = 0; i < ext.size(); ++i)
+        groups[{static_cast<int64_t>(std::floor((0.5 * (ext[i].min_x + ext[i].max_x) - all.min_x) / tile)),
+                static_cast<int64_t>(std::floor((0.5 * (ext[i].min_y + ext[i].max_y) - all.min_y) / tile))}]
+            .push_back(i);
+    HeightsStage out;
+    out.footprints = footprints;
+    std::vector<Feature> rows(footprints.features.size());
+    std::vector<BuildingHeight> heights(footprints.features.size());
+    std::size_t done = 0;
+    bool first = true;
+    for (const auto& [key, members] : groups) {
+        Extent w{INFINITY, INFINITY, -INFINITY, -INFINITY};
+        PolygonLayer sub;
+        sub.crs = footprints.crs, sub.field_names = footprints.field_names, sub.field_types = footprints.field_types;
+        for (std::size_t i : members) {
+            w.min_x = std::min(w.min_x, ext[i].min_x - margin), w.min_y = std::min(w.min_y, ext[i].min_y - margin);
+            w.max_x = std::max(w.max_x, ext[i].max_x + margin), w.max_y = std::max(w.max_y, ext[i].max_y + margin);
+            sub.features.push_back(footprints.features[i]);
+            sub.fids.push_back(footprints.fids[i]);
+        }
+        PreparedCloud pc = prepare_cloud(cloud_path, o.cloud_crs, footprints.crs, ho.outliers, ho.ground, &w);
+        HeightsStage st = compute_heights_stage(std::move(sub), std::move(pc), ho);
+        if (first) {
+            out.table.crs = st.table.crs, out.table.field_names = st.table.field_names, out.table.field_types = st.table.field_types;
+            out.report.crs = st.report.crs, out.report.ground_from_classification = st.report.ground_from_classification;
+            out.cloud.crs = st.cloud.crs, out.cloud.source_crs = st.cloud.source_crs;
+            first = false;
+        }
+        out.report.points_read += st.report.points_read, out.report.removed_statistical += st.report.removed_statistical;
+        out.report.removed_isolated += st.report.removed_isolated, out.report.ground_points += st.report.ground_points;
+        out.report.reprojected = out.report.reprojected || st.report.reprojected;
+        for (std::size_t k = 0; k < members.size(); ++k) rows[members[k]] = std::move(st.table.features[k]), heights[members[k]] = std::move(st.heights[k]);
+        done += members.size();
+        progress(double(done) / double(ext.size()), "tiles");
+    }
+    tiles_used = groups.size();
+    out.table.features = std::move(rows);
+    out.table.fids = footprints.fids;
+    out.heights = std::move(heights);
+    for (const BuildingHeight& h : out.heights) ++out.report.quality_counts[h.height_quality];
+    out.report.buildings = out.heights.size();
+    return out;
+}
+
+}  // namespace
+
 HeightsRunReport run_heights(const std::string& footprints_path, const std::string& cloud_path,
                              const std::string& output_path, const HeightsRunOptions& o, const Progress& progress) {
     const auto t0 = std::chrono::steady_clock::now();
     const std::string driver = vector_driver_for(output_path);
-    HeightsStage st = compute_heights_stage(footprints_path, cloud_path, o, progress.sub(0.0, 0.95));
+    o.heights.validate();
+    if (!(o.tile_m > 0) || !(o.tile_margin_m >= 4 * o.heights.ground_buffer_m))
+        throw Error("--tile-m", "tiles must be > 0 m and their margin at least 4 x the ground buffer");
+    const uint64_t announced = CloudReader(cloud_path).announced_points();
+    HeightsStage st;
+    std::size_t tiles = 1;
+    if (o.max_points_in_memory > 0 && announced > o.max_points_in_memory) {
+        PolygonLayer footprints = read_polygon_layer(footprints_path, o.footprint_layer);
+        if (footprints.crs.empty()) throw Error(footprints_path, "footprints have no coordinate reference system");
+        if (footprints.crs.geographic) throw Error(footprints_path, "footprints are in a geographic CRS; reproject them to a projected CRS first");
+        st = tiled_heights_stage(std::move(footprints), cloud_path, o, progress.sub(0.0, 0.95), tiles);
+    } else {
+        st = compute_heights_stage(footprints_path, cloud_path, o, progress.sub(0.0, 0.95));
+    }
     HeightsRunReport rep = st.report;
+    rep.tiles = tiles;
     rep.output_path = output_path;
     std::vector<FieldDefinition> fields;
     for (std::size_t i = 0; i < st.table.field_names.size(); ++i) fields.push_back({st.table.field_names[i], st.table.field_types[i]});

@@ -19,6 +19,13 @@ struct HeightsRunOptions {
     OutlierFilterOptions outliers;    ///< radii in metres here; converted to CRS units
     GroundFilterOptions ground;       ///< lengths in metres here; converted to CRS units
     HeightOptions heights;            ///< unit_m / z_unit_m are set from the CRSs
+    /// A cloud announcing more points is never held whole: footprints are
+    /// grouped in square tiles of `tile_m` and each group reads only its
+    /// window of the cloud (streamed), grown by `tile_margin_m`. The outlier
+    /// filter's limit is then measured once on the footprints' central 400 m.
+    uint64_t max_points_in_memory = 60'000'000;
+    double tile_m = 1000.0;           ///< tile edge, metres
+    double tile_margin_m = 30.0;      ///< window margin around a tile's footprints (>= 4 x the ground buffer), metres
 };
 
 struct HeightsRunReport {
@@ -31,6 +38,7 @@ struct HeightsRunReport {
     bool reprojected = false;
     std::size_t buildings = 0;
     std::map<std::string, std::size_t> quality_counts;
+    std::size_t tiles = 1;            ///< footprint groups the cloud was read in (1 = whole cloud at once)
     double seconds = 0.0;
 };
 
