@@ -205,6 +205,9 @@ int main(int argc, char** argv) {
     rasterize->add_option("--gsd", ropt.gsd_m, "Cell size in metres when no --grid is given")->capture_default_str();
     rasterize->add_option("--cloud-crs", ropt.cloud_crs, "CRS of the cloud, e.g. EPSG:7415");
     rasterize->add_flag("--recompute-ground", r_recompute_ground, "Ignore class 2 and classify ground with SMRF");
+    rasterize->add_option("--max-points-in-memory", ropt.max_points_in_memory, "With --grid, larger clouds are read window by window")
+        ->capture_default_str();
+    rasterize->add_option("--tile-m", ropt.tile_m, "Tile edge of windowed reading, metres")->capture_default_str();
 
     // footprints ------------------------------------------------------------
     auto* footprints = app.add_subcommand("footprints", "Building footprints with rectangle fits (cloud-only or ortho-only mode)");

@@ -15,6 +15,14 @@ struct RasterizeOptions {
     double gsd_m = 0.5;            ///< cell size when no grid raster is given
     OutlierFilterOptions outliers;
     GroundFilterOptions ground;
+    /// With a grid raster, a cloud announcing more points is never held
+    /// whole: the grid is cut into tiles of `tile_m` read as windows grown by
+    /// `overlap_m` (streamed); each tile's core is kept. The DTM fill is local,
+    /// so cores join seamlessly; the outlier limit is measured once on the
+    /// grid's central 400 m.
+    uint64_t max_points_in_memory = 60'000'000;
+    double tile_m = 1000.0;
+    double overlap_m = 100.0;
     void validate() const;
 };
 
@@ -24,6 +32,7 @@ struct RasterizeReport {
     std::string crs;
     uint64_t points = 0;
     std::size_t ground_points = 0;
+    std::size_t tiles = 1;          ///< cloud windows read (1 = the whole cloud at once)
     bool ground_from_classification = false;
     double seconds = 0.0;
 };
