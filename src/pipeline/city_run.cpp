@@ -227,16 +227,11 @@ RunManifest plan_run(const RunOptions& in) {
     // The outlier filter's limit, measured once on a sample fixed by the grid
     // (its central 400 m square), so that every tile filters alike.
     if (m.options.buildings.heights.outliers.enabled && !(m.options.buildings.heights.outliers.max_mean_distance > 0)) {
-        const CrsInfo grid_crs = crs_from_wkt(m.crs_wkt, "grid");
-        const double half = 200.0 / grid_crs.linear_unit_m;
-        const MapPoint c = m.grid.transform.pixel_to_map({m.grid.width / 2.0, m.grid.height / 2.0});
-        const Extent box{c.x - half, c.y - half, c.x + half, c.y + half};
-        GroundFilterOptions trust = o.buildings.heights.ground;
-        trust.trust_classification = true;
-        const PreparedCloud sample = prepare_cloud(o.cloud, o.cloud_crs, grid_crs, o.buildings.heights.outliers, trust, &box);
-        if (sample.cloud.size() == 0) throw Error(o.cloud, "no points in the centre of the grid; is the cloud over the ortho?");
-        m.options.buildings.heights.outliers.max_mean_distance = sample.outlier_limit_m;
-        m.options.extraction.outliers.max_mean_distance = sample.outlier_limit_m;
+        const double limit = sample_outlier_limit_m(o.cloud, o.cloud_crs, crs_from_wkt(m.crs_wkt, "grid"), o.buildings.heights.outliers,
+                                                    m.grid.transform.pixel_to_map({m.grid.width / 2.0, m.grid.height / 2.0}));
+        if (!(limit > 0)) throw Error(o.cloud, "no points in the centre of the grid; is the cloud over the ortho?");
+        m.options.buildings.heights.outliers.max_mean_distance = limit;
+        m.options.extraction.outliers.max_mean_distance = limit;
     }
     const int ts = o.tile_size_px;
     int k = 0;

@@ -113,15 +113,9 @@ HeightsStage tiled_heights_stage(PolygonLayer footprints, const std::string& clo
         all.max_x = std::max(all.max_x, e.max_x), all.max_y = std::max(all.max_y, e.max_y);
     }
     HeightsRunOptions ho = o;
-    if (ho.outliers.enabled && !(ho.outliers.max_mean_distance > 0)) {
-        // One outlier limit for every tile, from the footprints' central 400 m.
-        const double half = 200.0 / unit, cx = 0.5 * (all.min_x + all.max_x), cy = 0.5 * (all.min_y + all.max_y);
-        const Extent box{cx - half, cy - half, cx + half, cy + half};
-        GroundFilterOptions trust = o.ground;
-        trust.trust_classification = true;
-        const PreparedCloud sample = prepare_cloud(cloud_path, o.cloud_crs, footprints.crs, o.outliers, trust, &box);
-        if (sample.cloud.size()) ho.outliers.max_mean_distance = sample.outlier_limit_m;
-    }
+    if (ho.outliers.enabled && !(ho.outliers.max_mean_distance > 0))  // one limit for every tile
+        ho.outliers.max_mean_distance =
+            sample_outlier_limit_m(cloud_path, o.cloud_crs, footprints.crs, o.outliers, {0.5 * (all.min_x + all.max_x), 0.5 * (all.min_y + all.max_y)});
     // Footprints grouped by the tile holding their bounding-box centre.
     const double tile = o.tile_m / unit, margin = o.tile_margin_m / unit;
     std::map<std::pair<int64_t, int64_t>, std::vector<std::size_t>> groups;

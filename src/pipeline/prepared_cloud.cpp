@@ -65,4 +65,14 @@ PreparedCloud prepare_cloud(const std::string& cloud_path, const std::string& cl
     return p;
 }
 
+double sample_outlier_limit_m(const std::string& cloud_path, const std::string& cloud_crs_override, const CrsInfo& target,
+                              const OutlierFilterOptions& outliers, const MapPoint& centre) {
+    const double half = 200.0 / (target.empty() ? 1.0 : target.linear_unit_m);
+    const Extent box{centre.x - half, centre.y - half, centre.x + half, centre.y + half};
+    GroundFilterOptions trust;  // the limit needs no ground: take class 2 as it is, never run SMRF here
+    trust.trust_classification = true;
+    const PreparedCloud sample = prepare_cloud(cloud_path, cloud_crs_override, target, outliers, trust, &box);
+    return sample.cloud.size() ? sample.outlier_limit_m : 0.0;
+}
+
 }  // namespace cityforge

@@ -33,4 +33,10 @@ struct PreparedCloud {
 PreparedCloud prepare_cloud(const std::string& cloud_path, const std::string& cloud_crs_override, const CrsInfo& target,
                             const OutlierFilterOptions& outliers, const GroundFilterOptions& ground, const Extent* crop = nullptr);
 
+/// The outlier filter's mean-kNN-distance limit (metres) measured on the
+/// 400 m square of the cloud centred on `centre` (target CRS), so that
+/// windows of one cloud all filter alike. 0 when the square holds no point.
+double sample_outlier_limit_m(const std::string& cloud_path, const std::string& cloud_crs_override, const CrsInfo& target,
+                              const OutlierFilterOptions& outliers, const MapPoint& centre);
+
 }  // namespace cityforge
