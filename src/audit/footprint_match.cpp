@@ -9,22 +9,6 @@
 namespace cityforge {
 namespace {
 
-Extent extent_of(const std::vector<Polygon>& parts) {
-    Extent e{INFINITY, INFINITY, -INFINITY, -INFINITY};
-    for (const Polygon& p : parts) {
-        const Extent q = polygon_extent(p);
-        e.min_x = std::min(e.min_x, q.min_x), e.min_y = std::min(e.min_y, q.min_y);
-        e.max_x = std::max(e.max_x, q.max_x), e.max_y = std::max(e.max_y, q.max_y);
-    }
-    return e;
-}
-
-double area_of(const std::vector<Polygon>& parts) {
-    double a = 0.0;
-    for (const Polygon& p : parts) a += polygon_area(p);
-    return a;
-}
-
 // Intersection area of two multipolygons whose parts do not overlap among themselves.
 double multi_intersection(const std::vector<Polygon>& a, const std::vector<Polygon>& b) {
     double inter = 0.0;
@@ -70,17 +54,17 @@ FootprintScores match_footprints(const std::vector<std::vector<Polygon>>& pred, 
         std::size_t p, r;
     };
     std::vector<Extent> pe(pred.size()), re(ref.size());
-    for (std::size_t i = 0; i < pred.size(); ++i) pe[i] = extent_of(pred[i]);
-    for (std::size_t i = 0; i < ref.size(); ++i) re[i] = extent_of(ref[i]);
+    for (std::size_t i = 0; i < pred.size(); ++i) pe[i] = parts_extent(pred[i]);
+    for (std::size_t i = 0; i < ref.size(); ++i) re[i] = parts_extent(ref[i]);
     std::vector<std::vector<Candidate>> per_pred(pred.size());
     std::vector<double> inter_of_pred(pred.size(), 0.0);
     tbb::parallel_for(std::size_t(0), pred.size(), [&](std::size_t p) {
-        const double ap = area_of(pred[p]);
+        const double ap = parts_area(pred[p]);
         for (std::size_t r = 0; r < ref.size(); ++r) {
             if (pe[p].max_x < re[r].min_x || re[r].max_x < pe[p].min_x || pe[p].max_y < re[r].min_y || re[r].max_y < pe[p].min_y) continue;
             const double inter = multi_intersection(pred[p], ref[r]);
             inter_of_pred[p] += inter;
-            const double uni = ap + area_of(ref[r]) - inter;
+            const double uni = ap + parts_area(ref[r]) - inter;
             const double iou = uni > 0 ? std::min(1.0, inter / uni) : 0.0;
             if (iou >= threshold) per_pred[p].push_back({iou, p, r});
         }
@@ -97,8 +81,8 @@ FootprintScores match_footprints(const std::vector<std::vector<Polygon>>& pred, 
     for (const Candidate& c : all) {
         if (pu[c.p] || ru[c.r]) continue;
         pu[c.p] = ru[c.r] = 1;
-        const double ar = area_of(ref[c.r]);
-        s.matches.push_back({c.p, c.r, c.iou, ar > 0 ? (area_of(pred[c.p]) - ar) / ar * 100.0 : 0.0, polis_distance(pred[c.p], ref[c.r])});
+        const double ar = parts_area(ref[c.r]);
+        s.matches.push_back({c.p, c.r, c.iou, ar > 0 ? (parts_area(pred[c.p]) - ar) / ar * 100.0 : 0.0, polis_distance(pred[c.p], ref[c.r])});
     }
     std::sort(s.matches.begin(), s.matches.end(), [](const FootprintMatch& a, const FootprintMatch& b) { return a.reference < b.reference; });
     s.true_positives = s.matches.size();
@@ -114,8 +98,8 @@ FootprintScores match_footprints(const std::vector<std::vector<Polygon>>& pred, 
         s.mean_iou /= n, s.mean_abs_area_error_pct /= n, s.mean_polis /= n;
     }
     double inter = 0.0, area_pred = 0.0, area_ref = 0.0;
-    for (std::size_t p = 0; p < pred.size(); ++p) inter += inter_of_pred[p], area_pred += area_of(pred[p]);
-    for (const auto& r : ref) area_ref += area_of(r);
+    for (std::size_t p = 0; p < pred.size(); ++p) inter += inter_of_pred[p], area_pred += parts_area(pred[p]);
+    for (const auto& r : ref) area_ref += parts_area(r);
     inter = std::min({inter, area_pred, area_ref});  // rounding must not push the ratios above 1
     s.area_completeness = area_ref > 0 ? inter / area_ref : 0.0;
     s.area_correctness = area_pred > 0 ? inter / area_pred : 0.0;

@@ -155,16 +155,9 @@ std::string svg_scatter(const std::vector<double>& x, const std::vector<double>&
 std::string svg_footprint_map(const std::vector<std::vector<Polygon>>& shapes, const std::vector<double>& values, double low,
                               double high, const std::string& value_label, const std::vector<std::vector<Polygon>>& outlines,
                               const MapPicture* background) {
-    Extent e{INFINITY, INFINITY, -INFINITY, -INFINITY};
-    auto grow = [&](const std::vector<std::vector<Polygon>>& set) {
-        for (const auto& parts : set)
-            for (const Polygon& p : parts) {
-                const Extent q = polygon_extent(p);
-                e.min_x = std::min(e.min_x, q.min_x), e.min_y = std::min(e.min_y, q.min_y);
-                e.max_x = std::max(e.max_x, q.max_x), e.max_y = std::max(e.max_y, q.max_y);
-            }
-    };
-    grow(shapes), grow(outlines);
+    Extent e = empty_extent();
+    for (const auto* set : {&shapes, &outlines})
+        for (const auto& parts : *set) include(e, parts_extent(parts));
     if (!(e.max_x > e.min_x && e.max_y > e.min_y)) return empty_chart(value_label);
     const double pad = 0.03 * std::max(e.width(), e.height());
     e.min_x -= pad, e.min_y -= pad, e.max_x += pad, e.max_y += pad;

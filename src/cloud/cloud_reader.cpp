@@ -384,15 +384,8 @@ PointCloud read_point_cloud_in(const std::string& path, double min_x, double min
     while (true) {
         chunk.clear();
         if (reader.read_chunk(chunk, 1u << 20) == 0) break;
-        const bool color = chunk.has_color(), gps = chunk.has_gps_time();
-        for (std::size_t i = 0; i < chunk.size(); ++i) {
-            if (chunk.x[i] < min_x || chunk.x[i] >= max_x || chunk.y[i] < min_y || chunk.y[i] >= max_y) continue;
-            out.x.push_back(chunk.x[i]), out.y.push_back(chunk.y[i]), out.z.push_back(chunk.z[i]);
-            out.intensity.push_back(chunk.intensity[i]), out.classification.push_back(chunk.classification[i]);
-            out.return_number.push_back(chunk.return_number[i]), out.number_of_returns.push_back(chunk.number_of_returns[i]);
-            if (gps) out.gps_time.push_back(chunk.gps_time[i]);
-            if (color) out.red.push_back(chunk.red[i]), out.green.push_back(chunk.green[i]), out.blue.push_back(chunk.blue[i]);
-        }
+        for (std::size_t i = 0; i < chunk.size(); ++i)
+            if (chunk.x[i] >= min_x && chunk.x[i] < max_x && chunk.y[i] >= min_y && chunk.y[i] < max_y) out.append(chunk, i);
     }
     return out;
 }

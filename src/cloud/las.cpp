@@ -53,6 +53,14 @@ void PointCloud::clear() {
     for (auto* v : {&classification, &return_number, &number_of_returns}) v->clear();
 }
 
+void PointCloud::append(const PointCloud& src, std::size_t i) {
+    x.push_back(src.x[i]), y.push_back(src.y[i]), z.push_back(src.z[i]);
+    intensity.push_back(src.intensity[i]), classification.push_back(src.classification[i]);
+    return_number.push_back(src.return_number[i]), number_of_returns.push_back(src.number_of_returns[i]);
+    if (src.has_gps_time()) gps_time.push_back(src.gps_time[i]);
+    if (src.has_color()) red.push_back(src.red[i]), green.push_back(src.green[i]), blue.push_back(src.blue[i]);
+}
+
 void PointCloud::reserve(std::size_t n, bool color, bool gps) {
     // Grow geometrically: readers call this once per chunk.
     if (n <= x.capacity() && (!color || n <= red.capacity()) && (!gps || n <= gps_time.capacity())) return;

@@ -32,6 +32,9 @@ struct PointCloud {
     bool has_gps_time() const { return !gps_time.empty(); }
     void clear();
     void reserve(std::size_t n, bool color, bool gps);
+    /// Appends point `i` of `src` with all its attributes (colour and GPS time
+    /// when `src` has them; mixing clouds with and without them is the caller's error).
+    void append(const PointCloud& src, std::size_t i);
 };
 
 }  // namespace cityforge

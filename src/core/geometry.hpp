@@ -88,14 +88,37 @@ inline double distance_to_boundary(const Polygon& p, double x, double y) {
     return std::sqrt(best);
 }
 
+/// An extent that contains nothing; include() grows it.
+inline Extent empty_extent() { return {INFINITY, INFINITY, -INFINITY, -INFINITY}; }
+
+/// Grows `e` to cover `o`.
+inline void include(Extent& e, const Extent& o) {
+    e.min_x = std::min(e.min_x, o.min_x), e.min_y = std::min(e.min_y, o.min_y);
+    e.max_x = std::max(e.max_x, o.max_x), e.max_y = std::max(e.max_y, o.max_y);
+}
+
 /// Bounding box of the outer ring.
 inline Extent polygon_extent(const Polygon& p) {
-    Extent e{INFINITY, INFINITY, -INFINITY, -INFINITY};
+    Extent e = empty_extent();
     for (const MapPoint& q : p.outer) {
         e.min_x = std::min(e.min_x, q.x), e.max_x = std::max(e.max_x, q.x);
         e.min_y = std::min(e.min_y, q.y), e.max_y = std::max(e.max_y, q.y);
     }
     return e;
+}
+
+/// Bounding box of a footprint's parts (a multipolygon).
+inline Extent parts_extent(const std::vector<Polygon>& parts) {
+    Extent e = empty_extent();
+    for (const Polygon& p : parts) include(e, polygon_extent(p));
+    return e;
+}
+
+/// Area of a footprint's parts (parts do not overlap), CRS units squared.
+inline double parts_area(const std::vector<Polygon>& parts) {
+    double a = 0.0;
+    for (const Polygon& p : parts) a += polygon_area(p);
+    return a;
 }
 
 }  // namespace cityforge

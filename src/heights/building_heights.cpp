@@ -91,12 +91,7 @@ double distance_to_parts(const std::vector<Polygon>& parts, double x, double y) 
 }
 
 Extent extent_of(const std::vector<Polygon>& parts, double grow) {
-    Extent e{INFINITY, INFINITY, -INFINITY, -INFINITY};
-    for (const Polygon& p : parts) {
-        const Extent pe = polygon_extent(p);
-        e.min_x = std::min(e.min_x, pe.min_x), e.min_y = std::min(e.min_y, pe.min_y);
-        e.max_x = std::max(e.max_x, pe.max_x), e.max_y = std::max(e.max_y, pe.max_y);
-    }
+    Extent e = parts_extent(parts);
     e.min_x -= grow, e.min_y -= grow, e.max_x += grow, e.max_y += grow;
     return e;
 }
@@ -121,9 +116,7 @@ std::vector<BuildingHeight> compute_building_heights(const PointCloud& c, const 
     tbb::parallel_for(std::size_t(0), footprints.size(), [&](std::size_t f) {
         const std::vector<Polygon>& parts = footprints[f];
         BuildingHeight& b = out[f];
-        double area = 0.0;
-        for (const Polygon& p : parts) area += polygon_area(p);
-        const double area_m2 = area * o.unit_m * o.unit_m;
+        const double area_m2 = parts_area(parts) * o.unit_m * o.unit_m;
         // Candidates: points in the bounding box grown by the widest ground ring.
         std::vector<double> roof, ground_dist, ground_z;
         std::vector<std::pair<double, double>> roof_xy;

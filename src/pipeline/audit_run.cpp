@@ -65,11 +65,6 @@ Parts parts_of(const PolygonLayer& layer) {
     return out;
 }
 
-double area_of(const std::vector<Polygon>& parts) {
-    double a = 0.0;
-    for (const Polygon& p : parts) a += polygon_area(p);
-    return a;
-}
 
 void reproject_layer(PolygonLayer& layer, const CrsInfo& to, const std::string& path) {
     for (Feature& f : layer.features)
@@ -168,13 +163,8 @@ std::optional<MapPicture> background_for(const std::string& ortho, const CrsInfo
     const RasterInfo info = read_raster_info(ortho);
     if (!same_horizontal_crs(info.crs, crs))
         throw Error(ortho, "ortho CRS (" + info.crs.label() + ") differs from the reference footprints' (" + crs.label() + ")");
-    Extent e{INFINITY, INFINITY, -INFINITY, -INFINITY};
-    for (const auto& parts : shapes)
-        for (const Polygon& p : parts) {
-            const Extent q = polygon_extent(p);
-            e.min_x = std::min(e.min_x, q.min_x), e.min_y = std::min(e.min_y, q.min_y);
-            e.max_x = std::max(e.max_x, q.max_x), e.max_y = std::max(e.max_y, q.max_y);
-        }
+    Extent e = empty_extent();
+    for (const auto& parts : shapes) include(e, parts_extent(parts));
     if (!(e.max_x > e.min_x)) return std::nullopt;
     const double pad = 0.03 * std::max(e.width(), e.height());
     e.min_x -= pad, e.min_y -= pad, e.max_x += pad, e.max_y += pad;
@@ -222,7 +212,7 @@ FootprintAuditReport audit_footprints(const std::string& pred_path, const std::s
         table.push_back({std::to_string(ref.fids[m.reference]), std::to_string(pred.fids[m.predicted]), fmt(m.iou), fmt(m.area_error_pct),
                          fmt(m.polis)});
         ious.push_back(m.iou), errs.push_back(m.area_error_pct);
-        ref_area.push_back(area_of(rp[m.reference])), pred_area.push_back(area_of(pp[m.predicted]));
+        ref_area.push_back(parts_area(rp[m.reference])), pred_area.push_back(parts_area(pp[m.predicted]));
         iou_of_pred[m.predicted] = m.iou;
         ref_matched[m.reference] = 1;
     }
@@ -288,7 +278,7 @@ RectangleAuditReport audit_rectangles(const std::string& fitted_path, const std:
         rep.fitted = fp.size();
         const FootprintScores s = match_footprints(fp, op, o.iou_threshold);
         for (const FootprintMatch& m : s.matches) {
-            const double a0 = area_of(op[m.reference]), a1 = area_of(fp[m.predicted]);
+            const double a0 = parts_area(op[m.reference]), a1 = parts_area(fp[m.predicted]);
             rep.rows.push_back({lp.pred.fids[m.predicted], a0, a1, a1 - a0, a0 > 0 ? (a1 - a0) / a0 * 100.0 : NAN, m.iou});
         }
         std::sort(rep.rows.begin(), rep.rows.end(), [](const RectangleError& a, const RectangleError& b) { return a.fid < b.fid; });
@@ -303,7 +293,7 @@ RectangleAuditReport audit_rectangles(const std::string& fitted_path, const std:
         for (std::size_t i = 0; i < layer.features.size(); ++i) {
             const auto a0 = number(layer.features[i].values[field]);
             if (!a0) continue;  // a footprint without an original area (e.g. a failed fit) has no row
-            const double a1 = area_of(layer.features[i].geometry) * unit2;
+            const double a1 = parts_area(layer.features[i].geometry) * unit2;
             rep.rows.push_back({layer.fids[i], *a0, a1, a1 - *a0, *a0 > 0 ? (a1 - *a0) / *a0 * 100.0 : NAN, -1.0});
             fitted_shapes.push_back(layer.features[i].geometry);
         }

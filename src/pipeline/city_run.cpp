@@ -202,13 +202,8 @@ RunManifest plan_run(const RunOptions& in) {
     } else {
         const PolygonLayer fp = read_polygon_layer(o.footprints, o.buildings.heights.footprint_layer);
         if (fp.crs.empty() || fp.crs.geographic) throw Error(o.footprints, "footprints need a projected CRS");
-        Extent e{INFINITY, INFINITY, -INFINITY, -INFINITY};
-        for (const Feature& f : fp.features)
-            for (const Polygon& p : f.geometry) {
-                const Extent q = polygon_extent(p);
-                e.min_x = std::min(e.min_x, q.min_x), e.min_y = std::min(e.min_y, q.min_y);
-                e.max_x = std::max(e.max_x, q.max_x), e.max_y = std::max(e.max_y, q.max_y);
-            }
+        Extent e = empty_extent();
+        for (const Feature& f : fp.features) include(e, parts_extent(f.geometry));
         const double cell = o.footprint_grid_m / fp.crs.linear_unit_m;
         const double x0 = std::floor(e.min_x / cell) * cell, y1 = std::ceil(e.max_y / cell) * cell;
         m.grid = {GeoTransform{x0, cell, y1, -cell}, static_cast<int>(std::ceil((e.max_x - x0) / cell)) + 1,
@@ -339,17 +334,9 @@ void split_cloud(const RunManifest& m, const std::string& out_dir) {
     while (true) {
         chunk.clear();
         if (reader.read_chunk(chunk, 1u << 20) == 0) break;
-        const bool gps = chunk.has_gps_time(), color = chunk.has_color();
         for (Window& w : windows) {
-            for (std::size_t i = 0; i < chunk.size(); ++i) {
-                if (chunk.x[i] < w.e.min_x || chunk.x[i] >= w.e.max_x || chunk.y[i] < w.e.min_y || chunk.y[i] >= w.e.max_y) continue;
-                PointCloud& p = w.pending;
-                p.x.push_back(chunk.x[i]), p.y.push_back(chunk.y[i]), p.z.push_back(chunk.z[i]);
-                p.intensity.push_back(chunk.intensity[i]), p.classification.push_back(chunk.classification[i]);
-                p.return_number.push_back(chunk.return_number[i]), p.number_of_returns.push_back(chunk.number_of_returns[i]);
-                if (gps) p.gps_time.push_back(chunk.gps_time[i]);
-                if (color) p.red.push_back(chunk.red[i]), p.green.push_back(chunk.green[i]), p.blue.push_back(chunk.blue[i]);
-            }
+            for (std::size_t i = 0; i < chunk.size(); ++i)
+                if (chunk.x[i] >= w.e.min_x && chunk.x[i] < w.e.max_x && chunk.y[i] >= w.e.min_y && chunk.y[i] < w.e.max_y) w.pending.append(chunk, i);
             if (w.pending.size() >= (1u << 16)) flush(w);
         }
     }
@@ -406,12 +393,7 @@ std::vector<Building> tile_buildings(const RunManifest& m, const TileSpec& t, co
         const double cx0 = std::min(ca.x, cb.x), cx1 = std::max(ca.x, cb.x), cy0 = std::min(ca.y, cb.y), cy1 = std::max(ca.y, cb.y);
         const bool last_col = t.core.col + t.core.width == m.grid.width, last_row = t.core.row + t.core.height == m.grid.height;
         for (std::size_t i = 0; i < all.features.size(); ++i) {
-            Extent e{INFINITY, INFINITY, -INFINITY, -INFINITY};
-            for (const Polygon& p : all.features[i].geometry) {
-                const Extent q = polygon_extent(p);
-                e.min_x = std::min(e.min_x, q.min_x), e.min_y = std::min(e.min_y, q.min_y);
-                e.max_x = std::max(e.max_x, q.max_x), e.max_y = std::max(e.max_y, q.max_y);
-            }
+            const Extent e = parts_extent(all.features[i].geometry);
             const double x = 0.5 * (e.min_x + e.max_x), y = 0.5 * (e.min_y + e.max_y);
             // Half-open cores (the grid's last row and column closed) own every point exactly once.
             const bool in_x = x >= cx0 && (x < cx1 || (last_col && x <= cx1));

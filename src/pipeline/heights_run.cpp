@@ -100,18 +100,8 @@ HeightsStage tiled_heights_stage(PolygonLayer footprints, const std::string& clo
                                  std::size_t& tiles_used) {
     const double unit = footprints.crs.linear_unit_m;
     std::vector<Extent> ext(footprints.features.size());
-    Extent all{INFINITY, INFINITY, -INFINITY, -INFINITY};
-    for (std::size_t i = 0; i < ext.size(); ++i) {
-        Extent e{INFINITY, INFINITY, -INFINITY, -INFINITY};
-        for (const Polygon& p : footprints.features[i].geometry) {
-            const Extent q = polygon_extent(p);
-            e.min_x = std::min(e.min_x, q.min_x), e.min_y = std::min(e.min_y, q.min_y);
-            e.max_x = std::max(e.max_x, q.max_x), e.max_y = std::max(e.max_y, q.max_y);
-        }
-        ext[i] = e;
-        all.min_x = std::min(all.min_x, e.min_x), all.min_y = std::min(all.min_y, e.min_y);
-        all.max_x = std::max(all.max_x, e.max_x), all.max_y = std::max(all.max_y, e.max_y);
-    }
+    Extent all = empty_extent();
+    for (std::size_t i = 0; i < ext.size(); ++i) include(all, ext[i] = parts_extent(footprints.features[i].geometry));
     HeightsRunOptions ho = o;
     if (ho.outliers.enabled && !(ho.outliers.max_mean_distance > 0))  // one limit for every tile
         ho.outliers.max_mean_distance =
@@ -130,12 +120,11 @@ HeightsStage tiled_heights_stage(PolygonLayer footprints, const std::string& clo
     std::size_t done = 0;
     bool first = true;
     for (const auto& [key, members] : groups) {
-        Extent w{INFINITY, INFINITY, -INFINITY, -INFINITY};
+        Extent w = empty_extent();
         PolygonLayer sub;
         sub.crs = footprints.crs, sub.field_names = footprints.field_names, sub.field_types = footprints.field_types;
         for (std::size_t i : members) {
-            w.min_x = std::min(w.min_x, ext[i].min_x - margin), w.min_y = std::min(w.min_y, ext[i].min_y - margin);
-            w.max_x = std::max(w.max_x, ext[i].max_x + margin), w.max_y = std::max(w.max_y, ext[i].max_y + margin);
+            include(w, {ext[i].min_x - margin, ext[i].min_y - margin, ext[i].max_x + margin, ext[i].max_y + margin});
             sub.features.push_back(footprints.features[i]);
             sub.fids.push_back(footprints.fids[i]);
         }

@@ -32,15 +32,9 @@ PreparedCloud prepare_cloud(const std::string& cloud_path, const std::string& cl
     }
     if (crop && !same) {
         PointCloud kept;
-        std::vector<std::size_t> idx;
         for (std::size_t i = 0; i < p.cloud.size(); ++i)
-            if (p.cloud.x[i] >= crop->min_x && p.cloud.x[i] < crop->max_x && p.cloud.y[i] >= crop->min_y && p.cloud.y[i] < crop->max_y) idx.push_back(i);
-        kept.x.reserve(idx.size());
-        for (std::size_t i : idx) {
-            kept.x.push_back(p.cloud.x[i]), kept.y.push_back(p.cloud.y[i]), kept.z.push_back(p.cloud.z[i]);
-            kept.intensity.push_back(p.cloud.intensity[i]), kept.classification.push_back(p.cloud.classification[i]);
-            kept.return_number.push_back(p.cloud.return_number[i]), kept.number_of_returns.push_back(p.cloud.number_of_returns[i]);
-        }
+            if (p.cloud.x[i] >= crop->min_x && p.cloud.x[i] < crop->max_x && p.cloud.y[i] >= crop->min_y && p.cloud.y[i] < crop->max_y)
+                kept.append(p.cloud, i);
         p.cloud = std::move(kept);
     }
     if (p.cloud.size() == 0) {

@@ -4,7 +4,6 @@
 #include <CGAL/Arr_segment_traits_2.h>
 #include <CGAL/Arrangement_2.h>
 #include <CGAL/Exact_predicates_exact_constructions_kernel.h>
-#include <Eigen/Dense>
 #include <algorithm>
 #include <cmath>
 #include <map>
@@ -253,7 +252,6 @@ PartResult build_part(const Polygon& part, const std::vector<std::array<double, 
         return res;
     }
     std::vector<std::map<int, int>> votes(cells.size());
-    std::vector<int> point_cell(pts.size(), -1);
     std::vector<Extent> cell_ext;
     for (const Polygon& p : cell_poly) cell_ext.push_back(polygon_extent(p));
     for (std::size_t i = 0; i < pts.size(); ++i)
@@ -261,7 +259,6 @@ PartResult build_part(const Polygon& part, const std::vector<std::array<double, 
             const Extent& e = cell_ext[c];
             if (pts[i][0] < e.min_x || pts[i][0] > e.max_x || pts[i][1] < e.min_y || pts[i][1] > e.max_y) continue;
             if (!point_in_polygon(cell_poly[c], pts[i][0], pts[i][1])) continue;
-            point_cell[i] = static_cast<int>(c);
             if (point_plane[i] >= 0) ++votes[c][point_plane[i]];
             break;
         }
