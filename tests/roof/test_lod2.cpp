@@ -104,3 +104,25 @@ TEST_CASE("Roof planes of a gable - two planes with the right slope and azimuths
     REQUIRE(thin.solids.size() == 1);
     CHECK(solid_volume(thin.solids[0]) == Approx(12 * 8 * 7.0));
 }
+
+TEST_CASE("A roof model that misses most of its points (vegetation over a flat roof) falls back to a flat roof and says why", "[roof]") {
+    // A third of the points on a flat roof at 6 m, the rest scattered 1-6 m above it (a tree crown).
+    std::vector<std::array<double, 3>> pts;
+    Rng rng(9);
+    for (double y = 0.1; y < 10; y += 0.3)
+        for (double x = 0.1; x < 10; x += 0.3) {
+            const bool roof = rng.uniform() < 0.33;
+            pts.push_back({x, y, roof ? 6.0 + 0.02 * rng.normal() : 7.0 + 5.0 * rng.uniform()});
+        }
+    const std::vector<Polygon> footprint{Polygon{{{0, 0}, {10, 0}, {10, 10}, {0, 10}}, {}}};
+    const Lod2Result r = reconstruct_lod2(footprint, pts, 0.0, 6.0);
+    CHECK(r.fallback);
+    CHECK(r.fallback_reason.find("miss") != std::string::npos);
+    REQUIRE(r.solids.size() == 1);
+    CHECK(validate_solid(r.solids[0]).empty());
+    Lod2Options lenient;
+    lenient.max_median_residual_m = 10.0;  // accepted when the limit allows it
+    const Lod2Result kept = reconstruct_lod2(footprint, pts, 0.0, 6.0, lenient);
+    CHECK_FALSE(kept.fallback);
+    CHECK(kept.median_residual_m > 0.5);
+}
