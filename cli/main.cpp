@@ -226,6 +226,10 @@ int main(int argc, char** argv) {
     footprints->add_option("--min-area-m2", fopt.mask.min_area_m2, "Smallest building kept, square metres")->capture_default_str();
     footprints->add_option("--min-hole-m2", fopt.mask.min_hole_m2, "Smaller holes are filled, larger ones (courtyards) kept")->capture_default_str();
     footprints->add_option("--opening-px", fopt.mask.opening_radius_px, "Morphological opening radius removing slivers, pixels")->capture_default_str();
+    footprints->add_option("--split-step-m", fopt.mask.split_step_m, "Split buildings along roof height steps larger than this, metres (0 = never)")
+        ->capture_default_str();
+    footprints->add_option("--min-split-part-m2", fopt.mask.min_split_part_m2, "Smallest part split off at a height step, square metres")
+        ->capture_default_str();
     footprints->add_option("--fit-tolerance-pct", fopt.recursive.tolerance_pct, "Recursive fit: stop below this area error, percent")->capture_default_str();
     footprints->add_option("--simplify-m", fopt.simplify_m, "Douglas-Peucker tolerance of the outline, metres")->capture_default_str();
 

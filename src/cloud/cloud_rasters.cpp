@@ -55,7 +55,11 @@ CloudRasters rasterize_cloud(const PointCloud& c, const std::vector<uint8_t>& ke
     r.vegetation_share = Image<float>(g.width, g.height, 1, NAN);
     for (std::size_t k = 0; k < n; ++k)
         if (above_n[k]) {
-            r.building_share.data[k] = static_cast<float>(building_n[k]) / static_cast<float>(above_n[k]);
+            // Vegetation points are left out of the building share: under a
+            // crown that overhangs a roof, the pulses that pierce the crown
+            // still tell roof (class 6) from ground.
+            if (above_n[k] > vegetation_n[k])
+                r.building_share.data[k] = static_cast<float>(building_n[k]) / static_cast<float>(above_n[k] - vegetation_n[k]);
             r.vegetation_share.data[k] = static_cast<float>(vegetation_n[k]) / static_cast<float>(above_n[k]);
         }
     const double cell_m2 = std::abs(g.transform.pixel_width * g.transform.pixel_height) * unit_m * unit_m;

@@ -23,11 +23,13 @@ struct CloudRasters {
     Image<float> dtm;      ///< mean ground z per cell, gaps filled (no holes)
     Image<float> ndsm;     ///< dsm - dtm where the dsm has data
     Image<float> density;  ///< kept points per square metre
-    /// Share of the cell's points classified building (6); NaN where the cell
-    /// has no point. A majority (>= 0.5) puts building edges where half the
-    /// cell is roof, so outlines are not biased outwards.
+    /// Share of building (6) among the cell's points that are not vegetation
+    /// (3, 4, 5); NaN where the cell has no such point (empty, or crown only).
+    /// A majority (>= 0.5) puts building edges where half the cell is roof, so
+    /// outlines are not biased outwards; leaving vegetation out keeps roofs
+    /// under overhanging crowns, seen by the returns that pierce the crown.
     Image<float> building_share;
-    /// Share of the cell's points classified vegetation (3, 4, 5).
+    /// Share of the cell's points classified vegetation (3, 4, 5); NaN where empty.
     Image<float> vegetation_share;
 };
 

@@ -2,6 +2,8 @@
 
 #include <algorithm>
 #include <cmath>
+#include <map>
+#include <set>
 #include <vector>
 
 #include "core/error.hpp"
@@ -14,6 +16,9 @@ void BuildingMaskOptions::validate() const {
     if (!(min_height_m > 0.0)) throw Error("--min-height-m", "must be > 0");
     if (!(min_area_m2 >= 0.0)) throw Error("--min-area-m2", "must be >= 0");
     if (!(min_hole_m2 >= 0.0)) throw Error("--min-hole-m2", "must be >= 0");
+    if (!(split_step_m >= 0.0)) throw Error("--split-step-m", "must be >= 0");
+    if (!(min_split_part_m2 >= 0.0)) throw Error("--min-split-part-m2", "must be >= 0");
+    if (fill_passes < 0 || fill_passes > 50) throw Error("fill passes", "must be between 0 and 50");
     if (opening_radius_px < 0 || opening_radius_px > 10) throw Error("--opening-px", "must be between 0 and 10");
 }
 
@@ -61,18 +66,30 @@ BuildingMask detect_buildings(const Image<float>& ndsm, const Image<float>& dsm,
             classified += building_share.data[k] > 0.0f || vegetation_share.data[k] > 0.0f;
         }
     out.used_classes = with_points > 0 && classified * 10 > with_points;  // classes present in > 10 % of cells
+    // Cell states: 0 = decided not building, 1 = building, 2 = unknown (no
+    // point, or only crown points over something high). Unknown cells are
+    // decided by their neighbours below.
+    constexpr uint8_t kUnknown = 2;
     std::vector<uint8_t> mask(n, 0);
     for (int y = 0; y < h; ++y)
         for (int x = 0; x < w; ++x) {
             const std::size_t k = static_cast<std::size_t>(y) * w + x;
             const float z = ndsm.data[k];
-            if (std::isnan(z) || z < o.min_height_m) continue;
+            if (std::isnan(z)) {
+                mask[k] = kUnknown;
+                continue;
+            }
+            if (z < o.min_height_m) continue;
             if (out.used_classes) {
                 const float b = building_share.data[k], v = vegetation_share.data[k];
+                if (std::isnan(b)) {
+                    // Crown points only: a roof may lie under the crown.
+                    if (!std::isnan(v)) mask[k] = kUnknown;
+                    continue;
+                }
                 // Exact ties (a cell with as many building as other points, common
                 // at 1-2 points per cell) alternate in a checkerboard so that
                 // edge cells are neither all in nor all out: no outward bias.
-                if (std::isnan(b) || v > o.max_vegetation_share) continue;
                 if (b < o.min_building_share || (b == o.min_building_share && ((x + y) & 1))) continue;
             } else {
                 // Roughness: residual of the 3x3 DSM neighbourhood around its best plane,
@@ -86,29 +103,208 @@ BuildingMask detect_buildings(const Image<float>& ndsm, const Image<float>& dsm,
             }
             mask[k] = 1;
         }
-    // Cells without points (dark roofs absorb most LiDAR pulses, matching fails
-    // in shadows) take the building label when most of their neighbours have it.
-    for (int iter = 0; iter < 3; ++iter) {
+    // Unknown cells (dark roofs absorb most LiDAR pulses, matching fails in
+    // shadows, crowns hide roofs) take the building label when at least as
+    // many of their decided neighbours are building as not; the front moves
+    // one cell per pass, and what is still unknown afterwards is not building.
+    for (int iter = 0; iter < o.fill_passes; ++iter) {
         std::vector<uint8_t> next = mask;
+        bool changed = false;
         for (int y = 1; y < h - 1; ++y)
             for (int x = 1; x < w - 1; ++x) {
                 const std::size_t k = static_cast<std::size_t>(y) * w + x;
-                if (mask[k] || !std::isnan(ndsm.data[k])) continue;
-                int votes = 0, known = 0;
+                if (mask[k] != kUnknown) continue;
+                int votes = 0, against = 0;
                 for (int dy = -1; dy <= 1; ++dy)
                     for (int dx = -1; dx <= 1; ++dx) {
-                        const std::size_t q = static_cast<std::size_t>(y + dy) * w + x + dx;
-                        if (q == k) continue;
-                        votes += mask[q];
-                        known += mask[q] || !std::isnan(ndsm.data[q]);
+                        const uint8_t m = mask[static_cast<std::size_t>(y + dy) * w + x + dx];
+                        votes += m == 1;
+                        against += m == 0;
                     }
-                if (votes >= 2 && 2 * votes >= known) next[k] = 1;
+                if (votes >= 2 && votes >= against) next[k] = 1, changed = true;
             }
         mask.swap(next);
+        if (!changed) break;
     }
+    // Heights for the step split: only cells with their own evidence (a crown
+    // over a roof would otherwise look like a taller building).
+    Image<float> step_dsm = dsm;
+    for (std::size_t k = 0; k < n; ++k)
+        if (mask[k] != 1) step_dsm.data[k] = NAN;
+    for (uint8_t& m : mask) m = m == 1;
     BuildingMask labelled = label_buildings(std::move(mask), w, h, o);
     labelled.used_classes = out.used_classes;
+    split_at_height_steps(labelled, step_dsm, o);
     return labelled;
+}
+
+namespace {
+// Union-find over roof parts: a merged part points to the part it joined.
+struct PartSets {
+    std::vector<uint32_t> parent;
+    explicit PartSets(uint32_t n) : parent(n + 1) {
+        for (uint32_t i = 0; i <= n; ++i) parent[i] = i;
+    }
+    uint32_t find(uint32_t a) {
+        while (parent[a] != a) a = parent[a] = parent[parent[a]];
+        return a;
+    }
+};
+}  // namespace
+
+void split_at_height_steps(BuildingMask& mask, const Image<float>& dsm, const BuildingMaskOptions& o) {
+    if (!(o.split_step_m > 0) || mask.count == 0) return;
+    const int w = mask.labels.width, h = mask.labels.height;
+    const std::size_t n = mask.labels.pixel_count();
+    if (dsm.pixel_count() != n) throw Error("building detection", "DSM size differs from the mask");
+    const auto& building = mask.labels.data;
+    const float step = static_cast<float>(o.split_step_m);
+    auto neighbours = [w, h](std::size_t k, std::size_t* out) {
+        const int x = static_cast<int>(k % static_cast<std::size_t>(w)), y = static_cast<int>(k / static_cast<std::size_t>(w));
+        int c = 0;
+        if (x > 0) out[c++] = k - 1;
+        if (x + 1 < w) out[c++] = k + 1;
+        if (y > 0) out[c++] = k - static_cast<std::size_t>(w);
+        if (y + 1 < h) out[c++] = k + static_cast<std::size_t>(w);
+        return c;
+    };
+    // 1. Parts: cells of one building joined when their heights differ by at
+    // most the step (slopes of pitched roofs stay joined).
+    std::vector<uint32_t> part(n, 0);
+    uint32_t parts = 0;
+    std::vector<std::size_t> stack;
+    std::size_t nb[4];
+    for (std::size_t s = 0; s < n; ++s) {
+        if (!building[s] || part[s] || std::isnan(dsm.data[s])) continue;
+        part[s] = ++parts;
+        stack.push_back(s);
+        while (!stack.empty()) {
+            const std::size_t p = stack.back();
+            stack.pop_back();
+            for (int i = 0, c = neighbours(p, nb); i < c; ++i) {
+                const std::size_t q = nb[i];
+                if (building[q] != building[p] || part[q] || std::isnan(dsm.data[q])) continue;
+                if (std::abs(dsm.data[q] - dsm.data[p]) > step) continue;
+                part[q] = parts;
+                stack.push_back(q);
+            }
+        }
+    }
+    // Cells without a height join the neighbouring part with the smallest id,
+    // one ring per pass; a building without any height keeps one part.
+    for (bool changed = true; changed;) {
+        changed = false;
+        std::vector<uint32_t> next = part;
+        for (std::size_t k = 0; k < n; ++k) {
+            if (!building[k] || part[k]) continue;
+            uint32_t best = 0;
+            for (int i = 0, c = neighbours(k, nb); i < c; ++i)
+                if (building[nb[i]] == building[k] && part[nb[i]] && (!best || part[nb[i]] < best)) best = part[nb[i]];
+            if (best) next[k] = best, changed = true;
+        }
+        part.swap(next);
+    }
+    for (std::size_t k = 0; k < n; ++k)
+        if (building[k] && !part[k]) {
+            // Whole building without heights: one part.
+            part[k] = ++parts;
+            stack.push_back(k);
+            while (!stack.empty()) {
+                const std::size_t p = stack.back();
+                stack.pop_back();
+                for (int i = 0, c = neighbours(p, nb); i < c; ++i)
+                    if (building[nb[i]] == building[p] && !part[nb[i]]) part[nb[i]] = parts, stack.push_back(nb[i]);
+            }
+        }
+    // 2. Sizes, contact with the outline, shared borders between parts, and
+    // how much of each border is a measured step (both cells with a height;
+    // such pairs differ by more than the step, or the flood had joined them).
+    std::vector<long> size(parts + 1, 0);
+    std::vector<uint8_t> outline(parts + 1, 0);
+    struct Border {
+        long length = 0;    // cell pairs across the border
+        long measured = 0;  // of which both cells have a height
+    };
+    std::vector<std::map<uint32_t, Border>> border(parts + 1);
+    for (std::size_t k = 0; k < n; ++k) {
+        if (!part[k]) continue;
+        ++size[part[k]];
+        const int c = neighbours(k, nb);
+        if (c < 4) outline[part[k]] = 1;
+        for (int i = 0; i < c; ++i) {
+            if (building[nb[i]] != building[k]) {
+                outline[part[k]] = 1;
+            } else if (part[nb[i]] != part[k]) {
+                Border& b = border[part[k]][part[nb[i]]];
+                ++b.length;
+                b.measured += !std::isnan(dsm.data[k]) && !std::isnan(dsm.data[nb[i]]);
+            }
+        }
+    }
+    PartSets sets(parts);
+    auto merge = [&](uint32_t p, uint32_t into) {
+        size[into] += size[p];
+        outline[into] |= outline[p];
+        for (const auto& [q, b] : border[p]) {
+            if (q == into) continue;
+            Border& bi = border[into][q];
+            bi.length += b.length, bi.measured += b.measured;
+            Border& bq = border[q][into];
+            bq.length += b.length, bq.measured += b.measured;
+            border[q].erase(p);
+        }
+        border[into].erase(p);
+        border[p].clear();
+        sets.parent[p] = into;
+    };
+    // 3. Parts that meet mostly across cells without heights (gaps, dark
+    // roofs) are one roof: a step must be measured along most of the border.
+    auto is_step = [](const Border& b) { return b.measured >= 4 && 2 * b.measured >= b.length; };
+    for (bool changed = true; changed;) {
+        changed = false;
+        for (uint32_t p = 1; p <= parts; ++p) {
+            if (sets.parent[p] != p) continue;
+            for (auto it = border[p].begin(); it != border[p].end();) {
+                const uint32_t q = it->first;
+                if (is_step(it->second)) {
+                    ++it;
+                    continue;
+                }
+                merge(q, p);
+                changed = true;
+                it = border[p].begin();
+            }
+        }
+    }
+    // 4. Small parts and parts inside the roof merge into the neighbour with
+    // the longest shared border (smallest id on ties), smallest parts first.
+    const double cell_m2 = o.gsd_m * o.gsd_m;
+    auto weak = [&](uint32_t p) { return static_cast<double>(size[p]) * cell_m2 < o.min_split_part_m2 || !outline[p]; };
+    std::set<std::pair<long, uint32_t>> queue;
+    for (uint32_t p = 1; p <= parts; ++p)
+        if (sets.parent[p] == p && weak(p) && !border[p].empty()) queue.insert({size[p], p});
+    while (!queue.empty()) {
+        const uint32_t p = queue.begin()->second;
+        queue.erase(queue.begin());
+        uint32_t into = 0;
+        long longest = -1;
+        for (const auto& [q, b] : border[p])
+            if (b.length > longest) longest = b.length, into = q;  // map order: smallest id wins ties
+        if (!into) continue;
+        if (weak(into)) queue.erase({size[into], into});
+        merge(p, into);
+        if (weak(into) && !border[into].empty()) queue.insert({size[into], into});
+    }
+    // 5. Relabel: one label per surviving part, in raster order.
+    std::vector<uint32_t> relabel(parts + 1, 0);
+    uint32_t count = 0;
+    for (std::size_t k = 0; k < n; ++k) {
+        if (!part[k]) continue;
+        const uint32_t root = sets.find(part[k]);
+        if (!relabel[root]) relabel[root] = ++count;
+        mask.labels.data[k] = relabel[root];
+    }
+    mask.count = count;
 }
 
 BuildingMask label_buildings(std::vector<uint8_t> mask, int w, int h, const BuildingMaskOptions& o) {

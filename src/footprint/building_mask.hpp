@@ -14,11 +14,18 @@ namespace cityforge {
 struct BuildingMaskOptions {
     double gsd_m = 0.5;                 ///< cell size of the rasters, metres
     double min_height_m = 2.5;          ///< nDSM threshold, metres above ground
-    double min_building_share = 0.5;    ///< with classes: share of class-6 points among the cell's points
-    double max_vegetation_share = 0.5;  ///< with classes: more vegetation points than this -> not building
+    double min_building_share = 0.5;    ///< with classes: share of class-6 points among the cell's non-vegetation points
+    int fill_passes = 6;                ///< passes deciding cells without evidence (gaps, crown-only) from their neighbours
     double max_roughness_m = 0.35;      ///< without classes: local DSM plane residual (3x3) above this -> vegetation
     double min_area_m2 = 20.0;          ///< smaller components are dropped
     double min_hole_m2 = 6.0;           ///< smaller holes (data gaps) are filled; larger ones (courtyards) kept
+    /// Buildings whose roofs are separated by a height step larger than this
+    /// (metres, between neighbouring cells of the DSM) are split along the
+    /// step (terraced houses of different heights); 0 = never split.
+    double split_step_m = 1.5;
+    /// Parts smaller than this, or not touching the building's outline
+    /// (dormers, chimneys, roof superstructures), stay with their neighbour.
+    double min_split_part_m2 = 15.0;
     int opening_radius_px = 0;          ///< morphological opening removing thin artefacts (0 = none; 1 shrinks outlines ~2 %)
     void validate() const;
 };
@@ -38,8 +45,16 @@ uint32_t label_components(const std::vector<uint8_t>& mask, uint8_t value, int w
 /// min_hole_m2 filled, optional opening, components under min_area_m2 dropped.
 BuildingMask label_buildings(std::vector<uint8_t> mask, int w, int h, const BuildingMaskOptions& options);
 
+/// Splits every building of `mask` into parts whose roofs are separated by
+/// height steps of the DSM (see BuildingMaskOptions::split_step_m); parts are
+/// relabelled 1..count in raster order of first appearance. `dsm` on the same
+/// grid, NaN = no data (such cells join the neighbouring part).
+void split_at_height_steps(BuildingMask& mask, const Image<float>& dsm, const BuildingMaskOptions& options);
+
 /// `ndsm`, `dsm`, `building_share`, `vegetation_share` on the same grid (NaN =
-/// no data). Shares may be all-NaN for unclassified clouds.
+/// no data). Shares may be all-NaN for unclassified clouds. Buildings are
+/// split at height steps (split_at_height_steps) when split_step_m > 0; cells
+/// decided from their neighbours (gaps, crowns) do not count as steps.
 BuildingMask detect_buildings(const Image<float>& ndsm, const Image<float>& dsm, const Image<float>& building_share,
                               const Image<float>& vegetation_share, const BuildingMaskOptions& options);
 

@@ -131,6 +131,66 @@ double polygon_perimeter(const Polygon& p) {
     return s;
 }
 
+bool polygon_is_valid(const Polygon& p) {
+    const BPolygon b = to_boost(p);
+    return bg::is_valid(b);
+}
+
+Polygon offset_edges(const Polygon& polygon, double d) {
+    auto ring = [d](const Ring& r) {
+        const std::size_t n = r.size();
+        Ring out(n);
+        // Outward normal of edge i (r[i] -> r[i+1]): the right-hand side, since
+        // the interior lies to the left of every edge of an oriented ring.
+        std::vector<MapPoint> normal(n);
+        for (std::size_t i = 0; i < n; ++i) {
+            const MapPoint& a = r[i];
+            const MapPoint& b = r[(i + 1) % n];
+            const double len = std::hypot(b.x - a.x, b.y - a.y);
+            normal[i] = len > 0 ? MapPoint{(b.y - a.y) / len, -(b.x - a.x) / len} : MapPoint{0.0, 0.0};
+        }
+        for (std::size_t i = 0; i < n; ++i) {
+            const MapPoint& n1 = normal[(i + n - 1) % n];
+            const MapPoint& n2 = normal[i];
+            // Mitre: the point at distance d from both moved edge lines.
+            const double c = 1.0 + n1.x * n2.x + n1.y * n2.y;
+            const double k = c > 0.1 ? d / c : d / 0.1;  // near-reversals are clamped
+            out[i] = {r[i].x + k * (n1.x + n2.x), r[i].y + k * (n1.y + n2.y)};
+        }
+        return out;
+    };
+    Polygon out;
+    out.outer = ring(polygon.outer);
+    for (const Ring& h : polygon.holes) out.holes.push_back(ring(h));
+    return out;
+}
+
+Polygon match_area(const Polygon& polygon_in, double target_area, double max_offset) {
+    Polygon polygon = polygon_in;
+    orient_polygon(polygon);
+    const double a0 = polygon_area(polygon);
+    const double perimeter = polygon_perimeter(polygon);
+    if (!(target_area > 0) || !(perimeter > 0) || !(max_offset > 0)) return polygon_in;
+    // Area as a function of the offset is a quadratic, A(d) = a0 + P d + k d²;
+    // secant steps from the linear guess converge in two or three steps.
+    double d_prev = 0.0, a_prev = a0;
+    double d = (target_area - a0) / perimeter;
+    Polygon best = polygon_in;
+    for (int it = 0; it < 4; ++it) {
+        if (std::abs(d) > max_offset) return polygon_in;
+        Polygon moved = offset_edges(polygon, d);
+        const double a = polygon_area(moved);
+        best = std::move(moved);
+        if (std::abs(a - target_area) <= 1e-9 * target_area || a == a_prev) break;
+        const double slope = (a - a_prev) / (d - d_prev);
+        if (!(std::abs(slope) > 0)) break;
+        d_prev = d, a_prev = a;
+        d += (target_area - a) / slope;
+    }
+    if (!polygon_is_valid(best)) return polygon_in;
+    return best;
+}
+
 }  // namespace cityforge
 
 #include "footprint/vectorize.hpp"
@@ -254,8 +314,11 @@ RecursiveFit recursive_rectangle_fit(const Polygon& polygon, const RecursiveFitO
         for (const MapPoint& p : ring) out.push_back(to_map(p.x, p.y));
         return out;
     };
-    fit.polygon.outer = ring_to_map(parts[0].outer);
-    for (const Ring& hr : parts[0].holes) fit.polygon.holes.push_back(ring_to_map(hr));
+    Polygon frame_fit = parts[0];
+    // The grid edges are quantised to the working cell: place them exactly.
+    if (o.match_area_max_offset > 0) frame_fit = match_area(frame_fit, polygon_area(local), o.match_area_max_offset);
+    fit.polygon.outer = ring_to_map(frame_fit.outer);
+    for (const Ring& hr : frame_fit.holes) fit.polygon.holes.push_back(ring_to_map(hr));
     orient_polygon(fit.polygon);
     fit.accuracy = fit_accuracy(polygon, fit.polygon);
     return fit;

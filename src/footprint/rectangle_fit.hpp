@@ -40,6 +40,24 @@ double polygon_iou(const Polygon& a, const Polygon& b);
 /// Perimeter of all rings, CRS units.
 double polygon_perimeter(const Polygon& p);
 
+/// True when the polygon is valid in the OGC sense (closed, non-crossing
+/// rings, holes inside the exterior), via Boost.Geometry.
+bool polygon_is_valid(const Polygon& p);
+
+/// Moves every edge of every ring by `distance` along its outward normal
+/// (> 0 grows the polygon, < 0 shrinks it), keeping each edge's direction:
+/// vertices are the mitred intersections of the moved edge lines, so right
+/// angles stay right angles. Expects oriented rings (outer counter-clockwise,
+/// holes clockwise); CRS units.
+Polygon offset_edges(const Polygon& polygon, double distance);
+
+/// Moves all edges by one common distance (at most `max_offset`) so that the
+/// polygon's area becomes `target_area`: outlines traced from rasters sit on
+/// the staircase's outer or inner corners, and a fit made of straight edges
+/// inherits that band. Returns the input when no valid polygon within the
+/// limit reaches the target (thin parts would collapse).
+Polygon match_area(const Polygon& polygon, double target_area, double max_offset);
+
 }  // namespace cityforge
 
 namespace cityforge {
@@ -49,6 +67,9 @@ struct RecursiveFitOptions {
     double min_rectangle_area = 2.0;   ///< smallest rectangle added or cut, CRS units squared
     int max_rectangles = 16;           ///< cuts + additions after the first rectangle
     double cell = 0.0;                 ///< working grid cell, CRS units (0 = automatic)
+    /// Final step: all edges moved by one distance (at most this, CRS units)
+    /// so that the fit has the raw polygon's area; 0 = keep the grid's edges.
+    double match_area_max_offset = 1.0;
 };
 
 struct RecursiveFit {

@@ -97,6 +97,8 @@ json to_json(const RunOptions& o) {
               {"min_area_m2", m.min_area_m2},
               {"min_hole_m2", m.min_hole_m2},
               {"opening_px", m.opening_radius_px},
+              {"split_step_m", m.split_step_m},
+              {"min_split_part_m2", m.min_split_part_m2},
               {"fit", to_string(o.extraction.fit)},
               {"fit_tolerance_pct", o.extraction.recursive.tolerance_pct},
               {"simplify_m", o.extraction.simplify_m},
@@ -132,9 +134,10 @@ RunOptions run_options_from_json(const json& j, const std::string& where, RunOpt
     if (j.contains("extraction")) {
         const json& x = j["extraction"];
         const std::string w = where + ": extraction";
-        check_keys(x, {"min_height_m", "min_area_m2", "min_hole_m2", "opening_px", "fit", "fit_tolerance_pct", "simplify_m", "footprint_grid_m"}, w);
+        check_keys(x, {"min_height_m", "min_area_m2", "min_hole_m2", "opening_px", "split_step_m", "min_split_part_m2", "fit", "fit_tolerance_pct", "simplify_m", "footprint_grid_m"}, w);
         take(x, "min_height_m", o.extraction.mask.min_height_m, w), take(x, "min_area_m2", o.extraction.mask.min_area_m2, w);
         take(x, "min_hole_m2", o.extraction.mask.min_hole_m2, w), take(x, "opening_px", o.extraction.mask.opening_radius_px, w);
+        take(x, "split_step_m", o.extraction.mask.split_step_m, w), take(x, "min_split_part_m2", o.extraction.mask.min_split_part_m2, w);
         take(x, "fit_tolerance_pct", o.extraction.recursive.tolerance_pct, w), take(x, "simplify_m", o.extraction.simplify_m, w);
         take(x, "footprint_grid_m", o.footprint_grid_m, w);
         if (x.contains("fit")) {

@@ -89,16 +89,18 @@ FootprintTable footprint_table(const BuildingMask& mask, const Image<float>& nds
                 err = acc.area_error_pct, iou = acc.iou;
             } else if (o.fit == FootprintFit::regularised) {
                 RegularizeOptions go = o.regularize;
-                go.merge_offset /= unit, go.min_edge /= unit;
+                go.merge_offset /= unit, go.min_edge /= unit, go.match_area_max_offset /= unit;
                 // Pixel staircases must be straightened before edges can be
                 // snapped: simplify with at least 1.5 pixels.
                 const double straighten = std::max(o.simplify_m / unit, 1.5 * std::abs(grid_transform.pixel_width));
                 out = regularize_polygon(simplify_polygon(polygons[id][0], straighten), rect.orientation_deg, go);
+                if (go.match_area_max_offset > 0) out = match_area(out, polygon_area(raw), go.match_area_max_offset);
                 const FitAccuracy acc = fit_accuracy(raw, out);
                 err = acc.area_error_pct, iou = acc.iou;
             } else if (o.fit == FootprintFit::recursive) {
                 RecursiveFitOptions ro = o.recursive;
                 ro.min_rectangle_area /= unit * unit;
+                ro.match_area_max_offset /= unit;
                 const RecursiveFit rf = recursive_rectangle_fit(raw, ro);
                 out = rf.polygon;
                 err = rf.accuracy.area_error_pct, iou = rf.accuracy.iou;
