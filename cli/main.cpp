@@ -210,12 +210,21 @@ int main(int argc, char** argv) {
     rasterize->add_option("--tile-m", ropt.tile_m, "Tile edge of windowed reading, metres")->capture_default_str();
 
     // footprints ------------------------------------------------------------
-    auto* footprints = app.add_subcommand("footprints", "Building footprints with rectangle fits (cloud-only or ortho-only mode)");
-    std::string f_out, f_fit = "recursive";
+    auto* footprints = app.add_subcommand("footprints", "Building footprints with rectangle fits (ortho + cloud, ortho-only or cloud-only detection)");
+    std::string f_out, f_fit = "recursive", f_mode = "auto";
     cf::FootprintsRunOptions fopt;
-    footprints->add_option("--cloud", fopt.cloud, "Point cloud (LAS, PLY, XYZ/CSV): cloud-only mode");
-    footprints->add_option("--ortho", fopt.ortho, "Ortho whose grid and CRS the footprints follow; alone: ortho-only mode");
-    footprints->add_option("--segment-scale", fopt.segment_scale, "Ortho-only: merging scale of the segmentation")->capture_default_str();
+    footprints->add_option("--cloud", fopt.cloud, "Point cloud (LAS, PLY, XYZ/CSV)");
+    footprints->add_option("--ortho", fopt.ortho, "Ortho (any GDAL raster): its grid and CRS are used");
+    footprints->add_option("--mode", f_mode, "Detection: ortho_cloud (segments voted by the cloud), ortho_only, cloud_only; auto = from the inputs")
+        ->check(CLI::IsMember({"auto", "ortho_cloud", "ortho_only", "cloud_only"}))
+        ->capture_default_str();
+    footprints->add_option("--segment-scale", fopt.segment_scale, "Ortho modes: merging scale of the segmentation")->capture_default_str();
+    footprints->add_option("--refine-passes", fopt.refine_passes, "Ortho modes: passes moving boundary pixels to the closest-colour segment")
+        ->capture_default_str();
+    footprints->add_option("--ndsm-weight", fopt.ndsm_band_weight, "ortho_cloud: weight of the nDSM band in the segmentation")->capture_default_str();
+    footprints->add_option("--min-segment-building-share", fopt.min_segment_building_share,
+                           "ortho_cloud: share of a segment's pixels that must be cloud building cells")
+        ->capture_default_str();
     footprints->add_option("--out", f_out, "Output .gpkg (layer buildings), .geojson, .fgb or .shp")->required();
     footprints->add_option("--cloud-crs", fopt.cloud_crs, "CRS of the cloud, e.g. EPSG:7415");
     footprints->add_option("--fit", f_fit, "Geometry written: recursive (rectangles cut/added until the area error < tolerance), regularised (edges snapped to the dominant directions), rectangle (minimum-area) or raw (simplified outline)")
@@ -442,6 +451,7 @@ int main(int argc, char** argv) {
                              r.ground_from_classification ? "class 2" : "SMRF", r.seconds, r_out.c_str());
         } else if (*footprints) {
             fopt.fit = cf::footprint_fit_from_string(f_fit);
+            fopt.mode = cf::detection_mode_from_string(f_mode);
             const cf::FootprintsReport r = cf::run_footprints(f_out, fopt, make_progress(g));
             if (!g.quiet)
                 std::fprintf(stderr, "cityforge: %zu footprints (%s, %s, classes %s) on %d x %d cells in %.1f s; mean |fit area error| %.2f %% -> %s\n",

@@ -53,12 +53,21 @@ uint32_t label_components(const std::vector<uint8_t>& mask, uint8_t value, int w
 
 BuildingMask detect_buildings(const Image<float>& ndsm, const Image<float>& dsm, const Image<float>& building_share,
                               const Image<float>& vegetation_share, const BuildingMaskOptions& o) {
+    BuildingCells c = building_cells(ndsm, dsm, building_share, vegetation_share, o);
+    BuildingMask labelled = label_buildings(std::move(c.cells), ndsm.width, ndsm.height, o);
+    labelled.used_classes = c.used_classes;
+    split_at_height_steps(labelled, c.step_dsm, o);
+    return labelled;
+}
+
+BuildingCells building_cells(const Image<float>& ndsm, const Image<float>& dsm, const Image<float>& building_share,
+                             const Image<float>& vegetation_share, const BuildingMaskOptions& o) {
     o.validate();
     const int w = ndsm.width, h = ndsm.height;
     const std::size_t n = ndsm.pixel_count();
     if (dsm.pixel_count() != n || building_share.pixel_count() != n || vegetation_share.pixel_count() != n)
         throw Error("building detection", "rasters differ in size");
-    BuildingMask out;
+    BuildingCells out;
     std::size_t classified = 0, with_points = 0;
     for (std::size_t k = 0; k < n; ++k)
         if (!std::isnan(building_share.data[k])) {
@@ -71,6 +80,7 @@ BuildingMask detect_buildings(const Image<float>& ndsm, const Image<float>& dsm,
     // decided by their neighbours below.
     constexpr uint8_t kUnknown = 2;
     std::vector<uint8_t> mask(n, 0);
+    out.evidence.assign(n, 1);
     for (int y = 0; y < h; ++y)
         for (int x = 0; x < w; ++x) {
             const std::size_t k = static_cast<std::size_t>(y) * w + x;
@@ -107,6 +117,7 @@ BuildingMask detect_buildings(const Image<float>& ndsm, const Image<float>& dsm,
     // shadows, crowns hide roofs) take the building label when at least as
     // many of their decided neighbours are building as not; the front moves
     // one cell per pass, and what is still unknown afterwards is not building.
+    for (std::size_t k = 0; k < n; ++k) out.evidence[k] = mask[k] != kUnknown;
     for (int iter = 0; iter < o.fill_passes; ++iter) {
         std::vector<uint8_t> next = mask;
         bool changed = false;
@@ -128,14 +139,12 @@ BuildingMask detect_buildings(const Image<float>& ndsm, const Image<float>& dsm,
     }
     // Heights for the step split: only cells with their own evidence (a crown
     // over a roof would otherwise look like a taller building).
-    Image<float> step_dsm = dsm;
+    out.step_dsm = dsm;
     for (std::size_t k = 0; k < n; ++k)
-        if (mask[k] != 1) step_dsm.data[k] = NAN;
+        if (mask[k] != 1 || !out.evidence[k]) out.step_dsm.data[k] = NAN;
     for (uint8_t& m : mask) m = m == 1;
-    BuildingMask labelled = label_buildings(std::move(mask), w, h, o);
-    labelled.used_classes = out.used_classes;
-    split_at_height_steps(labelled, step_dsm, o);
-    return labelled;
+    out.cells = std::move(mask);
+    return out;
 }
 
 namespace {

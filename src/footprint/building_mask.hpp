@@ -45,6 +45,18 @@ uint32_t label_components(const std::vector<uint8_t>& mask, uint8_t value, int w
 /// min_hole_m2 filled, optional opening, components under min_area_m2 dropped.
 BuildingMask label_buildings(std::vector<uint8_t> mask, int w, int h, const BuildingMaskOptions& options);
 
+/// Per-cell building decisions from the cloud rasters, before components are
+/// formed: `cells` 1 = building; `step_dsm` = the DSM where a cell has its own
+/// evidence (NaN where it was decided from its neighbours), for step splits.
+struct BuildingCells {
+    std::vector<uint8_t> cells;
+    std::vector<uint8_t> evidence;  ///< 1 where the cell was decided by its own points (not from neighbours)
+    Image<float> step_dsm;
+    bool used_classes = false;
+};
+BuildingCells building_cells(const Image<float>& ndsm, const Image<float>& dsm, const Image<float>& building_share,
+                             const Image<float>& vegetation_share, const BuildingMaskOptions& options);
+
 /// Splits every building of `mask` into parts whose roofs are separated by
 /// height steps of the DSM (see BuildingMaskOptions::split_step_m); parts are
 /// relabelled 1..count in raster order of first appearance. `dsm` on the same

@@ -417,6 +417,7 @@ std::vector<Building> tile_buildings(const RunManifest& m, const TileSpec& t, co
         BuildingMaskOptions mo = o.extraction.mask;
         mo.gsd_m = std::abs(gt.pixel_width) * unit;
         mo.min_height_m /= pc.crs.z_unit_m;
+        mo.split_step_m /= pc.crs.z_unit_m;
         const BuildingMask mask = detect_buildings(rasters.ndsm, rasters.dsm, rasters.building_share, rasters.vegetation_share, mo);
         rep.seconds["detection"] = since(t0);
         if (o.keep_rasters) {

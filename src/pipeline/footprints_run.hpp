@@ -1,7 +1,8 @@
 #pragma once
-// `cityforge footprints`: building footprints with rectangle fits. This stage
-// implements the cloud-only mode (buildings from the nDSM and point classes);
-// with --ortho the ortho's grid is used so footprints line up with the image.
+// `cityforge footprints`: building footprints with rectangle fits, in three
+// detection modes chosen from the inputs: ortho + cloud (segments of the
+// ortho and nDSM voted building by the cloud's cells), ortho only (segments
+// classified by spectra and shape) and cloud only (nDSM and point classes).
 #include <map>
 #include <string>
 
@@ -19,15 +20,31 @@
 namespace cityforge {
 
 enum class FootprintFit { raw, rectangle, recursive, regularised };
+
+/// Detection mode; `automatic` picks ortho_cloud with both inputs, otherwise
+/// the one input's mode.
+enum class DetectionMode { automatic, ortho_cloud, ortho_only, cloud_only };
+DetectionMode detection_mode_from_string(const std::string& s);
+std::string to_string(DetectionMode m);
 FootprintFit footprint_fit_from_string(const std::string& s);
 std::string to_string(FootprintFit f);
 
 struct FootprintsRunOptions {
-    std::string cloud;             ///< point cloud: cloud-only mode (with or without --ortho)
+    std::string cloud;             ///< point cloud (LAS, PLY, XYZ)
     std::string cloud_crs;         ///< overrides/supplies the cloud's CRS
-    std::string ortho;             ///< ortho: its grid and CRS are used; alone, ortho-only mode
-    WatershedOptions watershed;    ///< ortho-only: over-segmentation
-    double segment_scale = 30.0;   ///< ortho-only: merging scale (cost < scale^2)
+    std::string ortho;             ///< ortho: its grid and CRS are used
+    DetectionMode mode = DetectionMode::automatic;
+    WatershedOptions watershed;    ///< ortho modes: over-segmentation
+    double segment_scale = 30.0;   ///< ortho modes: merging scale (cost < scale^2)
+    /// ortho modes: passes moving segment-boundary pixels to the segment of
+    /// the closest colour (undoes the watershed's one-pixel edge jitter).
+    int refine_passes = 2;
+    /// ortho + cloud: weight of the nDSM band (0..20 m scaled to 0..255) in the
+    /// segmentation, next to weight 1 for each image band.
+    double ndsm_band_weight = 2.0;
+    /// ortho + cloud: a segment is a building when at least this share of its
+    /// pixels are building cells of the cloud.
+    double min_segment_building_share = 0.5;
     SegmentClassifierOptions classifier;  ///< ortho-only: segment rules
     BuildingMaskOptions mask;      ///< detection thresholds (gsd_m is the raster cell)
     double simplify_m = 0.25;      ///< Douglas–Peucker tolerance of the raw outline, metres
@@ -59,7 +76,8 @@ FootprintTable footprint_table(const BuildingMask& mask, const Image<float>& nds
                                const FootprintsRunOptions& options);
 
 struct FootprintsReport {
-    std::string mode;              ///< "cloud_only" or "ortho_only" (the combined mode is not implemented yet)
+    std::string mode;              ///< "ortho_cloud", "ortho_only" or "cloud_only"
+    uint32_t segments = 0;         ///< ortho modes: merged segments
     std::string crs;
     std::size_t buildings = 0;
     bool used_classes = false;
