@@ -173,3 +173,36 @@ TEST_CASE("Regularisation gives right angles to a noisy rotated L", "[footprint]
     bowtie.outer = {{0, 0}, {10, 10}, {10, 0}, {0, 10}};
     CHECK_THROWS(regularize_polygon(bowtie, 0.0));
 }
+
+TEST_CASE("Edges moved to the raw area keep right angles and reach the area exactly", "[footprint][fit]") {
+    // An L of 20 x 10 m plus 10 x 10 m (300 m²) at UTM-size coordinates.
+    const double x0 = 500000.0, y0 = 4400000.0;
+    Polygon l{{{x0, y0}, {x0 + 20, y0}, {x0 + 20, y0 + 10}, {x0 + 10, y0 + 10}, {x0 + 10, y0 + 20}, {x0, y0 + 20}}, {}};
+    REQUIRE(polygon_area(l) == Approx(300.0));
+    // Offsetting by d grows each of the 6 edges: 80 m perimeter, 4 convex - 1 reflex corners.
+    const Polygon grown = offset_edges(l, 0.25);
+    CHECK(polygon_area(grown) == Approx(300.0 + 80.0 * 0.25 + (5 - 1) * 0.25 * 0.25 - 0.0).epsilon(1e-9));
+    for (std::size_t i = 0; i < grown.outer.size(); ++i) {
+        const MapPoint& a = grown.outer[i];
+        const MapPoint& b = grown.outer[(i + 1) % grown.outer.size()];
+        CHECK((std::abs(a.x - b.x) < 1e-9 || std::abs(a.y - b.y) < 1e-9));  // still axis-aligned
+    }
+    const Polygon matched = match_area(l, 290.0, 1.0);
+    CHECK(polygon_area(matched) == Approx(290.0).epsilon(1e-9));
+    CHECK(polygon_is_valid(matched));
+    // A target beyond the offset limit leaves the polygon as it was.
+    const Polygon same = match_area(l, 400.0, 0.5);
+    CHECK(polygon_area(same) == Approx(300.0));
+}
+
+TEST_CASE("A courtyard's inner edges move the other way and the recursive fit keeps the raw area", "[footprint][fit]") {
+    Polygon c{{{0, 0}, {30, 0}, {30, 30}, {0, 30}}, {{{10, 10}, {10, 20}, {20, 20}, {20, 10}}}};
+    orient_polygon(c);
+    const Polygon grown = offset_edges(c, 0.5);
+    // Outer 31 x 31, hole 9 x 9.
+    CHECK(polygon_area(grown) == Approx(31.0 * 31.0 - 9.0 * 9.0));
+    RecursiveFitOptions ro;
+    const RecursiveFit f = recursive_rectangle_fit(c, ro);
+    CHECK(std::abs(f.accuracy.area_error_pct) < 1e-6);
+    CHECK(f.polygon.holes.size() == 1);
+}

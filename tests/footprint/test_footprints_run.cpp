@@ -25,39 +25,69 @@ FootprintScores score(const PolygonLayer& pred, const PolygonLayer& truth) {
 }
 }  // namespace
 
-TEST_CASE("Cloud-only footprints on a synthetic town match the truth (regression guard)", "[footprint][synth]") {
-    ScratchDir dir("fp_run");
-    const SynthResult s = make_town(dir, 300, 9, 8);
+TEST_CASE("Lidar footprints meet the issue's targets on two synthetic towns in both cloud modes", "[footprint][synth]") {
+    // Targets of issue #5 with a lidar-mode cloud: F1 >= 0.95, mean IoU >=
+    // 0.85, mean |area error| of the fitted polygons against the truth <= 1 %.
+    for (const uint64_t seed : {3u, 7u}) {
+        ScratchDir dir("fp_run_" + std::to_string(seed));
+        const SynthResult s = make_town(dir, 600, seed, 8);
+        const PolygonLayer truth = read_polygon_layer(s.truth_path);
+        for (const DetectionMode mode : {DetectionMode::cloud_only, DetectionMode::ortho_cloud}) {
+            for (const FootprintFit fit : {FootprintFit::recursive, FootprintFit::regularised}) {
+                FootprintsRunOptions o;
+                o.cloud = s.cloud_path;
+                o.ortho = s.ortho_path;
+                o.mode = mode;
+                o.fit = fit;
+                const std::string name = to_string(mode) + "_" + to_string(fit) + ".gpkg";
+                const FootprintsReport rep = run_footprints(dir / name, o);
+                CHECK(rep.mode == to_string(mode));
+                CHECK(rep.used_classes);
+                const FootprintScores sc = score(read_polygon_layer(dir / name), truth);
+                std::printf("footprints (lidar, seed %d, 600 m, %s, %s): %zu buildings; P %.3f R %.3f F1 %.3f mean IoU %.3f |area err| %.2f %% (fit vs raw %.3f %%)\n",
+                            int(seed), to_string(mode).c_str(), to_string(fit).c_str(), sc.reference, sc.precision, sc.recall, sc.f1, sc.mean_iou,
+                            sc.mean_abs_area_error_pct, rep.mean_abs_fit_area_error_pct);
+                CHECK(sc.f1 >= 0.95);
+                CHECK(sc.mean_iou >= 0.85);
+                CHECK(sc.mean_abs_area_error_pct <= 1.0);
+            }
+        }
+        const PolygonLayer out = read_polygon_layer(dir / "ortho_cloud_recursive.gpkg");
+        CHECK(out.crs.epsg == 32650);
+        const auto& names = out.field_names;
+        for (const char* f : {"area_m2", "geodesic_area_m2", "perimeter_m", "orientation_deg", "fit", "fit_area_error_pct", "fit_iou", "n_vertices", "status", "mode"})
+            CHECK(std::find(names.begin(), names.end(), f) != names.end());
+    }
+}
+
+TEST_CASE("Photo-mode footprints: the ortho sharpens the smeared cloud edges (regression guard)", "[footprint][synth]") {
+    ScratchDir dir("fp_photo");
+    const SynthResult s = make_town(dir, 400, 5, 8, CloudMode::photo);
+    const PolygonLayer truth = read_polygon_layer(s.truth_path);
     FootprintsRunOptions o;
     o.cloud = s.cloud_path;
     o.ortho = s.ortho_path;
-    o.fit = FootprintFit::raw;
-    const FootprintsReport raw_rep = run_footprints(dir / "raw.gpkg", o);
-    CHECK(raw_rep.used_classes);
-    o.fit = FootprintFit::rectangle;
-    run_footprints(dir / "rect.gpkg", o);
-    o.fit = FootprintFit::recursive;
-    const FootprintsReport rec_rep = run_footprints(dir / "rec.gpkg", o);
-    const PolygonLayer truth = read_polygon_layer(s.truth_path);
-    const FootprintScores raw = score(read_polygon_layer(dir / "raw.gpkg"), truth);
-    const FootprintScores rect = score(read_polygon_layer(dir / "rect.gpkg"), truth);
-    const FootprintScores rec = score(read_polygon_layer(dir / "rec.gpkg"), truth);
-    std::printf("footprints (lidar, seed 9, 300 m): raw P %.3f R %.3f F1 %.3f IoU %.3f |area err| %.2f %%; rectangle F1 %.3f IoU %.3f |area err| %.2f %%; recursive F1 %.3f IoU %.3f |area err| %.2f %% (fit vs raw %.2f %%)\n",
-                raw.precision, raw.recall, raw.f1, raw.mean_iou, raw.mean_abs_area_error_pct, rect.f1, rect.mean_iou,
-                rect.mean_abs_area_error_pct, rec.f1, rec.mean_iou, rec.mean_abs_area_error_pct, rec_rep.mean_abs_fit_area_error_pct);
-    double signed_err = 0.0;
-    for (const auto& m : raw.matches) signed_err += m.area_error_pct;
-    std::printf("raw outlines: mean signed area error %.2f %% over %zu matches\n", signed_err / double(raw.matches.size()), raw.matches.size());
-    CHECK(rec.f1 >= 0.9);
-    CHECK(rec_rep.mean_abs_fit_area_error_pct <= 6.0);  // regression guard: 4.55 % measured; the issue asks <= 1 % (open)
-    CHECK(raw.f1 >= 0.9);
-    CHECK(raw.mean_iou >= 0.85);
-    CHECK(raw.mean_abs_area_error_pct <= 5.0);
-    const PolygonLayer out = read_polygon_layer(dir / "rec.gpkg");
-    CHECK(out.crs.epsg == 32650);
-    const auto& names = out.field_names;
-    for (const char* f : {"area_m2", "geodesic_area_m2", "perimeter_m", "orientation_deg", "fit", "fit_area_error_pct", "fit_iou", "n_vertices", "status"})
-        CHECK(std::find(names.begin(), names.end(), f) != names.end());
+    const FootprintsReport combined = run_footprints(dir / "combined.gpkg", o);
+    CHECK(combined.mode == "ortho_cloud");
+    o.mode = DetectionMode::cloud_only;
+    run_footprints(dir / "cloud.gpkg", o);
+    const FootprintScores c = score(read_polygon_layer(dir / "combined.gpkg"), truth);
+    const FootprintScores p = score(read_polygon_layer(dir / "cloud.gpkg"), truth);
+    std::printf("footprints (photo, seed 5, 400 m): ortho+cloud F1 %.3f IoU %.3f |area err| %.2f %%; cloud only F1 %.3f IoU %.3f |area err| %.2f %%\n",
+                c.f1, c.mean_iou, c.mean_abs_area_error_pct, p.f1, p.mean_iou, p.mean_abs_area_error_pct);
+    CHECK(c.f1 >= 0.95);
+    CHECK(c.mean_iou >= 0.93);
+    CHECK(c.mean_iou > p.mean_iou);
+    CHECK(c.mean_abs_area_error_pct < p.mean_abs_area_error_pct);
+}
+
+TEST_CASE("A detection mode without its input is refused", "[footprint][errors]") {
+    ScratchDir dir("fp_mode");
+    FootprintsRunOptions o;
+    o.ortho = "x.tif";
+    o.mode = DetectionMode::ortho_cloud;
+    CHECK_THROWS_WITH(run_footprints(dir / "x.gpkg", o), Catch::StartsWith("--mode") && Catch::Contains("needs a point cloud"));
+    CHECK(dir.file_count() == 0);
 }
 
 TEST_CASE("footprints refuses to run without a cloud", "[footprint][errors]") {
@@ -73,7 +103,8 @@ TEST_CASE("Delft AHN3 cloud-only footprints against the 135 BGT footprints (regr
     o.cloud = test::shared_data("delft_ahn3_bgt_west/ahn3_delft_west.las");
     o.cloud_crs = "EPSG:7415";
     o.fit = FootprintFit::raw;
-    run_footprints(dir / "delft.gpkg", o);
+    const FootprintsReport rep = run_footprints(dir / "delft.gpkg", o);
+    CHECK(rep.mode == "cloud_only");
     const PolygonLayer pred = read_polygon_layer(dir / "delft.gpkg");
     const PolygonLayer ref = read_polygon_layer(test::shared_data("delft_ahn3_bgt_west/bgt_pand_west_with_ref_heights.geojson"));
     // The cloud covers more than the reference area: score predictions whose
@@ -95,12 +126,14 @@ TEST_CASE("Delft AHN3 cloud-only footprints against the 135 BGT footprints (regr
     std::printf("Delft cloud-only footprints: %zu predicted in the reference extent, %zu reference; P %.3f R %.3f F1 %.3f mean IoU %.3f |area err| %.2f %%; per-area completeness %.3f correctness %.3f quality %.3f\n",
                 s.predicted, s.reference, s.precision, s.recall, s.f1, s.mean_iou, s.mean_abs_area_error_pct, s.area_completeness,
                 s.area_correctness, s.area_quality);
-    // Terraced Delft houses share walls: one detected block covers several BGT
-    // footprints, so per-object recall stays low until height-step splitting
-    // lands; the per-area measures show that the built-up area itself is found.
+    // Terraced Delft houses share walls and, mostly, one continuous roof: the
+    // split at height steps separates blocks of different heights, but BGT's
+    // parcel-wide houses under one roof stay one block, so per-object recall
+    // stays low; the per-area measures show that the built-up area is found.
     // Correctness is not meaningful here: the reference set holds only this
     // split's buildings, while the cloud shows their unreferenced neighbours too.
     CHECK(s.area_completeness >= 0.85);
+    CHECK(s.recall >= 0.02);  // regression guard: 3 of 135 matched at IoU >= 0.5 (0.022)
 }
 
 TEST_CASE("Ortho-only footprints on a synthetic town (regression guard)", "[footprint][synth]") {

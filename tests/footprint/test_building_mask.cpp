@@ -1,0 +1,108 @@
+#include <catch2/catch.hpp>
+#include <cmath>
+#include <set>
+
+#include "footprint/building_mask.hpp"
+
+using namespace cityforge;
+
+namespace {
+// A flat scene: ground at 0 m, boxes of given heights {x0, y0, x1, y1 (inclusive), z}.
+struct Box {
+    int x0, y0, x1, y1;
+    float z;
+};
+Image<float> heights(int w, int h, const std::vector<Box>& boxes) {
+    Image<float> img(w, h, 1, 0.0f);
+    for (const Box& b : boxes)
+        for (int y = b.y0; y <= b.y1; ++y)
+            for (int x = b.x0; x <= b.x1; ++x) img.at(0, x, y) = b.z;
+    return img;
+}
+BuildingMask one_building(const Image<float>& dsm) {
+    BuildingMask m;
+    m.labels = Image<uint32_t>(dsm.width, dsm.height, 1, 0u);
+    for (std::size_t k = 0; k < dsm.data.size(); ++k) m.labels.data[k] = dsm.data[k] > 0.0f ? 1u : 0u;
+    m.count = 1;
+    return m;
+}
+std::set<uint32_t> labels_in(const BuildingMask& m, int x0, int y0, int x1, int y1) {
+    std::set<uint32_t> s;
+    for (int y = y0; y <= y1; ++y)
+        for (int x = x0; x <= x1; ++x) s.insert(m.labels.at(0, x, y));
+    return s;
+}
+}  // namespace
+
+TEST_CASE("Terraced houses of different heights are split along the step", "[footprint][split]") {
+    // Three houses of 10 x 20 m side by side (0.5 m cells): 8 m, 12 m, 12.5 m.
+    const Image<float> dsm = heights(80, 50, {{5, 5, 24, 44, 8.0f}, {25, 5, 44, 44, 12.0f}, {45, 5, 64, 44, 12.5f}});
+    BuildingMask m = one_building(dsm);
+    BuildingMaskOptions o;
+    split_at_height_steps(m, dsm, o);
+    CHECK(m.count == 2);  // 12 and 12.5 m differ by less than the 1.5 m step
+    const auto a = labels_in(m, 5, 5, 24, 44), b = labels_in(m, 25, 5, 64, 44);
+    REQUIRE(a.size() == 1);
+    REQUIRE(b.size() == 1);
+    CHECK(*a.begin() != *b.begin());
+    o.split_step_m = 0.0;
+    BuildingMask unsplit = one_building(dsm);
+    split_at_height_steps(unsplit, dsm, o);
+    CHECK(unsplit.count == 1);
+}
+
+TEST_CASE("Dormers - chimneys and gable slopes do not split a building", "[footprint][split]") {
+    // A gable roof (1 m rise per cell across a 20 m wide house) with a 3 x 3 m
+    // dormer 2 m above the slope and a 1 m chimney 4 m above the ridge.
+    Image<float> dsm(60, 60, 1, 0.0f);
+    for (int y = 5; y <= 44; ++y)
+        for (int x = 5; x <= 44; ++x) dsm.at(0, x, y) = 6.0f + 0.4f * static_cast<float>(std::min(x - 5, 44 - x));
+    for (int y = 20; y <= 25; ++y)
+        for (int x = 10; x <= 15; ++x) dsm.at(0, x, y) += 2.0f;
+    for (int y = 30; y <= 31; ++y)
+        for (int x = 24; x <= 25; ++x) dsm.at(0, x, y) += 4.0f;
+    BuildingMask m = one_building(dsm);
+    split_at_height_steps(m, dsm, BuildingMaskOptions{});
+    CHECK(m.count == 1);
+}
+
+TEST_CASE("Gaps in the DSM (dark roofs) do not split a building", "[footprint][split]") {
+    Image<float> dsm = heights(60, 40, {{5, 5, 44, 34, 9.0f}});
+    BuildingMask m = one_building(dsm);
+    // Every second column of the roof without points, and a wide band too.
+    for (int y = 5; y <= 34; ++y)
+        for (int x = 5; x <= 44; ++x)
+            if (x % 2 == 0 || (x >= 20 && x <= 27)) dsm.at(0, x, y) = NAN;
+    split_at_height_steps(m, dsm, BuildingMaskOptions{});
+    CHECK(m.count == 1);
+}
+
+TEST_CASE("A roof under an overhanging crown stays building", "[footprint][mask]") {
+    // A 20 x 15 m roof at 9 m; a crown covers its east third. Under the crown,
+    // cells hold crown points only, or crown points plus roof returns that
+    // pierced it; east of the roof the crown is over ground.
+    const int w = 80, h = 50;
+    Image<float> ndsm(w, h, 1, 0.0f), dsm(w, h, 1, 0.0f), building(w, h, 1, 0.0f), vegetation(w, h, 1, 0.0f);
+    for (int y = 10; y <= 39; ++y)
+        for (int x = 10; x <= 49; ++x) ndsm.at(0, x, y) = 9.0f, building.at(0, x, y) = 1.0f;
+    for (int y = 10; y <= 39; ++y)
+        for (int x = 37; x <= 60; ++x) {
+            ndsm.at(0, x, y) = 12.0f;
+            const bool roof = x <= 49;
+            const bool pierced = (x + 2 * y) % 3 == 0;  // a third of the cells see through the crown
+            vegetation.at(0, x, y) = pierced ? 0.6f : 1.0f;
+            building.at(0, x, y) = pierced ? (roof ? 1.0f : 0.0f) : NAN;
+        }
+    dsm = ndsm;
+    BuildingMaskOptions o;
+    const BuildingMask m = detect_buildings(ndsm, dsm, building, vegetation, o);
+    REQUIRE(m.count == 1);
+    long roof_cells = 0, outside = 0;
+    for (int y = 0; y < h; ++y)
+        for (int x = 0; x < w; ++x) {
+            const bool truth = x >= 10 && x <= 49 && y >= 10 && y <= 39;
+            if (m.labels.at(0, x, y)) (truth ? roof_cells : outside) += 1;
+        }
+    CHECK(roof_cells >= 40 * 30 * 97 / 100);  // the roof under the crown is kept
+    CHECK(outside <= 30 * 2);                  // at most a cell's width spills past the roof edge under the crown
+}
