@@ -215,9 +215,12 @@ int main(int argc, char** argv) {
     cf::FootprintsRunOptions fopt;
     footprints->add_option("--cloud", fopt.cloud, "Point cloud (LAS, PLY, XYZ/CSV)");
     footprints->add_option("--ortho", fopt.ortho, "Ortho (any GDAL raster): its grid and CRS are used");
+    footprints->add_option("--ndsm", fopt.ndsm, "Heights without a cloud: nDSM raster (height above ground), aligned with the ortho's grid");
+    footprints->add_option("--ndsm-band", fopt.ndsm_band, "Heights without a cloud: 1-based band of the ortho holding the nDSM");
     footprints->add_option("--mode", f_mode, "Detection: ortho_cloud (segments voted by the cloud), ortho_only, cloud_only; auto = from the inputs")
         ->check(CLI::IsMember({"auto", "ortho_cloud", "ortho_only", "cloud_only"}))
         ->capture_default_str();
+    footprints->add_option("--segments", fopt.segments, "Ortho modes: labels from `cityforge segment` (GeoTIFF, or its folder: the --segment-scale level)");
     footprints->add_option("--segment-scale", fopt.segment_scale, "Ortho modes: merging scale of the segmentation")->capture_default_str();
     footprints->add_option("--refine-passes", fopt.refine_passes, "Ortho modes: passes moving boundary pixels to the closest-colour segment")
         ->capture_default_str();
@@ -454,9 +457,9 @@ int main(int argc, char** argv) {
             fopt.mode = cf::detection_mode_from_string(f_mode);
             const cf::FootprintsReport r = cf::run_footprints(f_out, fopt, make_progress(g));
             if (!g.quiet)
-                std::fprintf(stderr, "cityforge: %zu footprints (%s, %s, classes %s) on %d x %d cells in %.1f s; mean |fit area error| %.2f %% -> %s\n",
-                             r.buildings, r.mode.c_str(), r.crs.c_str(), r.used_classes ? "used" : "absent", r.width, r.height,
-                             r.seconds, r.mean_abs_fit_area_error_pct, f_out.c_str());
+                std::fprintf(stderr, "cityforge: %zu footprints (%s%s%s, %s, classes %s) on %d x %d cells in %.1f s; mean |fit area error| %.2f %% -> %s\n",
+                             r.buildings, r.mode.c_str(), r.height_source.empty() ? "" : ", heights from ", r.height_source.c_str(), r.crs.c_str(),
+                             r.used_classes ? "used" : "absent", r.width, r.height, r.seconds, r.mean_abs_fit_area_error_pct, f_out.c_str());
         } else if (*exporter) {
             xopt.formats = split_list(x_formats);
             xopt.lods = parse_lods(x_lods);

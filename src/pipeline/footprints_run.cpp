@@ -2,6 +2,7 @@
 
 #include <chrono>
 #include <cmath>
+#include <filesystem>
 #include <memory>
 
 #include "cloud/cloud_rasters.hpp"
@@ -13,6 +14,7 @@
 #include "io/vector.hpp"
 #include "pipeline/prepared_cloud.hpp"
 #include "raster/raster.hpp"
+#include "pipeline/segment_raster.hpp"
 #include "segment/boundary_refine.hpp"
 #include "segment/region_merging.hpp"
 
@@ -53,11 +55,18 @@ std::string to_string(DetectionMode m) {
 }
 
 void FootprintsRunOptions::validate() const {
-    if (cloud.empty() && ortho.empty()) throw Error("--cloud", "give a point cloud, an ortho (--ortho) or both");
-    if ((mode == DetectionMode::ortho_cloud || mode == DetectionMode::cloud_only) && cloud.empty())
-        throw Error("--mode", to_string(mode) + " needs a point cloud (--cloud)");
+    const bool heights = !cloud.empty() || !ndsm.empty() || ndsm_band > 0;
+    if (!heights && ortho.empty()) throw Error("--cloud", "give a point cloud (or an nDSM), an ortho (--ortho) or both");
+    if (int(!cloud.empty()) + int(!ndsm.empty()) + int(ndsm_band > 0) > 1)
+        throw Error("--ndsm", "give one height source: --cloud, --ndsm or --ndsm-band");
+    if (ndsm_band < 0) throw Error("--ndsm-band", "must be >= 1");
+    if (ndsm_band > 0 && ortho.empty()) throw Error("--ndsm-band", "needs the ortho that holds the band (--ortho)");
+    if ((mode == DetectionMode::ortho_cloud || mode == DetectionMode::cloud_only) && !heights)
+        throw Error("--mode", to_string(mode) + " needs a point cloud (--cloud) or an nDSM (--ndsm, --ndsm-band)");
     if ((mode == DetectionMode::ortho_cloud || mode == DetectionMode::ortho_only) && ortho.empty())
         throw Error("--mode", to_string(mode) + " needs an ortho (--ortho)");
+    if (!segments.empty() && mode == DetectionMode::cloud_only) throw Error("--segments", "segments need an ortho mode, not cloud_only");
+    if (!segments.empty() && ortho.empty()) throw Error("--segments", "segments need the ortho they were made from (--ortho)");
     if (refine_passes < 0 || refine_passes > 20) throw Error("--refine-passes", "must be between 0 and 20");
     if (!(ndsm_band_weight >= 0)) throw Error("--ndsm-weight", "must be >= 0");
     if (!(min_segment_building_share > 0 && min_segment_building_share <= 1)) throw Error("--min-segment-building-share", "must be in (0, 1]");
@@ -171,6 +180,74 @@ OrthoImage read_ortho(RasterReader& reader) {
     return o;
 }
 
+// An nDSM raster on `grid` (when `grid` has cells: same horizontal CRS,
+// pixel edges aligned with it) or on its own grid (grid and crs are set);
+// nodata becomes NaN.
+Image<float> read_ndsm_raster(const std::string& path, GridSpec& grid, CrsInfo& crs) {
+    RasterReader reader(path);
+    const RasterInfo& info = reader.info();
+    Image<float> h;
+    if (grid.width == 0) {
+        grid = {info.transform, info.width, info.height};
+        crs = info.crs;
+        h = reader.read_all<float>({1});
+    } else {
+        if (!same_horizontal_crs(info.crs, crs)) throw Error(path, "the nDSM is in " + info.crs.label() + ", the ortho in " + crs.label());
+        const GeoTransform& g = grid.transform;
+        const GeoTransform& t = info.transform;
+        const double c0 = (g.origin_x - t.origin_x) / t.pixel_width, r0 = (g.origin_y - t.origin_y) / t.pixel_height;
+        const double cw = grid.width * g.pixel_width / t.pixel_width, rh = grid.height * g.pixel_height / t.pixel_height;
+        auto whole = [](double v) { return std::abs(v - std::round(v)) < 1e-3; };
+        if (!whole(c0) || !whole(r0) || !whole(cw) || !whole(rh))
+            throw Error(path, "the nDSM's pixels are not aligned with the ortho's; warp it onto the ortho's grid first (gdalwarp -te/-tr/-tap)");
+        const PixelWindow win{static_cast<int>(std::lround(c0)), static_cast<int>(std::lround(r0)), static_cast<int>(std::lround(cw)),
+                              static_cast<int>(std::lround(rh))};
+        if (win.col < 0 || win.row < 0 || win.col + win.width > info.width || win.row + win.height > info.height)
+            throw Error(path, "the nDSM does not cover the whole ortho");
+        h = reader.read_resampled<float>(win, grid.width, grid.height, {1}, win.width > grid.width ? "average" : "bilinear");
+    }
+    if (const auto& nd = info.bands[0].nodata)
+        for (float& v : h.data)
+            if (v == static_cast<float>(*nd)) v = NAN;
+    return h;
+}
+
+// The label raster of --segments: a file, or the level of `scale` (or the
+// only level) of a `cityforge segment` folder.
+std::string segments_file(const std::string& path, double scale) {
+    namespace fs = std::filesystem;
+    if (!fs::exists(path)) throw Error(path, "segments not found");
+    if (!fs::is_directory(path)) return path;
+    const std::string wanted = segment_level_path(path, scale);
+    if (fs::exists(wanted)) return wanted;
+    std::vector<std::string> levels;
+    for (const auto& e : fs::directory_iterator(path)) {
+        const std::string name = e.path().filename().string();
+        if (name.rfind("segments_scale_", 0) == 0 && e.path().extension() == ".tif") levels.push_back(name);
+    }
+    std::sort(levels.begin(), levels.end());
+    if (levels.size() == 1) return (fs::path(path) / levels[0]).string();
+    std::string list;
+    for (const std::string& l : levels) list += (list.empty() ? "" : ", ") + l;
+    throw Error(path, "no " + fs::path(wanted).filename().string() + " for --segment-scale; levels here: " + (list.empty() ? "none" : list));
+}
+
+// Segments read from a label raster on the ortho's grid; returns 1..count.
+Image<uint32_t> read_segments(const std::string& path, const GridSpec& grid, uint32_t& count) {
+    RasterReader reader(path);
+    const RasterInfo& info = reader.info();
+    if (info.band_count() != 1) throw Error(path, "segments must be one band of labels, not " + std::to_string(info.band_count()));
+    if (info.width != grid.width || info.height != grid.height || std::abs(info.transform.origin_x - grid.transform.origin_x) > 1e-6 * std::abs(grid.transform.pixel_width) ||
+        std::abs(info.transform.origin_y - grid.transform.origin_y) > 1e-6 * std::abs(grid.transform.pixel_width))
+        throw Error(path, "segments are not on the ortho's grid (" + std::to_string(info.width) + " x " + std::to_string(info.height) + " vs " +
+                              std::to_string(grid.width) + " x " + std::to_string(grid.height) + ")");
+    Image<uint32_t> labels = reader.read_all<uint32_t>();
+    count = 0;
+    for (const uint32_t l : labels.data) count = std::max(count, l);
+    if (count == 0) throw Error(path, "segments raster holds no segment (all 0)");
+    return labels;
+}
+
 // Watershed over-segmentation and region merging at one scale of the
 // normalised bands, then boundary pixels moved to the segment of the closest
 // colour (the first `colour_bands` bands); returns segments 1..count.
@@ -193,9 +270,10 @@ FootprintsReport run_footprints(const std::string& output_path, const Footprints
     o.validate();
     const std::string driver = vector_driver_for(output_path);
     FootprintsReport rep;
+    const bool heights = !o.cloud.empty() || !o.ndsm.empty() || o.ndsm_band > 0;
     DetectionMode mode = o.mode;
     if (mode == DetectionMode::automatic)
-        mode = !o.cloud.empty() && !o.ortho.empty() ? DetectionMode::ortho_cloud : !o.cloud.empty() ? DetectionMode::cloud_only : DetectionMode::ortho_only;
+        mode = heights && !o.ortho.empty() ? DetectionMode::ortho_cloud : heights ? DetectionMode::cloud_only : DetectionMode::ortho_only;
     rep.mode = to_string(mode);
     GridSpec grid;
     CrsInfo crs;
@@ -203,26 +281,71 @@ FootprintsReport run_footprints(const std::string& output_path, const Footprints
     Image<float> ndsm;  // empty in ortho-only mode
     double unit = 1.0, z_unit = 1.0;
     std::unique_ptr<RasterReader> ortho;
+    OrthoImage img;
     if (!o.ortho.empty()) {
         ortho = std::make_unique<RasterReader>(o.ortho);
         const RasterInfo& info = ortho->info();
         grid = {info.transform, info.width, info.height};
         crs = info.crs;
-        unit = crs.linear_unit_m;
+        unit = crs.linear_unit_m, z_unit = crs.z_unit_m;
+        if (o.ndsm_band > info.band_count())
+            throw Error(o.ortho, "has " + std::to_string(info.band_count()) + " bands; --ndsm-band " + std::to_string(o.ndsm_band) + " does not exist");
+        if (mode != DetectionMode::cloud_only || o.ndsm_band > 0) img = read_ortho(*ortho);
+    }
+    Image<float> ndsm_band;
+    if (o.ndsm_band > 0) {
+        // The nDSM band leaves the colours.
+        const int b = o.ndsm_band - 1;
+        ndsm_band = Image<float>(img.image.width, img.image.height, 1, 0.0f);
+        std::copy(img.image.band_data(b), img.image.band_data(b) + img.image.pixel_count(), ndsm_band.data.begin());
+        if (const auto& nd = ortho->info().bands[b].nodata)
+            for (float& v : ndsm_band.data)
+                if (v == static_cast<float>(*nd)) v = NAN;
+        Image<float> colours(img.image.width, img.image.height, img.image.bands - 1, 0.0f);
+        for (int k = 0, out = 0; k < img.image.bands; ++k)
+            if (k != b) std::copy(img.image.band_data(k), img.image.band_data(k) + img.image.pixel_count(), colours.band_data(out++));
+        img.image = std::move(colours);
+        // A nodata value in the height band alone does not make the colours invalid.
+        img.valid.assign(img.image.pixel_count(), 1);
+        for (int k = 0, out = 0; k < ortho->info().band_count(); ++k) {
+            if (k == b) continue;
+            if (const auto& nd = ortho->info().bands[k].nodata)
+                for (std::size_t i = 0; i < img.valid.size(); ++i)
+                    if (img.image.band_data(out)[i] == static_cast<float>(*nd)) img.valid[i] = 0;
+            ++out;
+        }
+        if (img.image.bands == 0 && mode != DetectionMode::cloud_only) throw Error(o.ortho, "has no colour band besides the nDSM band");
     }
     BuildingCells cells;
     if (mode != DetectionMode::ortho_only) {
-        const PreparedCloud pc = prepare_cloud(o.cloud, o.cloud_crs, ortho ? ortho->info().crs : CrsInfo{}, o.outliers, o.ground);
-        crs = pc.crs;
-        unit = pc.crs.linear_unit_m, z_unit = pc.crs.z_unit_m;
-        if (!ortho) grid = grid_over_cloud(pc.cloud, o.mask.gsd_m / unit);
-        progress(0.3, "cloud");
-        CloudRasters rasters = rasterize_cloud(pc.cloud, pc.keep, pc.is_ground, grid, unit);
         BuildingMaskOptions mo = o.mask;
-        mo.gsd_m = std::abs(grid.transform.pixel_width) * unit;
-        mo.min_height_m /= z_unit;
-        cells = building_cells(rasters.ndsm, rasters.dsm, rasters.building_share, rasters.vegetation_share, mo);
-        ndsm = std::move(rasters.ndsm);
+        if (!o.cloud.empty()) {
+            rep.height_source = "point cloud";
+            const PreparedCloud pc = prepare_cloud(o.cloud, o.cloud_crs, ortho ? ortho->info().crs : CrsInfo{}, o.outliers, o.ground);
+            crs = pc.crs;
+            unit = pc.crs.linear_unit_m, z_unit = pc.crs.z_unit_m;
+            if (!ortho) grid = grid_over_cloud(pc.cloud, o.mask.gsd_m / unit);
+            progress(0.3, "cloud");
+            CloudRasters rasters = rasterize_cloud(pc.cloud, pc.keep, pc.is_ground, grid, unit);
+            mo.gsd_m = std::abs(grid.transform.pixel_width) * unit;
+            mo.min_height_m /= z_unit;
+            cells = building_cells(rasters.ndsm, rasters.dsm, rasters.building_share, rasters.vegetation_share, mo);
+            ndsm = std::move(rasters.ndsm);
+        } else {
+            // An nDSM raster or band: no classes, so vegetation is told by roughness.
+            if (o.ndsm_band > 0) {
+                rep.height_source = "ortho band " + std::to_string(o.ndsm_band);
+                ndsm = std::move(ndsm_band);
+            } else {
+                rep.height_source = "nDSM raster";
+                ndsm = read_ndsm_raster(o.ndsm, grid, crs);
+                unit = crs.linear_unit_m, z_unit = crs.z_unit_m;
+            }
+            mo.gsd_m = std::abs(grid.transform.pixel_width) * unit;
+            mo.min_height_m /= z_unit;
+            const Image<float> none(ndsm.width, ndsm.height, 1, NAN);
+            cells = building_cells(ndsm, ndsm, none, none, mo);
+        }
         rep.used_classes = cells.used_classes;
     }
     BuildingMaskOptions mo = o.mask;
@@ -231,7 +354,6 @@ FootprintsReport run_footprints(const std::string& output_path, const Footprints
     if (mode == DetectionMode::cloud_only) {
         mask = label_buildings(std::move(cells.cells), grid.width, grid.height, mo);
     } else {
-        OrthoImage img = read_ortho(*ortho);
         Image<float> normalised = img.image;
         normalize_bands(normalised, img.valid);
         WatershedOptions wo = o.watershed;
@@ -254,8 +376,16 @@ FootprintsReport run_footprints(const std::string& output_path, const Footprints
             wo.band_weights.push_back(o.ndsm_band_weight);
             normalised = std::move(with_height);
         }
-        const Image<uint32_t> segments = segment_image(std::move(normalised), colour_bands, img.valid, wo, o.segment_scale,
-                                                       o.refine_passes, rep.segments, progress.sub(0.35, 0.55));
+        Image<uint32_t> segments;
+        if (!o.segments.empty()) {
+            const std::string path = segments_file(o.segments, o.segment_scale);
+            segments = read_segments(path, grid, rep.segments);
+            refine_segment_boundaries(normalised, colour_bands, segments, rep.segments, o.refine_passes);
+            rep.segments_path = path;
+        } else {
+            segments = segment_image(std::move(normalised), colour_bands, img.valid, wo, o.segment_scale, o.refine_passes, rep.segments,
+                                     progress.sub(0.35, 0.55));
+        }
         std::vector<uint8_t> building;
         if (mode == DetectionMode::ortho_cloud) {
             // A segment is a building when most of its cells with their own

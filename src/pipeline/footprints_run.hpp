@@ -21,8 +21,9 @@ namespace cityforge {
 
 enum class FootprintFit { raw, rectangle, recursive, regularised };
 
-/// Detection mode; `automatic` picks ortho_cloud with both inputs, otherwise
-/// the one input's mode.
+/// Detection mode; `automatic` picks ortho_cloud with an ortho and heights,
+/// otherwise the one input's mode. "cloud" stands for the height source: a
+/// point cloud, an nDSM raster or an nDSM band of the ortho.
 enum class DetectionMode { automatic, ortho_cloud, ortho_only, cloud_only };
 DetectionMode detection_mode_from_string(const std::string& s);
 std::string to_string(DetectionMode m);
@@ -32,8 +33,18 @@ std::string to_string(FootprintFit f);
 struct FootprintsRunOptions {
     std::string cloud;             ///< point cloud (LAS, PLY, XYZ)
     std::string cloud_crs;         ///< overrides/supplies the cloud's CRS
+    /// Heights without a cloud: an nDSM raster (heights above ground, vertical
+    /// CRS units; in the ortho's CRS on a grid aligned with it, or alone) ...
+    std::string ndsm;
+    /// ... or the 1-based band of the ortho that holds the nDSM (0 = none);
+    /// that band is then left out of the colours.
+    int ndsm_band = 0;
     std::string ortho;             ///< ortho: its grid and CRS are used
     DetectionMode mode = DetectionMode::automatic;
+    /// ortho modes: segments made beforehand by `cityforge segment` (a label
+    /// GeoTIFF on the ortho's grid, or its output folder: the level of
+    /// segment_scale, or its only level) instead of segmenting here.
+    std::string segments;
     WatershedOptions watershed;    ///< ortho modes: over-segmentation
     double segment_scale = 30.0;   ///< ortho modes: merging scale (cost < scale^2)
     /// ortho modes: passes moving segment-boundary pixels to the segment of
@@ -77,7 +88,9 @@ FootprintTable footprint_table(const BuildingMask& mask, const Image<float>& nds
 
 struct FootprintsReport {
     std::string mode;              ///< "ortho_cloud", "ortho_only" or "cloud_only"
+    std::string height_source;     ///< "point cloud", "nDSM raster", "ortho band N" or "" (ortho only)
     uint32_t segments = 0;         ///< ortho modes: merged segments
+    std::string segments_path;     ///< the label raster read for --segments (empty: segmented here)
     std::string crs;
     std::size_t buildings = 0;
     bool used_classes = false;

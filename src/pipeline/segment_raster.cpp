@@ -54,6 +54,13 @@ std::string scale_name(double s) {
     return o.str();
 }
 
+}  // namespace
+
+std::string segment_level_path(const std::string& out_dir, double scale) {
+    return (std::filesystem::path(out_dir) / ("segments_scale_" + scale_name(scale) + ".tif")).string();
+}
+
+namespace {
 // Nearest-neighbour transfer of working-grid labels back to the input grid.
 Image<uint32_t> to_input_grid(const Image<uint32_t>& work, int width, int height) {
     if (work.width == width && work.height == height) return work;
@@ -169,7 +176,7 @@ SegmentReport segment_raster(const std::string& path, const std::string& out_dir
         lr.regions_before = l.regions_before, lr.regions_after = l.regions_after;
         lr.initial_queue_length = l.initial_queue_length, lr.merges = l.merges, lr.queue_pushes = l.queue_pushes;
         lr.seconds = l.seconds;
-        lr.labels_path = (fs::path(out_dir) / ("segments_scale_" + scale_name(l.scale) + ".tif")).string();
+        lr.labels_path = segment_level_path(out_dir, l.scale);
         write_geotiff(lr.labels_path, to_input_grid(relabel(over.labels, l.label_of_input), info.width, info.height), gt, wkt, wo);
         hierarchy["levels"].push_back({{"scale", l.scale},
                                        {"from", s == 0 ? std::string("oversegmentation.tif") : fs::path(rep.levels.back().labels_path).filename().string()},

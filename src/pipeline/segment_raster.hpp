@@ -69,4 +69,8 @@ SegmentReport segment_raster(const std::string& raster_path, const std::string& 
 
 nlohmann::json to_json(const SegmentReport& report);
 
+/// The label raster of one scale level in a `cityforge segment` folder:
+/// DIR/segments_scale_<S>.tif (S without trailing zeros, e.g. 30 or 12.5).
+std::string segment_level_path(const std::string& out_dir, double scale);
+
 }  // namespace cityforge
