@@ -211,7 +211,7 @@ int main(int argc, char** argv) {
 
     // footprints ------------------------------------------------------------
     auto* footprints = app.add_subcommand("footprints", "Building footprints with rectangle fits (ortho + cloud, ortho-only or cloud-only detection)");
-    std::string f_out, f_fit = "recursive", f_mode = "auto";
+    std::string f_out, f_fit = "recursive", f_mode = "auto", f_reg = "lines";
     cf::FootprintsRunOptions fopt;
     footprints->add_option("--cloud", fopt.cloud, "Point cloud (LAS, PLY, XYZ/CSV)");
     footprints->add_option("--ortho", fopt.ortho, "Ortho (any GDAL raster): its grid and CRS are used");
@@ -243,6 +243,9 @@ int main(int argc, char** argv) {
     footprints->add_option("--min-split-part-m2", fopt.mask.min_split_part_m2, "Smallest part split off at a height step, square metres")
         ->capture_default_str();
     footprints->add_option("--fit-tolerance-pct", fopt.recursive.tolerance_pct, "Recursive fit: stop below this area error, percent")->capture_default_str();
+    footprints->add_option("--regularize-method", f_reg, "Regularised fit: lines (edge lines snapped to the dominant directions) or cgal (CGAL Shape_regularization contours)")
+        ->check(CLI::IsMember({"lines", "cgal"}))
+        ->capture_default_str();
     footprints->add_option("--simplify-m", fopt.simplify_m, "Douglas-Peucker tolerance of the outline, metres")->capture_default_str();
 
     // export ----------------------------------------------------------------
@@ -455,6 +458,7 @@ int main(int argc, char** argv) {
         } else if (*footprints) {
             fopt.fit = cf::footprint_fit_from_string(f_fit);
             fopt.mode = cf::detection_mode_from_string(f_mode);
+            fopt.regularize.method = f_reg == "cgal" ? cf::RegularizeMethod::cgal_contours : cf::RegularizeMethod::lines;
             const cf::FootprintsReport r = cf::run_footprints(f_out, fopt, make_progress(g));
             if (!g.quiet)
                 std::fprintf(stderr, "cityforge: %zu footprints (%s%s%s, %s, classes %s) on %d x %d cells in %.1f s; mean |fit area error| %.2f %% -> %s\n",

@@ -255,9 +255,31 @@ RecursiveFit recursive_rectangle_fit(const Polygon& polygon, const RecursiveFitO
     local.outer = to_local(polygon.outer);
     for (const Ring& hr : polygon.holes) local.holes.push_back(to_local(hr));
     std::vector<uint8_t> inside(static_cast<std::size_t>(w) * h), model(static_cast<std::size_t>(w) * h, 1);
-    for (int y = 0; y < h; ++y)
-        for (int x = 0; x < w; ++x)
-            inside[static_cast<std::size_t>(y) * w + x] = point_in_polygon(local, u0 + (x + 0.5) * cell, v0 + (y + 0.5) * cell);
+    // Scanline fill at the cell centres (even-odd over all rings, the same
+    // rule as point_in_polygon): O(rows x edges + cells).
+    {
+        std::vector<double> cross;
+        for (int y = 0; y < h; ++y) {
+            const double v = v0 + (y + 0.5) * cell;
+            cross.clear();
+            auto ring_crossings = [&](const Ring& r) {
+                for (std::size_t i = 0, j = r.size() - 1; i < r.size(); j = i++) {
+                    const MapPoint& p = r[i];
+                    const MapPoint& q = r[j];
+                    if ((p.y > v) != (q.y > v)) cross.push_back((q.x - p.x) * (v - p.y) / (q.y - p.y) + p.x);
+                }
+            };
+            ring_crossings(local.outer);
+            for (const Ring& hr : local.holes) ring_crossings(hr);
+            std::sort(cross.begin(), cross.end());
+            for (std::size_t c = 0; c + 1 < cross.size(); c += 2) {
+                // Cells whose centre u lies in (cross[c], cross[c+1]).
+                const int x_from = std::max(0, static_cast<int>(std::floor((cross[c] - u0) / cell - 0.5)) + 1);
+                const int x_to = std::min(w - 1, static_cast<int>(std::ceil((cross[c + 1] - u0) / cell - 0.5)) - 1);
+                for (int x = x_from; x <= x_to; ++x) inside[static_cast<std::size_t>(y) * w + x] = 1;
+            }
+        }
+    }
     const long min_cells = std::max(1L, static_cast<long>(o.min_rectangle_area / (cell * cell)));
     auto model_error_pct = [&] {
         long diff = 0, model_cells = 0, in_cells = 0;

@@ -1,10 +1,16 @@
 #include "footprint/regularize.hpp"
 
+#include <algorithm>
 #include <cmath>
 #include <numbers>
 #include <vector>
 
 #include "core/error.hpp"
+#include "footprint/rectangle_fit.hpp"
+#include "footprint/vectorize.hpp"
+
+#include <CGAL/Exact_predicates_inexact_constructions_kernel.h>
+#include <CGAL/Shape_regularization/regularize_contours.h>
 
 namespace cityforge {
 namespace {
@@ -97,19 +103,61 @@ bool rings_cross(const Ring& r) {
     return false;
 }
 
+
+// CGAL Shape_regularization contours: edges oriented to the dominant direction
+// or its perpendicular (User_defined_directions_2), parallel consecutive edges
+// closer than merge_offset made collinear.
+Ring regularize_ring_cgal(const Ring& ring, double theta, const RegularizeOptions& o) {
+    using K = CGAL::Exact_predicates_inexact_constructions_kernel;
+    using P2 = K::Point_2;
+    if (ring.size() < 3) throw Error("regularisation", "ring with fewer than 3 vertices");
+    // Relative to the first vertex: map coordinates of 10^5-10^6 lose digits.
+    const MapPoint origin = ring[0];
+    std::vector<P2> in;
+    for (const MapPoint& p : ring) in.emplace_back(p.x - origin.x, p.y - origin.y);
+    // Short jags (pixel staircase steps) are dropped first: their direction is noise.
+    std::vector<P2> kept;
+    for (std::size_t i = 0; i < in.size(); ++i) {
+        const P2& a = in[i];
+        const P2& b = in[(i + 1) % in.size()];
+        if (std::sqrt(CGAL::squared_distance(a, b)) >= o.min_edge || kept.empty()) kept.push_back(a);
+    }
+    if (kept.size() < 3) kept = in;
+    const std::vector<K::Direction_2> directions{K::Direction_2(std::cos(theta), std::sin(theta)),
+                                                 K::Direction_2(-std::sin(theta), std::cos(theta))};
+    CGAL::Shape_regularization::Contours::User_defined_directions_2<K, std::vector<P2>> dirs(kept, true, directions);
+    std::vector<P2> out;
+    CGAL::Shape_regularization::Contours::regularize_closed_contour(kept, dirs, std::back_inserter(out),
+                                                                    CGAL::parameters::maximum_offset(o.merge_offset));
+    Ring r;
+    for (const P2& p : out) r.push_back({CGAL::to_double(p.x()) + origin.x, CGAL::to_double(p.y()) + origin.y});
+    return r;
+}
+
 }  // namespace
 
 Polygon regularize_polygon(const Polygon& polygon, double orientation_deg, const RegularizeOptions& o) {
     const double theta = orientation_deg * std::numbers::pi / 180.0;
     Polygon out;
-    out.outer = regularize_ring(polygon.outer, theta, o);
-    for (const Ring& h : polygon.holes) out.holes.push_back(regularize_ring(h, theta, o));
+    auto ring = [&](const Ring& r) { return o.method == RegularizeMethod::cgal_contours ? regularize_ring_cgal(r, theta, o) : regularize_ring(r, theta, o); };
+    out.outer = ring(polygon.outer);
+    for (const Ring& h : polygon.holes) out.holes.push_back(ring(h));
     orient_polygon(out);
     if (rings_cross(out.outer)) throw Error("regularisation", "regularised outline self-intersects");
     for (const Ring& h : out.holes)
         if (rings_cross(h)) throw Error("regularisation", "regularised hole self-intersects");
+    if (!polygon_is_valid(out)) throw Error("regularisation", "regularised outline is not a valid polygon");
     const double a0 = polygon_area(polygon), a1 = polygon_area(out);
     if (!(a1 > 0) || std::abs(a1 - a0) > 0.25 * a0) throw Error("regularisation", "regularised outline changed the area by more than 25 %");
+    return out;
+}
+
+Polygon regularised_fit(const Polygon& traced, double orientation_deg, double pixel_size, double simplify, double target_area,
+                        const RegularizeOptions& o) {
+    // Pixel staircases must be straightened before edges can be snapped.
+    const double straighten = std::max(simplify, 1.5 * std::abs(pixel_size));
+    Polygon out = regularize_polygon(simplify_polygon(traced, straighten), orientation_deg, o);
+    if (o.match_area_max_offset > 0) out = match_area(out, target_area, o.match_area_max_offset);
     return out;
 }
 

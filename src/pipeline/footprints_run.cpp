@@ -126,11 +126,7 @@ FootprintTable footprint_table(const BuildingMask& mask, const Image<float>& nds
             } else if (o.fit == FootprintFit::regularised) {
                 RegularizeOptions go = o.regularize;
                 go.merge_offset /= unit, go.min_edge /= unit, go.match_area_max_offset /= unit;
-                // Pixel staircases must be straightened before edges can be
-                // snapped: simplify with at least 1.5 pixels.
-                const double straighten = std::max(o.simplify_m / unit, 1.5 * std::abs(grid_transform.pixel_width));
-                out = regularize_polygon(simplify_polygon(polygons[id][0], straighten), rect.orientation_deg, go);
-                if (go.match_area_max_offset > 0) out = match_area(out, polygon_area(raw), go.match_area_max_offset);
+                out = regularised_fit(polygons[id][0], rect.orientation_deg, grid_transform.pixel_width, o.simplify_m / unit, polygon_area(raw), go);
                 const FitAccuracy acc = fit_accuracy(raw, out);
                 err = acc.area_error_pct, iou = acc.iou;
             } else if (o.fit == FootprintFit::recursive) {
