@@ -149,7 +149,7 @@ TEST_CASE("Recursive rectangle fitting recovers an L and a courtyard with right 
     CHECK(recursive_rectangle_fit(r).rectangles == 1);
 }
 
-TEST_CASE("Regularisation gives right angles to a noisy rotated L", "[footprint][fit]") {
+TEST_CASE("Regularisation (lines and CGAL contours) gives right angles to a noisy rotated L", "[footprint][fit]") {
     const double a = 25.0 * std::numbers::pi / 180.0;
     Rng rng(12);
     auto rot = [&](double u, double v) {
@@ -159,16 +159,20 @@ TEST_CASE("Regularisation gives right angles to a noisy rotated L", "[footprint]
     // Edges with a few intermediate, slightly off-line vertices.
     for (auto [u, v] : std::vector<std::pair<double, double>>{{0, 0}, {15, 0.1}, {30, 0}, {30, 8}, {20, 8.1}, {8, 8}, {8, 20}, {0, 20}, {0.1, 10}})
         l.outer.push_back(rot(u, v));
-    const Polygon r = regularize_polygon(l, minimum_area_rectangle(l).orientation_deg);
-    REQUIRE(r.outer.size() == 6);
-    for (std::size_t i = 0; i < r.outer.size(); ++i) {
-        const MapPoint& p = r.outer[i];
-        const MapPoint& q = r.outer[(i + 1) % 6];
-        const MapPoint& s = r.outer[(i + 2) % 6];
-        const double dot = (q.x - p.x) * (s.x - q.x) + (q.y - p.y) * (s.y - q.y);
-        CHECK(std::abs(dot) / (std::hypot(q.x - p.x, q.y - p.y) * std::hypot(s.x - q.x, s.y - q.y)) < 1e-6);  // right angle
+    for (const RegularizeMethod method : {RegularizeMethod::lines, RegularizeMethod::cgal_contours}) {
+        RegularizeOptions ro;
+        ro.method = method;
+        const Polygon r = regularize_polygon(l, minimum_area_rectangle(l).orientation_deg, ro);
+        REQUIRE(r.outer.size() == 6);
+        for (std::size_t i = 0; i < r.outer.size(); ++i) {
+            const MapPoint& p = r.outer[i];
+            const MapPoint& q = r.outer[(i + 1) % 6];
+            const MapPoint& s = r.outer[(i + 2) % 6];
+            const double dot = (q.x - p.x) * (s.x - q.x) + (q.y - p.y) * (s.y - q.y);
+            CHECK(std::abs(dot) / (std::hypot(q.x - p.x, q.y - p.y) * std::hypot(s.x - q.x, s.y - q.y)) < 1e-6);  // right angle
+        }
+        CHECK(std::abs(polygon_area(r) - (30 * 8 + 8 * 12)) / (30 * 8 + 8 * 12) < 0.02);
     }
-    CHECK(std::abs(polygon_area(r) - (30 * 8 + 8 * 12)) / (30 * 8 + 8 * 12) < 0.02);
     Polygon bowtie;
     bowtie.outer = {{0, 0}, {10, 10}, {10, 0}, {0, 10}};
     CHECK_THROWS(regularize_polygon(bowtie, 0.0));
