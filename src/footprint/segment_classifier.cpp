@@ -2,6 +2,8 @@
 
 #include <algorithm>
 #include <cmath>
+#include <map>
+#include <tuple>
 
 #include "core/error.hpp"
 #include "footprint/building_mask.hpp"
@@ -49,28 +51,90 @@ std::vector<SegmentFeatures> classify_segments(const Image<float>& image, const 
         s.vegetation_index = rgb && r + g + b > 0 ? (2 * g - r - b) / (r + g + b) : 0.0;
         candidate[l] = s.vegetation_index <= o.max_vegetation_index && s.brightness >= o.min_brightness && s.area_m2 <= o.max_area_m2;
     }
-    // Components of candidate pixels, and their shapes.
+    // Shapes: candidate segments are grouped greedily with their neighbours
+    // (roof facets, lit and shaded halves) as long as the group stays about as
+    // rectangular as its parts; a roof next to a paved or bare patch of the
+    // same colour therefore keeps its own outline. Groups that pass the shape
+    // rules are buildings.
     const int w = labels.width, h = labels.height;
-    std::vector<uint8_t> cand_mask(n, 0);
-    for (std::size_t i = 0; i < n; ++i) cand_mask[i] = labels.data[i] && candidate[labels.data[i]];
-    std::vector<uint32_t> comp, sizes;
-    const uint32_t nc = label_components(cand_mask, 1, w, h, comp, sizes);
-    Image<uint32_t> comp_img(w, h, 1, 0u);
-    comp_img.data.assign(comp.begin(), comp.end());
     const GeoTransform pixel_grid{0.0, o.gsd_m, 0.0, -o.gsd_m};
-    const auto polygons = vectorize_all(comp_img, pixel_grid);
-    std::vector<uint8_t> comp_ok(nc + 1, 0);
-    for (uint32_t c = 1; c <= nc; ++c) {
-        const double a_m2 = sizes[c] * o.gsd_m * o.gsd_m;
-        if (a_m2 < o.min_area_m2 || a_m2 > o.max_area_m2 || c >= polygons.size() || polygons[c].empty()) continue;
+    const auto polygons = vectorize_all(labels, pixel_grid);
+    std::vector<std::vector<MapPoint>> hull(count + 1);
+    for (uint32_t l = 1; l <= count; ++l)
+        if (candidate[l] && l < polygons.size())
+            for (const Polygon& p : polygons[l]) hull[l].insert(hull[l].end(), p.outer.begin(), p.outer.end());
+    for (uint32_t l = 1; l <= count; ++l) hull[l] = convex_hull(hull[l]);
+    struct Shape {
+        double rectangularity = 0.0, elongation = 0.0;
+    };
+    auto shape_of = [&](const std::vector<MapPoint>& pts, double area_m2) {
+        Shape sh;
+        if (pts.size() < 3) return sh;
         try {
-            const OrientedRectangle rect = minimum_area_rectangle(polygons[c][0]);
-            const double rectangularity = a_m2 / std::max(1e-9, rect.length * rect.width);
-            const double elongation = rect.length / std::max(1e-9, rect.width);
-            comp_ok[c] = rectangularity >= o.min_rectangularity && elongation <= o.max_elongation;
+            const OrientedRectangle rect = minimum_area_rectangle(Polygon{pts, {}});
+            sh.rectangularity = area_m2 / std::max(1e-9, rect.length * rect.width);
+            sh.elongation = rect.length / std::max(1e-9, rect.width);
         } catch (const Error&) {
         }
+        return sh;
+    };
+    std::vector<uint32_t> parent(count + 1);
+    for (uint32_t l = 0; l <= count; ++l) parent[l] = l;
+    auto find = [&](uint32_t a) {
+        while (parent[a] != a) a = parent[a] = parent[parent[a]];
+        return a;
+    };
+    std::vector<double> group_area(count + 1, 0.0);
+    std::vector<Shape> group_shape(count + 1);
+    for (uint32_t l = 1; l <= count; ++l)
+        if (candidate[l]) group_area[l] = f[l].area_m2, group_shape[l] = shape_of(hull[l], f[l].area_m2);
+    // Shared boundary lengths between candidate segments (pixel edges).
+    std::map<std::pair<uint32_t, uint32_t>, long> shared;
+    for (int y = 0; y < h; ++y)
+        for (int x = 0; x < w; ++x) {
+            const std::size_t k = static_cast<std::size_t>(y) * w + x;
+            const uint32_t a = labels.data[k];
+            if (!a || !candidate[a]) continue;
+            if (x + 1 < w) {
+                const uint32_t b = labels.data[k + 1];
+                if (b && b != a && candidate[b]) ++shared[{std::min(a, b), std::max(a, b)}];
+            }
+            if (y + 1 < h) {
+                const uint32_t b = labels.data[k + static_cast<std::size_t>(w)];
+                if (b && b != a && candidate[b]) ++shared[{std::min(a, b), std::max(a, b)}];
+            }
+        }
+    std::vector<std::tuple<long, uint32_t, uint32_t>> pairs;
+    for (const auto& [ab, len] : shared) pairs.emplace_back(-len, ab.first, ab.second);
+    std::sort(pairs.begin(), pairs.end());  // longest shared boundary first, ties by ids
+    for (const auto& [neg_len, a0, b0] : pairs) {
+        const uint32_t a = find(a0), b = find(b0);
+        if (a == b) continue;
+        const double area_m2 = group_area[a] + group_area[b];
+        if (area_m2 > o.max_area_m2) continue;
+        std::vector<MapPoint> pts = hull[a];
+        pts.insert(pts.end(), hull[b].begin(), hull[b].end());
+        pts = convex_hull(pts);
+        const Shape sh = shape_of(pts, area_m2);
+        const double worst = std::min(group_shape[a].rectangularity, group_shape[b].rectangularity);
+        if (sh.rectangularity < o.min_rectangularity || sh.rectangularity < worst - o.max_rectangularity_loss) continue;
+        const uint32_t into = std::min(a, b), from = std::max(a, b);
+        parent[from] = into;
+        group_area[into] = area_m2, group_shape[into] = sh, hull[into] = std::move(pts);
+        hull[from].clear();
     }
+    std::vector<uint8_t> group_ok(count + 1, 0);
+    for (uint32_t l = 1; l <= count; ++l) {
+        if (!candidate[l] || find(l) != l) continue;
+        const double a_m2 = group_area[l];
+        group_ok[l] = a_m2 >= o.min_area_m2 && a_m2 <= o.max_area_m2 && group_shape[l].rectangularity >= o.min_rectangularity &&
+                      group_shape[l].elongation <= o.max_elongation;
+    }
+    std::vector<uint32_t> comp(n, 0);
+    std::vector<uint8_t> comp_ok(count + 1, 0);
+    for (std::size_t i = 0; i < n; ++i)
+        if (const uint32_t l = labels.data[i]; l && candidate[l]) comp[i] = find(l);
+    for (uint32_t l = 1; l <= count; ++l) comp_ok[l] = group_ok[l];
     mask.assign(n, 0);
     for (std::size_t i = 0; i < n; ++i) {
         mask[i] = comp[i] && comp_ok[comp[i]];

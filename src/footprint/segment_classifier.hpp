@@ -16,6 +16,9 @@ struct SegmentClassifierOptions {
     double min_area_m2 = 20.0;
     double max_area_m2 = 5000.0;
     double min_rectangularity = 0.65;    ///< area / minimum-area-rectangle area
+    /// Neighbouring segments are grouped while the group's rectangularity
+    /// stays within this of its least rectangular part's.
+    double max_rectangularity_loss = 0.05;
     double max_elongation = 5.0;         ///< rectangle length / width above this -> road or track
     void validate() const;
 };
@@ -29,9 +32,10 @@ struct SegmentFeatures {
 };
 
 /// Segments are first kept or rejected on their spectra (vegetation,
-/// shadow); adjacent kept segments (roof facets, shaded halves) then form
-/// components, and the shape rules (area, rectangularity, elongation) apply
-/// to those components.
+/// shadow); adjacent kept segments (roof facets, shaded halves) are then
+/// grouped, longest shared boundary first, while the group stays about as
+/// rectangular as its parts, and the shape rules (area, rectangularity,
+/// elongation) apply to the groups.
 /// `image` holds the original band values (1 band: panchromatic; 3+: R, G, B
 /// first); `labels` the merged segments (1..count, 0 = nodata). Returns the
 /// features of every segment (index = label) and sets `building_mask`

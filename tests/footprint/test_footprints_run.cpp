@@ -150,8 +150,27 @@ TEST_CASE("Ortho-only footprints on a synthetic town (regression guard)", "[foot
     const FootprintScores sc = score(read_polygon_layer(dir / "fp.gpkg"), read_polygon_layer(s.truth_path));
     std::printf("ortho-only footprints (seed 4, 300 m): P %.3f R %.3f F1 %.3f mean IoU %.3f |area err| %.2f %%\n", sc.precision, sc.recall,
                 sc.f1, sc.mean_iou, sc.mean_abs_area_error_pct);
-    CHECK(sc.f1 >= 0.6);
-    CHECK(sc.mean_iou >= 0.85);
+    CHECK(sc.f1 >= 0.7);  // regression guard: 0.738 measured (0.705 before rectangular grouping)
+    CHECK(sc.mean_iou >= 0.9);
+}
+
+TEST_CASE("SpaceNet Atlanta panchromatic ortho-only footprints against its 25 references (regression guard)", "[footprint][real]") {
+    ScratchDir dir("fp_spacenet");
+    FootprintsRunOptions o;
+    o.ortho = test::shared_data("spacenet4_atlanta_pan_west/atlanta_pan_0p5m_west.tif");
+    o.fit = FootprintFit::raw;
+    const FootprintsReport rep = run_footprints(dir / "sn.gpkg", o);
+    CHECK(rep.mode == "ortho_only");
+    const PolygonLayer pred = read_polygon_layer(dir / "sn.gpkg");
+    CHECK(pred.crs.epsg == 32616);
+    const FootprintScores s = score(pred, read_polygon_layer(test::shared_data("spacenet4_atlanta_pan_west/buildings_west.geojson")));
+    std::printf("SpaceNet ortho-only footprints: %zu predicted, %zu reference; P %.3f R %.3f F1 %.3f; per-area completeness %.3f correctness %.3f\n",
+                s.predicted, s.reference, s.precision, s.recall, s.f1, s.area_completeness, s.area_correctness);
+    // Off-nadir panchromatic, houses under canopy: roof segments have the
+    // brightness and texture of lawns and crowns, so spectral and shape rules
+    // find little (measured: F1 0, per-area completeness 0.041). Guard the
+    // part that is found.
+    CHECK(s.area_completeness >= 0.03);
 }
 
 TEST_CASE("Footprints from an nDSM raster or an nDSM band of the ortho - and from segments made by cityforge segment", "[footprint][synth]") {
