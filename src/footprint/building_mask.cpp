@@ -103,13 +103,21 @@ BuildingCells building_cells(const Image<float>& ndsm, const Image<float>& dsm, 
                 if (b < o.min_building_share || (b == o.min_building_share && ((x + y) & 1))) continue;
             } else {
                 // Roughness: residual of the 3x3 DSM neighbourhood around its best plane,
-                // approximated by the mean absolute second difference.
+                // approximated by the mean absolute second difference over the
+                // directions whose both neighbours have a height. Crowns are
+                // rough and dense; a cell whose neighbours are all gaps (dark
+                // roofs lose most pulses) is a roof candidate.
                 if (x == 0 || y == 0 || x == w - 1 || y == h - 1) continue;
                 auto d = [&](int dx, int dy) { return dsm.data[static_cast<std::size_t>(y + dy) * w + x + dx]; };
                 const float c = d(0, 0);
-                const float r = (std::abs(d(-1, 0) + d(1, 0) - 2 * c) + std::abs(d(0, -1) + d(0, 1) - 2 * c) +
-                                 std::abs(d(-1, -1) + d(1, 1) - 2 * c) + std::abs(d(-1, 1) + d(1, -1) - 2 * c)) / 4.0f;
-                if (std::isnan(r) || r > o.max_roughness_m) continue;
+                float sum = 0.0f;
+                int pairs = 0;
+                for (const auto& [dx, dy] : {std::pair{1, 0}, std::pair{0, 1}, std::pair{1, 1}, std::pair{1, -1}}) {
+                    const float second = d(-dx, -dy) + d(dx, dy) - 2 * c;
+                    if (!std::isnan(second)) sum += std::abs(second), ++pairs;
+                }
+                const float r = pairs ? sum / static_cast<float>(pairs) : 0.0f;
+                if (r > o.max_roughness_m) continue;
             }
             mask[k] = 1;
         }

@@ -15,21 +15,26 @@ namespace cityforge {
 void SegmentClassifierOptions::validate() const {
     if (!(gsd_m > 0)) throw Error("--gsd", "must be > 0");
     if (!(min_area_m2 >= 0 && max_area_m2 > min_area_m2)) throw Error("--min-area-m2", "must be below the maximum area");
+    if (!(max_ndvi > -1 && max_ndvi < 1)) throw Error("--max-ndvi", "must be between -1 and 1");
     if (!(min_rectangularity >= 0 && min_rectangularity <= 1)) throw Error("--min-rectangularity", "must be between 0 and 1");
 }
 
-std::vector<SegmentFeatures> classify_segments(const Image<float>& image, const Image<uint32_t>& labels, uint32_t count,
-                                               const SegmentClassifierOptions& o, std::vector<uint8_t>& mask) {
+std::vector<SegmentFeatures> segment_spectra(const Image<float>& image, const Image<uint32_t>& labels, uint32_t count,
+                                             const SegmentClassifierOptions& o) {
     o.validate();
     const std::size_t n = labels.pixel_count();
+    if (image.pixel_count() != n) throw Error("segment features", "image and segments differ in size");
+    if (o.nir_band >= image.bands) throw Error("--nir-band", "the image has only " + std::to_string(image.bands) + " bands");
     const bool rgb = image.bands >= 3;
-    std::vector<double> sum_r(count + 1, 0), sum_g(count + 1, 0), sum_b(count + 1, 0), area(count + 1, 0);
+    const bool nir = o.nir_band >= 0;
+    std::vector<double> sum_r(count + 1, 0), sum_g(count + 1, 0), sum_b(count + 1, 0), sum_nir(count + 1, 0), area(count + 1, 0);
     // Brightness reference: 99th percentile of the mean band value (sampled).
+    const int colour_bands = std::min(image.bands, 3);
     std::vector<float> sample;
     for (std::size_t i = 0; i < n; i += std::max<std::size_t>(1, n / 200000)) {
         double s = 0;
-        for (int b = 0; b < std::min(image.bands, 3); ++b) s += image.band_data(b)[i];
-        sample.push_back(static_cast<float>(s / std::min(image.bands, 3)));
+        for (int b = 0; b < colour_bands; ++b) s += image.band_data(b)[i];
+        sample.push_back(static_cast<float>(s / colour_bands));
     }
     std::sort(sample.begin(), sample.end());
     const double ref = sample.empty() ? 1.0 : std::max(1e-6, static_cast<double>(sample[sample.size() * 99 / 100]));
@@ -39,9 +44,9 @@ std::vector<SegmentFeatures> classify_segments(const Image<float>& image, const 
         area[l] += 1;
         sum_r[l] += image.band_data(0)[i];
         if (rgb) sum_g[l] += image.band_data(1)[i], sum_b[l] += image.band_data(2)[i];
+        if (nir) sum_nir[l] += image.band_data(o.nir_band)[i];
     }
     std::vector<SegmentFeatures> f(count + 1);
-    std::vector<uint8_t> candidate(count + 1, 0);
     for (uint32_t l = 1; l <= count; ++l) {
         if (area[l] == 0) continue;
         SegmentFeatures& s = f[l];
@@ -49,8 +54,21 @@ std::vector<SegmentFeatures> classify_segments(const Image<float>& image, const 
         const double r = sum_r[l] / area[l], g = rgb ? sum_g[l] / area[l] : r, b = rgb ? sum_b[l] / area[l] : r;
         s.brightness = (r + g + b) / 3.0 / ref;
         s.vegetation_index = rgb && r + g + b > 0 ? (2 * g - r - b) / (r + g + b) : 0.0;
-        candidate[l] = s.vegetation_index <= o.max_vegetation_index && s.brightness >= o.min_brightness && s.area_m2 <= o.max_area_m2;
+        const double ni = nir ? sum_nir[l] / area[l] : 0.0;
+        s.ndvi = nir && ni + r > 0 ? (ni - r) / (ni + r) : 0.0;
+        s.vegetation = (rgb && s.vegetation_index > o.max_vegetation_index) || (nir && s.ndvi > o.max_ndvi);
+        s.shadow = s.brightness < o.min_brightness;
     }
+    return f;
+}
+
+std::vector<SegmentFeatures> classify_segments(const Image<float>& image, const Image<uint32_t>& labels, uint32_t count,
+                                               const SegmentClassifierOptions& o, std::vector<uint8_t>& mask) {
+    std::vector<SegmentFeatures> f = segment_spectra(image, labels, count, o);
+    const std::size_t n = labels.pixel_count();
+    std::vector<uint8_t> candidate(count + 1, 0);
+    for (uint32_t l = 1; l <= count; ++l)
+        candidate[l] = f[l].area_m2 > 0 && !f[l].vegetation && !f[l].shadow && f[l].area_m2 <= o.max_area_m2;
     // Shapes: candidate segments are grouped greedily with their neighbours
     // (roof facets, lit and shaded halves) as long as the group stays about as
     // rectangular as its parts; a roof next to a paved or bare patch of the

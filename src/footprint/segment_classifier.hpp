@@ -12,6 +12,8 @@ namespace cityforge {
 struct SegmentClassifierOptions {
     double gsd_m = 0.5;                  ///< pixel size, metres
     double max_vegetation_index = 0.25;  ///< ExG = (2G - R - B) / (R + G + B) above this -> vegetation (RGB only)
+    int nir_band = -1;                   ///< 0-based band holding near infrared (-1 = none); red is band 0
+    double max_ndvi = 0.3;               ///< with NIR: NDVI = (NIR - R) / (NIR + R) above this -> vegetation
     double min_brightness = 0.2;         ///< mean (R+G+B)/3 relative to the image's 99th percentile; darker -> shadow
     double min_area_m2 = 20.0;
     double max_area_m2 = 5000.0;
@@ -28,8 +30,16 @@ struct SegmentFeatures {
     double area_m2 = 0.0;
     double brightness = 0.0;        ///< 0..1 relative
     double vegetation_index = 0.0;  ///< ExG, 0 for fewer than 3 bands
-    bool building = false;          ///< in a component that passed the shape rules
+    double ndvi = 0.0;              ///< NDVI, 0 without a NIR band
+    bool vegetation = false;        ///< ExG or NDVI above its limit
+    bool shadow = false;            ///< darker than min_brightness
+    bool building = false;          ///< in a group that passed the shape rules
 };
+
+/// Spectral features of every segment (index = label; 0 and empty labels
+/// zero): area, brightness, ExG, NDVI and the vegetation and shadow flags.
+std::vector<SegmentFeatures> segment_spectra(const Image<float>& image, const Image<uint32_t>& labels, uint32_t count,
+                                             const SegmentClassifierOptions& options);
 
 /// Segments are first kept or rejected on their spectra (vegetation,
 /// shadow); adjacent kept segments (roof facets, shaded halves) are then

@@ -60,6 +60,9 @@ void FootprintsRunOptions::validate() const {
     if (int(!cloud.empty()) + int(!ndsm.empty()) + int(ndsm_band > 0) > 1)
         throw Error("--ndsm", "give one height source: --cloud, --ndsm or --ndsm-band");
     if (ndsm_band < 0) throw Error("--ndsm-band", "must be >= 1");
+    if (nir_band < 0) throw Error("--nir-band", "must be >= 1");
+    if (nir_band > 0 && ortho.empty()) throw Error("--nir-band", "needs the ortho that holds the band (--ortho)");
+    if (nir_band > 0 && nir_band == ndsm_band) throw Error("--nir-band", "is the nDSM band");
     if (ndsm_band > 0 && ortho.empty()) throw Error("--ndsm-band", "needs the ortho that holds the band (--ortho)");
     if ((mode == DetectionMode::ortho_cloud || mode == DetectionMode::cloud_only) && !heights)
         throw Error("--mode", to_string(mode) + " needs a point cloud (--cloud) or an nDSM (--ndsm, --ndsm-band)");
@@ -286,6 +289,8 @@ FootprintsReport run_footprints(const std::string& output_path, const Footprints
         unit = crs.linear_unit_m, z_unit = crs.z_unit_m;
         if (o.ndsm_band > info.band_count())
             throw Error(o.ortho, "has " + std::to_string(info.band_count()) + " bands; --ndsm-band " + std::to_string(o.ndsm_band) + " does not exist");
+        if (o.nir_band > info.band_count())
+            throw Error(o.ortho, "has " + std::to_string(info.band_count()) + " bands; --nir-band " + std::to_string(o.nir_band) + " does not exist");
         if (mode != DetectionMode::cloud_only || o.ndsm_band > 0) img = read_ortho(*ortho);
     }
     Image<float> ndsm_band;
@@ -347,6 +352,10 @@ FootprintsReport run_footprints(const std::string& output_path, const Footprints
     BuildingMaskOptions mo = o.mask;
     mo.gsd_m = std::abs(grid.transform.pixel_width) * unit;
     mo.split_step_m /= z_unit;
+    SegmentClassifierOptions co = o.classifier;
+    if (ortho) co.gsd_m = ortho->info().gsd.x_m;
+    // The NIR band's index among the colours (the nDSM band left them).
+    co.nir_band = o.nir_band > 0 ? o.nir_band - 1 - (o.ndsm_band > 0 && o.ndsm_band < o.nir_band ? 1 : 0) : -1;
     if (mode == DetectionMode::cloud_only) {
         mask = label_buildings(std::move(cells.cells), grid.width, grid.height, mo);
     } else {
@@ -396,7 +405,12 @@ FootprintsReport run_footprints(const std::string& output_path, const Footprints
                 if (cells.evidence[k]) ++seen[sg], seen_votes[sg] += cells.cells[k];
             }
             std::vector<uint8_t> is_building(ns, 0);
+            // Without point classes the heights cannot tell crowns from
+            // roofs: the image's vegetation indices (ExG, NDVI) veto.
+            std::vector<SegmentFeatures> spectra;
+            if (!cells.used_classes && (img.image.bands >= 3 || co.nir_band >= 0)) spectra = segment_spectra(img.image, segments, rep.segments, co);
             for (std::size_t sg = 1; sg < ns; ++sg) {
+                if (!spectra.empty() && spectra[sg].vegetation) continue;
                 const double share = seen[sg] ? static_cast<double>(seen_votes[sg]) / seen[sg]
                                               : total[sg] ? static_cast<double>(votes[sg]) / total[sg] : 0.0;
                 is_building[sg] = share >= o.min_segment_building_share;
@@ -426,8 +440,6 @@ FootprintsReport run_footprints(const std::string& output_path, const Footprints
                 building.swap(refined);
             }
         } else {
-            SegmentClassifierOptions co = o.classifier;
-            co.gsd_m = ortho->info().gsd.x_m;
             classify_segments(img.image, segments, rep.segments, co, building);
         }
         mask = label_buildings(std::move(building), grid.width, grid.height, mo);

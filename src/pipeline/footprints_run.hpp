@@ -39,6 +39,9 @@ struct FootprintsRunOptions {
     /// ... or the 1-based band of the ortho that holds the nDSM (0 = none);
     /// that band is then left out of the colours.
     int ndsm_band = 0;
+    /// 1-based band of the ortho holding near infrared (0 = none): NDVI then
+    /// marks vegetation segments (red is the first band).
+    int nir_band = 0;
     std::string ortho;             ///< ortho: its grid and CRS are used
     DetectionMode mode = DetectionMode::automatic;
     /// ortho modes: segments made beforehand by `cityforge segment` (a label
