@@ -1,10 +1,12 @@
 #include <catch2/catch.hpp>
+#include <filesystem>
 #include <nlohmann/json.hpp>
 
 #include "test_support.hpp"
 
 using cityforge::test::count_lines;
 using cityforge::test::run_cli;
+using cityforge::test::run_command;
 using cityforge::test::ScratchDir;
 using cityforge::test::shared_data;
 
@@ -65,4 +67,24 @@ TEST_CASE("cityforge synth writes the town - --quiet keeps stderr empty", "[cli]
     CHECK(doc["crs"]["epsg"] == 32631);
     CHECK(doc["extent"]["min_x"].get<double>() == Approx(300000.0));
     CHECK(doc["bands"].size() == 3);
+}
+
+TEST_CASE("cityforge footprints refuses a misaligned nDSM and a missing segments level in one line", "[cli][errors]") {
+    ScratchDir dir("cli_fp_err");
+    const std::string pan = shared_data("spacenet4_atlanta_pan_west/atlanta_pan_0p5m_west.tif");
+    // The panchromatic tile as its own "nDSM" over Delft's cloud CRS would be
+    // mismatched; over itself shifted by a fraction of a pixel it is misaligned.
+    const auto shifted = run_command("gdal_translate -q -a_ullr 733601.2 3725139 733826.2 3724689 " + pan + " " + (dir / "shifted.tif"));
+    REQUIRE(shifted.exit_code == 0);
+    const auto bad = run_cli("footprints --quiet --ortho " + pan + " --ndsm " + (dir / "shifted.tif") + " --out " + (dir / "fp.gpkg"));
+    CHECK(bad.exit_code == 1);
+    CHECK(count_lines(bad.err) == 1);
+    CHECK(bad.err.find("shifted.tif: the nDSM's pixels are not aligned with the ortho's") != std::string::npos);
+    const auto mode = run_cli("footprints --quiet --ortho " + pan + " --mode cloud_only --out " + (dir / "fp.gpkg"));
+    CHECK(mode.exit_code == 1);
+    CHECK(mode.err.find("--mode: cloud_only needs a point cloud") != std::string::npos);
+    const auto segs = run_cli("footprints --quiet --ortho " + pan + " --segments " + dir.path.string() + " --out " + (dir / "fp.gpkg"));
+    CHECK(segs.exit_code == 1);
+    CHECK(segs.err.find("no segments_scale_30.tif for --segment-scale; levels here: none") != std::string::npos);
+    CHECK_FALSE(std::filesystem::exists(dir / "fp.gpkg"));
 }
