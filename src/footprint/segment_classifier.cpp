@@ -141,17 +141,37 @@ std::vector<SegmentFeatures> classify_segments(const Image<float>& image, const 
         group_area[into] = area_m2, group_shape[into] = sh, hull[into] = std::move(pts);
         hull[from].clear();
     }
-    std::vector<uint8_t> group_ok(count + 1, 0);
+    std::vector<uint8_t> group_ok(count + 1, 0), rectilinear_candidate(count + 1, 0);
     for (uint32_t l = 1; l <= count; ++l) {
         if (!candidate[l] || find(l) != l) continue;
         const double a_m2 = group_area[l];
-        group_ok[l] = a_m2 >= o.min_area_m2 && a_m2 <= o.max_area_m2 && group_shape[l].rectangularity >= o.min_rectangularity &&
-                      group_shape[l].elongation <= o.max_elongation;
+        const bool sized = a_m2 >= o.min_area_m2 && a_m2 <= o.max_area_m2 && group_shape[l].elongation <= o.max_elongation;
+        group_ok[l] = sized && group_shape[l].rectangularity >= o.min_rectangularity;
+        rectilinear_candidate[l] = sized && !group_ok[l] && o.min_rectilinear_iou < 1.0;
     }
     std::vector<uint32_t> comp(n, 0);
-    std::vector<uint8_t> comp_ok(count + 1, 0);
     for (std::size_t i = 0; i < n; ++i)
         if (const uint32_t l = labels.data[i]; l && candidate[l]) comp[i] = find(l);
+    // L, T, U and courtyard buildings are not rectangular but rectilinear: a
+    // few rectangles aligned with their dominant direction cover them.
+    if (std::find(rectilinear_candidate.begin(), rectilinear_candidate.end(), 1) != rectilinear_candidate.end()) {
+        Image<uint32_t> groups(w, h, 1, 0u);
+        for (std::size_t i = 0; i < n; ++i)
+            if (comp[i] && rectilinear_candidate[comp[i]]) groups.data[i] = comp[i];
+        const auto group_polygons = vectorize_all(groups, pixel_grid);
+        RecursiveFitOptions ro;
+        ro.max_rectangles = o.max_rectilinear_rectangles - 1;
+        ro.min_rectangle_area = 4.0;  // m² (the pixel grid is in metres)
+        for (uint32_t l = 1; l <= count; ++l) {
+            if (!rectilinear_candidate[l] || l >= group_polygons.size() || group_polygons[l].size() != 1) continue;
+            try {
+                const RecursiveFit fit = recursive_rectangle_fit(group_polygons[l][0], ro);
+                group_ok[l] = fit.accuracy.iou >= o.min_rectilinear_iou;
+            } catch (const Error&) {
+            }
+        }
+    }
+    std::vector<uint8_t> comp_ok(count + 1, 0);
     for (uint32_t l = 1; l <= count; ++l) comp_ok[l] = group_ok[l];
     mask.assign(n, 0);
     for (std::size_t i = 0; i < n; ++i) {

@@ -22,6 +22,11 @@ struct SegmentClassifierOptions {
     /// stays within this of its least rectangular part's.
     double max_rectangularity_loss = 0.05;
     double max_elongation = 5.0;         ///< rectangle length / width above this -> road or track
+    /// A group that is not rectangular is still a building (L, T, U,
+    /// courtyard) when this many rectangles aligned with it cover it with at
+    /// least this IoU (1 = never).
+    int max_rectilinear_rectangles = 4;
+    double min_rectilinear_iou = 0.9;
     void validate() const;
 };
 
