@@ -19,6 +19,27 @@ void SegmentClassifierOptions::validate() const {
     if (!(min_rectangularity >= 0 && min_rectangularity <= 1)) throw Error("--min-rectangularity", "must be between 0 and 1");
 }
 
+std::vector<uint8_t> vegetation_pixels(const Image<float>& image, const SegmentClassifierOptions& o) {
+    o.validate();
+    const bool rgb = image.bands >= 3, nir = o.nir_band >= 0;
+    if (o.nir_band >= image.bands) throw Error("--nir-band", "the image has only " + std::to_string(image.bands) + " bands");
+    if (!rgb && !nir) return {};
+    const std::size_t n = image.pixel_count();
+    std::vector<uint8_t> out(n, 0);
+    for (std::size_t i = 0; i < n; ++i) {
+        const double r = image.band_data(0)[i];
+        if (rgb) {
+            const double g = image.band_data(1)[i], b = image.band_data(2)[i];
+            if (r + g + b > 0 && (2 * g - r - b) / (r + g + b) > o.max_vegetation_index) out[i] = 1;
+        }
+        if (nir) {
+            const double ni = image.band_data(o.nir_band)[i];
+            if (ni + r > 0 && (ni - r) / (ni + r) > o.max_ndvi) out[i] = 1;
+        }
+    }
+    return out;
+}
+
 std::vector<SegmentFeatures> segment_spectra(const Image<float>& image, const Image<uint32_t>& labels, uint32_t count,
                                              const SegmentClassifierOptions& o) {
     o.validate();

@@ -41,6 +41,10 @@ struct SegmentFeatures {
     bool building = false;          ///< in a group that passed the shape rules
 };
 
+/// Pixels whose colours say vegetation (ExG above its limit with 3+ bands,
+/// NDVI above its limit with a NIR band); empty when the image has neither.
+std::vector<uint8_t> vegetation_pixels(const Image<float>& image, const SegmentClassifierOptions& options);
+
 /// Spectral features of every segment (index = label; 0 and empty labels
 /// zero): area, brightness, ExG, NDVI and the vegetation and shadow flags.
 std::vector<SegmentFeatures> segment_spectra(const Image<float>& image, const Image<uint32_t>& labels, uint32_t count,

@@ -77,6 +77,10 @@ void RunOptions::validate() const {
     if (!(footprint_grid_m > 0)) throw Error("footprint_grid_m", "must be > 0");
     buildings.validate();
     if (footprints.empty()) extraction.mask.validate();
+    if (!cloud.empty() && extraction.mode == DetectionMode::ortho_only)
+        throw Error("extraction.mode", "ortho_only would ignore the cloud: choose auto, ortho_cloud or cloud_only, or drop the cloud");
+    if (cloud.empty() && (extraction.mode == DetectionMode::ortho_cloud || extraction.mode == DetectionMode::cloud_only))
+        throw Error("extraction.mode", to_string(extraction.mode) + " needs a cloud");
 }
 
 json to_json(const RunOptions& o) {
@@ -97,6 +101,7 @@ json to_json(const RunOptions& o) {
               {"min_area_m2", m.min_area_m2},
               {"min_hole_m2", m.min_hole_m2},
               {"opening_px", m.opening_radius_px},
+              {"mode", to_string(o.extraction.mode)},
               {"split_step_m", m.split_step_m},
               {"min_split_part_m2", m.min_split_part_m2},
               {"fit", to_string(o.extraction.fit)},
@@ -134,12 +139,17 @@ RunOptions run_options_from_json(const json& j, const std::string& where, RunOpt
     if (j.contains("extraction")) {
         const json& x = j["extraction"];
         const std::string w = where + ": extraction";
-        check_keys(x, {"min_height_m", "min_area_m2", "min_hole_m2", "opening_px", "split_step_m", "min_split_part_m2", "fit", "fit_tolerance_pct", "simplify_m", "footprint_grid_m"}, w);
+        check_keys(x, {"mode", "min_height_m", "min_area_m2", "min_hole_m2", "opening_px", "split_step_m", "min_split_part_m2", "fit", "fit_tolerance_pct", "simplify_m", "footprint_grid_m"}, w);
         take(x, "min_height_m", o.extraction.mask.min_height_m, w), take(x, "min_area_m2", o.extraction.mask.min_area_m2, w);
         take(x, "min_hole_m2", o.extraction.mask.min_hole_m2, w), take(x, "opening_px", o.extraction.mask.opening_radius_px, w);
         take(x, "split_step_m", o.extraction.mask.split_step_m, w), take(x, "min_split_part_m2", o.extraction.mask.min_split_part_m2, w);
         take(x, "fit_tolerance_pct", o.extraction.recursive.tolerance_pct, w), take(x, "simplify_m", o.extraction.simplify_m, w);
         take(x, "footprint_grid_m", o.footprint_grid_m, w);
+        if (x.contains("mode")) {
+            std::string mode;
+            take(x, "mode", mode, w);
+            o.extraction.mode = detection_mode_from_string(mode);
+        }
         if (x.contains("fit")) {
             std::string fit;
             take(x, "fit", fit, w);
@@ -418,7 +428,30 @@ std::vector<Building> tile_buildings(const RunManifest& m, const TileSpec& t, co
         mo.gsd_m = std::abs(gt.pixel_width) * unit;
         mo.min_height_m /= pc.crs.z_unit_m;
         mo.split_step_m /= pc.crs.z_unit_m;
-        const BuildingMask mask = detect_buildings(rasters.ndsm, rasters.dsm, rasters.building_share, rasters.vegetation_share, mo);
+        // With the run's ortho the buildings are redrawn along it, unless the
+        // config asks for the cloud alone.
+        const DetectionMode detection = o.extraction.mode == DetectionMode::cloud_only ? DetectionMode::cloud_only : DetectionMode::ortho_cloud;
+        const BuildingCells cells = building_cells(rasters.ndsm, rasters.dsm, rasters.building_share, rasters.vegetation_share, mo);
+        BuildingMask mask = label_buildings(cells.cells, t.window.width, t.window.height, mo);
+        mask.used_classes = cells.used_classes;
+        split_at_height_steps(mask, cells.step_dsm, mo);
+        if (detection == DetectionMode::ortho_cloud) {
+            // Each building redrawn along the ortho from a crop around it
+            // alone: the same buildings in any tiling.
+            RasterReader ortho(o.ortho);
+            const RasterInfo& oi = ortho.info();
+            const Image<float> colours = ortho.read<float>(PixelWindow{t.window.col, t.window.row, t.window.width, t.window.height});
+            std::vector<uint8_t> valid(colours.pixel_count(), 1);
+            for (int band = 0; band < colours.bands; ++band)
+                if (const auto& nd = oi.bands[band].nodata)
+                    for (std::size_t i = 0; i < valid.size(); ++i)
+                        if (colours.band_data(band)[i] == static_cast<float>(*nd)) valid[i] = 0;
+            SegmentClassifierOptions co = o.extraction.classifier;
+            co.gsd_m = oi.gsd.x_m;
+            const std::vector<uint8_t> vegetation = cells.used_classes ? std::vector<uint8_t>{} : vegetation_pixels(colours, co);
+            refine_buildings_with_ortho(mask, cells, colours, valid, rasters.ndsm, 20.0 / pc.crs.z_unit_m, {}, vegetation,
+                                        ortho_refine_options(o.extraction));
+        }
         rep.seconds["detection"] = since(t0);
         if (o.keep_rasters) {
             // The core of each raster: tiles mosaic without overlap.
@@ -453,7 +486,7 @@ std::vector<Building> tile_buildings(const RunManifest& m, const TileSpec& t, co
                 owned[l] = gc >= t.core.col && gc < t.core.col + t.core.width && gr >= t.core.row && gr < t.core.row + t.core.height;
             }
         FootprintsRunOptions fo = o.extraction;
-        const FootprintTable table = footprint_table(mask, rasters.ndsm, gt, t.window.col, t.window.row, ids, "cloud_only", unit,
+        const FootprintTable table = footprint_table(mask, rasters.ndsm, gt, t.window.col, t.window.row, ids, to_string(detection), unit,
                                                      pc.crs.z_unit_m, footprints.crs, fo);
         rasters = CloudRasters{};  // free the window's rasters before the heights
         std::set<int64_t> keep;

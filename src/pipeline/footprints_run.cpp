@@ -14,6 +14,7 @@
 #include "io/vector.hpp"
 #include "pipeline/prepared_cloud.hpp"
 #include "raster/raster.hpp"
+#include "pipeline/ortho_buildings.hpp"
 #include "pipeline/segment_raster.hpp"
 #include "segment/boundary_refine.hpp"
 #include "segment/region_merging.hpp"
@@ -264,6 +265,16 @@ Image<uint32_t> segment_image(Image<float> normalised, int colour_bands, const s
 }
 }  // namespace
 
+OrthoRefineOptions ortho_refine_options(const FootprintsRunOptions& o) {
+    OrthoRefineOptions r;
+    r.watershed = o.watershed;
+    r.segment_scale = o.segment_scale;
+    r.refine_passes = o.refine_passes;
+    r.ndsm_band_weight = o.ndsm_band_weight;
+    r.min_segment_building_share = o.min_segment_building_share;
+    return r;
+}
+
 FootprintsReport run_footprints(const std::string& output_path, const FootprintsRunOptions& o, const Progress& progress) {
     const auto t0 = std::chrono::steady_clock::now();
     o.validate();
@@ -356,95 +367,40 @@ FootprintsReport run_footprints(const std::string& output_path, const Footprints
     if (ortho) co.gsd_m = ortho->info().gsd.x_m;
     // The NIR band's index among the colours (the nDSM band left them).
     co.nir_band = o.nir_band > 0 ? o.nir_band - 1 - (o.ndsm_band > 0 && o.ndsm_band < o.nir_band ? 1 : 0) : -1;
-    if (mode == DetectionMode::cloud_only) {
-        mask = label_buildings(std::move(cells.cells), grid.width, grid.height, mo);
-    } else {
+    if (mode == DetectionMode::ortho_only) {
         Image<float> normalised = img.image;
         normalize_bands(normalised, img.valid);
-        WatershedOptions wo = o.watershed;
-        const int colour_bands = normalised.bands;
-        if (mode == DetectionMode::ortho_cloud) {
-            // The nDSM joins the image as one more band, so segments follow
-            // height edges as well as colour edges.
-            Image<float> with_height(normalised.width, normalised.height, normalised.bands + 1, 0.0f);
-            std::copy(normalised.data.begin(), normalised.data.end(), with_height.data.begin());
-            float* hb = with_height.band_data(normalised.bands);
-            const double full = 20.0 / z_unit;
-            // Gaps (dark roofs absorb pulses) are filled from around them:
-            // a gap read as 0 m would look like ground.
-            std::vector<double> filled(ndsm.data.begin(), ndsm.data.end());
-            fill_gaps(filled, grid.width, grid.height);
-            for (std::size_t i = 0; i < filled.size(); ++i)
-                hb[i] = std::isnan(filled[i]) ? 0.0f : static_cast<float>(std::clamp(filled[i] / full, 0.0, 1.0) * 255.0);
-            if (wo.band_weights.empty()) wo.band_weights.assign(static_cast<std::size_t>(normalised.bands), 1.0);
-            wo.band_weights.resize(static_cast<std::size_t>(normalised.bands), 1.0);
-            wo.band_weights.push_back(o.ndsm_band_weight);
-            normalised = std::move(with_height);
-        }
         Image<uint32_t> segments;
         if (!o.segments.empty()) {
             const std::string path = segments_file(o.segments, o.segment_scale);
             segments = read_segments(path, grid, rep.segments);
-            refine_segment_boundaries(normalised, colour_bands, segments, rep.segments, o.refine_passes);
+            refine_segment_boundaries(normalised, normalised.bands, segments, rep.segments, o.refine_passes);
             rep.segments_path = path;
         } else {
-            segments = segment_image(std::move(normalised), colour_bands, img.valid, wo, o.segment_scale, o.refine_passes, rep.segments,
-                                     progress.sub(0.35, 0.55));
+            const int colour_bands = normalised.bands;
+            segments = segment_image(std::move(normalised), colour_bands, img.valid, o.watershed, o.segment_scale, o.refine_passes,
+                                     rep.segments, progress.sub(0.35, 0.55));
         }
         std::vector<uint8_t> building;
-        if (mode == DetectionMode::ortho_cloud) {
-            // A segment is a building when most of its cells with their own
-            // evidence are building cells of the cloud (the cloud decides
-            // what, the image where); without any evidence, the filled cells
-            // vote.
-            const std::size_t ns = rep.segments + 1;
-            std::vector<uint32_t> total(ns, 0), votes(ns, 0), seen(ns, 0), seen_votes(ns, 0);
-            for (std::size_t k = 0; k < segments.data.size(); ++k) {
-                const uint32_t sg = segments.data[k];
-                ++total[sg], votes[sg] += cells.cells[k];
-                if (cells.evidence[k]) ++seen[sg], seen_votes[sg] += cells.cells[k];
-            }
-            std::vector<uint8_t> is_building(ns, 0);
-            // Without point classes the heights cannot tell crowns from
-            // roofs: the image's vegetation indices (ExG, NDVI) veto.
-            std::vector<SegmentFeatures> spectra;
-            if (!cells.used_classes && (img.image.bands >= 3 || co.nir_band >= 0)) spectra = segment_spectra(img.image, segments, rep.segments, co);
-            for (std::size_t sg = 1; sg < ns; ++sg) {
-                if (!spectra.empty() && spectra[sg].vegetation) continue;
-                const double share = seen[sg] ? static_cast<double>(seen_votes[sg]) / seen[sg]
-                                              : total[sg] ? static_cast<double>(votes[sg]) / total[sg] : 0.0;
-                is_building[sg] = share >= o.min_segment_building_share;
-            }
-            building.assign(segments.data.size(), 0);
-            for (std::size_t k = 0; k < segments.data.size(); ++k) building[k] = is_building[segments.data[k]];
-            if (cells.used_classes) {
-                // Classified clouds draw sharper edges than a pixel-quantised
-                // image: the share of roof points in a cell places the edge
-                // inside the pixel. Pixels along the segments' outline take
-                // the cloud's own decision where it has evidence.
-                const int w = grid.width, h = grid.height;
-                std::vector<uint8_t> refined = building;
-                for (int y = 0; y < h; ++y)
-                    for (int x = 0; x < w; ++x) {
-                        const std::size_t k = static_cast<std::size_t>(y) * w + x;
-                        if (!cells.evidence[k]) continue;
-                        bool edge = false;
-                        for (int dy = -1; dy <= 1 && !edge; ++dy)
-                            for (int dx = -1; dx <= 1 && !edge; ++dx) {
-                                const int xx = x + dx, yy = y + dy;
-                                if (xx < 0 || yy < 0 || xx >= w || yy >= h) continue;
-                                edge = building[static_cast<std::size_t>(yy) * w + xx] != building[k];
-                            }
-                        if (edge) refined[k] = cells.cells[k];
-                    }
-                building.swap(refined);
-            }
-        } else {
-            classify_segments(img.image, segments, rep.segments, co, building);
-        }
+        classify_segments(img.image, segments, rep.segments, co, building);
         mask = label_buildings(std::move(building), grid.width, grid.height, mo);
+    } else {
+        mask = label_buildings(cells.cells, grid.width, grid.height, mo);
+        mask.used_classes = cells.used_classes;
+        split_at_height_steps(mask, cells.step_dsm, mo);
+        if (mode == DetectionMode::ortho_cloud) {
+            // Each building redrawn along the ortho's edges (see ortho_buildings.hpp).
+            Image<uint32_t> segments;
+            if (!o.segments.empty()) {
+                const std::string path = segments_file(o.segments, o.segment_scale);
+                segments = read_segments(path, grid, rep.segments);
+                rep.segments_path = path;
+            }
+            const std::vector<uint8_t> vegetation = cells.used_classes ? std::vector<uint8_t>{} : vegetation_pixels(img.image, co);
+            progress(0.45, "buildings");
+            refine_buildings_with_ortho(mask, cells, img.image, img.valid, ndsm, 20.0 / z_unit, segments, vegetation, ortho_refine_options(o));
+        }
     }
-    if (!cells.step_dsm.data.empty()) split_at_height_steps(mask, cells.step_dsm, mo);
     rep.width = grid.width, rep.height = grid.height;
     progress(0.6, "detection");
     FootprintTable table = footprint_table(mask, ndsm, grid.transform, 0, 0, {}, rep.mode, unit, z_unit, crs, o);

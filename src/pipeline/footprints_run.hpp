@@ -15,6 +15,7 @@
 #include "footprint/rectangle_fit.hpp"
 #include "footprint/regularize.hpp"
 #include "footprint/segment_classifier.hpp"
+#include "pipeline/ortho_buildings.hpp"
 #include "segment/watershed.hpp"
 
 namespace cityforge {
@@ -69,6 +70,9 @@ struct FootprintsRunOptions {
     GroundFilterOptions ground;
     void validate() const;
 };
+
+/// The per-building ortho refinement's options taken from the footprints options.
+OrthoRefineOptions ortho_refine_options(const FootprintsRunOptions& options);
 
 /// Every region of a label raster as polygons in map coordinates, index =
 /// label. `labels` is the window of `grid` starting at pixel (col0, row0);

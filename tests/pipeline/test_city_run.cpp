@@ -38,6 +38,9 @@ TEST_CASE("run is tile-invariant and thread-invariant - byte-identical outputs -
     CHECK(report["stage_seconds"].contains("roofs"));
     CHECK(report["peak_memory_mb"].get<double>() > 0);
     CHECK(report["inputs"]["ortho"]["crs"] == "EPSG:32650");
+    CHECK(report["options"]["extraction"]["mode"] == "auto");
+    // With an ortho and a cloud, buildings are redrawn along the ortho.
+    CHECK(test::slurp(dir / "many/buildings.geojson").find("\"mode\": \"ortho_cloud\"") != std::string::npos);
     // Footprints match the truth one to one.
     const auto audit = test::run_cli("audit footprints --pred " + (dir / "many/buildings.gpkg") + " --ref " + s.truth_path + " --out " +
                                      (dir / "audit") + " --fail-below f1=0.95,iou=0.85");

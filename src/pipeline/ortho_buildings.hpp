@@ -1,0 +1,49 @@
+#pragma once
+// The ortho + heights detection mode, building by building: each building
+// found in the heights (cloud cells) is redrawn along the ortho's edges by
+// segmenting a crop around it. Each result depends only on the ortho and the
+// cells inside that building's own crop, so any tiling of a grid gives the
+// same buildings (used by `footprints` and by every tile of `run`).
+#include <cstdint>
+#include <vector>
+
+#include "core/image.hpp"
+#include "footprint/building_mask.hpp"
+#include "segment/watershed.hpp"
+
+namespace cityforge {
+
+struct OrthoRefineOptions {
+    WatershedOptions watershed;           ///< over-segmentation of each crop (band weights: colours; the nDSM band is added)
+    double segment_scale = 30.0;          ///< merging scale of each crop (cost < scale^2)
+    int refine_passes = 2;                ///< boundary pixels moved to the closest-colour segment
+    double ndsm_band_weight = 2.0;        ///< weight of the nDSM band (0..20 m -> 0..255)
+    double min_segment_building_share = 0.5;  ///< share of a segment's evidenced cells that must be building
+    int margin_px = 20;                   ///< crop = the building's bounding box grown by this many pixels
+    /// A redrawn building whose IoU with its heights' outline is below this
+    /// keeps the heights' outline (the image merged or lost the roof).
+    double min_iou_with_heights = 0.7;
+    void validate() const;
+};
+
+/// Redraws every building of `mask` (labels on the window's grid, 1..count
+/// in raster order) along the ortho: a crop of the bounding box plus margin is
+/// normalised on its own, segmented with the nDSM as one more band (gaps
+/// filled), and its segments are voted building by the cells of `cells` that
+/// have their own evidence; the building becomes the voted pixels connected
+/// to its own cells, never taking another building's cells. With a
+/// classified cloud (`cells.used_classes`), pixels along the new outline keep
+/// the cloud's own decision (the share of roof points places an edge inside a
+/// pixel). `colours` = the ortho's colour bands (raw values) on the window,
+/// `valid` its data mask, `ndsm` the heights (vertical units; `full_scale` =
+/// the height mapped to 255). `segments` (may be empty): labels made
+/// beforehand on the same window, used instead of segmenting each crop.
+/// `vegetation` (may be empty): pixels whose colours say vegetation (ExG,
+/// NDVI); segments mostly of such pixels are never building (heights without
+/// point classes cannot tell crowns from roofs).
+void refine_buildings_with_ortho(BuildingMask& mask, const BuildingCells& cells, const Image<float>& colours,
+                                 const std::vector<uint8_t>& valid, const Image<float>& ndsm, double full_scale,
+                                 const Image<uint32_t>& segments, const std::vector<uint8_t>& vegetation,
+                                 const OrthoRefineOptions& options);
+
+}  // namespace cityforge
