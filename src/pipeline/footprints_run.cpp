@@ -7,7 +7,6 @@
 
 #include "cloud/cloud_rasters.hpp"
 #include "core/error.hpp"
-#include "core/grid_fill.hpp"
 #include "footprint/rectangle_fit.hpp"
 #include "footprint/vectorize.hpp"
 #include "heights/building_heights.hpp"
