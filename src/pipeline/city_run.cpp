@@ -441,11 +441,7 @@ std::vector<Building> tile_buildings(const RunManifest& m, const TileSpec& t, co
             RasterReader ortho(o.ortho);
             const RasterInfo& oi = ortho.info();
             const Image<float> colours = ortho.read<float>(PixelWindow{t.window.col, t.window.row, t.window.width, t.window.height});
-            std::vector<uint8_t> valid(colours.pixel_count(), 1);
-            for (int band = 0; band < colours.bands; ++band)
-                if (const auto& nd = oi.bands[band].nodata)
-                    for (std::size_t i = 0; i < valid.size(); ++i)
-                        if (colours.band_data(band)[i] == static_cast<float>(*nd)) valid[i] = 0;
+            const std::vector<uint8_t> valid = data_mask(colours, oi);
             SegmentClassifierOptions co = o.extraction.classifier;
             co.gsd_m = oi.gsd.x_m;
             const std::vector<uint8_t> vegetation = cells.used_classes ? std::vector<uint8_t>{} : vegetation_pixels(colours, co);

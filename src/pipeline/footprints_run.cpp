@@ -169,13 +169,8 @@ struct OrthoImage {
     std::vector<uint8_t> valid;
 };
 OrthoImage read_ortho(RasterReader& reader) {
-    const RasterInfo& info = reader.info();
     OrthoImage o{reader.read_all<float>(), {}};
-    o.valid.assign(o.image.pixel_count(), 1);
-    for (int b = 0; b < o.image.bands; ++b)
-        if (const auto& nd = info.bands[b].nodata)
-            for (std::size_t i = 0; i < o.valid.size(); ++i)
-                if (o.image.band_data(b)[i] == static_cast<float>(*nd)) o.valid[i] = 0;
+    o.valid = data_mask(o.image, reader.info());
     return o;
 }
 
@@ -317,14 +312,10 @@ FootprintsReport run_footprints(const std::string& output_path, const Footprints
             if (k != b) std::copy(img.image.band_data(k), img.image.band_data(k) + img.image.pixel_count(), colours.band_data(out++));
         img.image = std::move(colours);
         // A nodata value in the height band alone does not make the colours invalid.
-        img.valid.assign(img.image.pixel_count(), 1);
-        for (int k = 0, out = 0; k < ortho->info().band_count(); ++k) {
-            if (k == b) continue;
-            if (const auto& nd = ortho->info().bands[k].nodata)
-                for (std::size_t i = 0; i < img.valid.size(); ++i)
-                    if (img.image.band_data(out)[i] == static_cast<float>(*nd)) img.valid[i] = 0;
-            ++out;
-        }
+        std::vector<int> sources;
+        for (int k = 1; k <= ortho->info().band_count(); ++k)
+            if (k != o.ndsm_band) sources.push_back(k);
+        img.valid = data_mask(img.image, ortho->info(), sources);
         if (img.image.bands == 0 && mode != DetectionMode::cloud_only) throw Error(o.ortho, "has no colour band besides the nDSM band");
     }
     BuildingCells cells;

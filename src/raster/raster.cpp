@@ -244,4 +244,18 @@ void build_vrt_mosaic(const std::string& path, const std::vector<std::string>& p
     commit_file(tmp, path);
 }
 
+std::vector<uint8_t> data_mask(const Image<float>& image, const RasterInfo& info, const std::vector<int>& bands) {
+    std::vector<uint8_t> valid(image.pixel_count(), 1);
+    for (int b = 0; b < image.bands; ++b) {
+        const int source = bands.empty() ? b + 1 : bands.at(static_cast<std::size_t>(b));
+        if (source < 1 || source > info.band_count()) throw Error(info.path, "band " + std::to_string(source) + " does not exist");
+        const auto& nd = info.bands[static_cast<std::size_t>(source - 1)].nodata;
+        if (!nd) continue;
+        const float* v = image.band_data(b);
+        for (std::size_t i = 0; i < valid.size(); ++i)
+            if (v[i] == static_cast<float>(*nd)) valid[i] = 0;
+    }
+    return valid;
+}
+
 }  // namespace cityforge

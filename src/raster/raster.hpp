@@ -99,6 +99,11 @@ private:
     RasterInfo info_;
 };
 
+/// Data mask of an image read from the raster `info` describes: 0 where any
+/// image band holds its source band's nodata value, else 1. `bands` = the
+/// 1-based source band of each image band (empty: image band k is band k+1).
+std::vector<uint8_t> data_mask(const Image<float>& image, const RasterInfo& info, const std::vector<int>& bands = {});
+
 /// Convenience: open `path` and return its header information.
 RasterInfo read_raster_info(const std::string& path, const RasterOpenOptions& options = {});
 
