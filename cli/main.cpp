@@ -217,6 +217,8 @@ int main(int argc, char** argv) {
     footprints->add_option("--ortho", fopt.ortho, "Ortho (any GDAL raster): its grid and CRS are used");
     footprints->add_option("--ndsm", fopt.ndsm, "Heights without a cloud: nDSM raster (height above ground), aligned with the ortho's grid");
     footprints->add_option("--ndsm-band", fopt.ndsm_band, "Heights without a cloud: 1-based band of the ortho holding the nDSM");
+    footprints->add_option("--cloud-cell-px", fopt.cloud_cell_factor, "Cloud rasters on cells of N x N ortho pixels (0 = from the cloud's density)")
+        ->capture_default_str();
     footprints->add_option("--nir-band", fopt.nir_band, "1-based band of the ortho holding near infrared: NDVI marks vegetation");
     footprints->add_option("--mode", f_mode, "Detection: ortho_cloud (segments voted by the cloud), ortho_only, cloud_only; auto = from the inputs")
         ->check(CLI::IsMember({"auto", "ortho_cloud", "ortho_only", "cloud_only"}))

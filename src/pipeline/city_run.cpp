@@ -22,6 +22,7 @@
 #include "footprint/building_mask.hpp"
 #include "io/vector.hpp"
 #include "model/building_json.hpp"
+#include "pipeline/cloud_cells.hpp"
 #include "pipeline/prepared_cloud.hpp"
 #include "raster/raster.hpp"
 
@@ -102,6 +103,7 @@ json to_json(const RunOptions& o) {
               {"min_hole_m2", m.min_hole_m2},
               {"opening_px", m.opening_radius_px},
               {"mode", to_string(o.extraction.mode)},
+              {"cloud_cell_px", o.extraction.cloud_cell_factor},
               {"split_step_m", m.split_step_m},
               {"min_split_part_m2", m.min_split_part_m2},
               {"fit", to_string(o.extraction.fit)},
@@ -139,9 +141,10 @@ RunOptions run_options_from_json(const json& j, const std::string& where, RunOpt
     if (j.contains("extraction")) {
         const json& x = j["extraction"];
         const std::string w = where + ": extraction";
-        check_keys(x, {"mode", "min_height_m", "min_area_m2", "min_hole_m2", "opening_px", "split_step_m", "min_split_part_m2", "fit", "fit_tolerance_pct", "simplify_m", "footprint_grid_m"}, w);
+        check_keys(x, {"mode", "cloud_cell_px", "min_height_m", "min_area_m2", "min_hole_m2", "opening_px", "split_step_m", "min_split_part_m2", "fit", "fit_tolerance_pct", "simplify_m", "footprint_grid_m"}, w);
         take(x, "min_height_m", o.extraction.mask.min_height_m, w), take(x, "min_area_m2", o.extraction.mask.min_area_m2, w);
         take(x, "min_hole_m2", o.extraction.mask.min_hole_m2, w), take(x, "opening_px", o.extraction.mask.opening_radius_px, w);
+        take(x, "cloud_cell_px", o.extraction.cloud_cell_factor, w);
         take(x, "split_step_m", o.extraction.mask.split_step_m, w), take(x, "min_split_part_m2", o.extraction.mask.min_split_part_m2, w);
         take(x, "fit_tolerance_pct", o.extraction.recursive.tolerance_pct, w), take(x, "simplify_m", o.extraction.simplify_m, w);
         take(x, "footprint_grid_m", o.footprint_grid_m, w);
@@ -235,11 +238,19 @@ RunManifest plan_run(const RunOptions& in) {
     // The outlier filter's limit, measured once on a sample fixed by the grid
     // (its central 400 m square), so that every tile filters alike.
     if (m.options.buildings.heights.outliers.enabled && !(m.options.buildings.heights.outliers.max_mean_distance > 0)) {
-        const double limit = sample_outlier_limit_m(o.cloud, o.cloud_crs, crs_from_wkt(m.crs_wkt, "grid"), o.buildings.heights.outliers,
-                                                    m.grid.transform.pixel_to_map({m.grid.width / 2.0, m.grid.height / 2.0}));
-        if (!(limit > 0)) throw Error(o.cloud, "no points in the centre of the grid; is the cloud over the ortho?");
-        m.options.buildings.heights.outliers.max_mean_distance = limit;
-        m.options.extraction.outliers.max_mean_distance = limit;
+        const CloudSample sample = sample_cloud(o.cloud, o.cloud_crs, crs_from_wkt(m.crs_wkt, "grid"), o.buildings.heights.outliers,
+                                                m.grid.transform.pixel_to_map({m.grid.width / 2.0, m.grid.height / 2.0}));
+        if (!(sample.outlier_limit_m > 0)) throw Error(o.cloud, "no points in the centre of the grid; is the cloud over the ortho?");
+        m.options.buildings.heights.outliers.max_mean_distance = sample.outlier_limit_m;
+        m.options.extraction.outliers.max_mean_distance = sample.outlier_limit_m;
+        if (m.options.extraction.cloud_cell_factor == 0)
+            m.options.extraction.cloud_cell_factor = cloud_cell_factor(sample.points_per_m2, std::abs(m.grid.transform.pixel_width) * crs_from_wkt(m.crs_wkt, "grid").linear_unit_m);
+    }
+    if (m.options.extraction.cloud_cell_factor == 0 && o.footprints.empty()) {
+        // Density from the same central sample (the outlier limit was given).
+        const CloudSample sample = sample_cloud(o.cloud, o.cloud_crs, crs_from_wkt(m.crs_wkt, "grid"), o.buildings.heights.outliers,
+                                                m.grid.transform.pixel_to_map({m.grid.width / 2.0, m.grid.height / 2.0}));
+        m.options.extraction.cloud_cell_factor = cloud_cell_factor(sample.points_per_m2, std::abs(m.grid.transform.pixel_width) * crs_from_wkt(m.crs_wkt, "grid").linear_unit_m);
     }
     const int ts = o.tile_size_px;
     int k = 0;
@@ -423,15 +434,16 @@ std::vector<Building> tile_buildings(const RunManifest& m, const TileSpec& t, co
         t0 = std::chrono::steady_clock::now();
         const GridSpec wg{gt.window(t.window.col, t.window.row), t.window.width, t.window.height};
         if (pc.cloud.size() == 0) throw Error(o.cloud, "no points in tile " + std::to_string(t.index));
-        CloudRasters rasters = rasterize_cloud(pc.cloud, pc.keep, pc.is_ground, wg, unit);
         BuildingMaskOptions mo = o.extraction.mask;
         mo.gsd_m = std::abs(gt.pixel_width) * unit;
         mo.min_height_m /= pc.crs.z_unit_m;
+        WindowCloudCells wc = cloud_cells_on_window(pc, wg, t.window.col, t.window.row, std::max(1, o.extraction.cloud_cell_factor), unit, mo);
+        CloudRasters rasters = std::move(wc.rasters);
         mo.split_step_m /= pc.crs.z_unit_m;
         // With the run's ortho the buildings are redrawn along it, unless the
         // config asks for the cloud alone.
         const DetectionMode detection = o.extraction.mode == DetectionMode::cloud_only ? DetectionMode::cloud_only : DetectionMode::ortho_cloud;
-        const BuildingCells cells = building_cells(rasters.ndsm, rasters.dsm, rasters.building_share, rasters.vegetation_share, mo);
+        const BuildingCells cells = std::move(wc.cells);
         BuildingMask mask = label_buildings(cells.cells, t.window.width, t.window.height, mo);
         mask.used_classes = cells.used_classes;
         split_at_height_steps(mask, cells.step_dsm, mo);
@@ -445,8 +457,9 @@ std::vector<Building> tile_buildings(const RunManifest& m, const TileSpec& t, co
             SegmentClassifierOptions co = o.extraction.classifier;
             co.gsd_m = oi.gsd.x_m;
             const std::vector<uint8_t> vegetation = cells.used_classes ? std::vector<uint8_t>{} : vegetation_pixels(colours, co);
-            refine_buildings_with_ortho(mask, cells, colours, valid, rasters.ndsm, 20.0 / pc.crs.z_unit_m, {}, vegetation,
-                                        ortho_refine_options(o.extraction));
+            OrthoRefineOptions ro = ortho_refine_options(o.extraction);
+            ro.cloud_edges = o.extraction.cloud_cell_factor <= 1;
+            refine_buildings_with_ortho(mask, cells, colours, valid, rasters.ndsm, 20.0 / pc.crs.z_unit_m, {}, vegetation, ro);
         }
         rep.seconds["detection"] = since(t0);
         if (o.keep_rasters) {

@@ -13,6 +13,7 @@
 #include "io/vector.hpp"
 #include "pipeline/prepared_cloud.hpp"
 #include "raster/raster.hpp"
+#include "pipeline/cloud_cells.hpp"
 #include "pipeline/ortho_buildings.hpp"
 #include "pipeline/segment_raster.hpp"
 #include "segment/boundary_refine.hpp"
@@ -61,6 +62,7 @@ void FootprintsRunOptions::validate() const {
         throw Error("--ndsm", "give one height source: --cloud, --ndsm or --ndsm-band");
     if (ndsm_band < 0) throw Error("--ndsm-band", "must be >= 1");
     if (nir_band < 0) throw Error("--nir-band", "must be >= 1");
+    if (cloud_cell_factor < 0 || cloud_cell_factor > 64) throw Error("--cloud-cell-px", "must be between 0 (automatic) and 64");
     if (nir_band > 0 && ortho.empty()) throw Error("--nir-band", "needs the ortho that holds the band (--ortho)");
     if (nir_band > 0 && nir_band == ndsm_band) throw Error("--nir-band", "is the nDSM band");
     if (ndsm_band > 0 && ortho.empty()) throw Error("--ndsm-band", "needs the ortho that holds the band (--ortho)");
@@ -114,7 +116,9 @@ FootprintTable footprint_table(const BuildingMask& mask, const Image<float>& nds
     double error_sum = 0.0;
     for (uint32_t id = 1; id <= mask.count; ++id) {
         if (polygons[id].empty()) continue;
-        const Polygon raw = simplify_polygon(polygons[id][0], o.simplify_m / unit);
+        // Douglas–Peucker may fold a ring onto itself: then the exact pixel outline.
+        Polygon raw = simplify_polygon(polygons[id][0], o.simplify_m / unit);
+        if (!polygon_is_valid(raw)) raw = polygons[id][0];
         Feature f;
         std::string status = "ok", reason;
         Polygon out = raw;
@@ -144,6 +148,7 @@ FootprintTable footprint_table(const BuildingMask& mask, const Image<float>& nds
             status = "fit_failed", reason = e.what();
         }
         orient_polygon(out);
+        if (status == "ok" && !polygon_is_valid(out)) status = "fit_failed", reason = "the fit is not a valid polygon", out = raw, err = 0.0, iou = 1.0;
         std::vector<Ring> rings{out.outer};
         for (const Ring& h : out.holes) rings.push_back(h);
         std::size_t vertices = out.outer.size();
@@ -328,11 +333,12 @@ FootprintsReport run_footprints(const std::string& output_path, const Footprints
             unit = pc.crs.linear_unit_m, z_unit = pc.crs.z_unit_m;
             if (!ortho) grid = grid_over_cloud(pc.cloud, o.mask.gsd_m / unit);
             progress(0.3, "cloud");
-            CloudRasters rasters = rasterize_cloud(pc.cloud, pc.keep, pc.is_ground, grid, unit);
             mo.gsd_m = std::abs(grid.transform.pixel_width) * unit;
             mo.min_height_m /= z_unit;
-            cells = building_cells(rasters.ndsm, rasters.dsm, rasters.building_share, rasters.vegetation_share, mo);
-            ndsm = std::move(rasters.ndsm);
+            rep.cloud_cell_factor = o.cloud_cell_factor > 0 ? o.cloud_cell_factor : cloud_cell_factor(point_density_m2(pc), mo.gsd_m);
+            WindowCloudCells wc = cloud_cells_on_window(pc, grid, 0, 0, rep.cloud_cell_factor, unit, mo);
+            cells = std::move(wc.cells);
+            ndsm = std::move(wc.rasters.ndsm);
         } else {
             // An nDSM raster or band: no classes, so vegetation is told by roughness.
             if (o.ndsm_band > 0) {
@@ -388,7 +394,9 @@ FootprintsReport run_footprints(const std::string& output_path, const Footprints
             }
             const std::vector<uint8_t> vegetation = cells.used_classes ? std::vector<uint8_t>{} : vegetation_pixels(img.image, co);
             progress(0.45, "buildings");
-            refine_buildings_with_ortho(mask, cells, img.image, img.valid, ndsm, 20.0 / z_unit, segments, vegetation, ortho_refine_options(o));
+            OrthoRefineOptions ro = ortho_refine_options(o);
+            ro.cloud_edges = rep.cloud_cell_factor == 1;
+            refine_buildings_with_ortho(mask, cells, img.image, img.valid, ndsm, 20.0 / z_unit, segments, vegetation, ro);
         }
     }
     rep.width = grid.width, rep.height = grid.height;

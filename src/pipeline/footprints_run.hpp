@@ -43,6 +43,9 @@ struct FootprintsRunOptions {
     /// 1-based band of the ortho holding near infrared (0 = none): NDVI then
     /// marks vegetation segments (red is the first band).
     int nir_band = 0;
+    /// Cloud rasters on cells of this many ortho pixels a side (0 = chosen
+    /// from the cloud's density: at least 2 points per cell on average).
+    int cloud_cell_factor = 0;
     std::string ortho;             ///< ortho: its grid and CRS are used
     DetectionMode mode = DetectionMode::automatic;
     /// ortho modes: segments made beforehand by `cityforge segment` (a label
@@ -96,6 +99,7 @@ FootprintTable footprint_table(const BuildingMask& mask, const Image<float>& nds
 struct FootprintsReport {
     std::string mode;              ///< "ortho_cloud", "ortho_only" or "cloud_only"
     std::string height_source;     ///< "point cloud", "nDSM raster", "ortho band N" or "" (ortho only)
+    int cloud_cell_factor = 1;     ///< cloud rasters on cells of this many pixels a side
     uint32_t segments = 0;         ///< ortho modes: merged segments
     std::string segments_path;     ///< the label raster read for --segments (empty: segmented here)
     std::string crs;

@@ -105,7 +105,7 @@ HeightsStage tiled_heights_stage(PolygonLayer footprints, const std::string& clo
     HeightsRunOptions ho = o;
     if (ho.outliers.enabled && !(ho.outliers.max_mean_distance > 0))  // one limit for every tile
         ho.outliers.max_mean_distance =
-            sample_outlier_limit_m(cloud_path, o.cloud_crs, footprints.crs, o.outliers, {0.5 * (all.min_x + all.max_x), 0.5 * (all.min_y + all.max_y)});
+            sample_cloud(cloud_path, o.cloud_crs, footprints.crs, o.outliers, {0.5 * (all.min_x + all.max_x), 0.5 * (all.min_y + all.max_y)}).outlier_limit_m;
     // Footprints grouped by the tile holding their bounding-box centre.
     const double tile = o.tile_m / unit, margin = o.tile_margin_m / unit;
     std::map<std::pair<int64_t, int64_t>, std::vector<std::size_t>> groups;

@@ -143,7 +143,7 @@ void refine_buildings_with_ortho(BuildingMask& mask, const BuildingCells& cells,
                 voted[static_cast<std::size_t>(y) * cw + x] =
                     seen[s] ? static_cast<double>(yes[s]) >= o.min_segment_building_share * seen[s] : old[k] == l;
             }
-        if (cells.used_classes) {
+        if (cells.used_classes && o.cloud_edges) {
             // Outline pixels with evidence keep the classified cloud's decision.
             std::vector<uint8_t> edged = voted;
             for (int y = 0; y < ch; ++y)

@@ -19,6 +19,9 @@ struct OrthoRefineOptions {
     int refine_passes = 2;                ///< boundary pixels moved to the closest-colour segment
     double ndsm_band_weight = 2.0;        ///< weight of the nDSM band (0..20 m -> 0..255)
     double min_segment_building_share = 0.5;  ///< share of a segment's evidenced cells that must be building
+    /// With a classified cloud rasterised on the ortho's own pixels, outline
+    /// pixels keep the cloud's decision; off when the cloud cells are coarser.
+    bool cloud_edges = true;
     int margin_px = 20;                   ///< crop = the building's bounding box grown by this many pixels
     /// A redrawn building whose IoU with its heights' outline is below this
     /// keeps the heights' outline (the image merged or lost the roof).

@@ -1,5 +1,7 @@
 #include "pipeline/prepared_cloud.hpp"
 
+#include "core/geometry.hpp"
+
 #include "cloud/cloud_reader.hpp"
 #include "core/error.hpp"
 #include "core/log.hpp"
@@ -59,14 +61,29 @@ PreparedCloud prepare_cloud(const std::string& cloud_path, const std::string& cl
     return p;
 }
 
-double sample_outlier_limit_m(const std::string& cloud_path, const std::string& cloud_crs_override, const CrsInfo& target,
-                              const OutlierFilterOptions& outliers, const MapPoint& centre) {
+CloudSample sample_cloud(const std::string& cloud_path, const std::string& cloud_crs_override, const CrsInfo& target,
+                         const OutlierFilterOptions& outliers, const MapPoint& centre) {
     const double half = 200.0 / (target.empty() ? 1.0 : target.linear_unit_m);
     const Extent box{centre.x - half, centre.y - half, centre.x + half, centre.y + half};
-    GroundFilterOptions trust;  // the limit needs no ground: take class 2 as it is, never run SMRF here
+    GroundFilterOptions trust;  // the sample needs no ground: take class 2 as it is, never run SMRF here
     trust.trust_classification = true;
     const PreparedCloud sample = prepare_cloud(cloud_path, cloud_crs_override, target, outliers, trust, &box);
-    return sample.cloud.size() ? sample.outlier_limit_m : 0.0;
+    if (!sample.cloud.size()) return {};
+    return {sample.outlier_limit_m, point_density_m2(sample)};
+}
+
+double point_density_m2(const PreparedCloud& pc) {
+    Extent e = empty_extent();
+    std::size_t kept = 0;
+    for (std::size_t i = 0; i < pc.cloud.size(); ++i)
+        if (pc.keep.empty() || pc.keep[i]) {
+            e.min_x = std::min(e.min_x, pc.cloud.x[i]), e.max_x = std::max(e.max_x, pc.cloud.x[i]);
+            e.min_y = std::min(e.min_y, pc.cloud.y[i]), e.max_y = std::max(e.max_y, pc.cloud.y[i]);
+            ++kept;
+        }
+    const double unit = pc.crs.empty() ? 1.0 : pc.crs.linear_unit_m;
+    const double area_m2 = (e.max_x - e.min_x) * (e.max_y - e.min_y) * unit * unit;
+    return kept >= 2 && area_m2 > 0 ? static_cast<double>(kept) / area_m2 : 0.0;
 }
 
 }  // namespace cityforge

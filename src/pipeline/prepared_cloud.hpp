@@ -33,10 +33,19 @@ struct PreparedCloud {
 PreparedCloud prepare_cloud(const std::string& cloud_path, const std::string& cloud_crs_override, const CrsInfo& target,
                             const OutlierFilterOptions& outliers, const GroundFilterOptions& ground, const Extent* crop = nullptr);
 
-/// The outlier filter's mean-kNN-distance limit (metres) measured on the
-/// 400 m square of the cloud centred on `centre` (target CRS), so that
-/// windows of one cloud all filter alike. 0 when the square holds no point.
-double sample_outlier_limit_m(const std::string& cloud_path, const std::string& cloud_crs_override, const CrsInfo& target,
-                              const OutlierFilterOptions& outliers, const MapPoint& centre);
+/// What the 400 m square of the cloud centred on `centre` (target CRS)
+/// tells about the whole cloud, so that windows of one cloud all work alike:
+/// the outlier filter's mean-kNN-distance limit (metres) and the density of
+/// the kept points (per m², over their bounding box). Both 0 when the square
+/// holds no point.
+struct CloudSample {
+    double outlier_limit_m = 0.0;
+    double points_per_m2 = 0.0;
+};
+CloudSample sample_cloud(const std::string& cloud_path, const std::string& cloud_crs_override, const CrsInfo& target,
+                         const OutlierFilterOptions& outliers, const MapPoint& centre);
+
+/// Kept points per m² over their bounding box (0 for fewer than 2 points).
+double point_density_m2(const PreparedCloud& pc);
 
 }  // namespace cityforge

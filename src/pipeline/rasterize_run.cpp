@@ -41,7 +41,7 @@ RasterizeReport rasterize_run(const std::string& cloud_path, const std::string& 
         const GeoTransform& gt = grid.transform;
         if (outliers.enabled && !(outliers.max_mean_distance > 0))
             outliers.max_mean_distance =
-                sample_outlier_limit_m(cloud_path, o.cloud_crs, target, o.outliers, gt.pixel_to_map({grid.width / 2.0, grid.height / 2.0}));
+                sample_cloud(cloud_path, o.cloud_crs, target, o.outliers, gt.pixel_to_map({grid.width / 2.0, grid.height / 2.0})).outlier_limit_m;
         const double px = std::abs(gt.pixel_width) * unit;
         const int tile = std::max(64, static_cast<int>(std::lround(o.tile_m / px))), overlap = static_cast<int>(std::ceil(o.overlap_m / px));
         for (Image<float>* img : {&r.dsm, &r.dtm, &r.ndsm, &r.density}) *img = Image<float>(grid.width, grid.height, 1, NAN);
