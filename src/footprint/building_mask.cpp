@@ -53,11 +53,14 @@ uint32_t label_components(const std::vector<uint8_t>& mask, uint8_t value, int w
 
 BuildingMask detect_buildings(const Image<float>& ndsm, const Image<float>& dsm, const Image<float>& building_share,
                               const Image<float>& vegetation_share, const BuildingMaskOptions& o) {
-    BuildingCells c = building_cells(ndsm, dsm, building_share, vegetation_share, o);
-    BuildingMask labelled = label_buildings(std::move(c.cells), ndsm.width, ndsm.height, o);
-    labelled.used_classes = c.used_classes;
-    split_at_height_steps(labelled, c.step_dsm, o);
-    return labelled;
+    return buildings_from_cells(building_cells(ndsm, dsm, building_share, vegetation_share, o), ndsm.width, ndsm.height, o);
+}
+
+BuildingMask buildings_from_cells(const BuildingCells& cells, int w, int h, const BuildingMaskOptions& o) {
+    BuildingMask mask = label_buildings(cells.cells, w, h, o);
+    mask.used_classes = cells.used_classes;
+    split_at_height_steps(mask, cells.step_dsm, o);
+    return mask;
 }
 
 BuildingCells building_cells(const Image<float>& ndsm, const Image<float>& dsm, const Image<float>& building_share,

@@ -57,6 +57,10 @@ struct BuildingCells {
 BuildingCells building_cells(const Image<float>& ndsm, const Image<float>& dsm, const Image<float>& building_share,
                              const Image<float>& vegetation_share, const BuildingMaskOptions& options);
 
+/// Buildings from decided cells: components (label_buildings), then split at
+/// height steps of `cells.step_dsm` (split_at_height_steps); w x h = the grid.
+BuildingMask buildings_from_cells(const BuildingCells& cells, int w, int h, const BuildingMaskOptions& options);
+
 /// Splits every building of `mask` into parts whose roofs are separated by
 /// height steps of the DSM (see BuildingMaskOptions::split_step_m); parts are
 /// relabelled 1..count in raster order of first appearance. `dsm` on the same

@@ -444,9 +444,7 @@ std::vector<Building> tile_buildings(const RunManifest& m, const TileSpec& t, co
         // config asks for the cloud alone.
         const DetectionMode detection = o.extraction.mode == DetectionMode::cloud_only ? DetectionMode::cloud_only : DetectionMode::ortho_cloud;
         const BuildingCells cells = std::move(wc.cells);
-        BuildingMask mask = label_buildings(cells.cells, t.window.width, t.window.height, mo);
-        mask.used_classes = cells.used_classes;
-        split_at_height_steps(mask, cells.step_dsm, mo);
+        BuildingMask mask = buildings_from_cells(cells, t.window.width, t.window.height, mo);
         if (detection == DetectionMode::ortho_cloud) {
             // Each building redrawn along the ortho from a crop around it
             // alone: the same buildings in any tiling.

@@ -381,9 +381,7 @@ FootprintsReport run_footprints(const std::string& output_path, const Footprints
         classify_segments(img.image, segments, rep.segments, co, building);
         mask = label_buildings(std::move(building), grid.width, grid.height, mo);
     } else {
-        mask = label_buildings(cells.cells, grid.width, grid.height, mo);
-        mask.used_classes = cells.used_classes;
-        split_at_height_steps(mask, cells.step_dsm, mo);
+        mask = buildings_from_cells(cells, grid.width, grid.height, mo);
         if (mode == DetectionMode::ortho_cloud) {
             // Each building redrawn along the ortho's edges (see ortho_buildings.hpp).
             Image<uint32_t> segments;
