@@ -224,11 +224,11 @@ int main(int argc, char** argv) {
         ->check(CLI::IsMember({"auto", "ortho_cloud", "ortho_only", "cloud_only"}))
         ->capture_default_str();
     footprints->add_option("--segments", fopt.segments, "Ortho modes: labels from `cityforge segment` (GeoTIFF, or its folder: the --segment-scale level)");
-    footprints->add_option("--segment-scale", fopt.segment_scale, "Ortho modes: merging scale of the segmentation")->capture_default_str();
-    footprints->add_option("--refine-passes", fopt.refine_passes, "Ortho modes: passes moving boundary pixels to the closest-colour segment")
+    footprints->add_option("--segment-scale", fopt.segmentation.segment_scale, "Ortho modes: merging scale of the segmentation")->capture_default_str();
+    footprints->add_option("--refine-passes", fopt.segmentation.refine_passes, "Ortho modes: passes moving boundary pixels to the closest-colour segment")
         ->capture_default_str();
-    footprints->add_option("--ndsm-weight", fopt.ndsm_band_weight, "ortho_cloud: weight of the nDSM band in the segmentation")->capture_default_str();
-    footprints->add_option("--min-segment-building-share", fopt.min_segment_building_share,
+    footprints->add_option("--ndsm-weight", fopt.segmentation.ndsm_band_weight, "ortho_cloud: weight of the nDSM band in the segmentation")->capture_default_str();
+    footprints->add_option("--min-segment-building-share", fopt.segmentation.min_segment_building_share,
                            "ortho_cloud: share of a segment's pixels that must be cloud building cells")
         ->capture_default_str();
     footprints->add_option("--out", f_out, "Output .gpkg (layer buildings), .geojson, .fgb or .shp")->required();

@@ -51,11 +51,6 @@ uint32_t label_components(const std::vector<uint8_t>& mask, uint8_t value, int w
 }
 
 
-BuildingMask detect_buildings(const Image<float>& ndsm, const Image<float>& dsm, const Image<float>& building_share,
-                              const Image<float>& vegetation_share, const BuildingMaskOptions& o) {
-    return buildings_from_cells(building_cells(ndsm, dsm, building_share, vegetation_share, o), ndsm.width, ndsm.height, o);
-}
-
 BuildingMask buildings_from_cells(const BuildingCells& cells, int w, int h, const BuildingMaskOptions& o) {
     BuildingMask mask = label_buildings(cells.cells, w, h, o);
     mask.used_classes = cells.used_classes;
@@ -83,7 +78,6 @@ BuildingCells building_cells(const Image<float>& ndsm, const Image<float>& dsm, 
     // decided by their neighbours below.
     constexpr uint8_t kUnknown = 2;
     std::vector<uint8_t> mask(n, 0);
-    out.evidence.assign(n, 1);
     for (int y = 0; y < h; ++y)
         for (int x = 0; x < w; ++x) {
             const std::size_t k = static_cast<std::size_t>(y) * w + x;
@@ -128,6 +122,7 @@ BuildingCells building_cells(const Image<float>& ndsm, const Image<float>& dsm, 
     // shadows, crowns hide roofs) take the building label when at least as
     // many of their decided neighbours are building as not; the front moves
     // one cell per pass, and what is still unknown afterwards is not building.
+    out.evidence.resize(n);
     for (std::size_t k = 0; k < n; ++k) out.evidence[k] = mask[k] != kUnknown;
     for (int iter = 0; iter < o.fill_passes; ++iter) {
         std::vector<uint8_t> next = mask;

@@ -54,6 +54,8 @@ struct BuildingCells {
     Image<float> step_dsm;
     bool used_classes = false;
 };
+/// `ndsm`, `dsm`, `building_share`, `vegetation_share` on the same grid (NaN =
+/// no data); shares may be all-NaN for unclassified clouds.
 BuildingCells building_cells(const Image<float>& ndsm, const Image<float>& dsm, const Image<float>& building_share,
                              const Image<float>& vegetation_share, const BuildingMaskOptions& options);
 
@@ -66,12 +68,5 @@ BuildingMask buildings_from_cells(const BuildingCells& cells, int w, int h, cons
 /// relabelled 1..count in raster order of first appearance. `dsm` on the same
 /// grid, NaN = no data (such cells join the neighbouring part).
 void split_at_height_steps(BuildingMask& mask, const Image<float>& dsm, const BuildingMaskOptions& options);
-
-/// `ndsm`, `dsm`, `building_share`, `vegetation_share` on the same grid (NaN =
-/// no data). Shares may be all-NaN for unclassified clouds. Buildings are
-/// split at height steps (split_at_height_steps) when split_step_m > 0; cells
-/// decided from their neighbours (gaps, crowns) do not count as steps.
-BuildingMask detect_buildings(const Image<float>& ndsm, const Image<float>& dsm, const Image<float>& building_share,
-                              const Image<float>& vegetation_share, const BuildingMaskOptions& options);
 
 }  // namespace cityforge

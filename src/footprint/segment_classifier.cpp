@@ -19,6 +19,12 @@ void SegmentClassifierOptions::validate() const {
     if (!(min_rectangularity >= 0 && min_rectangularity <= 1)) throw Error("--min-rectangularity", "must be between 0 and 1");
 }
 
+namespace {
+// The vegetation indices, for pixels and for segment means alike.
+double excess_green(double r, double g, double b) { return r + g + b > 0 ? (2 * g - r - b) / (r + g + b) : 0.0; }
+double ndvi_of(double nir, double r) { return nir + r > 0 ? (nir - r) / (nir + r) : 0.0; }
+}  // namespace
+
 std::vector<uint8_t> vegetation_pixels(const Image<float>& image, const SegmentClassifierOptions& o) {
     o.validate();
     const bool rgb = image.bands >= 3, nir = o.nir_band >= 0;
@@ -28,14 +34,8 @@ std::vector<uint8_t> vegetation_pixels(const Image<float>& image, const SegmentC
     std::vector<uint8_t> out(n, 0);
     for (std::size_t i = 0; i < n; ++i) {
         const double r = image.band_data(0)[i];
-        if (rgb) {
-            const double g = image.band_data(1)[i], b = image.band_data(2)[i];
-            if (r + g + b > 0 && (2 * g - r - b) / (r + g + b) > o.max_vegetation_index) out[i] = 1;
-        }
-        if (nir) {
-            const double ni = image.band_data(o.nir_band)[i];
-            if (ni + r > 0 && (ni - r) / (ni + r) > o.max_ndvi) out[i] = 1;
-        }
+        out[i] = (rgb && excess_green(r, image.band_data(1)[i], image.band_data(2)[i]) > o.max_vegetation_index) ||
+                 (nir && ndvi_of(image.band_data(o.nir_band)[i], r) > o.max_ndvi);
     }
     return out;
 }
@@ -74,9 +74,9 @@ std::vector<SegmentFeatures> segment_spectra(const Image<float>& image, const Im
         s.area_m2 = area[l] * o.gsd_m * o.gsd_m;
         const double r = sum_r[l] / area[l], g = rgb ? sum_g[l] / area[l] : r, b = rgb ? sum_b[l] / area[l] : r;
         s.brightness = (r + g + b) / 3.0 / ref;
-        s.vegetation_index = rgb && r + g + b > 0 ? (2 * g - r - b) / (r + g + b) : 0.0;
+        s.vegetation_index = rgb ? excess_green(r, g, b) : 0.0;
         const double ni = nir ? sum_nir[l] / area[l] : 0.0;
-        s.ndvi = nir && ni + r > 0 ? (ni - r) / (ni + r) : 0.0;
+        s.ndvi = nir ? ndvi_of(ni, r) : 0.0;
         s.vegetation = (rgb && s.vegetation_index > o.max_vegetation_index) || (nir && s.ndvi > o.max_ndvi);
         s.shadow = s.brightness < o.min_brightness;
     }

@@ -455,7 +455,7 @@ std::vector<Building> tile_buildings(const RunManifest& m, const TileSpec& t, co
             SegmentClassifierOptions co = o.extraction.classifier;
             co.gsd_m = oi.gsd.x_m;
             const std::vector<uint8_t> vegetation = cells.used_classes ? std::vector<uint8_t>{} : vegetation_pixels(colours, co);
-            OrthoRefineOptions ro = ortho_refine_options(o.extraction);
+            OrthoRefineOptions ro = o.extraction.segmentation;
             ro.cloud_edges = o.extraction.cloud_cell_factor <= 1;
             refine_buildings_with_ortho(mask, cells, colours, valid, rasters.ndsm, 20.0 / pc.crs.z_unit_m, {}, vegetation, ro);
         }

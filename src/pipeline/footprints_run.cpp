@@ -72,10 +72,7 @@ void FootprintsRunOptions::validate() const {
         throw Error("--mode", to_string(mode) + " needs an ortho (--ortho)");
     if (!segments.empty() && mode == DetectionMode::cloud_only) throw Error("--segments", "segments need an ortho mode, not cloud_only");
     if (!segments.empty() && ortho.empty()) throw Error("--segments", "segments need the ortho they were made from (--ortho)");
-    if (refine_passes < 0 || refine_passes > 20) throw Error("--refine-passes", "must be between 0 and 20");
-    if (!(ndsm_band_weight >= 0)) throw Error("--ndsm-weight", "must be >= 0");
-    if (!(min_segment_building_share > 0 && min_segment_building_share <= 1)) throw Error("--min-segment-building-share", "must be in (0, 1]");
-    if (!(segment_scale > 0)) throw Error("--segment-scale", "must be > 0");
+    segmentation.validate();
     if (!(simplify_m >= 0.0)) throw Error("--simplify-m", "must be >= 0");
     mask.validate();
 }
@@ -111,8 +108,6 @@ FootprintTable footprint_table(const BuildingMask& mask, const Image<float>& nds
         {"orientation_deg", FieldType::real}, {"fit_area_error_pct", FieldType::real}, {"fit_iou", FieldType::real},
         {"n_vertices", FieldType::integer},   {"height_p50_m", FieldType::real}};
     std::vector<Feature>& features = table.features;
-    const std::string& rep_mode = mode;
-    const GeoTransform& grid_transform = grid;
     double error_sum = 0.0;
     for (uint32_t id = 1; id <= mask.count; ++id) {
         if (polygons[id].empty()) continue;
@@ -133,7 +128,7 @@ FootprintTable footprint_table(const BuildingMask& mask, const Image<float>& nds
             } else if (o.fit == FootprintFit::regularised) {
                 RegularizeOptions go = o.regularize;
                 go.merge_offset /= unit, go.min_edge /= unit, go.match_area_max_offset /= unit;
-                out = regularised_fit(polygons[id][0], rect.orientation_deg, grid_transform.pixel_width, o.simplify_m / unit, polygon_area(raw), go);
+                out = regularised_fit(polygons[id][0], rect.orientation_deg, grid.pixel_width, o.simplify_m / unit, polygon_area(raw), go);
                 const FitAccuracy acc = fit_accuracy(raw, out);
                 err = acc.area_error_pct, iou = acc.iou;
             } else if (o.fit == FootprintFit::recursive) {
@@ -156,7 +151,7 @@ FootprintTable footprint_table(const BuildingMask& mask, const Image<float>& nds
         std::vector<double>& hv = heights[id];
         const std::optional<double> h50 = percentile(hv, 50.0);
         f.geometry = {out};
-        f.values = {ids.empty() ? int64_t(features.size() + 1) : ids[id], rep_mode, to_string(o.fit), status, reason,
+        f.values = {ids.empty() ? int64_t(features.size() + 1) : ids[id], mode, to_string(o.fit), status, reason,
                     polygon_area(out) * unit * unit, polygon_area(raw) * unit * unit, geodesic_area_m2(rings, crs),
                     polygon_perimeter(out) * unit, orientation, err, iou, int64_t(vertices),
                     h50 ? AttributeValue(*h50 * z_unit) : AttributeValue()};
@@ -177,6 +172,14 @@ OrthoImage read_ortho(RasterReader& reader) {
     OrthoImage o{reader.read_all<float>(), {}};
     o.valid = data_mask(o.image, reader.info());
     return o;
+}
+
+// Heights read from 1-based `band` of the raster `info` describes: its
+// nodata value becomes NaN (a gap, not a height).
+void gaps_to_nan(Image<float>& heights, const RasterInfo& info, int band) {
+    const std::vector<uint8_t> valid = data_mask(heights, info, {band});
+    for (std::size_t i = 0; i < valid.size(); ++i)
+        if (!valid[i]) heights.data[i] = NAN;
 }
 
 // An nDSM raster on `grid` (when `grid` has cells: same horizontal CRS,
@@ -205,9 +208,7 @@ Image<float> read_ndsm_raster(const std::string& path, GridSpec& grid, CrsInfo& 
             throw Error(path, "the nDSM does not cover the whole ortho");
         h = reader.read_resampled<float>(win, grid.width, grid.height, {1}, win.width > grid.width ? "average" : "bilinear");
     }
-    if (const auto& nd = info.bands[0].nodata)
-        for (float& v : h.data)
-            if (v == static_cast<float>(*nd)) v = NAN;
+    gaps_to_nan(h, info, 1);
     return h;
 }
 
@@ -247,32 +248,7 @@ Image<uint32_t> read_segments(const std::string& path, const GridSpec& grid, uin
     return labels;
 }
 
-// Watershed over-segmentation and region merging at one scale of the
-// normalised bands, then boundary pixels moved to the segment of the closest
-// colour (the first `colour_bands` bands); returns segments 1..count.
-Image<uint32_t> segment_image(Image<float> normalised, int colour_bands, const std::vector<uint8_t>& valid, const WatershedOptions& watershed,
-                              double scale, int refine_passes, uint32_t& count, const Progress& progress) {
-    const Oversegmentation over = watershed_oversegment(normalised, valid, watershed, progress.sub(0.0, 0.6));
-    RegionMergingOptions rmo;
-    rmo.scales = {scale};
-    if (!watershed.band_weights.empty()) rmo.band_weights = watershed.band_weights;
-    const RegionMergingResult merged = merge_regions(normalised, over.labels, over.region_count, rmo, progress.sub(0.6, 1.0));
-    count = merged.levels[0].regions_after;
-    Image<uint32_t> segments = relabel(over.labels, merged.levels[0].label_of_input);
-    refine_segment_boundaries(normalised, colour_bands, segments, count, refine_passes);
-    return segments;
-}
 }  // namespace
-
-OrthoRefineOptions ortho_refine_options(const FootprintsRunOptions& o) {
-    OrthoRefineOptions r;
-    r.watershed = o.watershed;
-    r.segment_scale = o.segment_scale;
-    r.refine_passes = o.refine_passes;
-    r.ndsm_band_weight = o.ndsm_band_weight;
-    r.min_segment_building_share = o.min_segment_building_share;
-    return r;
-}
 
 FootprintsReport run_footprints(const std::string& output_path, const FootprintsRunOptions& o, const Progress& progress) {
     const auto t0 = std::chrono::steady_clock::now();
@@ -309,9 +285,7 @@ FootprintsReport run_footprints(const std::string& output_path, const Footprints
         const int b = o.ndsm_band - 1;
         ndsm_band = Image<float>(img.image.width, img.image.height, 1, 0.0f);
         std::copy(img.image.band_data(b), img.image.band_data(b) + img.image.pixel_count(), ndsm_band.data.begin());
-        if (const auto& nd = ortho->info().bands[b].nodata)
-            for (float& v : ndsm_band.data)
-                if (v == static_cast<float>(*nd)) v = NAN;
+        gaps_to_nan(ndsm_band, ortho->info(), o.ndsm_band);
         Image<float> colours(img.image.width, img.image.height, img.image.bands - 1, 0.0f);
         for (int k = 0, out = 0; k < img.image.bands; ++k)
             if (k != b) std::copy(img.image.band_data(k), img.image.band_data(k) + img.image.pixel_count(), colours.band_data(out++));
@@ -368,15 +342,14 @@ FootprintsReport run_footprints(const std::string& output_path, const Footprints
         normalize_bands(normalised, img.valid);
         Image<uint32_t> segments;
         if (!o.segments.empty()) {
-            const std::string path = segments_file(o.segments, o.segment_scale);
+            const std::string path = segments_file(o.segments, o.segmentation.segment_scale);
             segments = read_segments(path, grid, rep.segments);
-            refine_segment_boundaries(normalised, normalised.bands, segments, rep.segments, o.refine_passes);
             rep.segments_path = path;
         } else {
-            const int colour_bands = normalised.bands;
-            segments = segment_image(std::move(normalised), colour_bands, img.valid, o.watershed, o.segment_scale, o.refine_passes,
-                                     rep.segments, progress.sub(0.35, 0.55));
+            segments = segment_at_scale(normalised, img.valid, o.segmentation.watershed, o.segmentation.segment_scale, rep.segments,
+                                        progress.sub(0.35, 0.55));
         }
+        refine_segment_boundaries(normalised, normalised.bands, segments, rep.segments, o.segmentation.refine_passes);
         std::vector<uint8_t> building;
         classify_segments(img.image, segments, rep.segments, co, building);
         mask = label_buildings(std::move(building), grid.width, grid.height, mo);
@@ -386,13 +359,13 @@ FootprintsReport run_footprints(const std::string& output_path, const Footprints
             // Each building redrawn along the ortho's edges (see ortho_buildings.hpp).
             Image<uint32_t> segments;
             if (!o.segments.empty()) {
-                const std::string path = segments_file(o.segments, o.segment_scale);
+                const std::string path = segments_file(o.segments, o.segmentation.segment_scale);
                 segments = read_segments(path, grid, rep.segments);
                 rep.segments_path = path;
             }
             const std::vector<uint8_t> vegetation = cells.used_classes ? std::vector<uint8_t>{} : vegetation_pixels(img.image, co);
             progress(0.45, "buildings");
-            OrthoRefineOptions ro = ortho_refine_options(o);
+            OrthoRefineOptions ro = o.segmentation;
             ro.cloud_edges = rep.cloud_cell_factor == 1;
             refine_buildings_with_ortho(mask, cells, img.image, img.valid, ndsm, 20.0 / z_unit, segments, vegetation, ro);
         }

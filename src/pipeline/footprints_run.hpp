@@ -16,7 +16,6 @@
 #include "footprint/regularize.hpp"
 #include "footprint/segment_classifier.hpp"
 #include "pipeline/ortho_buildings.hpp"
-#include "segment/watershed.hpp"
 
 namespace cityforge {
 
@@ -50,19 +49,11 @@ struct FootprintsRunOptions {
     DetectionMode mode = DetectionMode::automatic;
     /// ortho modes: segments made beforehand by `cityforge segment` (a label
     /// GeoTIFF on the ortho's grid, or its output folder: the level of
-    /// segment_scale, or its only level) instead of segmenting here.
+    /// segmentation.segment_scale, or its only level) instead of segmenting here.
     std::string segments;
-    WatershedOptions watershed;    ///< ortho modes: over-segmentation
-    double segment_scale = 30.0;   ///< ortho modes: merging scale (cost < scale^2)
-    /// ortho modes: passes moving segment-boundary pixels to the segment of
-    /// the closest colour (undoes the watershed's one-pixel edge jitter).
-    int refine_passes = 2;
-    /// ortho + cloud: weight of the nDSM band (0..20 m scaled to 0..255) in the
-    /// segmentation, next to weight 1 for each image band.
-    double ndsm_band_weight = 2.0;
-    /// ortho + cloud: a segment is a building when at least this share of its
-    /// pixels are building cells of the cloud.
-    double min_segment_building_share = 0.5;
+    /// Segmentation of the ortho (watershed, scale, boundary refinement: both
+    /// ortho modes) and the per-building voting of the ortho_cloud mode.
+    OrthoRefineOptions segmentation;
     SegmentClassifierOptions classifier;  ///< ortho-only: segment rules
     BuildingMaskOptions mask;      ///< detection thresholds (gsd_m is the raster cell)
     double simplify_m = 0.25;      ///< Douglas–Peucker tolerance of the raw outline, metres
@@ -73,9 +64,6 @@ struct FootprintsRunOptions {
     GroundFilterOptions ground;
     void validate() const;
 };
-
-/// The per-building ortho refinement's options taken from the footprints options.
-OrthoRefineOptions ortho_refine_options(const FootprintsRunOptions& options);
 
 /// Every region of a label raster as polygons in map coordinates, index =
 /// label. `labels` is the window of `grid` starting at pixel (col0, row0);

@@ -67,17 +67,7 @@ Image<uint32_t> crop_segments(const Box& b, const Image<float>& colours, const s
     WatershedOptions wo = o.watershed;
     wo.band_weights.resize(static_cast<std::size_t>(colours.bands), 1.0);
     wo.band_weights.push_back(o.ndsm_band_weight);
-    const Oversegmentation over = watershed_oversegment(bands, crop_valid, wo);
-    if (over.region_count == 0) {
-        count = 0;
-        return over.labels;
-    }
-    RegionMergingOptions rmo;
-    rmo.scales = {o.segment_scale};
-    rmo.band_weights = wo.band_weights;
-    const RegionMergingResult merged = merge_regions(bands, over.labels, over.region_count, rmo);
-    count = merged.levels[0].regions_after;
-    return relabel(over.labels, merged.levels[0].label_of_input);
+    return segment_at_scale(bands, crop_valid, wo, o.segment_scale, count);
 }
 }  // namespace
 
@@ -114,26 +104,21 @@ void refine_buildings_with_ortho(BuildingMask& mask, const BuildingCells& cells,
         auto global = [&](int x, int y) { return static_cast<std::size_t>(b.y0 + y) * w + b.x0 + x; };
         // Votes of the cells with their own evidence.
         std::vector<uint32_t> seen(count + 1, 0), yes(count + 1, 0), size(count + 1, 0), green(count + 1, 0);
+        std::vector<uint8_t> vetoed(count + 1, 0);
         for (int y = 0; y < ch; ++y)
             for (int x = 0; x < cw; ++x) {
-                const std::size_t k = global(x, y);
                 const uint32_t s = seg.at(0, x, y);
                 if (!s) continue;
+                const std::size_t k = global(x, y);
                 ++size[s];
                 if (!vegetation.empty()) green[s] += vegetation[k];
                 if (cells.evidence[k]) ++seen[s], yes[s] += cells.cells[k];
+                // A segment reaching the crop's edge (inside the grid) runs on
+                // beyond the building: ground, or roof merged with ground.
+                if ((x == 0 && b.x0 > 0) || (y == 0 && b.y0 > 0) || (x == cw - 1 && b.x1 < w - 1) || (y == ch - 1 && b.y1 < h - 1)) vetoed[s] = 1;
             }
-        if (!vegetation.empty())
-            for (uint32_t s = 1; s <= count; ++s)
-                if (2 * green[s] > size[s]) yes[s] = 0, seen[s] = std::max(seen[s], 1u);  // a crown: vetoed
-        // A segment reaching the crop's edge (inside the grid) runs on beyond
-        // the building: ground, or roof merged with ground. Never building.
-        for (int y = 0; y < ch; ++y)
-            for (int x = 0; x < cw; ++x) {
-                const bool inner_edge = (x == 0 && b.x0 > 0) || (y == 0 && b.y0 > 0) || (x == cw - 1 && b.x1 < w - 1) || (y == ch - 1 && b.y1 < h - 1);
-                if (inner_edge)
-                    if (const uint32_t s = seg.at(0, x, y)) yes[s] = 0, seen[s] = std::max(seen[s], 1u);
-            }
+        for (uint32_t s = 1; s <= count; ++s)
+            if (2 * green[s] > size[s]) vetoed[s] = 1;  // vegetation colours: a crown
         std::vector<uint8_t> voted(static_cast<std::size_t>(cw) * ch, 0);
         for (int y = 0; y < ch; ++y)
             for (int x = 0; x < cw; ++x) {
@@ -141,7 +126,7 @@ void refine_buildings_with_ortho(BuildingMask& mask, const BuildingCells& cells,
                 const std::size_t k = global(x, y);
                 if (!s || (old[k] && old[k] != l)) continue;  // never another building's cells
                 voted[static_cast<std::size_t>(y) * cw + x] =
-                    seen[s] ? static_cast<double>(yes[s]) >= o.min_segment_building_share * seen[s] : old[k] == l;
+                    !vetoed[s] && (seen[s] ? static_cast<double>(yes[s]) >= o.min_segment_building_share * seen[s] : old[k] == l);
             }
         if (cells.used_classes && o.cloud_edges) {
             // Outline pixels with evidence keep the classified cloud's decision.

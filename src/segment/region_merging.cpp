@@ -479,4 +479,17 @@ RegionMergingResult merge_regions(const Image<float>& image, const Image<uint32_
     return result;
 }
 
+Image<uint32_t> segment_at_scale(const Image<float>& image, const std::vector<uint8_t>& valid, const WatershedOptions& watershed,
+                                 double scale, uint32_t& count, const Progress& progress) {
+    const Oversegmentation over = watershed_oversegment(image, valid, watershed, progress.sub(0.0, 0.6));
+    count = 0;
+    if (over.region_count == 0) return over.labels;
+    RegionMergingOptions rmo;
+    rmo.scales = {scale};
+    rmo.band_weights = watershed.band_weights;
+    const RegionMergingResult merged = merge_regions(image, over.labels, over.region_count, rmo, progress.sub(0.6, 1.0));
+    count = merged.levels[0].regions_after;
+    return relabel(over.labels, merged.levels[0].label_of_input);
+}
+
 }  // namespace cityforge

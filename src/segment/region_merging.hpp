@@ -30,6 +30,7 @@
 
 #include "core/image.hpp"
 #include "core/progress.hpp"
+#include "segment/watershed.hpp"
 
 namespace cityforge {
 
@@ -83,5 +84,12 @@ Image<uint32_t> relabel(const Image<uint32_t>& labels, const std::vector<uint32_
 /// the same input gives the same labels for every strategy.
 RegionMergingResult merge_regions(const Image<float>& image, const Image<uint32_t>& labels, uint32_t region_count,
                                   const RegionMergingOptions& options, const Progress& progress = {});
+
+/// One level of segmentation: watershed over-segmentation of `image`
+/// (normalised bands; `valid` may be empty), then merging at `scale` with the
+/// watershed's band weights. Returns segments 1..count in raster order of
+/// first appearance (0 = invalid pixels).
+Image<uint32_t> segment_at_scale(const Image<float>& image, const std::vector<uint8_t>& valid, const WatershedOptions& watershed,
+                                 double scale, uint32_t& count, const Progress& progress = {});
 
 }  // namespace cityforge

@@ -95,7 +95,7 @@ TEST_CASE("A roof under an overhanging crown stays building", "[footprint][mask]
         }
     dsm = ndsm;
     BuildingMaskOptions o;
-    const BuildingMask m = detect_buildings(ndsm, dsm, building, vegetation, o);
+    const BuildingMask m = buildings_from_cells(building_cells(ndsm, dsm, building, vegetation, o), w, h, o);
     REQUIRE(m.count == 1);
     long roof_cells = 0, outside = 0;
     for (int y = 0; y < h; ++y)

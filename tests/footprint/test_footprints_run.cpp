@@ -230,7 +230,7 @@ TEST_CASE("Footprints from an nDSM raster or an nDSM band of the ortho - and fro
     CHECK(c.f1 >= 0.95);
     CHECK(c.mean_iou >= 0.9);
 
-    oc.segment_scale = 25;
+    oc.segmentation.segment_scale = 25;
     CHECK_THROWS_WITH(run_footprints(dir / "bad.gpkg", oc), Catch::Contains("segments_scale_20.tif, segments_scale_30.tif"));
     FootprintsRunOptions both = o;
     both.cloud = s.cloud_path;
