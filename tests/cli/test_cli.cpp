@@ -69,7 +69,7 @@ TEST_CASE("cityforge synth writes the town - --quiet keeps stderr empty", "[cli]
     CHECK(doc["bands"].size() == 3);
 }
 
-TEST_CASE("cityforge footprints refuses a misaligned nDSM and a missing segments level in one line", "[cli][errors]") {
+TEST_CASE("cityforge footprints refuses a misaligned nDSM - segments on another grid - a missing segments level in one line", "[cli][errors]") {
     ScratchDir dir("cli_fp_err");
     const std::string pan = shared_data("spacenet4_atlanta_pan_west/atlanta_pan_0p5m_west.tif");
     // The panchromatic tile as its own "nDSM" over Delft's cloud CRS would be
@@ -86,5 +86,9 @@ TEST_CASE("cityforge footprints refuses a misaligned nDSM and a missing segments
     const auto segs = run_cli("footprints --quiet --ortho " + pan + " --segments " + dir.path.string() + " --out " + (dir / "fp.gpkg"));
     CHECK(segs.exit_code == 1);
     CHECK(segs.err.find("no segments_scale_30.tif for --segment-scale; levels here: none") != std::string::npos);
+    REQUIRE(run_command("gdal_translate -q -srcwin 0 0 100 100 " + pan + " " + (dir / "small.tif")).exit_code == 0);
+    const auto grid = run_cli("footprints --quiet --ortho " + pan + " --segments " + (dir / "small.tif") + " --out " + (dir / "fp.gpkg"));
+    CHECK(grid.exit_code == 1);
+    CHECK(grid.err.find("small.tif: segments are not on the ortho's grid (100 x 100 vs 450 x 900)") != std::string::npos);
     CHECK_FALSE(std::filesystem::exists(dir / "fp.gpkg"));
 }
