@@ -1186,8 +1186,8 @@ void LazPointSource::select_chunks(const std::vector<bool>& keep) {
 }
 
 void LazPointSource::fill() {
-    decoded_.clear();
     batch_index_ = batch_pos_ = 0;
+    if (next_ >= order_.size() || !has_table_) decoded_.clear();
     if (next_ >= order_.size()) return;
     const std::size_t rl = static_cast<std::size_t>(record_length_);
     if (!has_table_) {
@@ -1216,7 +1216,9 @@ void LazPointSource::fill() {
         ++end;
         if (budget > (256ull << 20)) break;  // keep a batch's memory bounded
     }
-    std::vector<std::vector<uint8_t>> raw(end - next_);
+    // Buffers keep their capacity from batch to batch (no page faults per chunk).
+    std::vector<std::vector<uint8_t>>& raw = raw_;
+    raw.resize(std::max(raw.size(), end - next_));
     decoded_.resize(end - next_);
     for (std::size_t i = next_; i < end; ++i) {
         const LazChunk& c = chunks_[order_[i]];

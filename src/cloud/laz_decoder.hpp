@@ -98,6 +98,7 @@ private:
     uint64_t selected_points_ = 0;
     uint64_t sequential_offset_ = 0;  ///< no chunk table: where the next chunk starts
     std::vector<std::vector<char>> decoded_;  ///< current batch, in order
+    std::vector<std::vector<uint8_t>> raw_;   ///< compressed bytes of the current batch
     std::size_t batch_index_ = 0;
     std::size_t batch_pos_ = 0;       ///< records handed out of decoded_[batch_index_]
 };
