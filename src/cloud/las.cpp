@@ -200,6 +200,7 @@ LasReader::LasReader(const std::string& path) : path_(path) {
 }
 
 std::size_t LasReader::read_records(std::vector<char>& buf, std::size_t max_points) {
+    if (laz_ && read_ == 0 && &buf != &buffer_) laz_->set_point_fields_only(false);
     const auto n = static_cast<std::size_t>(std::min<uint64_t>(max_points, points_remaining()));
     buf.resize(n * static_cast<std::size_t>(header_.point_record_length));
     if (n == 0) return 0;
@@ -220,6 +221,7 @@ void LasReader::select_laz_chunks(const std::vector<bool>& keep) {
 }
 
 std::size_t LasReader::read_chunk(PointCloud& out, std::size_t max_points) {
+    if (laz_ && read_ == 0) laz_->set_point_fields_only(true);  // LAZ: skip layers a PointCloud does not hold
     std::vector<char>& buf = buffer_;  // reused between chunks: no page faults per chunk
     const std::size_t n = read_records(buf, max_points);
     if (n == 0) return 0;

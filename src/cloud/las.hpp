@@ -55,6 +55,8 @@ public:
     const LasHeader& header() const { return header_; }
     /// Appends up to `max_points` points to `out`; returns how many were read
     /// (0 at the end). Throws Error on a truncated file.
+    /// A reader is used either through read_chunk or through read_records
+    /// (LAZ: read_chunk skips the layers a PointCloud does not hold).
     std::size_t read_chunk(PointCloud& out, std::size_t max_points);
     /// Replaces `records` with up to `max_points` raw point records
     /// (point_record_length bytes each, as stored in an uncompressed LAS,

@@ -908,7 +908,8 @@ private:
     std::array<std::unique_ptr<Ctx>, 4> contexts_;
 };
 
-std::size_t decode_layered(const LazInfo& info, int rl, const uint8_t* data, std::size_t size, uint64_t count, char* out_chars) {
+std::size_t decode_layered(const LazInfo& info, int rl, const uint8_t* data, std::size_t size, uint64_t count, char* out_chars,
+                           bool point_fields_only) {
     if (count == 0) return 0;
     auto* out = reinterpret_cast<uint8_t*>(out_chars);
     std::size_t pos = 0;
@@ -937,7 +938,13 @@ std::size_t decode_layered(const LazInfo& info, int rl, const uint8_t* data, std
         for (std::size_t j = 0; j < nl; ++j, ++li) {
             need(sizes[li], "truncated chunk (layer runs past the chunk)");
             Layer& layer = it.type == 10 ? point_layers[j] : layers[li];
-            layer.open(data + pos, sizes[li]);
+            // Selective decoding: flags, scan angle, user data, point source, NIR
+            // and extra bytes are not needed for a PointCloud; their layers are
+            // independent of the others and are skipped (fields keep the chunk's
+            // first value).
+            const bool skip = point_fields_only && ((it.type == 10 && (j == 3 || j == 5 || j == 6 || j == 7)) ||
+                                                    (it.type == 12 && j == 1) || it.type == 14);
+            layer.open(data + pos, skip ? 0 : sizes[li]);
             pos += sizes[li];
         }
         item_layers.push_back(it.type == 10 ? point_layers.data() : &layers[li - nl]);
@@ -1077,9 +1084,9 @@ void check_laz_supported(const LazInfo& info, int point_format, int record_lengt
 }
 
 std::size_t decode_laz_chunk(const LazInfo& info, int record_length, const uint8_t* data, std::size_t size, uint64_t count,
-                             char* out, const std::string& path, std::size_t chunk_index) {
+                             char* out, const std::string& path, std::size_t chunk_index, bool point_fields_only) {
     try {
-        if (info.compressor == 3) return decode_layered(info, record_length, data, size, count, out);
+        if (info.compressor == 3) return decode_layered(info, record_length, data, size, count, out, point_fields_only);
         return decode_pointwise(info, record_length, data, size, count, out);
     } catch (const Corrupt& c) {
         throw Error(path, "chunk " + std::to_string(chunk_index) + ": " + c.what);
@@ -1200,7 +1207,8 @@ void LazPointSource::fill() {
         in_.seekg(static_cast<std::streamoff>(sequential_offset_));
         in_.read(reinterpret_cast<char*>(raw.data()), static_cast<std::streamsize>(raw.size()));
         std::vector<char> out(static_cast<std::size_t>(c.point_count) * rl);
-        const std::size_t used = decode_laz_chunk(info_, record_length_, raw.data(), raw.size(), c.point_count, out.data(), path_, order_[next_]);
+        const std::size_t used = decode_laz_chunk(info_, record_length_, raw.data(), raw.size(), c.point_count, out.data(), path_, order_[next_],
+                                              point_fields_only_);
         sequential_offset_ += used;
         decoded_.push_back(std::move(out));
         ++next_;
@@ -1233,7 +1241,8 @@ void LazPointSource::fill() {
     const std::size_t base = next_;
     tbb::parallel_for(std::size_t(0), end - next_, [&](std::size_t k) {
         const LazChunk& c = chunks_[order_[base + k]];
-        decode_laz_chunk(info_, record_length_, raw[k].data(), raw[k].size(), c.point_count, decoded_[k].data(), path_, order_[base + k]);
+        decode_laz_chunk(info_, record_length_, raw[k].data(), raw[k].size(), c.point_count, decoded_[k].data(), path_, order_[base + k],
+                         point_fields_only_);
     });
     next_ = end;
 }

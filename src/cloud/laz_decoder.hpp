@@ -57,9 +57,12 @@ struct LazChunk {
 /// Decodes one chunk: `data`/`size` are its compressed bytes, `count` points
 /// of `record_length` bytes are written to `out`. Returns the bytes the chunk
 /// used. Throws Error("<path>: chunk <index>: <problem>") on corrupt data; it
-/// never reads outside `data` or writes outside `out`.
+/// never reads outside `data` or writes outside `out`. With
+/// `point_fields_only`, layered chunks skip the layers a PointCloud does not
+/// use (flags, scan angle, user data, point source, NIR, extra bytes): those
+/// bytes of the records then hold the chunk's first value.
 std::size_t decode_laz_chunk(const LazInfo& info, int record_length, const uint8_t* data, std::size_t size, uint64_t count,
-                             char* out, const std::string& path, std::size_t chunk_index);
+                             char* out, const std::string& path, std::size_t chunk_index, bool point_fields_only = false);
 
 /// Streams the decoded point records of a LAZ file, chunk by chunk, several
 /// chunks decoded in parallel (TBB) and handed out in file order.
@@ -77,6 +80,8 @@ public:
     bool has_chunk_table() const { return has_table_; }
     /// Decode only the chunks with keep[i] (size == chunks().size()); before the first read.
     void select_chunks(const std::vector<bool>& keep);
+    /// Before the first read: decode only what a PointCloud holds (see decode_laz_chunk).
+    void set_point_fields_only(bool on) { point_fields_only_ = on; }
     /// Points that the selected chunks hold.
     uint64_t selected_points() const { return selected_points_; }
     /// Writes up to `max_points` records to `out` (room for max_points ×
@@ -93,6 +98,7 @@ private:
     uint64_t file_size_ = 0;
     std::vector<LazChunk> chunks_;
     bool has_table_ = false;
+    bool point_fields_only_ = false;
     std::vector<std::size_t> order_;  ///< selected chunk indices
     std::size_t next_ = 0;            ///< next entry of order_ to decode
     uint64_t selected_points_ = 0;

@@ -347,3 +347,61 @@ TEST_CASE("heights on a LAZ gives the same output bytes as on its LAS twin", "[l
     CHECK(la.size() > 200);
     CHECK(la == lb);
 }
+
+TEST_CASE("CLI: cloud translate and info on LAZ; refusals are one line and non-zero", "[laz][cli]") {
+    ScratchDir dir("laz_cli");
+    const auto ok = cityforge::test::run_cli("cloud translate " + corpus("Semis_2022_0906_6665_LA93_IGN69_ok.laz") + " " + dir / "o.las");
+    INFO(ok.err);
+    REQUIRE(ok.exit_code == 0);
+    std::string sha;
+    const nlohmann::json o_json = oracle();
+    for (const auto& e : o_json["files"])
+        if (e["file"] == "Semis_2022_0906_6665_LA93_IGN69_ok.laz") sha = e["points_sha256"];
+    CHECK_THAT(ok.err, Catch::Contains(sha) && Catch::Contains("decompressed from LAZ"));
+    const auto again = cityforge::test::run_cli("cloud translate " + corpus("Semis_2022_0906_6665_LA93_IGN69_ok.laz") + " " + dir / "o.las");
+    CHECK(again.exit_code != 0);
+    CHECK_THAT(again.err, Catch::Contains("--overwrite"));
+
+    const auto info = cityforge::test::run_cli("info " + corpus("lone-star.copc.laz"));
+    REQUIRE(info.exit_code == 0);
+    CHECK_THAT(info.out, Catch::Contains("LAZ:       compressor 3 (layered chunked)") && Catch::Contains("chunk size variable") &&
+                             Catch::Contains("POINT14 v3") && Catch::Contains("COPC:"));
+
+    const auto refused = cityforge::test::run_cli("cloud translate " + corpus("simple-laszip-compressor-version-1.2r0.laz") + " " + dir / "s.las");
+    CHECK(refused.exit_code != 0);
+    CHECK_THAT(refused.err, Catch::Contains("simple-laszip-compressor-version-1.2r0.laz") && Catch::Contains("compressor 1"));
+    CHECK(std::count(refused.err.begin(), refused.err.end(), '\n') == 1);
+    CHECK_FALSE(std::filesystem::exists(dir / "s.las"));
+
+    std::string bad = slurp(corpus("crop_duplicate.laz"));
+    bad.resize(bad.size() - 2000);  // cut through the only chunk and the chunk table
+    write_file(dir / "cut.laz", bad);
+    const auto cut = cityforge::test::run_cli("info --stats " + dir / "cut.laz");
+    CHECK(cut.exit_code != 0);
+    CHECK_THAT(cut.err, Catch::Contains("cut.laz") && Catch::Contains("chunk 0"));
+    CHECK(std::count(cut.err.begin(), cut.err.end(), '\n') == 1);
+}
+
+TEST_CASE("Selective layer decoding gives the same PointCloud as a full decode", "[laz]") {
+    ScratchDir dir("laz_selective");
+    for (const char* name : {"las_with_several_extra_byte_bloc.laz", "Semis_2022_0906_6665_LA93_IGN69_ok.laz", "1.2-with-color.copc.laz"}) {
+        INFO(name);
+        CloudTranslateOptions o;
+        o.input = corpus(name);
+        o.output = dir / "full.las";
+        o.overwrite = true;
+        translate_cloud(o);  // full decode, every layer
+        const PointCloud a = read_point_cloud(corpus(name));  // PointCloud path: some layers skipped
+        const PointCloud b = read_point_cloud(o.output);
+        CHECK(a.x == b.x);
+        CHECK(a.y == b.y);
+        CHECK(a.z == b.z);
+        CHECK(a.intensity == b.intensity);
+        CHECK(a.classification == b.classification);
+        CHECK(a.return_number == b.return_number);
+        CHECK(a.number_of_returns == b.number_of_returns);
+        CHECK(a.gps_time == b.gps_time);
+        CHECK(a.red == b.red);
+        CHECK(a.blue == b.blue);
+    }
+}
