@@ -633,7 +633,9 @@ std::size_t decode_pointwise(const LazInfo& info, int rl, const uint8_t* data, s
     return rl + in.pos();
 }
 
-// ============================================================ layered v3
+// ============================================================ layered v3 / v4
+// Item version 4 is version 3 with the two channel-context rules fixed (the
+// channel is always handed on; a switch always predicts from the new channel).
 // One arithmetic-coded layer of a chunk.
 struct Layer {
     ByteIn in;
@@ -710,7 +712,7 @@ struct Point14Context {
 class Point14V3 {
 public:
     static constexpr int kLayers = 9;  // xy+returns, z, class, flags, intensity, scan angle, user data, source, gps
-    Point14V3(const uint8_t* first, std::array<Layer, kLayers>& layers) : layers_(layers) {
+    Point14V3(const uint8_t* first, std::array<Layer, kLayers>& layers, bool v4) : layers_(layers), v4_(v4) {
         const Point14 p = Point14::unpack(first);
         current_ = p.channel;
         item_context_ = current_;
@@ -719,7 +721,7 @@ public:
     /// The context the other items of this point use: the scanner channel on
     /// the first point and on points where it changes, 0 otherwise (LASzip v3
     /// and laz-perf pass it only on change; the format depends on that).
-    uint32_t context() const { return item_context_; }
+    uint32_t context() const { return v4_ ? current_ : item_context_; }  // v4 always passes the channel
     void read(uint8_t* item) {
         ArithDecoder& xy = layers_[0].dec;
         item_context_ = 0;
@@ -810,6 +812,7 @@ public:
 
 private:
     std::array<Layer, kLayers>& layers_;
+    bool v4_;
     std::array<std::unique_ptr<Point14Context>, 4> contexts_;
     uint32_t current_ = 0;
     uint32_t item_context_ = 0;
@@ -819,8 +822,8 @@ private:
 // RGB14 / RGBNIR14 v3: per scanner channel contexts, RGB and NIR layers.
 class Rgb14V3 {
 public:
-    Rgb14V3(const uint8_t* first, bool nir, uint32_t context, Layer& rgb, Layer* nir_layer)
-        : nir_(nir), rgb_(rgb), nir_layer_(nir_layer), current_(context) {
+    Rgb14V3(const uint8_t* first, bool nir, uint32_t context, Layer& rgb, Layer* nir_layer, bool v4)
+        : nir_(nir), v4_(v4), rgb_(rgb), nir_layer_(nir_layer), current_(context) {
         contexts_[context] = std::make_unique<Ctx>(first, nir ? 8 : 6);
     }
     // As in LASzip v3 (and laz-perf): on a switch to a channel seen before in
@@ -833,6 +836,8 @@ public:
             if (!contexts_[context]) {
                 contexts_[context] = std::make_unique<Ctx>(reinterpret_cast<const uint8_t*>(last), 8);
                 last = contexts_[context]->last;
+            } else if (v4_) {
+                last = contexts_[context]->last;  // v4 fixed the stale prediction
             }
         }
         Ctx& c = *contexts_[current_];
@@ -863,7 +868,7 @@ private:
         SymbolModel nir_used{4};
         std::array<SymbolModel, 2> nir_diff{SymbolModel(256), SymbolModel(256)};
     };
-    bool nir_;
+    bool nir_, v4_;
     Layer& rgb_;
     Layer* nir_layer_;
     uint32_t current_;
@@ -873,7 +878,8 @@ private:
 // BYTE14 v3: one layer per extra byte.
 class Byte14V3 {
 public:
-    Byte14V3(const uint8_t* first, std::size_t n, uint32_t context, Layer* layers) : n_(n), layers_(layers), current_(context) {
+    Byte14V3(const uint8_t* first, std::size_t n, uint32_t context, Layer* layers, bool v4)
+        : n_(n), v4_(v4), layers_(layers), current_(context) {
         contexts_[context] = std::make_unique<Ctx>(first, n);
     }
     // Same channel-switch rule as Rgb14V3.
@@ -883,6 +889,8 @@ public:
             current_ = context;
             if (!contexts_[context]) {
                 contexts_[context] = std::make_unique<Ctx>(last, n_);
+                last = contexts_[context]->last.data();
+            } else if (v4_) {
                 last = contexts_[context]->last.data();
             }
         }
@@ -903,6 +911,7 @@ private:
         std::vector<SymbolModel> models;
     };
     std::size_t n_;
+    bool v4_;
     Layer* layers_;
     uint32_t current_;
     std::array<std::unique_ptr<Ctx>, 4> contexts_;
@@ -950,7 +959,8 @@ std::size_t decode_layered(const LazInfo& info, int rl, const uint8_t* data, std
         item_layers.push_back(it.type == 10 ? point_layers.data() : &layers[li - nl]);
     }
     // Point14 must be first (checked on open); it hands its scanner channel to the others.
-    Point14V3 point(out, point_layers);
+    const bool v4 = info.items[0].version == 4;  // all items share one version (checked on open)
+    Point14V3 point(out, point_layers, v4);
     std::vector<std::unique_ptr<Rgb14V3>> rgbs;
     std::vector<std::unique_ptr<Byte14V3>> bytes;
     struct Slot {
@@ -965,10 +975,10 @@ std::size_t decode_layered(const LazInfo& info, int rl, const uint8_t* data, std
             slots.push_back({0, 0, off});
         } else if (it.type == 11 || it.type == 12) {
             rgbs.push_back(std::make_unique<Rgb14V3>(out + off, it.type == 12, point.context(), item_layers[i][0],
-                                                     it.type == 12 ? &item_layers[i][1] : nullptr));
+                                                     it.type == 12 ? &item_layers[i][1] : nullptr, v4));
             slots.push_back({1, rgbs.size() - 1, off});
         } else {
-            bytes.push_back(std::make_unique<Byte14V3>(out + off, it.size, point.context(), item_layers[i]));
+            bytes.push_back(std::make_unique<Byte14V3>(out + off, it.size, point.context(), item_layers[i], v4));
             slots.push_back({2, bytes.size() - 1, off});
         }
         off += it.size;
@@ -1067,8 +1077,9 @@ void check_laz_supported(const LazInfo& info, int point_format, int record_lengt
             ok = it.version == 2 && ((it.type == 6 && it.size == 20 && i == 0) || (it.type == 7 && it.size == 8) ||
                                      (it.type == 8 && it.size == 6) || (it.type == 0 && it.size > 0));
         } else {
-            ok = it.version == 3 && ((it.type == 10 && it.size == 30 && i == 0) || (it.type == 11 && it.size == 6) ||
-                                     (it.type == 12 && it.size == 8) || (it.type == 14 && it.size > 0));
+            ok = (it.version == 3 || it.version == 4) && it.version == info.items[0].version &&
+                 ((it.type == 10 && it.size == 30 && i == 0) || (it.type == 11 && it.size == 6) || (it.type == 12 && it.size == 8) ||
+                  (it.type == 14 && it.size > 0));
         }
         if (!ok)
             throw Error(path, "LAZ item " + to_string(it) + " (" + std::to_string(it.size) + " bytes, position " + std::to_string(i) +

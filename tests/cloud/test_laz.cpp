@@ -405,3 +405,19 @@ TEST_CASE("Selective layer decoding gives the same PointCloud as a full decode",
         CHECK(a.blue == b.blue);
     }
 }
+
+TEST_CASE("Fixtures of laz-perf (v3, changing scanner channels) and LASzip (item version 4) decode to their LAS twins", "[laz]") {
+    const std::string dir = cityforge::test::source_dir() + "/tests/data/laz/";
+    for (const char* stem : {"pdrf6-1.4", "pdrf8-1.4", "pdrf7-v4-1.4"}) {
+        INFO(stem);
+        LasReader laz(dir + stem + ".laz"), las(dir + stem + ".las");
+        REQUIRE(laz.header().laz);
+        CHECK(laz.header().point_count == 1024);
+        CHECK(laz.header().point_record_length == las.header().point_record_length);
+        uint64_t n = 0;
+        CHECK(records_sha(laz, &n) == records_sha(las));
+        CHECK(n == 1024);
+    }
+    LasReader v4(dir + "pdrf7-v4-1.4.laz");
+    CHECK(v4.header().laz->items[0].version == 4);
+}
