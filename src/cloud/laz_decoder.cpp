@@ -78,23 +78,63 @@ struct BitModel {
     }
 };
 
-// Adaptive multi-symbol model with a decoding look-up table for > 16 symbols.
+// Adaptive multi-symbol model. The coded stream depends only on the
+// distribution (LASzip's ArithmeticModel); the decoding table is ours and
+// decoder-side only: table_[t] is the symbol whose interval holds
+// t << table_shift_, for every model (LASzip keeps one only for > 16 symbols
+// and searches the rest by bisection with a multiplication per step). The
+// table has about 4 entries per symbol (at most 1024), so the search after
+// the look-up is almost always empty; the symbol found is the same.
 class SymbolModel {
 public:
     explicit SymbolModel(uint32_t symbols) : symbols_(symbols), last_symbol_(symbols - 1) {
-        if (symbols > 16) {
-            uint32_t bits = 3;
-            while (symbols > (1u << (bits + 2))) ++bits;
-            table_size_ = 1u << bits;
-            table_shift_ = kSymShift - bits;
-            table_.assign(table_size_ + 2, 0);
-        }
-        distribution_.assign(symbols, 0);
-        count_.assign(symbols, 1);
+        uint32_t bits = 2;
+        while (bits < 10 && (1u << bits) < 4 * symbols) ++bits;
+        table_size_ = 1u << bits;
+        table_shift_ = kSymShift - bits;
+        // One allocation: distribution (symbols + 1, the last entry
+        // kSymMaxCount as a sentinel), counts (symbols), table (size + 2).
+        store_.assign(2 * static_cast<std::size_t>(symbols) + 1 + table_size_ + 2, 0);
+        distribution_ = store_.data();
+        count_ = distribution_ + symbols + 1;
+        table_ = count_ + symbols;
+        for (uint32_t n = 0; n < symbols; ++n) count_[n] = 1;
+        distribution_[symbols] = kSymMaxCount;
         total_count_ = 0;
         update_cycle_ = symbols;
         update();
         until_update_ = update_cycle_ = (symbols + 6) >> 1;
+    }
+    SymbolModel(const SymbolModel& o) { *this = o; }
+    SymbolModel& operator=(const SymbolModel& o) {
+        if (this == &o) return *this;
+        symbols_ = o.symbols_;
+        last_symbol_ = o.last_symbol_;
+        table_size_ = o.table_size_;
+        table_shift_ = o.table_shift_;
+        total_count_ = o.total_count_;
+        update_cycle_ = o.update_cycle_;
+        until_update_ = o.until_update_;
+        store_ = o.store_;
+        distribution_ = store_.data();
+        count_ = distribution_ + symbols_ + 1;
+        table_ = count_ + symbols_;
+        return *this;
+    }
+    SymbolModel(SymbolModel&& o) noexcept { *this = std::move(o); }
+    SymbolModel& operator=(SymbolModel&& o) noexcept {
+        symbols_ = o.symbols_;
+        last_symbol_ = o.last_symbol_;
+        table_size_ = o.table_size_;
+        table_shift_ = o.table_shift_;
+        total_count_ = o.total_count_;
+        update_cycle_ = o.update_cycle_;
+        until_update_ = o.until_update_;
+        store_ = std::move(o.store_);  // the buffer (and so the pointers) moves along
+        distribution_ = o.distribution_;
+        count_ = o.count_;
+        table_ = o.table_;
+        return *this;
     }
     void update() {
         if ((total_count_ += update_cycle_) > kSymMaxCount) {
@@ -103,29 +143,27 @@ public:
         }
         uint32_t sum = 0, s = 0;
         const uint32_t scale = 0x80000000u / total_count_;
-        if (table_size_ == 0) {
-            for (uint32_t k = 0; k < symbols_; ++k) {
-                distribution_[k] = (scale * sum) >> (31 - kSymShift);
-                sum += count_[k];
-            }
-        } else {
-            for (uint32_t k = 0; k < symbols_; ++k) {
-                distribution_[k] = (scale * sum) >> (31 - kSymShift);
-                sum += count_[k];
-                const uint32_t w = distribution_[k] >> table_shift_;
-                while (s < w) table_[++s] = k - 1;
-            }
-            table_[0] = 0;
-            while (s <= table_size_) table_[++s] = symbols_ - 1;
+        for (uint32_t k = 0; k < symbols_; ++k) {
+            distribution_[k] = (scale * sum) >> (31 - kSymShift);
+            sum += count_[k];
+            const uint32_t w = distribution_[k] >> table_shift_;
+            while (s < w) table_[++s] = k - 1;
         }
+        table_[0] = 0;
+        while (s <= table_size_) table_[++s] = symbols_ - 1;
         update_cycle_ = std::min((5 * update_cycle_) >> 2, (symbols_ + 6) << 3);
         until_update_ = update_cycle_;
     }
 
-    uint32_t symbols_, last_symbol_;
+    uint32_t symbols_ = 0, last_symbol_ = 0;
     uint32_t table_size_ = 0, table_shift_ = 0;
     uint32_t total_count_ = 0, update_cycle_ = 0, until_update_ = 0;
-    std::vector<uint32_t> distribution_, count_, table_;
+    uint32_t* distribution_ = nullptr;
+    uint32_t* count_ = nullptr;
+    uint32_t* table_ = nullptr;
+
+private:
+    std::vector<uint32_t> store_;
 };
 
 class ArithDecoder {
@@ -153,34 +191,19 @@ public:
         return sym;
     }
     uint32_t decode_symbol(SymbolModel& m) {
-        uint32_t n, sym, x, y = length_;
-        if (m.table_size_) {
-            const uint32_t dv = value_ / (length_ >>= kSymShift);
-            const uint32_t t = std::min(dv >> m.table_shift_, m.table_size_);
-            sym = m.table_[t];
-            n = m.table_[t + 1] + 1;
-            while (n > sym + 1) {
-                const uint32_t k = (sym + n) >> 1;
-                if (m.distribution_[k] > dv) n = k;
-                else sym = k;
-            }
-            x = m.distribution_[sym] * length_;
-            if (sym != m.last_symbol_) y = m.distribution_[sym + 1] * length_;
-        } else {
-            x = sym = 0;
-            length_ >>= kSymShift;
-            uint32_t k = (n = m.symbols_) >> 1;
-            do {
-                const uint32_t z = length_ * m.distribution_[k];
-                if (z > value_) {
-                    n = k;
-                    y = z;
-                } else {
-                    sym = k;
-                    x = z;
-                }
-            } while ((k = (sym + n) >> 1) != sym);
+        const uint32_t y0 = length_;
+        length_ >>= kSymShift;
+        const uint32_t dv = value_ / length_;
+        const uint32_t t = std::min(dv >> m.table_shift_, m.table_size_);
+        uint32_t sym = m.table_[t];
+        uint32_t n = m.table_[t + 1] + 1;
+        while (n > sym + 1) {
+            const uint32_t k = (sym + n) >> 1;
+            if (m.distribution_[k] > dv) n = k;
+            else sym = k;
         }
+        const uint32_t x = m.distribution_[sym] * length_;
+        const uint32_t y = sym != m.last_symbol_ ? m.distribution_[sym + 1] * length_ : y0;
         value_ -= x;
         length_ = y - x;
         if (length_ < kMinLength) renorm();
