@@ -89,7 +89,7 @@ class SymbolModel {
 public:
     explicit SymbolModel(uint32_t symbols) : symbols_(symbols), last_symbol_(symbols - 1) {
         uint32_t bits = 2;
-        while (bits < 10 && (1u << bits) < 4 * symbols) ++bits;
+        while (bits < 8 && (1u << bits) < 4 * symbols) ++bits;
         table_size_ = 1u << bits;
         table_shift_ = kSymShift - bits;
         // One allocation: distribution (symbols + 1, the last entry
@@ -176,7 +176,7 @@ public:
         value_ |= in_->get() << 8;
         value_ |= in_->get();
     }
-    uint32_t decode_bit(BitModel& m) {
+    [[gnu::always_inline]] uint32_t decode_bit(BitModel& m) {
         const uint32_t x = m.bit0_prob * (length_ >> kBitShift);
         const uint32_t sym = value_ >= x;
         if (sym == 0) {
@@ -190,7 +190,7 @@ public:
         if (--m.until_update == 0) m.update();
         return sym;
     }
-    uint32_t decode_symbol(SymbolModel& m) {
+    [[gnu::always_inline]] uint32_t decode_symbol(SymbolModel& m) {
         const uint32_t y0 = length_;
         length_ >>= kSymShift;
         const uint32_t dv = value_ / length_;
@@ -235,7 +235,7 @@ public:
     }
 
 private:
-    void renorm() {
+    [[gnu::noinline]] void renorm() {
         do {
             value_ = (value_ << 8) | in_->get();
         } while ((length_ <<= 8) < kMinLength);
@@ -261,7 +261,7 @@ public:
         for (uint32_t i = 0; i < contexts; ++i) k_models_.emplace_back(corr_bits_ + 1);
         for (uint32_t i = 1; i <= corr_bits_; ++i) corrector_.emplace_back(i <= bits_high_ ? (1u << i) : (1u << bits_high_));
     }
-    int32_t decompress(ArithDecoder& dec, int32_t pred, uint32_t context = 0) {
+    [[gnu::always_inline]] int32_t decompress(ArithDecoder& dec, int32_t pred, uint32_t context = 0) {
         uint32_t real = static_cast<uint32_t>(pred) + static_cast<uint32_t>(read_corrector(dec, k_models_[context]));
         const int32_t sreal = static_cast<int32_t>(real);
         if (sreal < 0) real += corr_range_;
