@@ -627,6 +627,48 @@ private:
     std::vector<SymbolModel> models_;
 };
 
+// WAVEPACKET13 v1 (point formats 4 and 5, 29 bytes): the descriptor index
+// (a byte), then the 64-bit offset to the waveform data, coded as "same",
+// "previous offset + previous packet size", "previous + a 32-bit difference"
+// or raw; the packet size, return point location and x(t), y(t), z(t) (the
+// floats' bit patterns) as integer differences from the previous point.
+class WavePacket13V1 final : public ItemV2 {
+public:
+    explicit WavePacket13V1(const uint8_t* first) { std::memcpy(last_, first + 1, 28); }
+    void read(ArithDecoder& dec, uint8_t* item) override {
+        item[0] = static_cast<uint8_t>(dec.decode_symbol(packet_index_));
+        uint8_t* cur = item + 1;
+        const uint64_t last_offset = load<uint64_t>(last_);
+        const uint32_t last_size = load<uint32_t>(last_ + 8);
+        sym_last_offset_diff_ = dec.decode_symbol(offset_diff_[sym_last_offset_diff_]);
+        uint64_t offset;
+        if (sym_last_offset_diff_ == 0) {
+            offset = last_offset;
+        } else if (sym_last_offset_diff_ == 1) {
+            offset = last_offset + last_size;
+        } else if (sym_last_offset_diff_ == 2) {
+            last_diff_32_ = ic_offset_diff_.decompress(dec, last_diff_32_);
+            offset = last_offset + static_cast<uint64_t>(static_cast<int64_t>(last_diff_32_));
+        } else {
+            const uint64_t low = dec.read_int();
+            offset = (static_cast<uint64_t>(dec.read_int()) << 32) | low;
+        }
+        store<uint64_t>(cur, offset);
+        store<uint32_t>(cur + 8, static_cast<uint32_t>(ic_packet_size_.decompress(dec, load<int32_t>(last_ + 8))));
+        store<int32_t>(cur + 12, ic_return_point_.decompress(dec, load<int32_t>(last_ + 12)));
+        for (uint32_t c = 0; c < 3; ++c) store<int32_t>(cur + 16 + 4 * c, ic_xyz_.decompress(dec, load<int32_t>(last_ + 16 + 4 * c), c));
+        std::memcpy(last_, cur, 28);
+    }
+
+private:
+    uint8_t last_[28];
+    int32_t last_diff_32_ = 0;
+    uint32_t sym_last_offset_diff_ = 0;
+    SymbolModel packet_index_{256};
+    std::array<SymbolModel, 4> offset_diff_{SymbolModel(4), SymbolModel(4), SymbolModel(4), SymbolModel(4)};
+    IntegerDecompressor ic_offset_diff_{32, 1}, ic_packet_size_{32, 1}, ic_return_point_{32, 1}, ic_xyz_{32, 3};
+};
+
 std::size_t decode_pointwise(const LazInfo& info, int rl, const uint8_t* data, std::size_t size, uint64_t count, char* out_chars) {
     if (count == 0) return 0;
     if (size < static_cast<std::size_t>(rl)) throw Corrupt{"truncated chunk (shorter than one raw point)"};
@@ -641,6 +683,7 @@ std::size_t decode_pointwise(const LazInfo& info, int rl, const uint8_t* data, s
             case 6: items.push_back(std::make_unique<Point10V2>(first)); break;
             case 7: items.push_back(std::make_unique<GpsTime11V2>(first)); break;
             case 8: items.push_back(std::make_unique<Rgb12V2>(first)); break;
+            case 9: items.push_back(std::make_unique<WavePacket13V1>(first)); break;
             default: items.push_back(std::make_unique<ByteV2>(first, it.size)); break;
         }
         offsets.push_back(off);
@@ -1097,8 +1140,9 @@ void check_laz_supported(const LazInfo& info, int point_format, int record_lengt
         total += it.size;
         bool ok;
         if (info.compressor == 2) {
-            ok = it.version == 2 && ((it.type == 6 && it.size == 20 && i == 0) || (it.type == 7 && it.size == 8) ||
-                                     (it.type == 8 && it.size == 6) || (it.type == 0 && it.size > 0));
+            ok = (it.version == 2 && ((it.type == 6 && it.size == 20 && i == 0) || (it.type == 7 && it.size == 8) ||
+                                      (it.type == 8 && it.size == 6) || (it.type == 0 && it.size > 0))) ||
+                 (it.version == 1 && it.type == 9 && it.size == 29);
         } else {
             ok = (it.version == 3 || it.version == 4) && it.version == info.items[0].version &&
                  ((it.type == 10 && it.size == 30 && i == 0) || (it.type == 11 && it.size == 6) || (it.type == 12 && it.size == 8) ||
@@ -1112,7 +1156,7 @@ void check_laz_supported(const LazInfo& info, int point_format, int record_lengt
         throw Error(path, "LAZ items " + items() + " cover " + std::to_string(total) + " bytes but the point record is " +
                               std::to_string(record_length));
     const bool legacy = point_format <= 5;
-    if ((info.compressor == 2) != legacy || point_format == 4 || point_format == 5 || point_format > 8)
+    if ((info.compressor == 2) != legacy || point_format > 8)
         throw Error(path, "LAZ compressor " + info.compressor_name() + " with point format " + std::to_string(point_format) +
                               " is not supported");
 }
