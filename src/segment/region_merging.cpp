@@ -5,6 +5,7 @@
 #include <cmath>
 #include <cstddef>
 #include <cstdlib>
+#include <ctime>
 #include <new>
 #include <queue>
 #include <tbb/enumerable_thread_specific.h>
@@ -61,6 +62,12 @@ Image<uint32_t> relabel(const Image<uint32_t>& labels, const std::vector<uint32_
 }
 
 namespace {
+
+double thread_cpu_seconds() {
+    timespec ts{};
+    clock_gettime(CLOCK_THREAD_CPUTIME_ID, &ts);
+    return double(ts.tv_sec) + 1e-9 * double(ts.tv_nsec);
+}
 
 __extension__ typedef __int128 int128;  // exact sums of squared fixed-point values
 
@@ -543,6 +550,7 @@ RegionMergingResult merge_regions(const Image<float>& image, const Image<uint32_
     std::vector<uint32_t> changed, rescan;
     for (std::size_t s = 0; s < o.scales.size(); ++s) {
         const auto t0 = std::chrono::steady_clock::now();
+        const double c0 = thread_cpu_seconds();
         const double threshold = o.scales[s] * o.scales[s];
         ScaleLevel level;
         level.scale = o.scales[s];
@@ -632,6 +640,7 @@ RegionMergingResult merge_regions(const Image<float>& image, const Image<uint32_
         previous_compact = compact;
         previous_count = next;
         level.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+        level.cpu_seconds = thread_cpu_seconds() - c0;
         result.levels.push_back(std::move(level));
         progress(double(s + 1) / double(o.scales.size()), "merging");
     }

@@ -66,7 +66,8 @@ struct ScaleLevel {
     uint64_t merges = 0;
     uint64_t queue_pushes = 0;          ///< all pushes during the scale (initial included)
     uint32_t max_degree = 0;            ///< most neighbours of a region formed during the scale
-    double seconds = 0.0;
+    double seconds = 0.0;               ///< wall time of the scale
+    double cpu_seconds = 0.0;           ///< CPU time of the merging thread (less sensitive to machine load)
     /// Label at this scale (1..regions_after) of every over-segmentation
     /// region (index = input label, entry 0 = 0). Use relabel() for a raster.
     std::vector<uint32_t> label_of_input;
