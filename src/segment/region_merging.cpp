@@ -76,6 +76,7 @@ __extension__ typedef __int128 int128;  // exact sums of squared fixed-point val
 struct Neighbour {
     uint32_t id;      // node
     uint32_t shared;  // boundary length in pixel edges
+    double cost = 0;  // fusion cost of the edge, cached by the nearest-neighbour strategies
 };
 
 // A candidate merge. Order: (cost, lower key, higher key) — keys are the
@@ -145,7 +146,7 @@ public:
             for (int b = 0; b < bands_; ++b) weights_[b] = o.band_weights[b] / s;
         }
         const std::size_t fixed_bytes = sizeof(NodeHead) + 2 * sizeof(double) * bands_;
-        lines_ = (fixed_bytes + 8 * sizeof(Neighbour) + sizeof(Line) - 1) / sizeof(Line);
+        lines_ = (fixed_bytes + 10 * sizeof(Neighbour) + sizeof(Line) - 1) / sizeof(Line);
         inline_capacity_ = static_cast<uint32_t>((lines_ * sizeof(Line) - fixed_bytes) / sizeof(Neighbour));
         storage_.resize(static_cast<std::size_t>(n_) * lines_);
         for (uint32_t r = 0; r < n_; ++r) {
@@ -334,14 +335,53 @@ public:
     }
 
     // Nearest neighbour of r: lowest (cost, key).
+    // Also caches the cost on r's side of each edge.
     void update_nn(uint32_t r) {
         uint32_t best = 0, best_key = UINT32_MAX;
         double best_cost = INFINITY;
-        for (const Neighbour& k : neighbours(r)) {
-            const double c = cost(r, k.id, k.shared);
-            if (c < best_cost || (c == best_cost && key_of(k.id) < best_key)) best = k.id, best_cost = c, best_key = key_of(k.id);
+        NodeHead& R = head(r);
+        for (Neighbour* k = R.list; k != R.list + R.degree; ++k) {
+            const double c = k->cost = cost(r, k->id, k->shared);
+            if (c < best_cost || (c == best_cost && key_of(k->id) < best_key)) best = k->id, best_cost = c, best_key = key_of(k->id);
         }
         set_nn(r, best, best_cost);
+    }
+    // Nearest neighbour of r from the cached edge costs (exact: an edge's
+    // cost changes only when one of its regions merges, and score_merged
+    // then rewrites it on both sides).
+    void rescan_nn(uint32_t r) {
+        uint32_t best = 0, best_key = UINT32_MAX;  // best_key loaded only on a tie
+        double best_cost = INFINITY;
+        for (const Neighbour& k : neighbours(r)) {
+            if (k.cost < best_cost) {
+                best = k.id, best_cost = k.cost, best_key = UINT32_MAX;
+            } else if (k.cost == best_cost) {
+                if (best_key == UINT32_MAX) best_key = key_of(best);
+                if (key_of(k.id) < best_key) best = k.id, best_key = key_of(k.id);
+            }
+        }
+        set_nn(r, best, best_cost);
+    }
+    // After a merge of a and b into m: one cost per neighbour of m, cached on
+    // both sides of the edge, gives m's nearest neighbour and is offered to
+    // the neighbour (its costs changed only towards m). Neighbours whose
+    // nearest neighbour was a or b go to `rescan`, those whose nearest
+    // neighbour became m to `changed`.
+    void score_merged(uint32_t m, uint32_t a, uint32_t b, std::vector<uint32_t>& changed, std::vector<uint32_t>& rescan) {
+        NodeHead& M = head(m);
+        uint32_t best = 0, best_key = UINT32_MAX;
+        double best_cost = INFINITY;
+        for (Neighbour* e = M.list; e != M.list + M.degree; ++e) {
+            const double c = e->cost = cost(m, e->id, e->shared);
+            NodeHead& K = head(e->id);
+            find(K, m)->cost = c;
+            if (c < best_cost || (c == best_cost && K.key < best_key)) best = e->id, best_cost = c, best_key = K.key;
+            // A neighbour that pointed at the merged pair always needs a
+            // fresh entry: its old one carries the pair's old versions.
+            if (K.nn == a || K.nn == b) rescan.push_back(e->id);
+            else if (offer_candidate(e->id, m, c)) changed.push_back(e->id);
+        }
+        set_nn(m, best, best_cost);
     }
     // Makes `candidate` r's nearest neighbour if it beats the current one on (cost, key).
     bool offer_candidate(uint32_t r, uint32_t candidate, double c) {
@@ -361,7 +401,7 @@ public:
         const uint32_t s = head(a).degree >= head(b).degree ? a : b;  // survivor slot
         const uint32_t t = s == a ? b : a;                            // dies
         prefetch_neighbours(t, static_cast<int>(lines_));  // their lists are edited below
-        prefetch_neighbours(s, 2);                          // their costs are read after the merge
+        prefetch_neighbours(s, static_cast<int>(lines_));  // scored, and their lists updated, after the merge
         NodeHead& S = head(s);
         NodeHead& T = head(t);
         const uint32_t shared = find(S, t)->shared;
@@ -598,26 +638,9 @@ RegionMergingResult merge_regions(const Image<float>& image, const Image<uint32_
                 for (const Neighbour& k : g.neighbours(m)) push_pair(m, k.id, g.cost(m, k.id, k.shared));
                 continue;
             }
-            // One cost per neighbour of m serves both m's nearest neighbour and
-            // the neighbour's: a neighbour's costs changed only towards m, so
-            // it is rescanned only when its nearest neighbour was one of the
-            // merged pair. Only regions whose nearest neighbour changed need a
-            // (new) queue entry: an unchanged pair keeps its valid entry, since
-            // its cost can only change through a merge of one of its regions.
             changed.clear(), rescan.clear();
-            uint32_t best = 0;
-            double best_cost = INFINITY;
-            for (const Neighbour& k : g.neighbours(m)) {
-                const double c = g.cost(m, k.id, k.shared);
-                if (c < best_cost || (c == best_cost && g.key_of(k.id) < g.key_of(best))) best = k.id, best_cost = c;  // best = 0 only while best_cost is infinite
-                // A neighbour that pointed at the merged pair always needs a
-                // fresh entry: its old one carries the pair's old versions.
-                if (g.nn(k.id) == e.a || g.nn(k.id) == e.b) rescan.push_back(k.id);
-                else if (g.offer_candidate(k.id, m, c)) changed.push_back(k.id);
-            }
-            g.set_nn(m, best, best_cost);
-            for (uint32_t k : rescan) g.prefetch_neighbours(k, 2);
-            for (uint32_t k : rescan) g.update_nn(k);
+            g.score_merged(m, e.a, e.b, changed, rescan);
+            for (uint32_t k : rescan) g.rescan_nn(k);
             offer_nn(m);
             for (uint32_t k : rescan) offer_nn(k);
             for (uint32_t k : changed) offer_nn(k);
