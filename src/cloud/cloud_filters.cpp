@@ -46,9 +46,10 @@ void grid_knn(const PointCloud& c, std::size_t k, Visit&& visit) {
     double minx = INFINITY, miny = INFINITY, maxx = -INFINITY, maxy = -INFINITY;
     for (std::size_t i = 0; i < n; ++i)
         minx = std::min(minx, c.x[i]), maxx = std::max(maxx, c.x[i]), miny = std::min(miny, c.y[i]), maxy = std::max(maxy, c.y[i]);
-    // About k/2 points per cell on average, so the 3 x 3 block holds ~4.5 k.
+    // About 0.3 k points per cell on average (the 3 x 3 block holds ~2.7 k;
+    // 0.5 k and 0.2 k measured 10-15 % slower on an 8 pts/m² town).
     const double area = std::max((maxx - minx) * (maxy - miny), 1e-12);
-    double cell = std::sqrt(area * std::max(1.0, 0.5 * double(k)) / double(n));
+    double cell = std::sqrt(area * std::max(1.0, 0.3 * double(k)) / double(n));
     if (!(cell > 0.0) || !std::isfinite(cell)) cell = 1.0;
     const auto nx = static_cast<int>(std::min(65535.0, std::floor((maxx - minx) / cell) + 1));
     const auto ny = static_cast<int>(std::min(65535.0, std::floor((maxy - miny) / cell) + 1));
