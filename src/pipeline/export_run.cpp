@@ -11,12 +11,13 @@
 #include "crs/crs.hpp"
 #include "io/cityjson_writer.hpp"
 #include "io/citygml_writer.hpp"
+#include "io/tiles3d_writer.hpp"
 #include "io/vector.hpp"
 
 namespace cityforge {
 
 namespace {
-const std::vector<std::string> kFormats{"geojson", "gpkg", "citygml", "cityjson", "cityjsonseq"};
+const std::vector<std::string> kFormats{"geojson", "gpkg", "citygml", "cityjson", "cityjsonseq", "3dtiles", "gltf"};
 // Attributes we compute; same-named source attributes are replaced (status and reason merged).
 const std::set<std::string> kOwnFields{"status", "reason", "lod1_valid", "lod1_errors", "lod1_volume_m3",
                                        "lod2_valid", "lod2_errors", "lod2_volume_m3", "roof_type"};
@@ -48,7 +49,7 @@ std::string join(const std::vector<std::string>& v) {
 void ExportOptions::validate() const {
     if (formats.empty()) throw Error("--formats", "name at least one format");
     for (const std::string& f : formats)
-        if (!wants(kFormats, f)) throw Error("--formats", "unknown format '" + f + "' (geojson, gpkg, citygml, cityjson, cityjsonseq)");
+        if (!wants(kFormats, f)) throw Error("--formats", "unknown format '" + f + "' (geojson, gpkg, citygml, cityjson, cityjsonseq, 3dtiles, gltf)");
     if (lods.empty()) throw Error("--lod", "name at least one level of detail");
     for (int l : lods)
         if (l < 0 || l > 2) throw Error("--lod", "levels of detail are 0, 1 and 2");
@@ -206,6 +207,16 @@ ExportReport write_city_model(const CityModel& model, const CrsInfo& crs, const 
             CityJsonWriteOptions seq = cj;
             seq.sequence = true;
             write_cityjson(p, model, seq);
+        });
+    if (wants(o.formats, "gltf")) timed("gltf", "buildings.glb", [&](const std::string& p) { write_glb(p, model, wants(o.lods, 2)); });
+    if (wants(o.formats, "3dtiles"))
+        timed("3dtiles", "3dtiles", [&](const std::string& p) {
+            Tiles3dWriteOptions t = o.tiles;
+            t.prefer_lod2 = wants(o.lods, 2);
+            const Tiles3dWriteReport tr = write_3dtiles(p, model, crs, t);
+            rep.files["3dtiles"] = (fs::path(p) / "tileset.json").string();
+            log::info(p + ": " + std::to_string(tr.buildings) + " buildings in " + std::to_string(tr.content_tiles) + " tiles (depth " +
+                      std::to_string(tr.depth) + ", " + std::to_string(tr.triangles) + " triangles)");
         });
     progress(1.0, "written");
     return rep;
