@@ -42,7 +42,7 @@ void add_run_inputs(CLI::App* cmd, RunInputs& r) {
     cmd->add_option("--tile-size", r.tile_size, "Tile core edge in pixels (default 4000)");
     cmd->add_option("--overlap-m", r.overlap_m, "Context around each tile, metres (default 100)");
     cmd->add_option("--threads", r.threads, "Threads (default: all cores)");
-    cmd->add_option("--formats", r.formats, "Comma-separated: geojson, gpkg, citygml, cityjson, cityjsonseq");
+    cmd->add_option("--formats", r.formats, "Comma-separated: geojson, gpkg, citygml, cityjson, cityjsonseq, 3dtiles, gltf");
     cmd->add_option("--lod", r.lods, "Comma-separated levels of detail: 0, 1, 2");
     cmd->add_option("--vertical-crs", r.vertical_crs, "Vertical CRS when the cloud names none, e.g. EPSG:5709");
     cmd->add_option("--id-field", r.id_field, "Building id attribute of given footprints");

@@ -35,6 +35,13 @@ TEST_CASE("The run's viewer page works in headless Chromium from disk", "[view][
     REQUIRE(test::run_cli("audit footprints --quiet --pred " + (dir / "run/buildings.gpkg") + " --ref " + town.truth_path + " --out " +
                           (dir / "run/audit_footprints"))
                 .exit_code == 0);
+    // `run` wrote the page; `view` refuses to replace it without --overwrite, then writes it with the audit.
+    REQUIRE(fs::exists(dir / "run/view/index.html"));
+    const auto again = test::run_cli("view " + (dir / "run"));
+    CHECK(again.exit_code == 1);
+    CHECK(again.err.find("exists (use --overwrite") != std::string::npos);
+    const auto view = test::run_cli("view --quiet --overwrite " + (dir / "run"));
+    CHECK(view.exit_code == 0);
     ViewOptions vo;
     vo.overwrite = true;
     const ViewReport rep = write_view(dir / "run", vo);
