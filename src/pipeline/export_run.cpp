@@ -19,7 +19,7 @@ namespace cityforge {
 namespace {
 const std::vector<std::string> kFormats{"geojson", "gpkg", "citygml", "cityjson", "cityjsonseq", "3dtiles", "gltf"};
 // Attributes we compute; same-named source attributes are replaced (status and reason merged).
-const std::set<std::string> kOwnFields{"status", "reason", "lod1_valid", "lod1_errors", "lod1_volume_m3",
+const std::set<std::string> kOwnFields{"cityforge_id", "roof_z", "status", "reason", "lod1_valid", "lod1_errors", "lod1_volume_m3",
                                        "lod2_valid", "lod2_errors", "lod2_volume_m3", "roof_type"};
 bool wants(const std::vector<std::string>& v, const std::string& s) { return std::find(v.begin(), v.end(), s) != v.end(); }
 bool wants(const std::vector<int>& v, int s) { return std::find(v.begin(), v.end(), s) != v.end(); }
@@ -54,6 +54,7 @@ void ExportOptions::validate() const {
     for (int l : lods)
         if (l < 0 || l > 2) throw Error("--lod", "levels of detail are 0, 1 and 2");
     if (geojson_crs != "rfc7946" && geojson_crs != "native") throw Error("--geojson-crs", "must be rfc7946 or native");
+    if (!database.empty() && !is_database_name(database)) throw Error("--db", "give a database connection, PG:\"dbname=... [tables=NAME]\"");
     if (!(validity.planarity_tolerance > 0) || !(validity.snap_tolerance > 0)) throw Error("validity", "tolerances must be > 0");
 }
 
@@ -135,7 +136,7 @@ ExportReport write_city_model(const CityModel& model, const CrsInfo& crs, const 
         ++done;
     };
 
-    if (wants(o.formats, "geojson") || wants(o.formats, "gpkg")) {
+    if (wants(o.formats, "geojson") || wants(o.formats, "gpkg") || !o.database.empty()) {
         // Flat tables: the source attributes plus ours, one row per building (failed ones say why).
         std::vector<FieldDefinition> fields{{"cityforge_id", FieldType::string}};
         std::vector<std::string> names;
@@ -193,6 +194,14 @@ ExportReport write_city_model(const CityModel& model, const CrsInfo& crs, const 
                 vo.driver = "GPKG";
                 write_polygon_features(p, crs, fields, features, vo);
             });
+        if (!o.database.empty()) {
+            const auto t0 = std::chrono::steady_clock::now();
+            VectorWriteOptions vo;
+            vo.driver = "PostgreSQL";
+            write_polygon_features(o.database, crs, fields, features, vo);
+            rep.seconds["database"] = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+            rep.files["database"] = o.database;
+        }
     }
     if (wants(o.formats, "citygml")) {
         if (wants(o.lods, 1) || wants(o.lods, 0))

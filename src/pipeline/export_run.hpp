@@ -27,6 +27,9 @@ struct ExportOptions {
     std::string ground_field = "ground_z";   ///< ground height attribute, vertical CRS units
     std::string height_field = "height_m";   ///< LOD1 height above ground attribute, metres
     SolidValidityOptions validity;
+    /// Also write the building table (the GeoPackage's rows) to a database: "PG:dbname=... [tables=NAME]"
+    /// (default table `buildings`, replaced in one transaction); empty = none.
+    std::string database;
     Tiles3dWriteOptions tiles;               ///< 3D Tiles quadtree (prefer_lod2 follows `lods`)
     void validate() const;
 };
