@@ -132,7 +132,7 @@ ExportReport write_city_model(const CityModel& model, const CrsInfo& crs, const 
         const std::string path = (fs::path(out_dir) / file).string();
         write(path);
         rep.seconds[format] = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-        rep.files[format] = path;
+        rep.files.emplace(format, path);  // a writer may have named its main file (3dtiles: tileset.json)
         ++done;
     };
 
