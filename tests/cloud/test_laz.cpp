@@ -360,7 +360,7 @@ TEST_CASE("heights on a LAZ gives the same output bytes as on its LAS twin", "[l
     CHECK(la == lb);
 }
 
-TEST_CASE("CLI: cloud translate and info on LAZ; refusals are one line and non-zero", "[laz][cli]") {
+TEST_CASE("CLI: cloud translate and info on LAZ - refusals are one line and non-zero", "[laz][cli]") {
     ScratchDir dir("laz_cli");
     const auto ok = cityforge::test::run_cli("cloud translate " + corpus("Semis_2022_0906_6665_LA93_IGN69_ok.laz") + " " + dir / "o.las");
     INFO(ok.err);
