@@ -17,7 +17,21 @@ int main(int argc, char** argv) try {
     }
     TrainOptions o;
     for (int i = 2; i + 1 < argc; i += 2) o.orthos.push_back(argv[i]), o.labels.push_back(argv[i + 1]);
+    // Developer overrides (experiments): FOLDS, SCALES=a,b,c, HMIN, SIGMA, ROUNDS, DEPTH, SHARE.
     if (const char* f = std::getenv("FOLDS")) o.folds = std::atoi(f);
+    if (const char* f = std::getenv("SCALES")) {
+        o.detector.segmentation.scales.clear();
+        for (std::string t = f; !t.empty();) {
+            const auto c = t.find(',');
+            o.detector.segmentation.scales.push_back(std::atof(t.substr(0, c).c_str()));
+            t = c == std::string::npos ? "" : t.substr(c + 1);
+        }
+    }
+    if (const char* f = std::getenv("HMIN")) o.detector.segmentation.watershed.h_minima = std::atof(f);
+    if (const char* f = std::getenv("SIGMA")) o.detector.segmentation.watershed.smoothing_sigma_px = std::atof(f);
+    if (const char* f = std::getenv("ROUNDS")) o.detector.booster.rounds = std::atoi(f);
+    if (const char* f = std::getenv("DEPTH")) o.detector.booster.max_depth = std::atoi(f);
+    if (const char* f = std::getenv("SHARE")) o.detector.min_label_share = std::atof(f);
     const TrainReport r = run_train(argv[1], o, true);
     for (const FoldReport& f : r.folds)
         std::printf("fold %d: objects P %.3f R %.3f F1 %.3f (%zu/%zu/%zu)  segment px P %.3f R %.3f F1 %.3f\n", f.fold, f.objects.precision,

@@ -57,11 +57,12 @@ std::string to_string(DetectionMode m) {
 }
 
 OrthoDetector ortho_detector_from_string(const std::string& s) {
+    if (s == "auto") return OrthoDetector::automatic;
     if (s == "model") return OrthoDetector::model;
     if (s == "rules") return OrthoDetector::rules;
-    throw Error("--detector", "must be model or rules, not '" + s + "'");
+    throw Error("--detector", "must be auto, model or rules, not '" + s + "'");
 }
-std::string to_string(OrthoDetector d) { return d == OrthoDetector::model ? "model" : "rules"; }
+std::string to_string(OrthoDetector d) { return d == OrthoDetector::automatic ? "auto" : d == OrthoDetector::model ? "model" : "rules"; }
 
 void FootprintsRunOptions::validate() const {
     const bool heights = !cloud.empty() || !ndsm.empty() || ndsm_band > 0;
@@ -80,7 +81,10 @@ void FootprintsRunOptions::validate() const {
         throw Error("--mode", to_string(mode) + " needs an ortho (--ortho)");
     if (!segments.empty() && mode == DetectionMode::cloud_only) throw Error("--segments", "segments need an ortho mode, not cloud_only");
     if (!segments.empty() && ortho.empty()) throw Error("--segments", "segments need the ortho they were made from (--ortho)");
-    if (!model.empty() && detector != OrthoDetector::model) throw Error("--model", "is used by --detector model, not rules");
+    if (!model.empty() && detector == OrthoDetector::rules) throw Error("--model", "is used by --detector model, not rules");
+    if (!segments.empty() && detector == OrthoDetector::model)
+        throw Error("--segments", "the model segments the ortho itself (at its own scales); --segments is for --detector rules");
+    if (!segments.empty() && !model.empty()) throw Error("--segments", "the model segments the ortho itself; give --model or --segments");
     segmentation.validate();
     if (!(simplify_m >= 0.0)) throw Error("--simplify-m", "must be >= 0");
     mask.validate();
@@ -287,7 +291,7 @@ FootprintsReport run_footprints(const std::string& output_path, const Footprints
             throw Error(o.ortho, "has " + std::to_string(info.band_count()) + " bands; --ndsm-band " + std::to_string(o.ndsm_band) + " does not exist");
         if (o.nir_band > info.band_count())
             throw Error(o.ortho, "has " + std::to_string(info.band_count()) + " bands; --nir-band " + std::to_string(o.nir_band) + " does not exist");
-        const bool learned = mode == DetectionMode::ortho_only && o.detector == OrthoDetector::model;  // reads its own bands
+        const bool learned = mode == DetectionMode::ortho_only && o.detector != OrthoDetector::rules && o.segments.empty();  // reads its own bands
         if ((mode != DetectionMode::cloud_only && !learned) || o.ndsm_band > 0) img = read_ortho(*ortho);
     }
     Image<float> ndsm_band;
@@ -348,9 +352,8 @@ FootprintsReport run_footprints(const std::string& output_path, const Footprints
     if (ortho) co.gsd_m = ortho->info().gsd.x_m;
     // The NIR band's index among the colours (the nDSM band left them).
     co.nir_band = o.nir_band > 0 ? o.nir_band - 1 - (o.ndsm_band > 0 && o.ndsm_band < o.nir_band ? 1 : 0) : -1;
-    if (mode == DetectionMode::ortho_only && o.detector == OrthoDetector::model) {
+    if (mode == DetectionMode::ortho_only && o.detector != OrthoDetector::rules && o.segments.empty()) {
         // Learned detection (src/detect): segments and outlines from the model's own segmentation.
-        if (!o.segments.empty()) throw Error("--segments", "the model segments the ortho itself; --segments is for --detector rules");
         const DetectionImage di = read_detection_image(o.ortho, o.nir_band);
         const std::string path = o.model.empty() ? default_model_path(di.layout) : o.model;
         const detect::DetectorModel model = detect::read_model_file(path);

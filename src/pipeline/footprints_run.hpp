@@ -30,8 +30,10 @@ std::string to_string(DetectionMode m);
 
 /// Ortho-only detector: a learned model (src/detect; the shipped default
 /// model for the image's bands unless one is given) or the hand-set
-/// segment rules (footprint/segment_classifier).
-enum class OrthoDetector { model, rules };
+/// segment rules (footprint/segment_classifier); `automatic` = the model,
+/// or the rules when segments made beforehand are given (--segments: the
+/// model segments the ortho itself, at its own scales).
+enum class OrthoDetector { automatic, model, rules };
 OrthoDetector ortho_detector_from_string(const std::string& s);
 std::string to_string(OrthoDetector d);
 FootprintFit footprint_fit_from_string(const std::string& s);
@@ -62,7 +64,7 @@ struct FootprintsRunOptions {
     /// ortho modes) and the per-building voting of the ortho_cloud mode.
     OrthoRefineOptions segmentation;
     SegmentClassifierOptions classifier;  ///< ortho-only: segment rules (--detector rules)
-    OrthoDetector detector = OrthoDetector::model;  ///< ortho-only detector
+    OrthoDetector detector = OrthoDetector::automatic;  ///< ortho-only detector
     /// ortho-only, --detector model: the model file (`cityforge train`);
     /// empty = the shipped default for the ortho's bands.
     std::string model;
