@@ -34,7 +34,7 @@ std::vector<uint8_t> bytes_of(const std::string& path) {
 std::string default_rgb_model() { return default_model_path(detect::BandLayout{3, -1}); }
 }  // namespace
 
-TEST_CASE("A detector trained on one synthetic town finds the buildings of another; CV folds partition the segments; same bytes for 1 and 2 threads",
+TEST_CASE("A detector trained on one synthetic town finds the buildings of another - CV folds partition the segments - same bytes for 1 and 2 threads",
           "[detect][synth]") {
     ScratchDir dir("detect_synth");
     ScratchDir a_dir("detect_town_a"), b_dir("detect_town_b");
@@ -195,7 +195,7 @@ TEST_CASE("Cross-validated detection on a real 0.3 m RGBA drone ortho (OAM Kampa
     CHECK(r.pooled_segments.f1 >= 0.70);  // measured 0.764
 }
 
-TEST_CASE("cityforge train and footprints --model from the command line; bad inputs fail in one line", "[detect][cli]") {
+TEST_CASE("cityforge train and footprints --model from the command line - bad inputs fail in one line", "[detect][cli]") {
     ScratchDir dir("detect_cli");
     const SynthResult s = make_town(dir, 150, 8, 0);
     const std::string model = dir / "m.cfdet";
