@@ -11,6 +11,7 @@ PACKAGES=(
   libopencv-imgproc-dev libopencv-core-dev
   catch2 libtbb-dev nlohmann-json3-dev libcli11-dev libgeos-dev libnanoflann-dev
   libxml2-utils
+  libxgboost-dev
   openmpi-bin
   chromium postgresql-15 postgresql-15-postgis-3
 )
