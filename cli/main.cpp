@@ -41,6 +41,7 @@ int main(int argc, char** argv) {
     cli::add_run_commands(app, g, commands);
     cli::add_audit_commands(app, g, commands);
     cli::add_view_command(app, g, commands);
+    cli::add_photo_commands(app, g, commands);
 
     try {
         app.parse(argc, argv);

@@ -19,5 +19,6 @@ void add_roofs_command(CLI::App& parent, const GlobalFlags& g, CommandList& out)
 void add_run_commands(CLI::App& parent, const GlobalFlags& g, CommandList& out);        // commands/run.cpp (run, plan, merge-tiles)
 void add_view_command(CLI::App& parent, const GlobalFlags& g, CommandList& out);         // commands/view.cpp
 void add_audit_commands(CLI::App& parent, const GlobalFlags& g, CommandList& out);      // commands/audit.cpp (audit footprints, ...)
+void add_photo_commands(CLI::App& parent, const GlobalFlags& g, CommandList& out);      // commands/photo.cpp (stereo, orient, densify, photo)
 
 }  // namespace cityforge::cli

@@ -13,6 +13,7 @@ void add_synth_command(CLI::App& parent, const GlobalFlags& g, CommandList& out)
         SynthOptions options;
         std::string cloud_mode = "lidar";
         std::vector<double> origin;
+        std::vector<int> view_size;
     };
     auto s = std::make_shared<State>();
     auto* cmd = parent.add_subcommand("synth", "Generate a synthetic town with exact ground truth");
@@ -26,15 +27,27 @@ void add_synth_command(CLI::App& parent, const GlobalFlags& g, CommandList& out)
     cmd->add_option("--cloud-mode", s->cloud_mode, "lidar or photo (dense image matching: noisier, gaps)")
         ->check(CLI::IsMember({"lidar", "photo"}))
         ->capture_default_str();
+    auto& v = s->options.views;
+    cmd->add_option("--views", v.views, "Perspective aerial photos to render into OUT/views (0 = none), with OUT/surface.las")
+        ->capture_default_str();
+    cmd->add_option("--view-gsd", v.gsd_m, "Photo ground sample distance at mean terrain height, metres")->capture_default_str();
+    cmd->add_option("--view-size", s->view_size, "Photo width and height in pixels (default 640 480)")->expected(2);
+    cmd->add_option("--forward-overlap", v.forward_overlap, "Along-strip overlap of neighbouring photos")->capture_default_str();
+    cmd->add_option("--side-overlap", v.side_overlap, "Overlap of neighbouring strips")->capture_default_str();
+    cmd->add_option("--surface-spacing", v.surface_spacing_m, "Sample spacing of OUT/surface.las, metres")->capture_default_str();
     out.push_back({cmd, [s, &g]() {
                        SynthOptions o = s->options;
                        if (s->origin.size() == 2) o.origin_x = s->origin[0], o.origin_y = s->origin[1];
                        o.cloud_mode = cloud_mode_from_string(s->cloud_mode);
+                       if (s->view_size.size() == 2) o.views.width_px = s->view_size[0], o.views.height_px = s->view_size[1];
                        const SynthResult r = write_synthetic_town(s->out, o, make_progress(g));
                        if (!g.quiet)
                            std::fprintf(stderr, "cityforge: synth wrote %s (%d x %d px, %d buildings, %d trees, %llu points) in %.1f s\n",
                                         s->out.c_str(), r.width, r.height, r.buildings, r.trees,
                                         static_cast<unsigned long long>(r.points), r.seconds);
+                       if (!g.quiet && r.views > 0)
+                           std::fprintf(stderr, "cityforge: synth rendered %d photos into %s and %llu exact surface points\n", r.views,
+                                        r.views_dir.c_str(), static_cast<unsigned long long>(r.surface_points));
                        return 0;
                    }});
 }

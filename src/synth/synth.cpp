@@ -18,6 +18,7 @@
 #include "crs/crs.hpp"
 #include "io/vector.hpp"
 #include "raster/raster.hpp"
+#include "synth/render.hpp"
 
 namespace cityforge {
 
@@ -35,23 +36,11 @@ void SynthOptions::validate() const {
     if (size_m / gsd_m > 100000.0) throw Error("--size-m", "scene would exceed 100000 pixels per side");
     if (!(cloud_density_m2 >= 0.0 && cloud_density_m2 <= 200.0)) throw Error("--cloud-density", "must be between 0 and 200 points/m2");
     if (!std::isfinite(origin_x) || !std::isfinite(origin_y)) throw Error("--origin", "must be finite");
+    if (views.views != 0) views.validate();
 }
 
-namespace {
+namespace synth {
 
-using synth::Scene;
-using synth::SceneBuilding;
-
-constexpr double kSunAzimuthDeg = 135.0;   // sun in the south-east: shadows fall north-west
-constexpr double kSunElevationDeg = 48.0;
-
-struct Rendered {
-    Image<uint32_t> building;   // building id per pixel (0 = none), pixel-centre sampling
-    Image<uint32_t> tree;       // visible tree id + 1 per pixel (0 = none)
-    Image<float> dsm;           // top surface, absolute metres
-    Image<uint8_t> shadow;      // 1 = in cast shadow
-    Image<uint8_t> rgb;
-};
 
 // Pixel-centre rasterisation of buildings and trees plus the DSM.
 Rendered render(const Scene& scene, double gsd, const Progress& progress) {
@@ -175,6 +164,16 @@ void colourise(const Scene& scene, double gsd, Rendered& r) {
         }
     });
 }
+
+}  // namespace synth
+
+namespace {
+
+using synth::Rendered;
+using synth::Scene;
+using synth::SceneBuilding;
+using synth::kSunAzimuthDeg;
+using synth::kSunElevationDeg;
 
 // Points of one raster row: surface z at exact positions, with mode-dependent
 // noise, gaps and outliers. A pure function of (seed, row), so rows can be made
@@ -315,8 +314,8 @@ SynthResult write_synthetic_town(const std::string& out_dir, const SynthOptions&
 
     const Scene scene = synth::generate_scene({o.size_m, o.seed});
     progress(0.05, "scene");
-    Rendered r = render(scene, o.gsd_m, progress.sub(0.05, 0.35));
-    colourise(scene, o.gsd_m, r);
+    Rendered r = synth::render(scene, o.gsd_m, progress.sub(0.05, 0.35));
+    synth::colourise(scene, o.gsd_m, r);
     res.width = res.height = r.building.width;
     const GeoTransform gt{o.origin_x, o.gsd_m, o.origin_y + res.height * o.gsd_m, -o.gsd_m};
     GeoTiffWriteOptions rgb_options;
@@ -356,6 +355,14 @@ SynthResult write_synthetic_town(const std::string& out_dir, const SynthOptions&
         res.points = write_cloud(res.cloud_path, scene, r, o.gsd_m, o, crs.wkt, progress.sub(0.5, 0.98));
     }
 
+    if (o.views.views > 0) {
+        const synth::ViewsResult v = synth::write_views(out_dir, scene, o.views, o.epsg, o.origin_x, o.origin_y, o.seed, progress.sub(0.98, 0.995));
+        res.views_dir = (fs::path(out_dir) / "views").string();
+        res.surface_path = (fs::path(out_dir) / "surface.las").string();
+        res.views = static_cast<int>(v.cameras.cameras.size());
+        res.surface_points = v.surface_points;
+    }
+
     nlohmann::json j;
     j["generator"] = "cityforge synth";
     j["parameters"] = {{"size_m", o.size_m},       {"gsd_m", o.gsd_m},
@@ -373,6 +380,12 @@ SynthResult write_synthetic_town(const std::string& out_dir, const SynthOptions&
                    {"shapes", shape_counts}, {"roof_types", roof_counts}};
     j["files"] = {{"ortho", "ortho.tif"}, {"truth", "truth.geojson"}, {"truth_raster", "truth_buildings.tif"},
                   {"cloud", o.cloud_density_m2 > 0 ? nlohmann::json("cloud.las") : nlohmann::json(nullptr)}};
+    if (o.views.views > 0)
+        j["views"] = {{"folder", "views"}, {"count", res.views}, {"gsd_m", o.views.gsd_m},
+                      {"width_px", o.views.width_px}, {"height_px", o.views.height_px},
+                      {"forward_overlap", o.views.forward_overlap}, {"side_overlap", o.views.side_overlap},
+                      {"cameras", "views/cameras_truth.json"}, {"gps", "views/gps.txt"}, {"camera_matrix", "views/K.txt"},
+                      {"surface", "surface.las"}, {"surface_points", res.surface_points}};
     write_text_file(res.scene_path, j.dump(2) + "\n");
     progress(1.0, "done");
     res.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();

@@ -7,6 +7,7 @@
 
 #include "core/progress.hpp"
 #include "synth/scene.hpp"
+#include "synth/views.hpp"
 
 namespace cityforge {
 
@@ -23,6 +24,8 @@ struct SynthOptions {
     double origin_y = 4400000.0;    ///< lower-left corner northing, CRS units
     double cloud_density_m2 = 8.0;  ///< points per square metre; 0 = no cloud
     CloudMode cloud_mode = CloudMode::lidar;
+    /// Perspective photos and the exact surface (views/, surface.las); views.views = 0 (default) = none.
+    synth::ViewsOptions views;
     /// Throws Error on out-of-range values (size 20..20000 m, GSD 0.05..10 m, ...).
     void validate() const;
 };
@@ -33,6 +36,10 @@ struct SynthResult {
     std::string truth_path;        ///< truth.geojson
     std::string truth_raster_path; ///< truth_buildings.tif (UInt32 building id per pixel, 0 = none)
     std::string scene_path;        ///< scene.json
+    std::string views_dir;         ///< views/ (photos, cameras_truth.json, gps.txt); empty when none
+    std::string surface_path;      ///< surface.las (exact surface); empty when no views
+    int views = 0;
+    uint64_t surface_points = 0;
     int width = 0, height = 0;     ///< ortho size in pixels
     int buildings = 0;
     int trees = 0;

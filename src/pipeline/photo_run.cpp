@@ -1,0 +1,551 @@
+#include "pipeline/photo_run.hpp"
+
+#include <algorithm>
+#include <cerrno>
+#include <chrono>
+#include <cmath>
+#include <fcntl.h>
+#include <filesystem>
+#include <fstream>
+#include <gdal_priv.h>
+#include <map>
+#include <nlohmann/json.hpp>
+#include <optional>
+#include <spawn.h>
+#include <sstream>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
+
+#include "cloud/las.hpp"
+#include "core/atomic_file.hpp"
+#include "core/error.hpp"
+#include "crs/crs.hpp"
+#include "photo/camera.hpp"
+#include "photo/colmap_model.hpp"
+
+namespace cityforge {
+
+namespace fs = std::filesystem;
+
+void check_output_free(const std::string& path, bool overwrite) {
+    if (!overwrite && fs::exists(path)) throw Error(path, "exists (give --overwrite to replace it)");
+}
+
+void StereoRunOptions::validate() const {
+    if (left_path.empty() || right_path.empty()) throw Error("stereo", "give --left and --right images");
+    if (cameras_path.empty()) throw Error("--cameras", "give the cameras file of the images");
+    if (out_path.empty()) throw Error("--out", "give the output LAS file");
+    stereo.validate();
+}
+
+namespace {
+
+cv::Mat read_colour_image(const std::string& path) {
+    if (!fs::exists(path)) throw Error(path, "no such image");
+    cv::Mat m = cv::imread(path, cv::IMREAD_COLOR);
+    if (m.empty()) throw Error(path, "not an image OpenCV can read");
+    return m;
+}
+
+void write_cloud_las(const std::string& path, const PointCloud& cloud, const std::string& wkt, const std::string& software) {
+    double ox = 0, oy = 0;
+    if (cloud.size()) ox = std::floor(cloud.x[0] / 1000) * 1000, oy = std::floor(cloud.y[0] / 1000) * 1000;
+    LasWriter w(path, {0.001, 0.001, 0.001}, {ox, oy, 0.0}, wkt, software);
+    w.write(cloud);
+    w.close();
+}
+
+}  // namespace
+
+StereoRunResult run_stereo(const StereoRunOptions& o, const Progress& progress) {
+    o.validate();
+    const auto t0 = std::chrono::steady_clock::now();
+    check_output_free(o.out_path, o.overwrite);
+    const photo::CameraSet set = photo::read_cameras_json(o.cameras_path);
+    const std::string lname = fs::path(o.left_path).filename().string(), rname = fs::path(o.right_path).filename().string();
+    const photo::PhotoCamera& cl = set.cameras[set.find(lname, o.cameras_path)];
+    const photo::PhotoCamera& cr = set.cameras[set.find(rname, o.cameras_path)];
+    if (lname == rname) throw Error(o.right_path, "left and right are the same image");
+    const cv::Mat left = read_colour_image(o.left_path), right = read_colour_image(o.right_path);
+    if (left.cols != cl.width || left.rows != cl.height)
+        throw Error(o.left_path, "image is " + std::to_string(left.cols) + " x " + std::to_string(left.rows) + " px but " +
+                                     o.cameras_path + " says " + std::to_string(cl.width) + " x " + std::to_string(cl.height));
+    if (right.cols != cr.width || right.rows != cr.height)
+        throw Error(o.right_path, "image is " + std::to_string(right.cols) + " x " + std::to_string(right.rows) + " px but " +
+                                      o.cameras_path + " says " + std::to_string(cr.width) + " x " + std::to_string(cr.height));
+    const photo::StereoResult s =
+        photo::stereo_pair_cloud(left, right, cl, cr, o.stereo, set.scene_z_range_m, lname + " + " + rname, progress.sub(0, 0.9));
+    write_cloud_las(o.out_path, s.cloud, set.crs_wkt, "cityforge stereo");
+    StereoRunResult r;
+    r.points = s.cloud.size();
+    r.baseline_m = s.baseline_m;
+    r.min_disparity_px = s.min_disparity_px, r.num_disparities_px = s.num_disparities_px;
+    r.matched_pixels = s.matched_pixels, r.lr_rejected = s.lr_rejected;
+    r.crs = set.crs;
+    r.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    progress(1.0, "done");
+    return r;
+}
+
+}  // namespace cityforge
+
+// ---------------------------------------------------------------- orient
+
+extern char** environ;
+
+namespace cityforge {
+
+void OrientRunOptions::validate() const {
+    if (images_dir.empty()) throw Error("--images", "give the folder of photos");
+    if (out_dir.empty()) throw Error("--out", "give the output folder");
+    if (max_image_px < 200 || max_image_px > 20000) throw Error("--max-image-px", "must be 200..20000");
+    if (threads < 1 || threads > 256) throw Error("--threads", "must be 1..256");
+    if (gps.empty()) throw Error("--gps", "give 'exif' or a file");
+}
+
+namespace {
+
+std::vector<std::string> list_images(const std::string& dir) {
+    if (!fs::is_directory(dir)) throw Error(dir, "not a folder of images");
+    std::vector<std::string> names;
+    for (const auto& e : fs::directory_iterator(dir)) {
+        if (!e.is_regular_file()) continue;
+        std::string ext = e.path().extension().string();
+        std::transform(ext.begin(), ext.end(), ext.begin(), [](unsigned char c) { return std::tolower(c); });
+        if (ext == ".jpg" || ext == ".jpeg" || ext == ".png" || ext == ".tif" || ext == ".tiff") names.push_back(e.path().filename().string());
+    }
+    std::sort(names.begin(), names.end());
+    if (names.size() < 2) throw Error(dir, "fewer than two images (" + std::to_string(names.size()) + ")");
+    return names;
+}
+
+struct GpsFix {
+    double lat = 0, lon = 0, h = 0;
+};
+
+// "(47) (36) (36.63)" -> degrees.
+double exif_dms(const char* s) {
+    double v[3] = {0, 0, 0};
+    int k = 0;
+    for (const char* p = s; *p && k < 3; ++p)
+        if (*p == '(') v[k++] = std::atof(p + 1);
+    if (k == 0) return std::atof(s);
+    return v[0] + v[1] / 60.0 + v[2] / 3600.0;
+}
+
+std::map<std::string, GpsFix> read_gps(const std::string& source, const std::string& dir, const std::vector<std::string>& names) {
+    std::map<std::string, GpsFix> out;
+    if (source == "exif") {
+        GDALAllRegister();
+        for (const std::string& n : names) {
+            const std::string path = (fs::path(dir) / n).string();
+            GDALDataset* ds = static_cast<GDALDataset*>(GDALOpen(path.c_str(), GA_ReadOnly));
+            if (!ds) continue;
+            const char* lat = ds->GetMetadataItem("EXIF_GPSLatitude");
+            const char* lon = ds->GetMetadataItem("EXIF_GPSLongitude");
+            if (lat && lon) {
+                GpsFix f;
+                f.lat = exif_dms(lat), f.lon = exif_dms(lon);
+                const char* latref = ds->GetMetadataItem("EXIF_GPSLatitudeRef");
+                const char* lonref = ds->GetMetadataItem("EXIF_GPSLongitudeRef");
+                if (latref && (latref[0] == 'S' || latref[0] == 's')) f.lat = -f.lat;
+                if (lonref && (lonref[0] == 'W' || lonref[0] == 'w')) f.lon = -f.lon;
+                if (const char* alt = ds->GetMetadataItem("EXIF_GPSAltitude")) f.h = exif_dms(alt);
+                if (const char* ref = ds->GetMetadataItem("EXIF_GPSAltitudeRef"))
+                    if (std::atoi(ref) == 1 || std::string(ref).find("(1)") != std::string::npos) f.h = -f.h;
+                out[n] = f;
+            }
+            GDALClose(ds);
+        }
+        if (out.size() < 3)
+            throw Error(dir, "only " + std::to_string(out.size()) +
+                                 " photos have GPS EXIF: give --gps FILE (lines: image lat lon height) to georeference");
+    } else {
+        std::ifstream in(source);
+        if (!in) throw Error(source, "cannot open GPS file");
+        std::string line;
+        int line_no = 0;
+        while (std::getline(in, line)) {
+            ++line_no;
+            if (line.empty() || line[0] == '#') continue;
+            std::istringstream s(line);
+            std::string n;
+            GpsFix f;
+            if (!(s >> n >> f.lat >> f.lon >> f.h) || std::abs(f.lat) > 90 || std::abs(f.lon) > 180)
+                throw Error(source, "line " + std::to_string(line_no) + ": expected 'image lat_deg lon_deg height_m'");
+            out[n] = f;
+        }
+        int found = 0;
+        for (const auto& n : names) found += out.count(n) ? 1 : 0;
+        if (found < 3) throw Error(source, "GPS positions for only " + std::to_string(found) + " of the photos (need 3)");
+    }
+    return out;
+}
+
+struct CameraMatrix {
+    double fx = 0, fy = 0, cx = 0, cy = 0;
+};
+
+CameraMatrix read_camera_matrix(const std::string& path, int width, int height) {
+    std::ifstream in(path);
+    if (!in) throw Error(path, "cannot open camera matrix");
+    std::vector<double> v;
+    std::string tok;
+    while (in >> tok) {
+        for (char& c : tok)
+            if (c == ',' || c == '[' || c == ']' || c == ';') c = ' ';
+        std::istringstream s(tok);
+        double x;
+        while (s >> x) v.push_back(x);
+    }
+    if (v.size() != 9) throw Error(path, "expected a 3 x 3 camera matrix (9 numbers), found " + std::to_string(v.size()));
+    CameraMatrix k{v[0], v[4], v[2], v[5]};
+    if (!(k.fx > 0 && k.fy > 0) || std::abs(v[1]) > 1e-6 * k.fx || v[3] != 0 || v[6] != 0 || v[7] != 0 || v[8] != 1)
+        throw Error(path, "not a camera matrix [fx 0 cx; 0 fy cy; 0 0 1]");
+    if (std::abs(k.cx - 0.5 * width) > 0.15 * width || std::abs(k.cy - 0.5 * height) > 0.15 * height)
+        throw Error(path, "principal point (" + std::to_string(k.cx) + ", " + std::to_string(k.cy) + ") does not fit " +
+                              std::to_string(width) + " x " + std::to_string(height) + " px images: wrong camera file or image size");
+    return k;
+}
+
+void run_tool(const std::vector<std::string>& args, const fs::path& log, const std::string& step) {
+    std::vector<char*> argv;
+    for (const auto& a : args) argv.push_back(const_cast<char*>(a.c_str()));
+    argv.push_back(nullptr);
+    posix_spawn_file_actions_t fa;
+    posix_spawn_file_actions_init(&fa);
+    posix_spawn_file_actions_addopen(&fa, 1, log.c_str(), O_WRONLY | O_CREAT | O_APPEND, 0644);
+    posix_spawn_file_actions_adddup2(&fa, 1, 2);
+    pid_t pid = 0;
+    const int rc = posix_spawnp(&pid, args[0].c_str(), &fa, nullptr, argv.data(), environ);
+    posix_spawn_file_actions_destroy(&fa);
+    if (rc != 0) throw Error(args[0], "cannot run (is COLMAP installed? apt-get install colmap)");
+    int status = 0;
+    while (waitpid(pid, &status, 0) < 0 && errno == EINTR) {
+    }
+    if (!WIFEXITED(status) || WEXITSTATUS(status) != 0)
+        throw Error(step, "COLMAP failed (exit " + std::to_string(WIFEXITED(status) ? WEXITSTATUS(status) : -1) + "), see " + log.string());
+}
+
+std::string utm_for(double lat, double lon) {
+    const int zone = std::clamp(static_cast<int>(std::floor((lon + 180.0) / 6.0)) + 1, 1, 60);
+    return "EPSG:" + std::to_string((lat >= 0 ? 32600 : 32700) + zone);
+}
+
+}  // namespace
+
+OrientRunResult run_orient(const OrientRunOptions& o, const Progress& progress) {
+    o.validate();
+    const auto t0 = std::chrono::steady_clock::now();
+    const std::vector<std::string> names = list_images(o.images_dir);
+    if (fs::exists(o.out_dir)) {
+        if (!o.overwrite) throw Error(o.out_dir, "exists (give --overwrite to replace it)");
+    }
+    // Everything that can be refused is checked before any file is written.
+    const cv::Mat first = read_colour_image((fs::path(o.images_dir) / names[0]).string());
+    std::optional<CameraMatrix> k;
+    if (!o.camera_path.empty()) k = read_camera_matrix(o.camera_path, first.cols, first.rows);
+    const std::map<std::string, GpsFix> gps = read_gps(o.gps, o.images_dir, names);
+    const GpsFix& g0 = gps.begin()->second;
+    const CrsInfo out_crs = crs_from_user_input(o.crs.empty() ? utm_for(g0.lat, g0.lon) : o.crs, "--crs");
+    if (out_crs.geographic) throw Error("--crs", "must be a projected CRS in metres");
+
+    // Work in a sibling folder; it replaces OUT only at the end.
+    const fs::path out = fs::path(o.out_dir);
+    const fs::path work = fs::path(out.string() + ".part-" + std::to_string(getpid()));
+    fs::remove_all(work);
+    struct Cleanup {
+        fs::path p;
+        bool keep = false;
+        ~Cleanup() {
+            std::error_code ec;
+            if (!keep) fs::remove_all(p, ec);
+        }
+    } cleanup{work};
+    const fs::path colmap_dir = work / "colmap", img_dir = colmap_dir / "images";
+    ensure_directory(img_dir);
+    // Downscaled copies (COLMAP and the dense steps see the same pixels).
+    double scale = 1.0;
+    for (std::size_t i = 0; i < names.size(); ++i) {
+        const std::string src = (fs::path(o.images_dir) / names[i]).string();
+        cv::Mat m = read_colour_image(src);
+        if (m.cols != first.cols || m.rows != first.rows)
+            throw Error(src, "image size differs from " + names[0] + " (one camera per block)");
+        const int longest = std::max(m.cols, m.rows);
+        scale = longest > o.max_image_px ? double(o.max_image_px) / longest : 1.0;
+        if (scale < 1.0) cv::resize(m, m, cv::Size(), scale, scale, cv::INTER_AREA);
+        const fs::path dst = img_dir / (fs::path(names[i]).stem().string() + ".png");
+        if (!cv::imwrite(dst.string(), m)) throw Error(dst.string(), "cannot write image");
+        progress(0.1 * double(i + 1) / double(names.size()), "images");
+    }
+    const fs::path log = colmap_dir / "colmap.log", db = colmap_dir / "database.db";
+    const std::string th = std::to_string(o.threads);
+    std::vector<std::string> fe{o.colmap, "feature_extractor", "--database_path", db.string(), "--image_path", img_dir.string(),
+                                "--ImageReader.single_camera", "1", "--SiftExtraction.use_gpu", "0",
+                                "--SiftExtraction.num_threads", th};
+    if (k) {
+        // COLMAP's principal point: top-left pixel centre at (0.5, 0.5).
+        char params[200];
+        std::snprintf(params, sizeof params, "%.6f,%.6f,%.6f,%.6f", k->fx * scale, k->fy * scale, (k->cx + 0.5) * scale,
+                      (k->cy + 0.5) * scale);
+        fe.insert(fe.end(), {"--ImageReader.camera_model", "PINHOLE", "--ImageReader.camera_params", params});
+    } else {
+        fe.insert(fe.end(), {"--ImageReader.camera_model", "SIMPLE_RADIAL"});
+    }
+    run_tool(fe, log, "feature extraction");
+    progress(0.3, "features");
+    run_tool({o.colmap, "exhaustive_matcher", "--database_path", db.string(), "--SiftMatching.use_gpu", "0",
+              "--SiftMatching.num_threads", th},
+             log, "matching");
+    progress(0.5, "matching");
+    const fs::path sparse = colmap_dir / "sparse";
+    ensure_directory(sparse);
+    std::vector<std::string> mapper{o.colmap, "mapper", "--database_path", db.string(), "--image_path", img_dir.string(),
+                                    "--output_path", sparse.string(), "--Mapper.num_threads", th};
+    // A calibrated camera stays fixed: nadir blocks over flat ground make the
+    // focal length nearly unobservable in self-calibration.
+    if (k) mapper.insert(mapper.end(), {"--Mapper.ba_refine_focal_length", "0", "--Mapper.ba_refine_extra_params", "0"});
+    run_tool(mapper, log, "mapping");
+    progress(0.8, "mapping");
+    // The largest reconstruction.
+    fs::path best;
+    std::uintmax_t best_size = 0;
+    if (fs::is_directory(sparse))
+        for (const auto& e : fs::directory_iterator(sparse)) {
+            const fs::path imgs = e.path() / "images.bin";
+            if (fs::exists(imgs) && fs::file_size(imgs) > best_size) best = e.path(), best_size = fs::file_size(imgs);
+        }
+    if (best.empty()) throw Error(o.images_dir, "COLMAP oriented no image pair: the photos do not overlap or have no texture");
+    const fs::path undist = colmap_dir / "undistorted";
+    run_tool({o.colmap, "image_undistorter", "--image_path", img_dir.string(), "--input_path", best.string(), "--output_path",
+              undist.string(), "--output_type", "COLMAP"},
+             log, "undistortion");
+    const fs::path txt = colmap_dir / "model_txt";
+    ensure_directory(txt);
+    run_tool({o.colmap, "model_converter", "--input_path", (undist / "sparse").string(), "--output_path", txt.string(),
+              "--output_type", "TXT"},
+             log, "model conversion");
+    progress(0.9, "undistortion");
+
+    const photo::ColmapModel model = photo::read_colmap_text_model(txt.string());
+    const std::vector<photo::PhotoCamera> cams = photo::pinhole_cameras(model, txt.string());
+    if (cams.size() < 2) throw Error(o.images_dir, "COLMAP oriented fewer than two photos: the photos do not overlap");
+    // GPS positions in the output CRS; names in the model are the PNG copies.
+    auto original_name = [&](const std::string& png) -> std::string {
+        for (const auto& n : names)
+            if (fs::path(n).stem().string() == fs::path(png).stem().string()) return n;
+        return png;
+    };
+    std::vector<std::string> used;
+    std::vector<double> gx, gy, gz;
+    for (const auto& c : cams) {
+        const auto it = gps.find(original_name(c.image));
+        if (it == gps.end()) continue;
+        used.push_back(c.image);
+        gx.push_back(it->second.lon), gy.push_back(it->second.lat), gz.push_back(it->second.h);
+    }
+    if (used.size() < 3) throw Error(o.images_dir, "fewer than 3 oriented photos have GPS positions: cannot georeference");
+    transform_points(crs_from_user_input("EPSG:4326", "gps"), out_crs, gx, gy, gz, "GPS positions");
+    const Eigen::Vector3d origin(std::floor(gx[0] / 1000) * 1000, std::floor(gy[0] / 1000) * 1000, 0.0);
+    std::vector<Eigen::Vector3d> from, to;
+    for (std::size_t i = 0; i < used.size(); ++i) {
+        for (const auto& c : cams)
+            if (c.image == used[i]) from.push_back(c.centre);
+        to.push_back(Eigen::Vector3d(gx[i], gy[i], gz[i]) - origin);
+    }
+    photo::Similarity sim = photo::fit_similarity(from, to, o.images_dir);
+    sim.translation += origin;
+
+    OrientRunResult r;
+    r.images = static_cast<int>(names.size());
+    r.oriented = static_cast<int>(cams.size());
+    r.scale = sim.scale;
+    r.crs = out_crs.label();
+    r.mean_reprojection_error_px = model.mean_reprojection_error_px();
+    double sq = 0;
+    for (std::size_t i = 0; i < used.size(); ++i) {
+        const Eigen::Vector3d d = sim.apply(from[i]) - (to[i] + origin);
+        r.residuals.push_back({original_name(used[i]), d.x(), d.y(), d.z()});
+        sq += d.squaredNorm();
+    }
+    r.gps_rmse_m = std::sqrt(sq / double(used.size()));
+    // A block that does not fit its GPS positions is mis-oriented: refuse it.
+    {
+        std::vector<double> spacing;
+        for (std::size_t i = 0; i < used.size(); ++i) {
+            double nearest = 1e300;
+            for (std::size_t j = 0; j < used.size(); ++j)
+                if (j != i) nearest = std::min(nearest, (to[i] - to[j]).norm());
+            spacing.push_back(nearest);
+        }
+        std::sort(spacing.begin(), spacing.end());
+        const double typical = spacing[spacing.size() / 2];
+        if (r.gps_rmse_m > std::max(2.0, 0.35 * typical)) {
+            char buf[300];
+            std::snprintf(buf, sizeof buf,
+                          "oriented camera centres disagree with the GPS positions (RMSE %.1f m, photo spacing %.1f m): "
+                          "the orientation is wrong%s",
+                          r.gps_rmse_m, typical, k ? "" : " (self-calibration of nadir photos is weak: give --camera K.txt)");
+            throw Error(o.images_dir, buf);
+        }
+    }
+
+    photo::CameraSet set;
+    set.crs = out_crs.label();
+    set.crs_wkt = out_crs.wkt;
+    for (const auto& c : cams) set.cameras.push_back(photo::transform_camera(c, sim));
+    // Sparse cloud in the map frame, and the height range it spans.
+    PointCloud sparse_cloud;
+    std::vector<double> zs;
+    for (const auto& p : model.points) {
+        const Eigen::Vector3d w = sim.apply(p.xyz);
+        sparse_cloud.x.push_back(w.x()), sparse_cloud.y.push_back(w.y()), sparse_cloud.z.push_back(w.z());
+        sparse_cloud.classification.push_back(1);
+        sparse_cloud.return_number.push_back(1), sparse_cloud.number_of_returns.push_back(1);
+        sparse_cloud.intensity.push_back(0);
+        sparse_cloud.red.push_back(p.rgb[0] * 257), sparse_cloud.green.push_back(p.rgb[1] * 257), sparse_cloud.blue.push_back(p.rgb[2] * 257);
+        zs.push_back(w.z());
+    }
+    if (zs.size() < 10) throw Error(o.images_dir, "COLMAP triangulated fewer than 10 points: the photos do not overlap");
+    std::sort(zs.begin(), zs.end());
+    const double zlo = zs[zs.size() / 100], zhi = zs[zs.size() - 1 - zs.size() / 100];
+    const double pad = 0.1 * (zhi - zlo) + 1.0;
+    set.scene_z_range_m = {zlo - pad, zhi + pad};
+    r.sparse_points = sparse_cloud.size();
+
+    // Final layout.
+    ensure_directory(work / "images");
+    for (const auto& c : set.cameras) fs::rename(undist / "images" / c.image, work / "images" / c.image);
+    photo::write_cameras_json((work / "cameras.json").string(), set);
+    write_cloud_las((work / "sparse.las").string(), sparse_cloud, out_crs.wkt, "cityforge orient (COLMAP sparse)");
+    nlohmann::json j;
+    j["crs"] = r.crs;
+    j["engine"] = "COLMAP (feature_extractor, exhaustive_matcher, mapper, image_undistorter; CPU)";
+    j["images"] = r.images;
+    j["oriented"] = r.oriented;
+    j["sparse_points"] = r.sparse_points;
+    j["mean_reprojection_error_px"] = r.mean_reprojection_error_px;
+    j["image_scale"] = scale;
+    j["georeferencing"] = {{"method", "similarity (Umeyama) from model camera centres to GPS positions in " + r.crs},
+                           {"gps_source", o.gps}, {"scale_m_per_model_unit", r.scale}, {"rmse_m", r.gps_rmse_m}};
+    j["residuals_m"] = nlohmann::json::array();
+    for (const auto& e : r.residuals) j["residuals_m"].push_back({{"image", e.image}, {"dx", e.dx_m}, {"dy", e.dy_m}, {"dz", e.dz_m}});
+    j["scene_z_range_m"] = set.scene_z_range_m;
+    r.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    j["seconds"] = r.seconds;
+    write_text_file(work / "orient_report.json", j.dump(2) + "\n");
+    if (fs::exists(out)) fs::remove_all(out);
+    fs::rename(work, out);
+    cleanup.keep = true;
+    r.cameras_path = (out / "cameras.json").string();
+    r.sparse_path = (out / "sparse.las").string();
+    r.report_path = (out / "orient_report.json").string();
+    r.images_dir = (out / "images").string();
+    progress(1.0, "done");
+    return r;
+}
+
+}  // namespace cityforge
+
+// ---------------------------------------------------------------- densify, photo
+
+namespace cityforge {
+
+void DensifyRunOptions::validate() const {
+    if (model_dir.empty()) throw Error("--model", "give the oriented folder");
+    if (out_path.empty()) throw Error("--out", "give the output LAS file");
+    densify.validate();
+}
+
+DensifyRunResult run_densify(const DensifyRunOptions& o, const Progress& progress) {
+    o.validate();
+    const auto t0 = std::chrono::steady_clock::now();
+    check_output_free(o.out_path, o.overwrite);
+    const fs::path dir(o.model_dir);
+    if (!fs::is_directory(dir)) throw Error(o.model_dir, "not an oriented folder");
+    fs::path cams = dir / "cameras.json", images = dir / "images";
+    if (!fs::exists(cams)) cams = dir / "cameras_truth.json", images = dir;
+    if (!fs::exists(cams)) throw Error(o.model_dir, "no cameras.json (from `cityforge orient`) or cameras_truth.json");
+    const photo::CameraSet set = photo::read_cameras_json(cams.string());
+    if (set.cameras.size() < 2) throw Error(cams.string(), "fewer than two cameras");
+    std::vector<cv::Mat> imgs;
+    for (const auto& c : set.cameras) {
+        const std::string path = (images / c.image).string();
+        cv::Mat m = read_colour_image(path);
+        if (m.cols != c.width || m.rows != c.height)
+            throw Error(path, "image is " + std::to_string(m.cols) + " x " + std::to_string(m.rows) + " px but " + cams.string() +
+                                  " says " + std::to_string(c.width) + " x " + std::to_string(c.height));
+        imgs.push_back(std::move(m));
+    }
+    std::vector<Eigen::Vector3d> sparse;
+    if (o.use_sparse && fs::exists(dir / "sparse.las")) {
+        const PointCloud pc = read_las((dir / "sparse.las").string());
+        for (std::size_t i = 0; i < pc.size(); ++i) sparse.push_back({pc.x[i], pc.y[i], pc.z[i]});
+    }
+    const photo::DensifyResult d = photo::densify_patches(imgs, set, sparse, o.densify, o.model_dir, progress.sub(0.05, 0.95));
+    write_cloud_las(o.out_path, d.cloud, set.crs_wkt, "cityforge densify (patch-based MVS)");
+    DensifyRunResult r;
+    r.points = d.cloud.size();
+    r.seeds = d.seeds, r.expanded = d.expanded, r.filtered = d.filtered;
+    r.images = static_cast<int>(set.cameras.size());
+    r.crs = set.crs;
+    r.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    progress(1.0, "done");
+    return r;
+}
+
+void PhotoRunOptions::validate() const {
+    if (out_dir.empty()) throw Error("--out", "give the output folder");
+    densify.validate();
+}
+
+PhotoRunResult run_photo(const PhotoRunOptions& o, const Progress& progress) {
+    o.validate();
+    const auto t0 = std::chrono::steady_clock::now();
+    const fs::path out(o.out_dir);
+    if (fs::exists(out) && !o.overwrite) throw Error(o.out_dir, "exists (give --overwrite to replace it)");
+    OrientRunOptions oo = o.orient;
+    oo.out_dir = (out / "orient").string();
+    oo.overwrite = true;
+    oo.validate();
+    ensure_directory(out);
+    PhotoRunResult r;
+    try {
+        r.orient = run_orient(oo, progress.sub(0.0, 0.5));
+        DensifyRunOptions dd;
+        dd.model_dir = oo.out_dir;
+        dd.out_path = (out / "cloud.las").string();
+        dd.overwrite = true;
+        dd.densify = o.densify;
+        r.densify = run_densify(dd, progress.sub(0.5, 0.98));
+    } catch (...) {
+        std::error_code ec;
+        fs::remove_all(out, ec);  // nothing half-written
+        throw;
+    }
+    r.cloud_path = (out / "cloud.las").string();
+    r.sparse_path = (out / "sparse.las").string();
+    r.cameras_path = (out / "cameras.json").string();
+    r.report_path = (out / "photo_report.json").string();
+    fs::copy_file(r.orient.sparse_path, r.sparse_path, fs::copy_options::overwrite_existing);
+    fs::copy_file(r.orient.cameras_path, r.cameras_path, fs::copy_options::overwrite_existing);
+    r.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    nlohmann::json j;
+    j["crs"] = r.orient.crs;
+    j["steps"] = {
+        {{"step", "orient"}, {"seconds", r.orient.seconds}, {"images", r.orient.images}, {"oriented", r.orient.oriented},
+         {"sparse_points", r.orient.sparse_points}, {"mean_reprojection_error_px", r.orient.mean_reprojection_error_px},
+         {"gps_rmse_m", r.orient.gps_rmse_m}},
+        {{"step", "densify"}, {"seconds", r.densify.seconds}, {"points", r.densify.points}, {"seeds", r.densify.seeds},
+         {"expanded", r.densify.expanded}, {"filtered", r.densify.filtered}}};
+    j["files"] = {{"cloud", "cloud.las"}, {"sparse", "sparse.las"}, {"cameras", "cameras.json"}, {"oriented", "orient/"}};
+    j["seconds"] = r.seconds;
+    write_text_file(r.report_path, j.dump(2) + "\n");
+    progress(1.0, "done");
+    return r;
+}
+
+}  // namespace cityforge

@@ -1,0 +1,126 @@
+#pragma once
+// The photogrammetric subcommands joined to files: `stereo` (one oriented
+// pair to a dense LAS), `orient` (COLMAP as the engine, our georeferencing),
+// `densify` (patch-based MVS from an oriented folder) and `photo` (the chain).
+// Images are read with OpenCV; outputs are LAS 1.4 with RGB in the cameras' CRS.
+#include <string>
+
+#include "core/progress.hpp"
+#include "photo/densify.hpp"
+#include "photo/stereo.hpp"
+
+namespace cityforge {
+
+struct StereoRunOptions {
+    std::string left_path, right_path;  ///< image files; their file names must be in the cameras file
+    std::string cameras_path;           ///< cameras JSON (cameras_truth.json of synth, cameras.json of orient)
+    std::string out_path;               ///< LAS 1.4 output
+    bool overwrite = false;             ///< replace an existing output
+    photo::StereoOptions stereo;
+    void validate() const;
+};
+
+struct StereoRunResult {
+    uint64_t points = 0;
+    double baseline_m = 0, seconds = 0;
+    int min_disparity_px = 0, num_disparities_px = 0;
+    std::size_t matched_pixels = 0, lr_rejected = 0;
+    std::string crs;
+};
+
+/// Reads both images and their cameras, matches the pair, writes the cloud.
+/// Throws Error (one line naming the file) on bad input; writes nothing then.
+StereoRunResult run_stereo(const StereoRunOptions& options, const Progress& progress = {});
+
+/// Refuses to replace `path` unless `overwrite` (Error naming the file).
+void check_output_free(const std::string& path, bool overwrite);
+
+}  // namespace cityforge
+
+namespace cityforge {
+
+struct OrientRunOptions {
+    std::string images_dir;          ///< JPEG/PNG/TIFF photos (at least two)
+    std::string out_dir;             ///< created; must not exist unless overwrite
+    std::string camera_path;         ///< optional K.txt (3 x 3 camera matrix, pixels of the original images)
+    std::string gps = "exif";        ///< "exif" or a file of lines "image lat_deg lon_deg height_m"
+    std::string crs;                 ///< output CRS (projected, metres); empty = UTM zone of the site
+    int max_image_px = 2000;         ///< photos are downscaled to this longest side before matching
+    int threads = 2;                 ///< COLMAP threads
+    std::string colmap = "colmap";   ///< the COLMAP executable
+    bool overwrite = false;
+    void validate() const;
+};
+
+struct OrientImageResidual {
+    std::string image;
+    double dx_m = 0, dy_m = 0, dz_m = 0;  ///< oriented minus GPS position, map axes
+};
+
+struct OrientRunResult {
+    int images = 0, oriented = 0;
+    uint64_t sparse_points = 0;
+    double mean_reprojection_error_px = 0;
+    double gps_rmse_m = 0;            ///< of the camera centres after the similarity fit
+    double scale = 0;                 ///< model units -> metres
+    std::vector<OrientImageResidual> residuals;
+    std::string crs;
+    double seconds = 0;
+    std::string cameras_path, sparse_path, report_path, images_dir;
+};
+
+/// Orients the photos with COLMAP (SIFT on the CPU, exhaustive matching,
+/// incremental mapping with bundle adjustment, undistortion) and georeferences
+/// the model by a similarity to the GPS positions in the output CRS. Writes
+/// OUT/images/ (undistorted, possibly downscaled), OUT/cameras.json,
+/// OUT/sparse.las, OUT/orient_report.json, OUT/colmap/ (work files and log).
+/// All or nothing: the folder appears only when every step succeeded.
+OrientRunResult run_orient(const OrientRunOptions& options, const Progress& progress = {});
+
+}  // namespace cityforge
+
+
+namespace cityforge {
+
+struct DensifyRunOptions {
+    /// An oriented folder: cameras.json + images/ (+ sparse.las) from `orient`,
+    /// or a folder with cameras_truth.json and the images (synth's views/).
+    std::string model_dir;
+    std::string out_path;   ///< LAS 1.4 output (RGB, class 1, cameras' CRS)
+    bool overwrite = false;
+    bool use_sparse = true;  ///< also seed from model_dir/sparse.las when present
+    photo::DensifyOptions densify;
+    void validate() const;
+};
+
+struct DensifyRunResult {
+    uint64_t points = 0;
+    std::size_t seeds = 0, expanded = 0, filtered = 0;
+    int images = 0;
+    std::string crs;
+    double seconds = 0;
+};
+
+/// Reads the oriented folder, densifies, writes the cloud. All or nothing.
+DensifyRunResult run_densify(const DensifyRunOptions& options, const Progress& progress = {});
+
+struct PhotoRunOptions {
+    OrientRunOptions orient;       ///< images_dir, camera, gps, crs, max_image_px; out_dir = OUT/orient
+    photo::DensifyOptions densify;
+    std::string out_dir;           ///< OUT
+    bool overwrite = false;
+    void validate() const;
+};
+
+struct PhotoRunResult {
+    OrientRunResult orient;
+    DensifyRunResult densify;
+    std::string cloud_path, sparse_path, cameras_path, report_path;
+    double seconds = 0;
+};
+
+/// The chain: orient -> densify. Writes OUT/orient/ (oriented folder),
+/// OUT/cameras.json, OUT/sparse.las, OUT/cloud.las, OUT/photo_report.json.
+PhotoRunResult run_photo(const PhotoRunOptions& options, const Progress& progress = {});
+
+}  // namespace cityforge
