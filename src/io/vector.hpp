@@ -77,6 +77,18 @@ PolygonLayer read_polygon_layer(const std::string& path, const std::string& laye
 void write_polygon_features(const std::string& path, const CrsInfo& crs, const std::vector<FieldDefinition>& fields,
                             const std::vector<Feature>& features, const VectorWriteOptions& options = {});
 
+/// Leaves out of `layer` the fields whose names equal one of `ours` (the
+/// fields the command writes itself; compared case-insensitively, as
+/// GeoPackage, SQLite and Shapefile compare them), with one warning naming
+/// them and `subject`: our values replace theirs, the other fields pass
+/// through. Re-running a command on its own output therefore works and gives
+/// the same fields. Returns the names left out.
+std::vector<std::string> drop_colliding_fields(PolygonLayer& layer, const std::vector<std::string>& ours, const std::string& subject);
+
+/// Moves every vertex of `features` from `from` to `to` (one PROJ
+/// transformation for all). Throws Error naming `subject` when PROJ fails.
+void reproject_features(std::vector<Feature>& features, const CrsInfo& from, const CrsInfo& to, const std::string& subject);
+
 /// Output driver for a path: ".gpkg" -> GPKG, ".geojson"/".json" -> GeoJSON,
 /// ".fgb" -> FlatGeobuf, ".shp" -> ESRI Shapefile; Error otherwise.
 std::string vector_driver_for(const std::string& path);

@@ -62,6 +62,12 @@ struct CityModel {
 /// LOD1 and gets status "no_height".
 void complete_building(Building& b, const ModelCrs& crs, const SolidValidityOptions& validity = {});
 
+/// z of the LOD0 footprint of a building without ground_z (no_height: no
+/// point near it), so that it keeps its footprint in every format: the
+/// median ground_z of the model's other buildings, 0 when none has one.
+/// Writers mark such footprints with the attribute footprint_z_estimated.
+double fallback_footprint_z(const CityModel& model);
+
 /// Extent of one building: min x, y, z, max x, y, z (z from its solids or ground_z; 0 when unknown).
 std::array<double, 6> building_extent(const Building& building);
 

@@ -14,6 +14,7 @@
 #include "core/log.hpp"
 #include "core/version.hpp"
 #include "crs/crs.hpp"
+#include "io/cloud_crs.hpp"
 #include "io/vector.hpp"
 #include "raster/quicklook.hpp"
 #include "raster/raster.hpp"
@@ -67,17 +68,7 @@ Parts parts_of(const PolygonLayer& layer) {
 
 
 void reproject_layer(PolygonLayer& layer, const CrsInfo& to, const std::string& path) {
-    for (Feature& f : layer.features)
-        for (Polygon& p : f.geometry) {
-            auto move = [&](Ring& r) {
-                std::vector<double> x, y, z(r.size(), 0.0);
-                for (const MapPoint& q : r) x.push_back(q.x), y.push_back(q.y);
-                transform_points(layer.crs, to, x, y, z, path);
-                for (std::size_t i = 0; i < r.size(); ++i) r[i] = {x[i], y[i]};
-            };
-            move(p.outer);
-            for (Ring& h : p.holes) move(h);
-        }
+    reproject_features(layer.features, layer.crs, to, path);
     layer.crs = to;
 }
 
@@ -436,11 +427,10 @@ HeightAuditReport audit_heights(const std::string& pred_path, const std::string&
 CloudAuditReport audit_clouds(const std::string& pred_path, const std::string& ref_path, const std::string& out_dir,
                               const CloudAuditOptions& o) {
     o.validate();
-    std::string pred_wkt, ref_wkt;
-    PointCloud pred = read_point_cloud(pred_path, &pred_wkt);
-    const PointCloud ref = read_point_cloud(ref_path, &ref_wkt);
-    const CrsInfo pred_crs = !o.pred_crs.empty() ? crs_from_user_input(o.pred_crs, "--pred-crs") : crs_from_wkt(pred_wkt, pred_path);
-    const CrsInfo ref_crs = !o.ref_crs.empty() ? crs_from_user_input(o.ref_crs, "--ref-crs") : crs_from_wkt(ref_wkt, ref_path);
+    PointCloud pred = read_point_cloud(pred_path);
+    const PointCloud ref = read_point_cloud(ref_path);
+    const CrsInfo pred_crs = resolve_cloud_crs(pred_path, o.pred_crs, "--pred-crs").crs;
+    const CrsInfo ref_crs = resolve_cloud_crs(ref_path, o.ref_crs, "--ref-crs").crs;
     if (pred_crs.empty() != ref_crs.empty())
         throw Error(pred_crs.empty() ? pred_path : ref_path, "point cloud has no CRS while the other has one; give it with --pred-crs/--ref-crs");
     CloudAuditReport rep;

@@ -76,6 +76,13 @@ CityModel build_city_model(const PolygonLayer& layer, const CrsInfo& crs, const 
         if (std::holds_alternative<int64_t>(v)) return double(std::get<int64_t>(v));
         return std::nullopt;
     };
+    {
+        // Fields the model computes itself replace the input's (a warning names them).
+        std::string replaced;
+        for (const std::string& n : layer.field_names)
+            if (kOwnFields.count(n) && n != "status" && n != "reason") replaced += (replaced.empty() ? "" : ", ") + n;
+        if (!replaced.empty()) log::warning(path + ": input fields " + replaced + " are replaced by the values computed here");
+    }
     std::set<std::string> used;
     model.buildings.reserve(layer.features.size());
     for (std::size_t i = 0; i < layer.features.size(); ++i) {
