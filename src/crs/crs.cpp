@@ -77,6 +77,17 @@ CrsInfo describe(OGRSpatialReference& srs) {
         info.vertical_epsg = authority_code(srs, "VERT_CS");
         const char* vname = srs.GetAttrValue("VERT_CS");
         info.vertical_name = vname ? vname : "";
+        // A compound CRS known by its code whose parts carry none (GeoPackage's WKT2): the parts of the registered one.
+        if (info.epsg && (!info.vertical_epsg || !info.horizontal_epsg)) {
+            OGRSpatialReference registered;
+            if (registered.importFromEPSG(*info.epsg) == OGRERR_NONE && registered.IsCompound()) {
+                if (!info.vertical_epsg) info.vertical_epsg = authority_code(registered, "VERT_CS");
+                if (!info.horizontal_epsg) {
+                    registered.StripVertical();
+                    info.horizontal_epsg = authority_code(registered, nullptr);
+                }
+            }
+        }
     } else if (srs.IsVertical()) {
         info.epsg = authority_code(srs, nullptr);
         info.vertical_epsg = info.epsg;

@@ -41,7 +41,6 @@ struct Feature {
     std::vector<AttributeValue> values;  ///< one per field, in schema order
 };
 
-enum class FieldType { integer, real, string };
 struct FieldDefinition {
     std::string name;
     FieldType type = FieldType::real;

@@ -54,6 +54,10 @@ struct CityModel {
     ModelCrs crs;
     std::vector<Building> buildings;
     std::string title = "cityforge buildings";
+    /// Declared type of the buildings' attributes, by name (from the source
+    /// layer and the stages that add them); writers use it so that a field
+    /// whose values are all null keeps its type. Missing: from the values.
+    std::vector<std::pair<std::string, FieldType>> attribute_types;
 };
 
 /// Builds the LOD1 prisms of `b` from ground_z and height_m (converted to z

@@ -85,7 +85,8 @@ std::string describe_extent(const Extent& e, const CrsInfo& crs) {
     char buf[200];
     const int digits = crs.geographic ? 6 : 1;
     std::snprintf(buf, sizeof buf, "%.*f, %.*f - %.*f, %.*f", digits, e.min_x, digits, e.min_y, digits, e.max_x, digits, e.max_y);
-    return std::string(buf) + " " + crs.label();
+    // The horizontal CRS only: extents say nothing of heights.
+    return std::string(buf) + " " + (crs.horizontal_epsg ? "EPSG:" + std::to_string(*crs.horizontal_epsg) : crs.label());
 }
 
 void require_cloud_overlap(const PreparedCloud& pc, const std::string& cloud_path, const Extent& extent, const std::string& other_path) {

@@ -59,6 +59,11 @@ CityModel build_lod2_model(const HeightsStage& st, const CrsInfo& crs, const Roo
         else ++rep.lod2, rmse_sum += r.rmse_m;
         complete_building(b, model.crs, o.model.validity);
     }
+    for (const auto& [name, type] : std::initializer_list<std::pair<const char*, FieldType>>{
+             {"roof_planes", FieldType::integer}, {"roof_slope_deg", FieldType::real}, {"roof_azimuth_deg", FieldType::real},
+             {"lod2_rmse_m", FieldType::real}, {"lod2_median_residual_m", FieldType::real}, {"lod2_fallback", FieldType::string},
+             {"lod2_kind", FieldType::string}})
+        model.attribute_types.emplace_back(name, type);
     rep.mean_rmse_m = rep.lod2 ? rmse_sum / double(rep.lod2) : 0.0;
     return model;
 }
