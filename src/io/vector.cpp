@@ -61,7 +61,8 @@ void write_polygon_features(const std::string& path, const CrsInfo& crs, const s
     discard_file(tmp);
     GdalErrorCapture capture;
     auto fail = [&](const std::string& what) {
-        const std::string why = capture.suffix();
+        // GDAL names the temporary file; the user gave `path`.
+        const std::string why = user_named(capture.suffix(), tmp, path);
         discard_file(tmp);
         throw Error(path, what + why);
     };

@@ -233,7 +233,7 @@ void write_geotiff(const std::string& path, const Image<T>& image, const GeoTran
     if (static_cast<double>(image.pixel_count()) * image.bands * sizeof(T) > 3.5e9) co.SetNameValue("BIGTIFF", "YES");
 
     GDALDataset* ds = driver->Create(tmp.c_str(), image.width, image.height, image.bands, gdal_type<T>(), co.List());
-    if (!ds) throw Error(path, "cannot create GeoTIFF" + capture.suffix());
+    if (!ds) throw Error(path, "cannot create GeoTIFF" + user_named(capture.suffix(), tmp, path));
     bool ok = true;
     auto gt = transform.to_gdal();
     ok = ok && ds->SetGeoTransform(gt.data()) == CE_None;
@@ -253,7 +253,7 @@ void write_geotiff(const std::string& path, const Image<T>& image, const GeoTran
     GDALClose(ds);
     ok = ok && CPLGetLastErrorType() < CE_Failure;
     if (!ok) {
-        const std::string why = capture.suffix();
+        const std::string why = user_named(capture.suffix(), tmp, path);
         discard_file(tmp);
         throw Error(path, "writing GeoTIFF failed" + why);
     }
