@@ -32,6 +32,11 @@ CloudInfo inspect_cloud(const std::string& path, const InspectOptions& options) 
     CloudInfo info;
     info.path = path;
     info.header = reader.header();
+    if (LazPointSource* laz = reader.laz_source()) {
+        info.laz_chunks = laz->chunks().size();
+        info.laz_chunk_table = laz->has_chunk_table();
+        info.copc = read_copc_hierarchy(path, info.header);
+    }
     {
         CloudCrs resolved = resolve_cloud_crs(CloudReader(path), options.assume_crs, "--crs");
         info.crs = std::move(resolved.crs);
@@ -63,9 +68,6 @@ DatasetInfo inspect_dataset(const std::string& path, const InspectOptions& optio
     require_dataset_exists(path);
     DatasetInfo info;
     const std::string ext = lower_ext(path);
-    if (ext == ".laz") {
-        LasReader probe(path);  // throws the LAZ message
-    }
     if (has_las_signature(path)) {
         info.cloud = inspect_cloud(path, options);
         return info;
@@ -156,6 +158,25 @@ nlohmann::json to_json(const DatasetInfo& info) {
             j["class_counts"] = cc;
         }
         if (c.measured_bounds) j["measured_bounds"] = *c.measured_bounds;
+        if (h.laz) {
+            json items = json::array();
+            for (const LazItem& it : h.laz->items) items.push_back({{"type", to_string(it)}, {"size", it.size}, {"version", it.version}});
+            j["laz"] = {{"compressor", h.laz->compressor_name()},
+                        {"coder", h.laz->coder},
+                        {"laszip_version", std::to_string(h.laz->version_major) + "." + std::to_string(h.laz->version_minor) + " r" +
+                                               std::to_string(h.laz->version_revision)},
+                        {"chunk_size", h.laz->variable_chunks() ? json("variable") : json(h.laz->chunk_size)},
+                        {"chunks", c.laz_chunks},
+                        {"chunk_table", c.laz_chunk_table},
+                        {"items", items}};
+        }
+        if (c.copc) {
+            const CopcInfo& ci = c.copc->info;
+            j["copc"] = {{"center", {ci.center_x, ci.center_y, ci.center_z}}, {"halfsize", ci.halfsize},
+                         {"spacing", ci.spacing}, {"nodes", c.copc->nodes.size()},
+                         {"max_level", c.copc->max_level}, {"hierarchy_pages", c.copc->pages},
+                         {"gps_time", {ci.gps_time_min, ci.gps_time_max}}};
+        }
         if (!c.crs.empty() && !c.crs.geographic) {
             const double area = (h.max[0] - h.min[0]) * (h.max[1] - h.min[1]) * c.crs.linear_unit_m * c.crs.linear_unit_m;
             if (area > 0) j["mean_density_pts_m2"] = static_cast<double>(h.point_count) / area;
@@ -211,6 +232,22 @@ std::string to_text(const DatasetInfo& info) {
         for (const std::string& w : c.crs_warnings) o << "Warning:   " << w << "\n";
         o << "Bounds:    x " << h.min[0] << " - " << h.max[0] << ", y " << h.min[1] << " - " << h.max[1] << ", z "
           << h.min[2] << " - " << h.max[2] << "\n";
+        if (h.laz) {
+            o << "LAZ:       compressor " << h.laz->compressor_name() << ", LASzip " << h.laz->version_major << "."
+              << h.laz->version_minor << " r" << h.laz->version_revision << ", chunk size "
+              << (h.laz->variable_chunks() ? std::string("variable") : std::to_string(h.laz->chunk_size)) << ", " << c.laz_chunks
+              << " chunks" << (c.laz_chunk_table ? "" : " (no chunk table)") << "\n";
+            o << "Items:     ";
+            for (std::size_t i = 0; i < h.laz->items.size(); ++i)
+                o << (i ? " + " : "") << to_string(h.laz->items[i]) << " (" << h.laz->items[i].size << " B)";
+            o << "\n";
+        }
+        if (c.copc) {
+            const CopcInfo& ci = c.copc->info;
+            o << "COPC:      " << c.copc->nodes.size() << " nodes with points, levels 0-" << c.copc->max_level << ", "
+              << c.copc->pages << " hierarchy page(s), root cube centre " << ci.center_x << ", " << ci.center_y << ", "
+              << ci.center_z << " half size " << ci.halfsize << ", spacing " << ci.spacing << "\n";
+        }
         for (auto [k, v] : c.class_counts) o << "Class " << k << ":   " << v << " points\n";
     } else if (info.vector) {
         const VectorInfo& v = *info.vector;
