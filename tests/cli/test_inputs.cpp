@@ -214,7 +214,7 @@ TEST_CASE("heights and export run on their own output: colliding fields replaced
     CHECK(e2.err.find("no vertical CRS") == std::string::npos);
 }
 
-TEST_CASE("Inputs that cannot work are errors; partial overlap warns; buildings without heights keep their footprint", "[inputs][overlap]") {
+TEST_CASE("Inputs that cannot work are errors - partial overlap warns - buildings without heights keep their footprint", "[inputs][overlap]") {
     ScratchDir dir("inputs_overlap");
     const std::string delft = shared_data("delft_ahn3_bgt_west/ahn3_delft_west.las");
     const std::string fp = shared_data("delft_ahn3_bgt_west/bgt_pand_west_with_ref_heights.geojson");
@@ -323,7 +323,7 @@ TEST_CASE("CLI habits: usage errors exit 2 with a suggestion, existing outputs r
 
 // ---------------------------------------------------------------- 9. audits
 
-TEST_CASE("A footprint audit without a match says n/a (null) for the means over matches; report.md tables stay tables", "[inputs][audit]") {
+TEST_CASE("A footprint audit without a match says n/a (null) for the means over matches - report.md tables stay tables", "[inputs][audit]") {
     ScratchDir dir("inputs_audit");
     write_squares(dir / "far.geojson", {{90000.0, 447560.0}});
     const auto r = run_cli("audit footprints --pred " + (dir / "far.geojson") + " --ref " +
