@@ -1,11 +1,69 @@
 #include "cli_support.hpp"
 
+#include <algorithm>
+#include <filesystem>
 #include <fstream>
 #include <sstream>
 
 #include "core/error.hpp"
 
 namespace cityforge::cli {
+
+void refuse_existing_output(const GlobalFlags& g, const std::string& path) {
+    namespace fs = std::filesystem;
+    std::error_code ec;
+    if (path.empty() || g.overwrite || !fs::exists(path, ec)) return;
+    if (fs::is_directory(path, ec) && fs::is_empty(path, ec)) return;
+    throw Error(path, std::string(fs::is_directory(path, ec) ? "output folder exists and is not empty" : "output exists") +
+                          "; give --overwrite to replace it");
+}
+
+namespace {
+std::size_t edit_distance(const std::string& a, const std::string& b) {
+    std::vector<std::size_t> prev(b.size() + 1), cur(b.size() + 1);
+    for (std::size_t j = 0; j <= b.size(); ++j) prev[j] = j;
+    for (std::size_t i = 1; i <= a.size(); ++i) {
+        cur[0] = i;
+        for (std::size_t j = 1; j <= b.size(); ++j)
+            cur[j] = std::min({prev[j] + 1, cur[j - 1] + 1, prev[j - 1] + (a[i - 1] == b[j - 1] ? 0 : 1)});
+        std::swap(prev, cur);
+    }
+    return prev[b.size()];
+}
+}  // namespace
+
+std::string unknown_subcommand_message(const CLI::App& app, int argc, char** argv) {
+    const CLI::App* cur = &app;
+    std::string path;
+    for (int i = 1; i < argc; ++i) {
+        const std::string word = argv[i];
+        if (word.empty() || word[0] == '-') {
+            if (word == "--help" || word == "-h" || word == "--version") return {};
+            continue;
+        }
+        const auto subs = cur->get_subcommands([](const CLI::App*) { return true; });
+        if (subs.empty()) return {};  // a value or positional of a leaf command
+        const CLI::App* next = nullptr;
+        std::string best;
+        std::size_t best_d = std::string::npos;
+        for (const CLI::App* s : subs) {
+            if (s->get_name() == word) next = s;
+            const std::size_t d = edit_distance(word, s->get_name());
+            if (d < best_d) best_d = d, best = s->get_name();
+        }
+        if (!next) {
+            std::string names;
+            for (const CLI::App* s : subs) names += (names.empty() ? "" : ", ") + s->get_name();
+            std::string m = "unknown subcommand '" + path + word + "'";
+            if (best_d <= std::max<std::size_t>(2, word.size() / 3)) m += "; did you mean '" + path + best + "'?";
+            else m += "; subcommands: " + names;
+            return m;
+        }
+        path += word + " ";
+        cur = next;
+    }
+    return {};
+}
 
 Progress make_progress(const GlobalFlags& g) {
     if (g.quiet) return {};

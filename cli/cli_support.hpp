@@ -18,7 +18,17 @@ struct GlobalFlags {
     bool quiet = false;     // nothing on stderr but errors
     bool verbose = false;   // debug messages
     bool progress = false;  // progress even when stderr is not a terminal
+    bool overwrite = false; // replace existing outputs
 };
+
+// Refuses an existing output (a file, or a folder that is not empty) unless
+// --overwrite was given: Error "PATH: exists; give --overwrite to replace it".
+void refuse_existing_output(const GlobalFlags& g, const std::string& path);
+
+// "unknown subcommand 'segmnt'; did you mean 'segment'?" when the first word
+// of `argv` that is not an option names no subcommand of `app` (at any
+// level: `audit footprnts`); empty when all is well.
+std::string unknown_subcommand_message(const CLI::App& app, int argc, char** argv);
 
 // One leaf subcommand: its CLI11 parser and what runs when it was chosen.
 // `run` calls one library function and returns the process exit status;

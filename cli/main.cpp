@@ -27,6 +27,9 @@ int main(int argc, char** argv) {
     app.add_flag("-q,--quiet", g.quiet, "No progress and no messages except errors");
     app.add_flag("-v,--verbose", g.verbose, "More messages on stderr");
     app.add_flag("--progress", g.progress, "Show progress even when stderr is not a terminal");
+    app.add_flag("--overwrite", g.overwrite, "Replace existing outputs (refused otherwise)");
+    app.footer("Exit status: 0 success, 1 data error (bad or unusable input, output exists, nothing found), 2 usage error, "
+               "3 out of memory, 4 an audit gate failed, 70 internal error.");
 
     cli::CommandList commands;
     cli::add_info_command(app, g, commands);
@@ -43,10 +46,16 @@ int main(int argc, char** argv) {
     cli::add_view_command(app, g, commands);
     cli::add_photo_commands(app, g, commands);
 
+    // An unknown subcommand is named, with the closest one (CLI11 would only say one is required).
+    if (const std::string unknown = cli::unknown_subcommand_message(app, argc, argv); !unknown.empty()) {
+        std::fprintf(stderr, "cityforge: error: %s\n", unknown.c_str());
+        return 2;
+    }
     try {
         app.parse(argc, argv);
     } catch (const CLI::ParseError& e) {
-        return app.exit(e);
+        // --help and --version exit 0; every usage error exits 2 (not CLI11's own codes).
+        return app.exit(e) == 0 ? 0 : 2;
     }
     cf::log::set_level(g.quiet ? cf::log::Level::quiet : g.verbose ? cf::log::Level::debug : cf::log::Level::warning);
 
@@ -61,7 +70,7 @@ int main(int argc, char** argv) {
         return 3;
     } catch (const std::exception& e) {
         std::fprintf(stderr, "cityforge: internal error: %s\n", e.what());
-        return 2;
+        return 70;
     }
     return 0;
 }

@@ -12,6 +12,7 @@ namespace {
 // Every audit: --out DIR and the CI gates.
 struct AuditCommon {
     std::string out, below, above;
+    const GlobalFlags* flags = nullptr;
 };
 
 void add_common(CLI::App* cmd, AuditCommon& c) {
@@ -20,7 +21,9 @@ void add_common(CLI::App* cmd, AuditCommon& c) {
     cmd->add_option("--fail-above", c.above, "Exit with status 4 when a measure is above its maximum, e.g. mae=0.5");
 }
 
+// The gates; first of all, an existing report folder is refused without --overwrite.
 std::vector<AuditGate> gates_of(const AuditCommon& c) {
+    refuse_existing_output(*c.flags, c.out);
     auto gates = parse_gates(c.below, "--fail-below", true);
     const auto a = parse_gates(c.above, "--fail-above", false);
     gates.insert(gates.end(), a.begin(), a.end());
@@ -36,7 +39,7 @@ int gate_exit(const AuditOutput& out) {
     return 4;
 }
 
-void add_footprint_audit(CLI::App& audit, CommandList& out) {
+void add_footprint_audit(CLI::App& audit, const GlobalFlags& g, CommandList& out) {
     struct State {
         std::string pred, ref;
         AuditCommon common;
@@ -49,20 +52,28 @@ void add_footprint_audit(CLI::App& audit, CommandList& out) {
     cmd->add_option("--iou", s->options.iou_threshold, "IoU threshold of a match")->capture_default_str();
     cmd->add_option("--ortho", s->options.ortho_path, "Raster drawn under the map in report.html (reference CRS)");
     add_common(cmd, s->common);
+    s->common.flags = &g;
     cmd->footer("Measures for gates: " + join_words(footprint_audit_measures()));
     out.push_back({cmd, [s]() {
                        FootprintAuditOptions opt = s->options;
                        opt.gates = gates_of(s->common);
                        const FootprintAuditReport r = audit_footprints(s->pred, s->ref, s->common.out, opt);
                        const auto& sc = r.scores;
-                       std::printf("precision %.4f recall %.4f F1 %.4f mean IoU %.4f mean |area error| %.2f %% mean PoLiS %.3f (TP %zu of %zu predicted, %zu reference)%s\n",
-                                   sc.precision, sc.recall, sc.f1, sc.mean_iou, sc.mean_abs_area_error_pct, sc.mean_polis, sc.true_positives,
-                                   sc.predicted, sc.reference, r.reprojected ? "; prediction reprojected" : "");
+                       // Means over matches are not defined without a match: n/a.
+                       auto over = [&](double v, const char* f) {
+                           char buf[32];
+                           std::snprintf(buf, sizeof buf, f, v);
+                           return sc.true_positives ? std::string(buf) : std::string("n/a");
+                       };
+                       std::printf("precision %.4f recall %.4f F1 %.4f mean IoU %s mean |area error| %s %% mean PoLiS %s (TP %zu of %zu predicted, %zu reference)%s\n",
+                                   sc.precision, sc.recall, sc.f1, over(sc.mean_iou, "%.4f").c_str(), over(sc.mean_abs_area_error_pct, "%.2f").c_str(),
+                                   over(sc.mean_polis, "%.3f").c_str(), sc.true_positives, sc.predicted, sc.reference,
+                                   r.reprojected ? "; prediction reprojected" : "");
                        return gate_exit(r.output);
                    }});
 }
 
-void add_rectangle_audit(CLI::App& audit, CommandList& out) {
+void add_rectangle_audit(CLI::App& audit, const GlobalFlags& g, CommandList& out) {
     struct State {
         std::string in;
         AuditCommon common;
@@ -78,6 +89,7 @@ void add_rectangle_audit(CLI::App& audit, CommandList& out) {
     cmd->add_option("--iou", o.iou_threshold, "IoU threshold matching fitted to original polygons")->capture_default_str();
     cmd->add_option("--ortho", o.ortho_path, "Raster drawn under the map in report.html (same CRS)");
     add_common(cmd, s->common);
+    s->common.flags = &g;
     cmd->footer("Measures for gates: " + join_words(rectangle_audit_measures()));
     out.push_back({cmd, [s]() {
                        RectangleAuditOptions opt = s->options;
@@ -89,7 +101,7 @@ void add_rectangle_audit(CLI::App& audit, CommandList& out) {
                    }});
 }
 
-void add_height_audit(CLI::App& audit, CommandList& out) {
+void add_height_audit(CLI::App& audit, const GlobalFlags& g, CommandList& out) {
     struct State {
         std::string pred, ref;
         AuditCommon common;
@@ -105,6 +117,7 @@ void add_height_audit(CLI::App& audit, CommandList& out) {
     cmd->add_option("--iou", o.iou_threshold, "IoU threshold of a footprint match")->capture_default_str();
     cmd->add_option("--ortho", o.ortho_path, "Raster drawn under the map in report.html (reference CRS)");
     add_common(cmd, s->common);
+    s->common.flags = &g;
     cmd->footer("Measures for gates: " + join_words(height_audit_measures()) + " (metres; coverage: share of references with both heights)");
     out.push_back({cmd, [s]() {
                        HeightAuditOptions opt = s->options;
@@ -116,7 +129,7 @@ void add_height_audit(CLI::App& audit, CommandList& out) {
                    }});
 }
 
-void add_cloud_audit(CLI::App& audit, CommandList& out) {
+void add_cloud_audit(CLI::App& audit, const GlobalFlags& g, CommandList& out) {
     struct State {
         std::string pred, ref;
         AuditCommon common;
@@ -131,6 +144,7 @@ void add_cloud_audit(CLI::App& audit, CommandList& out) {
     cmd->add_option("--pred-crs", o.pred_crs, "CRS of the predicted cloud if it has none");
     cmd->add_option("--ref-crs", o.ref_crs, "CRS of the reference cloud if it has none");
     add_common(cmd, s->common);
+    s->common.flags = &g;
     cmd->footer("Measures for gates: chamfer chamfer_squared mean_pred_to_ref mean_ref_to_pred, and per tau T: precision@T recall@T f@T");
     out.push_back({cmd, [s]() {
                        CloudAuditOptions opt = s->options;
@@ -146,13 +160,13 @@ void add_cloud_audit(CLI::App& audit, CommandList& out) {
 
 }  // namespace
 
-void add_audit_commands(CLI::App& parent, const GlobalFlags&, CommandList& out) {
+void add_audit_commands(CLI::App& parent, const GlobalFlags& g, CommandList& out) {
     auto* audit = parent.add_subcommand("audit", "Accuracy audits");
     audit->require_subcommand(1);
-    add_footprint_audit(*audit, out);
-    add_rectangle_audit(*audit, out);
-    add_height_audit(*audit, out);
-    add_cloud_audit(*audit, out);
+    add_footprint_audit(*audit, g, out);
+    add_rectangle_audit(*audit, g, out);
+    add_height_audit(*audit, g, out);
+    add_cloud_audit(*audit, g, out);
 }
 
 }  // namespace cityforge::cli

@@ -30,6 +30,7 @@ void add_rasterize_command(CLI::App& cloud, const GlobalFlags& g, CommandList& o
     out.push_back({cmd, [s, &g]() {
                        RasterizeOptions opt = s->options;
                        opt.ground.trust_classification = !s->recompute_ground;
+                       refuse_existing_output(g, s->out);
                        const RasterizeReport r = rasterize_run(s->cloud, s->out, opt, make_progress(g));
                        if (!g.quiet)
                            std::fprintf(stderr, "cityforge: rasters %d x %d (%s) from %llu points, %zu ground (%s) in %.1f s -> %s\n",

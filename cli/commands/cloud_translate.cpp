@@ -21,9 +21,9 @@ void add_cloud_translate_command(CLI::App& cloud, const GlobalFlags& g, CommandL
     cmd->add_option("output", s->options.output, "Output .las (LAS/LAZ input keeps its header, point format and VLRs)")->required();
     cmd->add_option("--bounds", s->bounds, "Keep only points with xmin <= x <= xmax and ymin <= y <= ymax: xmin,ymin,xmax,ymax (file CRS)");
     cmd->add_option("--crs", s->crs, "PLY/XYZ input: CRS to store in the LAS (e.g. EPSG:7415); LAS/LAZ keep theirs");
-    cmd->add_flag("--overwrite", s->options.overwrite, "Replace an existing output file");
     out.push_back({cmd, [s, &g]() {
                        CloudTranslateOptions o = s->options;
+                       o.overwrite = g.overwrite;  // the global --overwrite, as for every output
                        if (!s->bounds.empty()) {
                            const auto parts = split_list(s->bounds);
                            std::array<double, 4> b{};

@@ -36,6 +36,7 @@ void add_export_command(CLI::App& parent, const GlobalFlags& g, CommandList& out
                        ExportOptions opt = s->options;
                        opt.formats = split_list(s->formats);
                        opt.lods = parse_lods(s->lods);
+                       refuse_existing_output(g, s->out);
                        const ExportReport r = run_export(s->in, s->out, opt, make_progress(g));
                        if (!g.quiet) {
                            std::string files, statuses;

@@ -41,6 +41,9 @@ void add_footprints_command(CLI::App& parent, const GlobalFlags& g, CommandList&
         ->capture_default_str();
     cmd->add_option("--out", s->out, "Output .gpkg (layer buildings), .geojson, .fgb or .shp")->required();
     cmd->add_option("--cloud-crs", o.cloud_crs, "CRS of the cloud, e.g. EPSG:7415");
+    cmd->add_option("--working-crs", o.working_crs,
+                    "CRS to work in (metres): default the ortho's, or the UTM zone of its centre for a lon/lat ortho (read warped onto it)");
+    cmd->add_option("--out-crs", o.out_crs, "CRS of the written footprints (default: the input's)");
     cmd->add_option("--fit", s->fit,
                     "Geometry written: recursive (rectangles cut/added until the area error < tolerance), regularised (edges snapped to the dominant directions), rectangle (minimum-area) or raw (simplified outline)")
         ->check(CLI::IsMember({"recursive", "regularised", "rectangle", "raw"}))
@@ -66,6 +69,7 @@ void add_footprints_command(CLI::App& parent, const GlobalFlags& g, CommandList&
                        opt.mode = detection_mode_from_string(s->mode);
                        opt.detector = ortho_detector_from_string(s->detector);
                        opt.regularize.method = s->regularize == "cgal" ? RegularizeMethod::cgal_contours : RegularizeMethod::lines;
+                       refuse_existing_output(g, s->out);
                        const FootprintsReport r = run_footprints(s->out, opt, make_progress(g));
                        if (!g.quiet)
                            std::fprintf(stderr,

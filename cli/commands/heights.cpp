@@ -40,6 +40,7 @@ void add_heights_command(CLI::App& parent, const GlobalFlags& g, CommandList& ou
                        HeightsRunOptions opt = s->options;
                        opt.ground.trust_classification = !s->recompute_ground;
                        opt.outliers.enabled = !s->no_outliers;
+                       refuse_existing_output(g, s->out);
                        const HeightsRunReport r = run_heights(s->footprints, s->cloud, s->out, opt, make_progress(g));
                        if (!g.quiet) {
                            std::string q;

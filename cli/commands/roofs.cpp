@@ -42,6 +42,7 @@ void add_roofs_command(CLI::App& parent, const GlobalFlags& g, CommandList& out)
                        opt.heights.outliers.enabled = !s->no_outliers;
                        opt.model.formats = split_list(s->formats);
                        opt.model.lods = parse_lods(s->lods);
+                       refuse_existing_output(g, s->out);
                        const RoofsRunReport r = run_roofs(s->footprints, s->cloud, s->out, opt, make_progress(g));
                        if (!g.quiet) {
                            std::string types;

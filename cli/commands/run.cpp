@@ -86,6 +86,11 @@ void add_run_commands(CLI::App& parent, const GlobalFlags& g, CommandList& out) 
     run_cmd->add_option("--manifest", rs->manifest, "Run the tiles of a manifest from `cityforge plan`");
     run_cmd->add_option("--tile", rs->tile, "Run only this tile of the manifest (Slurm arrays: $SLURM_ARRAY_TASK_ID); merge with merge-tiles");
     run_cmd->add_flag("--mpi", rs->mpi, "Share the tiles among MPI ranks (mpirun -np N); rank 0 merges");
+    // What only the config holds: every key with its default (schema and example named).
+    run_cmd->footer("Config file (--config): JSON, schema schemas/run_config.schema.json, example samples/run.json; unknown keys are "
+                    "refused, command-line options override it. Keys and defaults:\n" + to_json(RunOptions{}).dump(2) +
+                    "\nDIR may hold an earlier run of the same command: its finished tiles are kept and skipped (a folder made "
+                    "with other options is refused).");
     out.push_back({run_cmd, [rs, &g]() {
                        const RunManifest manifest = rs->manifest.empty() ? plan_from(rs->inputs) : read_manifest(rs->manifest);
                        if (rs->tile >= 0) {
@@ -119,6 +124,7 @@ void add_run_commands(CLI::App& parent, const GlobalFlags& g, CommandList& out) 
     plan_cmd->add_option("--out", ps->out, "Manifest file (.json)")->required();
     out.push_back({plan_cmd, [ps, &g]() {
                        const RunManifest manifest = plan_from(ps->inputs);
+                       refuse_existing_output(g, ps->out);
                        write_manifest(ps->out, manifest);
                        if (!g.quiet)
                            std::fprintf(stderr, "cityforge: %zu tiles of %d px (+%d px overlap) over %d x %d px -> %s\n", manifest.tiles.size(),

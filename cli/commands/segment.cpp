@@ -44,6 +44,7 @@ void add_segment_command(CLI::App& parent, const GlobalFlags& g, CommandList& ou
                        if (s->h) seg.watershed.h_minima = *s->h;
                        if (s->sigma) seg.watershed.smoothing_sigma_px = *s->sigma;
                        if (s->gsd) seg.working_gsd_m = *s->gsd;
+                       refuse_existing_output(g, s->out);
                        const SegmentReport r = segment_raster(s->in, s->out, seg, make_progress(g));
                        if (!g.quiet) {
                            std::fprintf(stderr, "cityforge: watershed %u regions in %.2f s (%d x %d px at %.3g m)\n",

@@ -40,6 +40,7 @@ void add_synth_command(CLI::App& parent, const GlobalFlags& g, CommandList& out)
                        if (s->origin.size() == 2) o.origin_x = s->origin[0], o.origin_y = s->origin[1];
                        o.cloud_mode = cloud_mode_from_string(s->cloud_mode);
                        if (s->view_size.size() == 2) o.views.width_px = s->view_size[0], o.views.height_px = s->view_size[1];
+                       refuse_existing_output(g, s->out);
                        const SynthResult r = write_synthetic_town(s->out, o, make_progress(g));
                        if (!g.quiet)
                            std::fprintf(stderr, "cityforge: synth wrote %s (%d x %d px, %d buildings, %d trees, %llu points) in %.1f s\n",

@@ -360,7 +360,7 @@ CloudReader::CloudReader(const std::string& path) : path_(path) {
     }
     if (std::memcmp(magic, "LASF", 4) == 0 || ext == ".las" || ext == ".laz") {
         auto las = std::make_unique<LasFormatReader>(path);
-        crs_wkt_ = las->reader_.header().crs_wkt;
+        crs_records_ = las->reader_.header().crs;
         announced_ = las->reader_.header().point_count;
         copc_ = las->copc_.has_value();
         format_ = CloudFormat::las;
@@ -380,9 +380,8 @@ CloudReader::~CloudReader() = default;
 CloudReader::CloudReader(CloudReader&&) noexcept = default;
 CloudReader& CloudReader::operator=(CloudReader&&) noexcept = default;
 
-PointCloud read_point_cloud(const std::string& path, std::string* crs_wkt) {
+PointCloud read_point_cloud(const std::string& path) {
     CloudReader reader(path);
-    if (crs_wkt) *crs_wkt = reader.crs_wkt();
     PointCloud cloud;
     while (reader.read_chunk(cloud, 1u << 20) > 0) {
     }
@@ -390,9 +389,8 @@ PointCloud read_point_cloud(const std::string& path, std::string* crs_wkt) {
     return cloud;
 }
 
-PointCloud read_point_cloud_in(const std::string& path, double min_x, double min_y, double max_x, double max_y, std::string* crs_wkt) {
+PointCloud read_point_cloud_in(const std::string& path, double min_x, double min_y, double max_x, double max_y) {
     CloudReader reader(path);
-    if (crs_wkt) *crs_wkt = reader.crs_wkt();
     reader.restrict_to_box(min_x, min_y, max_x, max_y);
     PointCloud out, chunk;
     while (true) {

@@ -1,12 +1,13 @@
 #pragma once
 // Point cloud readers behind one interface: LAS and LAZ/COPC (las.hpp), PLY (ASCII and
 // binary, x/y/z plus optional colour, classification, intensity) and XYZ/CSV
-// text. Streamed in chunks. No GDAL here: the CRS is passed on as the WKT the
-// file carries (empty when it has none); callers resolve overrides.
+// text. Streamed in chunks. No GDAL here: the CRS records the file carries
+// are passed on raw; resolve_cloud_crs (io/cloud_crs.hpp) interprets them.
 #include <cstdint>
 #include <memory>
 #include <string>
 
+#include "cloud/las.hpp"
 #include "cloud/point_cloud.hpp"
 
 namespace cityforge {
@@ -36,8 +37,8 @@ public:
 
     CloudFormat format() const { return format_; }
     const std::string& path() const { return path_; }
-    /// CRS WKT stored in the file (LAS VLRs); empty for PLY/XYZ or when absent.
-    const std::string& crs_wkt() const { return crs_wkt_; }
+    /// CRS records stored in the file (LAS VLRs/EVLRs); empty for PLY/XYZ or when absent.
+    const LasCrsRecords& crs_records() const { return crs_records_; }
     /// Point count announced by the header (LAS, PLY); 0 when unknown (XYZ).
     uint64_t announced_points() const { return announced_; }
     std::size_t read_chunk(PointCloud& out, std::size_t max_points) { return impl_->read_chunk(out, max_points); }
@@ -52,7 +53,7 @@ public:
 private:
     std::string path_;
     CloudFormat format_ = CloudFormat::las;
-    std::string crs_wkt_;
+    LasCrsRecords crs_records_;
     uint64_t announced_ = 0;
     bool copc_ = false;
     std::unique_ptr<CloudFormatReader> impl_;
@@ -60,12 +61,11 @@ private:
 
 /// Reads every point (explicit: callers that know it fits). Throws Error
 /// naming the file if it holds no point at all.
-PointCloud read_point_cloud(const std::string& path, std::string* crs_wkt = nullptr);
+PointCloud read_point_cloud(const std::string& path);
 
 /// Reads only the points with min_x <= x < max_x and min_y <= y < max_y (file
 /// CRS), streaming, so memory follows the box, not the file. May return an
 /// empty cloud.
-PointCloud read_point_cloud_in(const std::string& path, double min_x, double min_y, double max_x, double max_y,
-                               std::string* crs_wkt = nullptr);
+PointCloud read_point_cloud_in(const std::string& path, double min_x, double min_y, double max_x, double max_y);
 
 }  // namespace cityforge

@@ -30,21 +30,6 @@ std::string trimmed(const char* p, std::size_t n) {
     return s;
 }
 
-// GeoKeyDirectory: header of 4 shorts, then entries (key, location, count, value).
-void parse_geokeys(const std::vector<char>& data, LasHeader& h) {
-    if (data.size() < 8) return;
-    const auto n = get<uint16_t>(data.data() + 6);
-    for (std::size_t i = 0; i < n && 8 + (i + 1) * 8 <= data.size(); ++i) {
-        const char* e = data.data() + 8 + i * 8;
-        const auto key = get<uint16_t>(e);
-        const auto loc = get<uint16_t>(e + 2);
-        const auto value = get<uint16_t>(e + 6);
-        if (loc != 0 || value == 0 || value == 32767) continue;  // user-defined or stored elsewhere
-        if (key == 3072 || (key == 2048 && h.geokey_horizontal_epsg == 0)) h.geokey_horizontal_epsg = value;
-        if (key == 4096) h.geokey_vertical_epsg = value;
-    }
-}
-
 }  // namespace
 
 void PointCloud::clear() {
@@ -101,6 +86,7 @@ LasReader::LasReader(const std::string& path) : path_(path) {
         throw Error(path, "unsupported LAS version " + std::to_string(h.version_major) + "." + std::to_string(h.version_minor));
     h.system_identifier = trimmed(hdr + 26, 32);
     h.generating_software = trimmed(hdr + 58, 32);
+    h.crs.wkt_bit = (get<uint16_t>(hdr + 6) & 0x10) != 0;
     const auto header_size = get<uint16_t>(hdr + 94);
     h.offset_to_points = get<uint32_t>(hdr + 96);
     const auto n_vlr = get<uint32_t>(hdr + 100);
@@ -147,14 +133,20 @@ LasReader::LasReader(const std::string& path) : path_(path) {
         const auto record_id = get<uint16_t>(vh + 18);
         const auto length = get<uint16_t>(vh + 20);
         if (pos + 54 + length > h.offset_to_points) throw Error(path, "variable length record runs past the point data");
-        // WKT: the standard LASF_Projection 2112 record, or libLAS's older
-        // "liblas" 2112 record (used only when no standard one is present).
-        const bool wkt_record = record_id == 2112 && (user == "LASF_Projection" || (user == "liblas" && h.crs_wkt.empty()));
-        if (wkt_record || (user == "LASF_Projection" && record_id == 34735)) {
+        if (user == "LASF_Projection" || user == "liblas") {
             std::vector<char> data(length);
             in_.read(data.data(), length);
-            if (record_id == 2112) h.crs_wkt = trimmed(data.data(), data.size());
-            else parse_geokeys(data, h);
+            if (!in_) throw Error(path, "truncated variable length record");
+            if (record_id == 2112) (user == "liblas" ? h.crs.liblas_wkt : h.crs.wkt) = trimmed(data.data(), data.size());
+            else if (user == "LASF_Projection" && record_id == 34735) {
+                h.crs.geokey_directory.resize(length / 2);
+                std::memcpy(h.crs.geokey_directory.data(), data.data(), h.crs.geokey_directory.size() * 2);
+            } else if (user == "LASF_Projection" && record_id == 34736) {
+                h.crs.geo_double_params.resize(length / 8);
+                std::memcpy(h.crs.geo_double_params.data(), data.data(), h.crs.geo_double_params.size() * 8);
+            } else if (user == "LASF_Projection" && record_id == 34737) {
+                h.crs.geo_ascii_params.assign(data.data(), data.size());
+            }
         }
         if (compressed && user == "laszip encoded" && record_id == 22204) {
             std::vector<char> data(length);
@@ -165,7 +157,7 @@ LasReader::LasReader(const std::string& path) : path_(path) {
         pos += 54 + length;
     }
     // LAS 1.4 may keep the WKT in an extended VLR after the points.
-    if (h.version_minor >= 4 && header_size >= 375 && h.crs_wkt.empty()) {
+    if (h.version_minor >= 4 && header_size >= 375) {
         uint64_t epos = get<uint64_t>(hdr + 235);
         const auto n_evlr = get<uint32_t>(hdr + 243);
         for (uint32_t i = 0; i < n_evlr && epos + 60 <= file_size; ++i) {
@@ -180,7 +172,7 @@ LasReader::LasReader(const std::string& path) : path_(path) {
             if (user == "LASF_Projection" && record_id == 2112 && length < (1u << 24)) {
                 std::vector<char> data(length);
                 in_.read(data.data(), static_cast<std::streamsize>(length));
-                h.crs_wkt = trimmed(data.data(), data.size());
+                h.crs.evlr_wkt = trimmed(data.data(), data.size());
             }
             epos += 60 + length;
         }

@@ -15,6 +15,19 @@
 
 namespace cityforge {
 
+/// The CRS records of a LAS file, raw (interpreted by resolve_cloud_crs in
+/// io/cloud_crs.hpp, which holds the order of precedence).
+struct LasCrsRecords {
+    std::string wkt;                         ///< OGC WKT, LASF_Projection 2112 VLR
+    std::string evlr_wkt;                    ///< OGC WKT, LASF_Projection 2112 extended VLR (LAS 1.4)
+    std::string liblas_wkt;                  ///< libLAS's older "liblas" 2112 VLR
+    std::vector<uint16_t> geokey_directory;  ///< LASF_Projection 34735, as unsigned shorts
+    std::vector<double> geo_double_params;   ///< LASF_Projection 34736
+    std::string geo_ascii_params;            ///< LASF_Projection 34737
+    bool wkt_bit = false;                    ///< global encoding bit 4: the WKT is the CRS
+    bool empty() const { return wkt.empty() && evlr_wkt.empty() && liblas_wkt.empty() && geokey_directory.empty(); }
+};
+
 /// The public header block fields we use, plus what the VLRs told us.
 struct LasHeader {
     int version_major = 1;
@@ -29,9 +42,7 @@ struct LasHeader {
     std::array<double, 3> max{0.0, 0.0, 0.0};
     std::string system_identifier;
     std::string generating_software;
-    std::string crs_wkt;             ///< from the OGC WKT VLR (2112), if present
-    int geokey_horizontal_epsg = 0;  ///< from the GeoKeyDirectory VLR (34735), 0 = none
-    int geokey_vertical_epsg = 0;
+    LasCrsRecords crs;               ///< the CRS records as stored (VLRs and EVLRs)
     uint16_t header_size = 0;         ///< bytes of the public header block
     uint32_t vlr_count = 0;
     uint64_t evlr_offset = 0;         ///< LAS 1.4: start of the first EVLR (0 = none)

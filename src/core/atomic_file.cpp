@@ -15,6 +15,15 @@ fs::path temporary_path_for(const fs::path& final_path) {
     return tmp;
 }
 
+std::string user_named(std::string message, const fs::path& tmp, const fs::path& final_path) {
+    for (const auto& [from, to] : {std::pair{tmp.string(), final_path.string()}, std::pair{tmp.filename().string(), final_path.filename().string()}}) {
+        if (from.empty()) continue;
+        for (std::size_t at = message.find(from); at != std::string::npos; at = message.find(from, at + to.size()))
+            message.replace(at, from.size(), to);
+    }
+    return message;
+}
+
 void commit_file(const fs::path& tmp, const fs::path& final_path) {
     std::error_code ec;
     fs::rename(tmp, final_path, ec);

@@ -10,6 +10,11 @@ namespace cityforge {
 /// the rename is atomic and keeps the extension so that drivers recognise it).
 std::filesystem::path temporary_path_for(const std::filesystem::path& final_path);
 
+/// `message` (e.g. a GDAL error about the temporary file) with every mention
+/// of `tmp` (full path or file name) replaced by `final_path`: errors name the
+/// file the user gave, never "x.part-20659.gpkg".
+std::string user_named(std::string message, const std::filesystem::path& tmp, const std::filesystem::path& final_path);
+
 /// Renames `tmp` onto `final_path` (replacing it). Throws Error naming final_path.
 void commit_file(const std::filesystem::path& tmp, const std::filesystem::path& final_path);
 

@@ -33,8 +33,11 @@ private:
     double end_ = 1.0;
 };
 
-/// A terminal progress bar in GDAL's style ("0...10...20...30" on stderr).
-/// Writes nothing when stderr is not a terminal unless `force` is set.
+/// A progress line on stderr: "cityforge: 45 % tile 4/9 (ok), ETA 12 s, 0:31
+/// elapsed, 1.5 %/s, ETA 0:38" (percent, the stage's own count, elapsed
+/// time, rate, ETA), rewritten in place on a terminal, else one line per
+/// percent step at most once a second. Writes nothing when stderr is not a
+/// terminal unless `force` is set (--progress).
 ProgressFn make_terminal_progress(bool force = false);
 
 }  // namespace cityforge

@@ -2,6 +2,7 @@
 // Coordinate reference systems: parsing, identification (EPSG codes of the
 // horizontal and vertical parts), units and ground sample distance in metres.
 // Wraps GDAL/OGR + PROJ; the algorithm modules never include this header.
+#include <cstdint>
 #include <optional>
 #include <string>
 #include <vector>
@@ -33,12 +34,34 @@ struct CrsInfo {
     std::string ogc_urn() const;
 };
 
+/// The PROJ string of a CRS ("+proj=lcc +lat_1=43 ... +units=ft"), for
+/// messages that must tell two unnamed CRSs apart; empty when PROJ has none.
+std::string proj_string(const CrsInfo& crs);
+
+/// What the z values of data in `crs` are: "EPSG:5709" (the vertical CRS's
+/// code), else the vertical CRS's name, else "unknown (UNIT)" with the unit
+/// of z ("unknown (foot)" for Autzen): never the horizontal CRS's name.
+std::string z_crs_label(const CrsInfo& crs);
+
 /// Parses anything GDAL's SetFromUserInput accepts ("EPSG:7415", WKT, PROJ
 /// string). `subject` names where the text came from, for the error message.
 CrsInfo crs_from_user_input(const std::string& text, const std::string& subject);
 
 /// Parses a WKT (1 or 2, ESRI flavour included). Empty input gives an empty CrsInfo.
 CrsInfo crs_from_wkt(const std::string& wkt, const std::string& subject);
+
+/// Interprets GeoTIFF keys (the GeoKeyDirectory as raw unsigned shorts, the
+/// GeoDoubleParams and GeoAsciiParams they point into), as stored in a
+/// GeoTIFF or in a LAS file's LASF_Projection 34735/34736/34737 records:
+/// EPSG codes of projected (3072), geographic (2048) and vertical (4096)
+/// CRSs, user-defined (32767) CRSs built from their projection, datum and
+/// parameter keys, and linear / vertical units (3076, 4099). GDAL's GeoTIFF
+/// reader (libgeotiff) does the interpretation, so the result is what
+/// gdalinfo reports for a GeoTIFF with these keys; a vertical key gives a
+/// compound CRS. Empty result when the keys hold no CRS; throws Error naming
+/// `subject` when they are malformed.
+CrsInfo crs_from_geokeys(const std::vector<uint16_t>& directory, const std::vector<double>& doubles,
+                         const std::string& ascii, const std::string& subject);
 
 /// Describes an OGR spatial reference (e.g. a layer's or a dataset's);
 /// nullptr gives an empty CrsInfo.
@@ -51,8 +74,31 @@ struct GroundSampleDistance {
     double x_m = 0.0;
     double y_m = 0.0;
 };
+/// Projected CRSs with strong scale distortion (Web Mercator: 1/cos(latitude))
+/// give true ground distances through ground_scale_factor.
 GroundSampleDistance ground_sample_distance(const CrsInfo& crs, const GeoTransform& transform, int width,
                                             int height);
+
+/// Scale of a projected CRS at the raster centre: ground metres per metre of
+/// the CRS's grid, measured geodesically over one pixel step along x and y
+/// (1/cos(latitude) in Web Mercator, 1.13 at 27.6 deg). Exactly 1.0 when
+/// within 0.2 % of 1 (UTM, national grids: their nominal GSD is kept) and
+/// for a CRS without a horizontal part; 0 for a geographic CRS.
+double ground_scale_factor(const CrsInfo& crs, const GeoTransform& transform, int width, int height);
+
+/// Ground metres per CRS unit at the raster centre: the linear unit (0.3048
+/// for international feet) times ground_scale_factor; 0 for a geographic CRS.
+/// Lengths in metres divide by it to become CRS units; areas in CRS units
+/// multiply by its square to become ground m^2.
+double ground_metres_per_unit(const CrsInfo& crs, const GeoTransform& transform, int width, int height);
+
+/// Longitude and latitude (degrees, WGS 84) of a point in `crs`.
+MapPoint to_lon_lat(const CrsInfo& crs, const MapPoint& p);
+
+/// The UTM zone holding `lon_lat` (degrees) on the geodetic datum of `crs`:
+/// EPSG:326zz / 327zz for WGS 84 (and for a CRS whose datum has no UTM
+/// code), e.g. the working CRS of a lon/lat raster.
+CrsInfo utm_crs_for(const CrsInfo& crs, const MapPoint& lon_lat);
 
 /// True when the horizontal parts are the same CRS (vertical parts ignored).
 bool same_horizontal_crs(const CrsInfo& a, const CrsInfo& b);

@@ -6,6 +6,17 @@
 
 namespace cityforge {
 
+/// True for a GDAL/OGR dataset name that is not a plain file path: a virtual
+/// file system path ("/vsizip/a.zip/b.gpkg", "/vsicurl/...") or a connection
+/// string with a driver prefix ("PG:dbname=city", "WFS:https://...",
+/// "GPKG:file.gpkg:layer"); a Windows drive letter ("C:") is a path. Such
+/// names are handed to GDAL as they are, never stat()ed as files.
+bool is_gdal_dataset_name(const std::string& name);
+
+/// Throws Error(name, "file not found") when `name` is a plain path that does
+/// not exist; GDAL dataset names (is_gdal_dataset_name) pass.
+void require_dataset_exists(const std::string& name);
+
 /// Registers GDAL/OGR drivers once per process (thread-safe).
 void ensure_gdal_registered();
 

@@ -118,6 +118,7 @@ CityGmlWriteReport write_citygml(const std::string& path, const CityModel& model
     out << "</gml:upperCorner></gml:Envelope></gml:boundedBy>\n";
 
     CityGmlWriteReport rep;
+    const double fallback_z = fallback_footprint_z(model);
     for (const Building& b : model.buildings) {
         const std::string id = gml_id_for(b.id);
         const std::vector<Solid>& solids = o.lod == 1 ? b.lod1 : b.lod2;
@@ -126,6 +127,7 @@ CityGmlWriteReport write_citygml(const std::string& path, const CityModel& model
         write_attribute(out, "cityforge_id", b.id);
         for (const auto& [name, value] : b.attributes) write_attribute(out, name, value);
         write_attribute(out, "status", b.status);
+        if (!b.ground_z && !b.footprint.empty()) write_attribute(out, "footprint_z_estimated", int64_t(1));
         if (!b.reason.empty()) write_attribute(out, "reason", b.reason);
         const auto& errs = o.lod == 1 ? b.lod1_errors : b.lod2_errors;
         if (!solids.empty()) {
@@ -136,15 +138,17 @@ CityGmlWriteReport write_citygml(const std::string& path, const CityModel& model
         }
         if (o.lod == 2 && !b.roof_type.empty()) out << "<bldg:roofType>" << xml_escape(b.roof_type) << "</bldg:roofType>\n";
         if (b.height_m) out << "<bldg:measuredHeight uom=\"m\">", gml.number(*b.height_m), out << "</bldg:measuredHeight>\n";
-        if (b.ground_z) {
+        if (!b.footprint.empty()) {
+            // Every building keeps its footprint; one without ground (no_height) at the model's median ground.
+            const double z0 = b.ground_z ? *b.ground_z : fallback_z;
             out << "<bldg:lod0FootPrint><gml:MultiSurface>";
             for (const Polygon& p : b.footprint) {
                 Ring3 outer;
                 std::vector<Ring3> holes;
-                for (const MapPoint& q : p.outer) outer.push_back({q.x, q.y, *b.ground_z});
+                for (const MapPoint& q : p.outer) outer.push_back({q.x, q.y, z0});
                 for (const Ring& h : p.holes) {
                     holes.emplace_back();
-                    for (const MapPoint& q : h) holes.back().push_back({q.x, q.y, *b.ground_z});
+                    for (const MapPoint& q : h) holes.back().push_back({q.x, q.y, z0});
                 }
                 out << "<gml:surfaceMember>";
                 gml.polygon(outer, holes, "");

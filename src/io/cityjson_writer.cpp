@@ -83,7 +83,7 @@ json solids_json(const std::vector<Solid>& solids, const std::string& lod, Verte
     return g;
 }
 
-json building_json(const Building& b, const CityJsonWriteOptions& o, const ModelCrs& crs, VertexPool& pool) {
+json building_json(const Building& b, const CityJsonWriteOptions& o, const ModelCrs& crs, VertexPool& pool, double fallback_z) {
     json obj;
     obj["type"] = "Building";
     json attrs = json::object();
@@ -92,6 +92,9 @@ json building_json(const Building& b, const CityJsonWriteOptions& o, const Model
     if (!b.reason.empty()) attrs["reason"] = b.reason;
     if (b.height_m) attrs["measuredHeight"] = *b.height_m;
     if (b.ground_z) attrs["ground_z"] = *b.ground_z;
+    const bool want0 = std::find(o.lods.begin(), o.lods.end(), 0) != o.lods.end();
+    if (want0 && !b.ground_z && !b.footprint.empty()) attrs["footprint_z_estimated"] = true;  // no ground here: the model's median
+    const double z0 = b.ground_z ? *b.ground_z : fallback_z;
     const bool want1 = std::find(o.lods.begin(), o.lods.end(), 1) != o.lods.end();
     const bool want2 = std::find(o.lods.begin(), o.lods.end(), 2) != o.lods.end();
     const double unit3 = crs.linear_unit_m * crs.linear_unit_m * crs.z_unit_m;
@@ -108,14 +111,14 @@ json building_json(const Building& b, const CityJsonWriteOptions& o, const Model
     }
     obj["attributes"] = attrs;
     json geometry = json::array();
-    if (std::find(o.lods.begin(), o.lods.end(), 0) != o.lods.end() && b.ground_z) {
+    if (want0 && !b.footprint.empty()) {
         json surfaces = json::array();
         for (const Polygon& p : b.footprint) {
             Face f;
-            for (const MapPoint& q : p.outer) f.outer.push_back({q.x, q.y, *b.ground_z});
+            for (const MapPoint& q : p.outer) f.outer.push_back({q.x, q.y, z0});
             for (const Ring& h : p.holes) {
                 f.holes.emplace_back();
-                for (const MapPoint& q : h) f.holes.back().push_back({q.x, q.y, *b.ground_z});
+                for (const MapPoint& q : h) f.holes.back().push_back({q.x, q.y, z0});
             }
             surfaces.push_back(face_json(f, pool));
         }
@@ -157,6 +160,7 @@ CityJsonWriteReport write_cityjson(const std::string& path, const CityModel& mod
     std::ostream& out = file.stream();
     CityJsonWriteReport rep;
     VertexPool pool(translate, o.scale);
+    const double fallback_z = fallback_footprint_z(model);
     if (o.sequence) {
         out << header.dump() << '\n';
         for (const Building& b : model.buildings) {
@@ -164,7 +168,7 @@ CityJsonWriteReport write_cityjson(const std::string& path, const CityModel& mod
             json f;
             f["type"] = "CityJSONFeature";
             f["id"] = b.id;
-            f["CityObjects"] = {{b.id, building_json(b, o, model.crs, pool)}};
+            f["CityObjects"] = {{b.id, building_json(b, o, model.crs, pool, fallback_z)}};
             f["vertices"] = vertices_json(pool);
             rep.vertices += pool.list().size();
             out << f.dump() << '\n';
@@ -175,7 +179,7 @@ CityJsonWriteReport write_cityjson(const std::string& path, const CityModel& mod
         out << "{\"type\":\"CityJSON\",\"version\":\"2.0\",\"transform\":" << header["transform"].dump()
             << ",\"metadata\":" << header["metadata"].dump() << ",\"CityObjects\":{";
         for (const Building& b : model.buildings) {
-            out << (rep.buildings ? ",\n" : "\n") << json(b.id).dump() << ':' << building_json(b, o, model.crs, pool).dump();
+            out << (rep.buildings ? ",\n" : "\n") << json(b.id).dump() << ':' << building_json(b, o, model.crs, pool, fallback_z).dump();
             ++rep.buildings;
         }
         out << "\n},\"vertices\":[";

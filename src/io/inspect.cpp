@@ -8,6 +8,8 @@
 #include <sstream>
 
 #include "core/error.hpp"
+#include "crs/gdal_util.hpp"
+#include "io/cloud_crs.hpp"
 
 namespace cityforge {
 namespace {
@@ -35,12 +37,11 @@ CloudInfo inspect_cloud(const std::string& path, const InspectOptions& options) 
         info.laz_chunk_table = laz->has_chunk_table();
         info.copc = read_copc_hierarchy(path, info.header);
     }
-    if (!options.assume_crs.empty()) info.crs = crs_from_user_input(options.assume_crs, path);
-    else if (!info.header.crs_wkt.empty()) info.crs = crs_from_wkt(info.header.crs_wkt, path);
-    else if (info.header.geokey_horizontal_epsg) {
-        std::string text = "EPSG:" + std::to_string(info.header.geokey_horizontal_epsg);
-        if (info.header.geokey_vertical_epsg) text += "+" + std::to_string(info.header.geokey_vertical_epsg);
-        info.crs = crs_from_user_input(text, path);
+    {
+        CloudCrs resolved = resolve_cloud_crs(CloudReader(path), options.assume_crs, "--crs");
+        info.crs = std::move(resolved.crs);
+        info.crs_source = std::move(resolved.source);
+        info.crs_warnings = std::move(resolved.warnings);
     }
     if (options.cloud_statistics) {
         std::array<double, 6> b{};
@@ -64,7 +65,7 @@ CloudInfo inspect_cloud(const std::string& path, const InspectOptions& options) 
 }  // namespace
 
 DatasetInfo inspect_dataset(const std::string& path, const InspectOptions& options) {
-    if (!std::filesystem::exists(path)) throw Error(path, "file not found");
+    require_dataset_exists(path);
     DatasetInfo info;
     const std::string ext = lower_ext(path);
     if (has_las_signature(path)) {
@@ -149,6 +150,8 @@ nlohmann::json to_json(const DatasetInfo& info) {
         j["has_gps_time"] = h.has_gps_time();
         j["generating_software"] = h.generating_software;
         j["crs"] = to_json(c.crs);
+        j["crs_source"] = c.crs_source.empty() ? nlohmann::json(nullptr) : nlohmann::json(c.crs_source);
+        j["crs_warnings"] = c.crs_warnings;
         if (!c.class_counts.empty()) {
             json cc = json::object();
             for (auto [k, v] : c.class_counts) cc[std::to_string(k)] = v;
@@ -225,7 +228,8 @@ std::string to_text(const DatasetInfo& info) {
         o << "Cloud:     " << c.path << " (LAS " << h.version_major << "." << h.version_minor << ", point format "
           << h.point_format << ", " << h.point_record_length << " bytes/point)\n";
         o << "Points:    " << h.point_count << (h.has_color() ? ", RGB" : "") << (h.has_gps_time() ? ", GPS time" : "") << "\n";
-        o << "CRS:       " << crs_line(c.crs) << "\n";
+        o << "CRS:       " << crs_line(c.crs) << (c.crs_source.empty() ? "" : " [from the " + c.crs_source + "]") << "\n";
+        for (const std::string& w : c.crs_warnings) o << "Warning:   " << w << "\n";
         o << "Bounds:    x " << h.min[0] << " - " << h.max[0] << ", y " << h.min[1] << " - " << h.max[1] << ", z "
           << h.min[2] << " - " << h.max[2] << "\n";
         if (h.laz) {

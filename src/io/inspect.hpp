@@ -3,6 +3,7 @@
 #include <map>
 #include <optional>
 #include <string>
+#include <vector>
 
 #include <nlohmann/json.hpp>
 
@@ -24,7 +25,9 @@ struct InspectOptions {
 struct CloudInfo {
     std::string path;
     LasHeader header;
-    CrsInfo crs;
+    CrsInfo crs;                          ///< resolve_cloud_crs (io/cloud_crs.hpp)
+    std::string crs_source;               ///< which record (or option) gave the CRS; empty = none
+    std::vector<std::string> crs_warnings;  ///< records that disagree or cannot be read
     std::map<int, uint64_t> class_counts;  ///< only with cloud_statistics
     std::optional<std::array<double, 6>> measured_bounds;  ///< minx, miny, minz, maxx, maxy, maxz
     uint64_t laz_chunks = 0;          ///< LAZ: chunks of compressed points

@@ -7,18 +7,20 @@
 #include <cmath>
 #include <cpl_string.h>
 #include <filesystem>
+#include <set>
 #include <gdal_priv.h>
 #include <ogrsf_frmts.h>
 
 #include "core/atomic_file.hpp"
 #include "core/error.hpp"
+#include "core/log.hpp"
 #include "crs/gdal_util.hpp"
 
 namespace cityforge {
 
 VectorInfo read_vector_info(const std::string& path) {
     ensure_gdal_registered();
-    if (!is_database_name(path) && !std::filesystem::exists(path)) throw Error(path, "file not found");
+    require_dataset_exists(path);
     GdalErrorCapture capture;
     std::unique_ptr<GDALDataset> ds(GDALDataset::Open(path.c_str(), GDAL_OF_VECTOR | GDAL_OF_READONLY));
     if (!ds) throw Error(path, "not a vector dataset OGR can read" + capture.suffix());
@@ -163,7 +165,8 @@ void write_polygon_features(const std::string& path, const CrsInfo& crs, const s
     discard_file(tmp);
     GdalErrorCapture capture;
     auto fail = [&](const std::string& what) {
-        const std::string why = capture.suffix();
+        // GDAL names the temporary file; the user gave `path`.
+        const std::string why = user_named(capture.suffix(), tmp, path);
         discard_file(tmp);
         throw Error(path, what + why);
     };
@@ -183,6 +186,12 @@ void write_polygon_features(const std::string& path, const CrsInfo& crs, const s
     if (!ds) fail("cannot create vector file");
     OGRSpatialReference srs;
     if (!crs.empty()) srs.importFromWkt(crs.wkt.c_str());
+    // A CRS with a registered code (a compound 28992 + 5709 is EPSG:7415) is
+    // written under that code, not as a custom definition (GeoPackage srs_id 100000).
+    if (crs.epsg && !srs.GetAuthorityCode(nullptr)) {
+        OGRSpatialReference coded;
+        if (coded.importFromEPSG(*crs.epsg) == OGRERR_NONE) srs = coded;
+    }
     srs.SetAxisMappingStrategy(OAMS_TRADITIONAL_GIS_ORDER);
     CPLStringList lco;
     if (options.driver == "GeoJSON") {
@@ -218,7 +227,7 @@ Polygon from_ogr(const OGRPolygon* p) {
 
 PolygonLayer read_polygon_layer(const std::string& path, const std::string& layer_name) {
     ensure_gdal_registered();
-    if (!is_database_name(path) && !std::filesystem::exists(path)) throw Error(path, "file not found");
+    require_dataset_exists(path);
     GdalErrorCapture capture;
     std::unique_ptr<GDALDataset> ds(GDALDataset::Open(path.c_str(), GDAL_OF_VECTOR | GDAL_OF_READONLY));
     if (!ds) throw Error(path, "not a vector dataset OGR can read" + capture.suffix());
@@ -272,6 +281,58 @@ std::string vector_driver_for(const std::string& path) {
     if (ext == ".fgb") return "FlatGeobuf";
     if (ext == ".shp") return "ESRI Shapefile";
     throw Error(path, "unknown vector output format (use .gpkg, .geojson, .fgb, .shp or PG:...)");
+}
+
+void reproject_features(std::vector<Feature>& features, const CrsInfo& from, const CrsInfo& to, const std::string& subject) {
+    std::vector<double> x, y;
+    auto each_ring = [&](auto&& fn) {
+        for (Feature& f : features)
+            for (Polygon& p : f.geometry) {
+                fn(p.outer);
+                for (Ring& h : p.holes) fn(h);
+            }
+    };
+    each_ring([&](Ring& r) {
+        for (const MapPoint& q : r) x.push_back(q.x), y.push_back(q.y);
+    });
+    std::vector<double> z(x.size(), 0.0);
+    transform_points(from, to, x, y, z, subject);
+    std::size_t i = 0;
+    each_ring([&](Ring& r) {
+        for (MapPoint& q : r) q = {x[i], y[i]}, ++i;
+    });
+}
+
+std::vector<std::string> drop_colliding_fields(PolygonLayer& layer, const std::vector<std::string>& ours, const std::string& subject) {
+    auto lower = [](std::string s) {
+        for (char& c : s) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
+        return s;
+    };
+    std::set<std::string> taken;
+    for (const std::string& n : ours) taken.insert(lower(n));
+    std::vector<std::size_t> keep;
+    std::vector<std::string> dropped;
+    for (std::size_t i = 0; i < layer.field_names.size(); ++i) {
+        if (taken.count(lower(layer.field_names[i]))) dropped.push_back(layer.field_names[i]);
+        else keep.push_back(i);
+    }
+    if (dropped.empty()) return dropped;
+    std::vector<std::string> names;
+    std::vector<FieldType> types;
+    for (std::size_t i : keep) names.push_back(layer.field_names[i]), types.push_back(layer.field_types[i]);
+    for (Feature& f : layer.features) {
+        std::vector<AttributeValue> values;
+        values.reserve(keep.size());
+        for (std::size_t i : keep) values.push_back(std::move(f.values[i]));
+        f.values = std::move(values);
+    }
+    layer.field_names = std::move(names);
+    layer.field_types = std::move(types);
+    std::string list;
+    for (const std::string& n : dropped) list += (list.empty() ? "" : ", ") + n;
+    log::warning(subject + ": input field" + (dropped.size() > 1 ? "s " : " ") + list + (dropped.size() > 1 ? " are" : " is") +
+                 " replaced by the value" + (dropped.size() > 1 ? "s" : "") + " computed here");
+    return dropped;
 }
 
 }  // namespace cityforge

@@ -41,7 +41,6 @@ struct Feature {
     std::vector<AttributeValue> values;  ///< one per field, in schema order
 };
 
-enum class FieldType { integer, real, string };
 struct FieldDefinition {
     std::string name;
     FieldType type = FieldType::real;
@@ -82,6 +81,17 @@ void write_polygon_features(const std::string& path, const CrsInfo& crs, const s
 /// (NAME from `tables=`, else VectorWriteOptions::layer) replaced in one transaction, SRID = the
 /// horizontal EPSG code, the vertical CRS in a `crs_vertical` text column.
 bool is_database_name(const std::string& path);
+/// Leaves out of `layer` the fields whose names equal one of `ours` (the
+/// fields the command writes itself; compared case-insensitively, as
+/// GeoPackage, SQLite and Shapefile compare them), with one warning naming
+/// them and `subject`: our values replace theirs, the other fields pass
+/// through. Re-running a command on its own output therefore works and gives
+/// the same fields. Returns the names left out.
+std::vector<std::string> drop_colliding_fields(PolygonLayer& layer, const std::vector<std::string>& ours, const std::string& subject);
+
+/// Moves every vertex of `features` from `from` to `to` (one PROJ
+/// transformation for all). Throws Error naming `subject` when PROJ fails.
+void reproject_features(std::vector<Feature>& features, const CrsInfo& from, const CrsInfo& to, const std::string& subject);
 
 /// Output driver for a path: ".gpkg" -> GPKG, ".geojson"/".json" -> GeoJSON,
 /// ".fgb" -> FlatGeobuf, ".shp" -> ESRI Shapefile; Error otherwise.

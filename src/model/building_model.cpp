@@ -91,6 +91,15 @@ std::array<double, 6> building_extent(const Building& b) {
     return finish_extent(e);
 }
 
+double fallback_footprint_z(const CityModel& m) {
+    std::vector<double> z;
+    for (const Building& b : m.buildings)
+        if (b.ground_z) z.push_back(*b.ground_z);
+    if (z.empty()) return 0.0;
+    std::nth_element(z.begin(), z.begin() + static_cast<std::ptrdiff_t>(z.size() / 2), z.end());
+    return z[z.size() / 2];
+}
+
 std::array<double, 6> model_extent(const CityModel& m) {
     std::array<double, 6> e = kEmpty;
     for (const Building& b : m.buildings) grow_extent(e, b);

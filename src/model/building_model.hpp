@@ -54,6 +54,10 @@ struct CityModel {
     ModelCrs crs;
     std::vector<Building> buildings;
     std::string title = "cityforge buildings";
+    /// Declared type of the buildings' attributes, by name (from the source
+    /// layer and the stages that add them); writers use it so that a field
+    /// whose values are all null keeps its type. Missing: from the values.
+    std::vector<std::pair<std::string, FieldType>> attribute_types;
 };
 
 /// Builds the LOD1 prisms of `b` from ground_z and height_m (converted to z
@@ -61,6 +65,12 @@ struct CityModel {
 /// status, reason, errors and volumes. A building without heights keeps no
 /// LOD1 and gets status "no_height".
 void complete_building(Building& b, const ModelCrs& crs, const SolidValidityOptions& validity = {});
+
+/// z of the LOD0 footprint of a building without ground_z (no_height: no
+/// point near it), so that it keeps its footprint in every format: the
+/// median ground_z of the model's other buildings, 0 when none has one.
+/// Writers mark such footprints with the attribute footprint_z_estimated.
+double fallback_footprint_z(const CityModel& model);
 
 /// Extent of one building: min x, y, z, max x, y, z (z from its solids or ground_z; 0 when unknown).
 std::array<double, 6> building_extent(const Building& building);

@@ -14,6 +14,7 @@
 #include "core/log.hpp"
 #include "core/version.hpp"
 #include "crs/crs.hpp"
+#include "io/cloud_crs.hpp"
 #include "io/vector.hpp"
 #include "raster/quicklook.hpp"
 #include "raster/raster.hpp"
@@ -66,18 +67,18 @@ Parts parts_of(const PolygonLayer& layer) {
 }
 
 
+// A Markdown table cell: a '|' in the text (as in "mean |area error|") would end the cell.
+std::string md_cell(const std::string& text) {
+    std::string out;
+    for (char c : text) {
+        if (c == '|') out += '\\';
+        out += c;
+    }
+    return out;
+}
+
 void reproject_layer(PolygonLayer& layer, const CrsInfo& to, const std::string& path) {
-    for (Feature& f : layer.features)
-        for (Polygon& p : f.geometry) {
-            auto move = [&](Ring& r) {
-                std::vector<double> x, y, z(r.size(), 0.0);
-                for (const MapPoint& q : r) x.push_back(q.x), y.push_back(q.y);
-                transform_points(layer.crs, to, x, y, z, path);
-                for (std::size_t i = 0; i < r.size(); ++i) r[i] = {x[i], y[i]};
-            };
-            move(p.outer);
-            for (Ring& h : p.holes) move(h);
-        }
+    reproject_features(layer.features, layer.crs, to, path);
     layer.crs = to;
 }
 
@@ -197,10 +198,15 @@ FootprintAuditReport audit_footprints(const std::string& pred_path, const std::s
     j["predicted"] = {{"path", pred_path}, {"count", s.predicted}, {"reprojected", rep.reprojected}, {"crs", pred.crs.label()}};
     j["reference"] = {{"path", ref_path}, {"count", s.reference}, {"crs", rep.crs}};
     j["iou_threshold"] = o.iou_threshold;
+    // Means over matches are not defined without a match: null, "n/a" in the tables.
+    const bool matched = s.true_positives > 0;
+    auto over_matches = [&](double v) { return matched ? nlohmann::json(v) : nlohmann::json(nullptr); };
+    auto fmt_matches = [&](double v) { return matched ? fmt(v) : std::string("n/a"); };
     j["totals"] = {{"true_positives", s.true_positives}, {"false_positives", s.predicted - s.true_positives},
                    {"false_negatives", s.reference - s.true_positives}, {"precision", s.precision}, {"recall", s.recall},
-                   {"f1", s.f1}, {"object_quality", s.object_quality}, {"mean_iou", s.mean_iou}, {"mean_abs_area_error_pct", s.mean_abs_area_error_pct},
-                   {"mean_polis", s.mean_polis}, {"polis_unit", "CRS units (" + std::to_string(ref.crs.linear_unit_m) + " m)"},
+                   {"f1", s.f1}, {"object_quality", s.object_quality}, {"mean_iou", over_matches(s.mean_iou)},
+                   {"mean_abs_area_error_pct", over_matches(s.mean_abs_area_error_pct)},
+                   {"mean_polis", over_matches(s.mean_polis)}, {"polis_unit", "CRS units (" + std::to_string(ref.crs.linear_unit_m) + " m)"},
                    {"area_completeness", s.area_completeness}, {"area_correctness", s.area_correctness}, {"area_quality", s.area_quality}};
     nlohmann::json rows = nlohmann::json::array();
     std::vector<std::vector<std::string>> table;
@@ -231,8 +237,8 @@ FootprintAuditReport audit_footprints(const std::string& pred_path, const std::s
         {"false positives", std::to_string(s.predicted - s.true_positives)},
         {"false negatives", std::to_string(s.reference - s.true_positives)},
         {"precision (per-object correctness)", fmt(s.precision)}, {"recall (per-object completeness)", fmt(s.recall)}, {"F1", fmt(s.f1)},
-        {"per-object quality", fmt(s.object_quality)}, {"mean IoU", fmt(s.mean_iou)},
-        {"mean |area error| (%)", fmt(s.mean_abs_area_error_pct)}, {"mean PoLiS (CRS units)", fmt(s.mean_polis)},
+        {"per-object quality", fmt(s.object_quality)}, {"mean IoU", fmt_matches(s.mean_iou)},
+        {"mean |area error| (%)", fmt_matches(s.mean_abs_area_error_pct)}, {"mean PoLiS (CRS units)", fmt_matches(s.mean_polis)},
         {"per-area completeness", fmt(s.area_completeness)}, {"per-area correctness", fmt(s.area_correctness)},
         {"per-area quality", fmt(s.area_quality)}};
     std::ostringstream md;
@@ -240,9 +246,9 @@ FootprintAuditReport audit_footprints(const std::string& pred_path, const std::s
        << "- predicted: `" << pred_path << "` (" << s.predicted << " footprints" << (rep.reprojected ? ", reprojected" : "") << ")\n"
        << "- reference: `" << ref_path << "` (" << s.reference << " footprints, " << rep.crs << ")\n"
        << "- matching: one-to-one, IoU >= " << o.iou_threshold << " (greedy by IoU, the SpaceNet rule)\n\n| measure | value |\n|---|---|\n";
-    for (const auto& r : totals) md << "| " << r[0] << " | " << r[1] << " |\n";
+    for (const auto& r : totals) md << "| " << md_cell(r[0]) << " | " << md_cell(r[1]) << " |\n";
     md << "\n## Matches\n\n| reference fid | predicted fid | IoU | area error (%) | PoLiS |\n|---|---|---|---|---|\n";
-    for (const auto& r : table) md << "| " << r[0] << " | " << r[1] << " | " << r[2] << " | " << r[3] << " | " << r[4] << " |\n";
+    for (const auto& r : table) md << "| " << md_cell(r[0]) << " | " << md_cell(r[1]) << " | " << md_cell(r[2]) << " | " << md_cell(r[3]) << " | " << md_cell(r[4]) << " |\n";
 
     HtmlReport html("Footprint audit");
     html.paragraph("Predicted: " + pred_path + " (" + std::to_string(s.predicted) + " footprints" + (rep.reprojected ? ", reprojected" : "") +
@@ -339,9 +345,9 @@ RectangleAuditReport audit_rectangles(const std::string& fitted_path, const std:
     std::ostringstream md;
     md << "# Rectangle fit audit\n\n- fitted: `" << fitted_path << "` (" << rep.fitted << " footprints, " << crs_label << ")\n- original: "
        << (o.original_path.empty() ? "attribute `" + o.original_area_field + "`" : "`" + o.original_path + "`") << "\n\n| measure | value |\n|---|---|\n";
-    for (const auto& r : totals) md << "| " << r[0] << " | " << r[1] << " |\n";
+    for (const auto& r : totals) md << "| " << md_cell(r[0]) << " | " << md_cell(r[1]) << " |\n";
     md << "\n| fid | original (m²) | fitted (m²) | error (m²) | error (%) | IoU |\n|---|---|---|---|---|---|\n";
-    for (const auto& r : table) md << "| " << r[0] << " | " << r[1] << " | " << r[2] << " | " << r[3] << " | " << r[4] << " | " << r[5] << " |\n";
+    for (const auto& r : table) md << "| " << md_cell(r[0]) << " | " << md_cell(r[1]) << " | " << md_cell(r[2]) << " | " << md_cell(r[3]) << " | " << md_cell(r[4]) << " | " << md_cell(r[5]) << " |\n";
     HtmlReport html("Rectangle fit audit");
     html.paragraph("Fitted: " + fitted_path + " (" + std::to_string(rep.fitted) + " footprints, " + crs_label + "). Original areas from " +
                    (o.original_path.empty() ? "attribute " + o.original_area_field : o.original_path) + ".");
@@ -414,9 +420,9 @@ HeightAuditReport audit_heights(const std::string& pred_path, const std::string&
     md << "# Height audit\n\n- predicted: `" << pred_path << "`, field `" << o.pred_field << "`" << (lp.reprojected ? " (reprojected)" : "")
        << "\n- reference: `" << ref_path << "`, field `" << o.ref_field << "` (" << rep.reference << " footprints, " << lp.ref.crs.label()
        << ")\n- footprints matched one to one at IoU >= " << o.iou_threshold << "\n\n| measure | value |\n|---|---|\n";
-    for (const auto& t : totals) md << "| " << t[0] << " | " << t[1] << " |\n";
+    for (const auto& t : totals) md << "| " << md_cell(t[0]) << " | " << md_cell(t[1]) << " |\n";
     md << "\n| reference fid | predicted fid | predicted (m) | reference (m) | error (m) |\n|---|---|---|---|---|\n";
-    for (const auto& t : table) md << "| " << t[0] << " | " << t[1] << " | " << t[2] << " | " << t[3] << " | " << t[4] << " |\n";
+    for (const auto& t : table) md << "| " << md_cell(t[0]) << " | " << md_cell(t[1]) << " | " << md_cell(t[2]) << " | " << md_cell(t[3]) << " | " << md_cell(t[4]) << " |\n";
     HtmlReport html("Height audit");
     html.paragraph("Predicted: " + pred_path + ", field " + o.pred_field + ". Reference: " + ref_path + ", field " + o.ref_field + " (" +
                    lp.ref.crs.label() + "). Footprints matched one to one at IoU >= " + fmt(o.iou_threshold) + ".");
@@ -436,11 +442,10 @@ HeightAuditReport audit_heights(const std::string& pred_path, const std::string&
 CloudAuditReport audit_clouds(const std::string& pred_path, const std::string& ref_path, const std::string& out_dir,
                               const CloudAuditOptions& o) {
     o.validate();
-    std::string pred_wkt, ref_wkt;
-    PointCloud pred = read_point_cloud(pred_path, &pred_wkt);
-    const PointCloud ref = read_point_cloud(ref_path, &ref_wkt);
-    const CrsInfo pred_crs = !o.pred_crs.empty() ? crs_from_user_input(o.pred_crs, "--pred-crs") : crs_from_wkt(pred_wkt, pred_path);
-    const CrsInfo ref_crs = !o.ref_crs.empty() ? crs_from_user_input(o.ref_crs, "--ref-crs") : crs_from_wkt(ref_wkt, ref_path);
+    PointCloud pred = read_point_cloud(pred_path);
+    const PointCloud ref = read_point_cloud(ref_path);
+    const CrsInfo pred_crs = resolve_cloud_crs(pred_path, o.pred_crs, "--pred-crs").crs;
+    const CrsInfo ref_crs = resolve_cloud_crs(ref_path, o.ref_crs, "--ref-crs").crs;
     if (pred_crs.empty() != ref_crs.empty())
         throw Error(pred_crs.empty() ? pred_path : ref_path, "point cloud has no CRS while the other has one; give it with --pred-crs/--ref-crs");
     CloudAuditReport rep;
@@ -494,9 +499,9 @@ CloudAuditReport audit_clouds(const std::string& pred_path, const std::string& r
     std::ostringstream md;
     md << "# Point cloud audit\n\n- predicted: `" << pred_path << "` (" << c.predicted_points << " points" << (rep.reprojected ? ", reprojected" : "")
        << ")\n- reference: `" << ref_path << "` (" << c.reference_points << " points, " << rep.crs << ")\n\n| measure | value |\n|---|---|\n";
-    for (const auto& t : totals) md << "| " << t[0] << " | " << t[1] << " |\n";
+    for (const auto& t : totals) md << "| " << md_cell(t[0]) << " | " << md_cell(t[1]) << " |\n";
     md << "\n| tau (m) | precision | recall | F-score |\n|---|---|---|---|\n";
-    for (const auto& t : ftable) md << "| " << t[0] << " | " << t[1] << " | " << t[2] << " | " << t[3] << " |\n";
+    for (const auto& t : ftable) md << "| " << md_cell(t[0]) << " | " << md_cell(t[1]) << " | " << md_cell(t[2]) << " | " << md_cell(t[3]) << " |\n";
     HtmlReport html("Point cloud audit");
     html.paragraph("Predicted: " + pred_path + " (" + std::to_string(c.predicted_points) + " points" + (rep.reprojected ? ", reprojected" : "") +
                    "). Reference: " + ref_path + " (" + std::to_string(c.reference_points) + " points, " + rep.crs + ").");

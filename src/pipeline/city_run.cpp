@@ -21,6 +21,7 @@
 #include "core/version.hpp"
 #include "crs/crs.hpp"
 #include "footprint/building_mask.hpp"
+#include "io/cloud_crs.hpp"
 #include "io/vector.hpp"
 #include "model/building_json.hpp"
 #include "pipeline/cloud_cells.hpp"
@@ -330,7 +331,7 @@ void split_cloud(const RunManifest& m, const std::string& out_dir) {
     }
     CloudReader probe(o.cloud);
     const CrsInfo grid_crs = crs_from_wkt(m.crs_wkt, "manifest");
-    const CrsInfo cloud_crs = !o.cloud_crs.empty() ? crs_from_user_input(o.cloud_crs, "--cloud-crs") : crs_from_wkt(probe.crs_wkt(), o.cloud);
+    const CrsInfo cloud_crs = resolve_cloud_crs(probe, o.cloud_crs).crs;
     if (probe.format() != CloudFormat::las || cloud_crs.empty() || !same_horizontal_crs(cloud_crs, grid_crs)) {
         write_text_file(dir / "not_split", "tiles read the source cloud (not LAS, or not in the grid's CRS)\n");
         return;
@@ -352,7 +353,7 @@ void split_cloud(const RunManifest& m, const std::string& out_dir) {
         const MapPoint b = m.grid.transform.pixel_to_map({double(t.window.col + t.window.width), double(t.window.row + t.window.height)});
         Window w;
         w.e = {std::min(a.x, b.x), std::min(a.y, b.y), std::max(a.x, b.x), std::max(a.y, b.y)};
-        w.writer = std::make_unique<LasWriter>(tile_cloud_path(out_dir, t.index).string(), header.scale, header.offset, probe.crs_wkt());
+        w.writer = std::make_unique<LasWriter>(tile_cloud_path(out_dir, t.index).string(), header.scale, header.offset, cloud_crs.wkt);
         windows.push_back(std::move(w));
     }
     PointCloud chunk;
@@ -624,8 +625,7 @@ RunReport merge_tiles(const RunManifest& m, const std::string& out_dir, const Pr
     std::sort(buildings.begin(), buildings.end(), [&](const Building& a, const Building& b) { return key(a.id) < key(b.id); });
     CrsInfo crs = grid_crs;
     // The vertical datum: from the cloud (as the tiles saw it) or the option.
-    const std::string cloud_wkt = m.options.cloud_crs.empty() && !m.options.cloud.empty() ? CloudReader(m.options.cloud).crs_wkt() : std::string();
-    const CrsInfo cloud_crs = !m.options.cloud_crs.empty() ? crs_from_user_input(m.options.cloud_crs, "--cloud-crs") : crs_from_wkt(cloud_wkt, m.options.cloud);
+    const CrsInfo cloud_crs = m.options.cloud.empty() ? CrsInfo{} : resolve_cloud_crs(m.options.cloud, m.options.cloud_crs).crs;
     crs = combine_with_vertical(crs, cloud_crs);
     if (!m.options.buildings.model.vertical_crs.empty() && !crs.vertical_epsg)
         crs = combine_with_vertical(crs, crs_from_user_input(m.options.buildings.model.vertical_crs, "--vertical-crs"));

@@ -19,8 +19,17 @@ namespace cityforge {
 namespace {
 const std::vector<std::string> kFormats{"geojson", "gpkg", "citygml", "cityjson", "cityjsonseq", "3dtiles", "gltf"};
 // Attributes we compute; same-named source attributes are replaced (status and reason merged).
-const std::set<std::string> kOwnFields{"cityforge_id", "roof_z", "status", "reason", "lod1_valid", "lod1_errors", "lod1_volume_m3",
-                                       "lod2_valid", "lod2_errors", "lod2_volume_m3", "roof_type"};
+// The fields the flat tables (GeoJSON, GeoPackage) add to the source attributes.
+const std::vector<FieldDefinition> kOwnFieldDefinitions{
+    {"status", FieldType::string},     {"reason", FieldType::string},      {"roof_z", FieldType::real},
+    {"lod1_valid", FieldType::integer}, {"lod1_errors", FieldType::string}, {"lod1_volume_m3", FieldType::real},
+    {"lod2_valid", FieldType::integer}, {"lod2_errors", FieldType::string}, {"lod2_volume_m3", FieldType::real},
+    {"roof_type", FieldType::string}};
+const std::set<std::string> kOwnFields = [] {
+    std::set<std::string> s{"cityforge_id"};
+    for (const FieldDefinition& f : kOwnFieldDefinitions) s.insert(f.name);
+    return s;
+}();
 bool wants(const std::vector<std::string>& v, const std::string& s) { return std::find(v.begin(), v.end(), s) != v.end(); }
 bool wants(const std::vector<int>& v, int s) { return std::find(v.begin(), v.end(), s) != v.end(); }
 
@@ -78,6 +87,15 @@ CityModel build_city_model(const PolygonLayer& layer, const CrsInfo& crs, const 
         if (std::holds_alternative<int64_t>(v)) return double(std::get<int64_t>(v));
         return std::nullopt;
     };
+    {
+        // Fields the model computes itself replace the input's (a warning names them).
+        std::string replaced;
+        for (const std::string& n : layer.field_names)
+            if (kOwnFields.count(n) && n != "status" && n != "reason") replaced += (replaced.empty() ? "" : ", ") + n;
+        if (!replaced.empty()) log::warning(path + ": input fields " + replaced + " are replaced by the values computed here");
+    }
+    for (std::size_t k = 0; k < layer.field_names.size(); ++k)
+        if (!kOwnFields.count(layer.field_names[k])) model.attribute_types.emplace_back(layer.field_names[k], layer.field_types[k]);
     std::set<std::string> used;
     model.buildings.reserve(layer.features.size());
     for (std::size_t i = 0; i < layer.features.size(); ++i) {
@@ -151,14 +169,11 @@ ExportReport write_city_model(const CityModel& model, const CrsInfo& crs, const 
                 t = std::holds_alternative<int64_t>(v) ? FieldType::integer : std::holds_alternative<double>(v) ? FieldType::real : FieldType::string;
                 break;
             }
+            for (const auto& [name, declared] : model.attribute_types)
+                if (name == names[k]) t = declared;
             fields.push_back({names[k], t});
         }
-        for (const FieldDefinition& f : std::initializer_list<FieldDefinition>{
-                 {"status", FieldType::string}, {"reason", FieldType::string}, {"roof_z", FieldType::real},
-                 {"lod1_valid", FieldType::integer}, {"lod1_errors", FieldType::string}, {"lod1_volume_m3", FieldType::real},
-                 {"lod2_valid", FieldType::integer}, {"lod2_errors", FieldType::string}, {"lod2_volume_m3", FieldType::real},
-                 {"roof_type", FieldType::string}})
-            fields.push_back(f);
+        for (const FieldDefinition& f : kOwnFieldDefinitions) fields.push_back(f);
         const double unit3 = model.crs.linear_unit_m * model.crs.linear_unit_m * model.crs.z_unit_m;
         std::vector<Feature> features;
         features.reserve(model.buildings.size());

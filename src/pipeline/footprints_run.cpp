@@ -7,6 +7,7 @@
 
 #include "cloud/cloud_rasters.hpp"
 #include "core/error.hpp"
+#include "core/log.hpp"
 #include "footprint/rectangle_fit.hpp"
 #include "footprint/vectorize.hpp"
 #include "heights/building_heights.hpp"
@@ -281,12 +282,18 @@ FootprintsReport run_footprints(const std::string& output_path, const Footprints
     double unit = 1.0, z_unit = 1.0;
     std::unique_ptr<RasterReader> ortho;
     OrthoImage img;
+    CrsInfo input_crs;  // the CRS the footprints are written in by default
     if (!o.ortho.empty()) {
-        ortho = std::make_unique<RasterReader>(o.ortho);
+        RasterOpenOptions ro;
+        ro.project_geographic = true;  // metres: a lon/lat ortho is read on its UTM zone
+        ro.working_crs = o.working_crs;
+        ortho = std::make_unique<RasterReader>(o.ortho, ro);
         const RasterInfo& info = ortho->info();
+        if (info.warped) log::info(o.ortho + ": " + info.source_crs.label() + " read on " + info.crs.label() + " (working CRS)");
         grid = {info.transform, info.width, info.height};
         crs = info.crs;
-        unit = crs.linear_unit_m, z_unit = crs.z_unit_m;
+        input_crs = info.source_crs;
+        unit = info.metres_per_unit, z_unit = crs.z_unit_m;
         if (o.ndsm_band > info.band_count())
             throw Error(o.ortho, "has " + std::to_string(info.band_count()) + " bands; --ndsm-band " + std::to_string(o.ndsm_band) + " does not exist");
         if (o.nir_band > info.band_count())
@@ -319,8 +326,10 @@ FootprintsReport run_footprints(const std::string& output_path, const Footprints
             rep.height_source = "point cloud";
             const PreparedCloud pc = prepare_cloud(o.cloud, o.cloud_crs, ortho ? ortho->info().crs : CrsInfo{}, o.outliers, o.ground);
             crs = pc.crs;
-            unit = pc.crs.linear_unit_m, z_unit = pc.crs.z_unit_m;
+            if (input_crs.empty()) input_crs = pc.source_crs;
+            unit = ortho ? ortho->info().metres_per_unit : pc.crs.linear_unit_m, z_unit = pc.crs.z_unit_m;
             if (!ortho) grid = grid_over_cloud(pc.cloud, o.mask.gsd_m / unit);
+            if (ortho) require_cloud_overlap(pc, o.cloud, ortho->info().extent, o.ortho);
             progress(0.3, "cloud");
             mo.gsd_m = std::abs(grid.transform.pixel_width) * unit;
             mo.min_height_m /= z_unit;
@@ -336,7 +345,9 @@ FootprintsReport run_footprints(const std::string& output_path, const Footprints
             } else {
                 rep.height_source = "nDSM raster";
                 ndsm = read_ndsm_raster(o.ndsm, grid, crs);
-                unit = crs.linear_unit_m, z_unit = crs.z_unit_m;
+                if (input_crs.empty()) input_crs = crs;
+                unit = ground_metres_per_unit(crs, grid.transform, grid.width, grid.height), z_unit = crs.z_unit_m;
+                if (!(unit > 0.0)) throw Error(o.ndsm, "an nDSM in a geographic CRS needs metres: warp it (gdalwarp -t_srs) or give it as a band of the ortho");
             }
             mo.gsd_m = std::abs(grid.transform.pixel_width) * unit;
             mo.min_height_m /= z_unit;
@@ -397,11 +408,22 @@ FootprintsReport run_footprints(const std::string& output_path, const Footprints
     progress(0.6, "detection");
     FootprintTable table = footprint_table(mask, ndsm, grid.transform, 0, 0, {}, rep.mode, unit, z_unit, crs, o);
     rep.buildings = table.features.size();
+    if (table.features.empty()) {
+        // Nothing found is not a result: no empty file, a non-zero exit.
+        const std::string input = !o.ortho.empty() ? o.ortho : !o.cloud.empty() ? o.cloud : o.ndsm;
+        throw Error(input, "no building found (" + rep.mode + " mode" + (rep.height_source.empty() ? "" : ", heights from the " + rep.height_source) +
+                               "); nothing written to " + output_path);
+    }
     rep.mean_abs_fit_area_error_pct = table.mean_abs_fit_area_error_pct;
     VectorWriteOptions wopt;
     wopt.driver = driver;
-    write_polygon_features(output_path, crs, table.fields, table.features, wopt);
-    rep.crs = crs.label();
+    // Written in the input's CRS (or --out-crs), whatever CRS the work was done in.
+    CrsInfo out_crs = !o.out_crs.empty() ? crs_from_user_input(o.out_crs, "--out-crs") : input_crs.empty() ? crs : input_crs;
+    out_crs = combine_with_vertical(out_crs, crs);
+    if (!same_horizontal_crs(out_crs, crs)) reproject_features(table.features, crs, out_crs, output_path);
+    write_polygon_features(output_path, out_crs, table.fields, table.features, wopt);
+    rep.crs = out_crs.label();
+    rep.working_crs = crs.label();
     rep.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
     progress(1.0, "written");
     return rep;

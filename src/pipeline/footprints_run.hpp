@@ -55,6 +55,13 @@ struct FootprintsRunOptions {
     /// from the cloud's density: at least 2 points per cell on average).
     int cloud_cell_factor = 0;
     std::string ortho;             ///< ortho: its grid and CRS are used
+    /// CRS the work is done in (metres): empty = the ortho's own, or for an
+    /// ortho in a geographic CRS the UTM zone of its centre (the ortho is then
+    /// read warped onto it).
+    std::string working_crs;
+    /// CRS of the written footprints: empty = the input's (the ortho's own
+    /// CRS, else the cloud's or the nDSM's).
+    std::string out_crs;
     DetectionMode mode = DetectionMode::automatic;
     /// ortho modes: segments made beforehand by `cityforge segment` (a label
     /// GeoTIFF on the ortho's grid, or its output folder: the level of
@@ -104,7 +111,8 @@ struct FootprintsReport {
     int cloud_cell_factor = 1;     ///< cloud rasters on cells of this many pixels a side
     uint32_t segments = 0;         ///< ortho modes: merged segments
     std::string segments_path;     ///< the label raster read for --segments (empty: segmented here)
-    std::string crs;
+    std::string crs;               ///< CRS of the written footprints
+    std::string working_crs;       ///< CRS the detection worked in (metres)
     std::size_t buildings = 0;
     bool used_classes = false;
     int width = 0, height = 0;

@@ -13,14 +13,42 @@
 
 namespace cityforge {
 
+namespace {
+const char* const kRealFields[] = {"ground_z", "roof_z_min", "roof_z_50p", "roof_z_70p", "roof_z_90p", "roof_z_max", "height_m",
+                                   "point_density_m2", "nodata_fraction", "ground_buffer_m"};
+}
+
+const std::vector<std::string>& heights_output_fields() {
+    static const std::vector<std::string> names = [] {
+        std::vector<std::string> v{"source_fid"};
+        for (const char* n : kRealFields) v.push_back(n);
+        for (const char* n : {"n_points_roof", "n_points_ground", "height_quality", "z_crs"}) v.push_back(n);
+        return v;
+    }();
+    return names;
+}
+
+PolygonLayer read_footprints_for_heights(const std::string& path, const HeightsRunOptions& o) {
+    PolygonLayer footprints = read_polygon_layer(path, o.footprint_layer);
+    if (footprints.crs.empty()) throw Error(path, "footprints have no coordinate reference system");
+    if (footprints.crs.geographic) throw Error(path, "footprints are in a geographic CRS; reproject them to a projected CRS first");
+    std::vector<std::string> ours = heights_output_fields();
+    ours.insert(ours.end(), o.later_fields.begin(), o.later_fields.end());
+    drop_colliding_fields(footprints, ours, path);
+    return footprints;
+}
+
 HeightsStage compute_heights_stage(const std::string& footprints_path, const std::string& cloud_path, const HeightsRunOptions& o,
                                    const Progress& progress) {
     o.heights.validate();
-    PolygonLayer footprints = read_polygon_layer(footprints_path, o.footprint_layer);
-    if (footprints.crs.empty()) throw Error(footprints_path, "footprints have no coordinate reference system");
-    if (footprints.crs.geographic) throw Error(footprints_path, "footprints are in a geographic CRS; reproject them to a projected CRS first");
+    PolygonLayer footprints = read_footprints_for_heights(footprints_path, o);
     progress(0.05, "footprints");
     PreparedCloud cloud = prepare_cloud(cloud_path, o.cloud_crs, footprints.crs, o.outliers, o.ground);
+    {
+        std::vector<Extent> extents;
+        for (const Feature& f : footprints.features) extents.push_back(parts_extent(f.geometry));
+        check_footprint_overlap(cloud, cloud_path, extents, footprints_path);
+    }
     progress(0.5, "ground");
     return compute_heights_stage(std::move(footprints), std::move(cloud), o, progress.sub(0.5, 1.0));
 }
@@ -59,15 +87,13 @@ HeightsStage compute_heights_stage(PolygonLayer footprints_in, PreparedCloud clo
     std::vector<FieldDefinition> fields;
     fields.push_back({"source_fid", FieldType::integer});
     for (std::size_t i = 0; i < footprints.field_names.size(); ++i) fields.push_back({footprints.field_names[i], footprints.field_types[i]});
-    const char* real_fields[] = {"ground_z", "roof_z_min", "roof_z_50p", "roof_z_70p", "roof_z_90p", "roof_z_max", "height_m",
-                                 "point_density_m2", "nodata_fraction", "ground_buffer_m"};
-    for (const char* n : real_fields) fields.push_back({n, FieldType::real});
+    for (const char* n : kRealFields) fields.push_back({n, FieldType::real});
     fields.push_back({"n_points_roof", FieldType::integer});
     fields.push_back({"n_points_ground", FieldType::integer});
     fields.push_back({"height_quality", FieldType::string});
     fields.push_back({"z_crs", FieldType::string});
     for (const FieldDefinition& f : fields) t.field_names.push_back(f.name), t.field_types.push_back(f.type);
-    const std::string z_crs = cloud_crs.vertical_epsg ? "EPSG:" + std::to_string(*cloud_crs.vertical_epsg) : cloud_crs.label();
+    const std::string z_crs = z_crs_label(cloud_crs);
     t.features.reserve(heights.size());
     auto opt = [](const std::optional<double>& v) { return v ? AttributeValue(*v) : AttributeValue(); };
     for (std::size_t i = 0; i < heights.size(); ++i) {
@@ -96,7 +122,7 @@ namespace {
 
 // Heights of `footprints` with the cloud read window by window (see
 // HeightsRunOptions::max_points_in_memory); rows in the footprints' order.
-HeightsStage tiled_heights_stage(PolygonLayer footprints, const std::string& cloud_path, const HeightsRunOptions& o, const Progress& progress,
+HeightsStage tiled_heights_stage(PolygonLayer footprints, const std::string& footprints_path, const std::string& cloud_path, const HeightsRunOptions& o, const Progress& progress,
                                  std::size_t& tiles_used) {
     const double unit = footprints.crs.linear_unit_m;
     std::vector<Extent> ext(footprints.features.size());
@@ -144,6 +170,8 @@ HeightsStage tiled_heights_stage(PolygonLayer footprints, const std::string& clo
         progress(double(done) / double(ext.size()), "tiles");
     }
     tiles_used = groups.size();
+    if (out.report.points_read == 0)
+        throw Error(cloud_path, "no point of the cloud lies near the footprints of " + footprints_path + " (" + describe_extent(all, footprints.crs) + ")");
     out.table.features = std::move(rows);
     out.table.fids = footprints.fids;
     out.heights = std::move(heights);
@@ -165,10 +193,8 @@ HeightsRunReport run_heights(const std::string& footprints_path, const std::stri
     HeightsStage st;
     std::size_t tiles = 1;
     if (o.max_points_in_memory > 0 && announced > o.max_points_in_memory) {
-        PolygonLayer footprints = read_polygon_layer(footprints_path, o.footprint_layer);
-        if (footprints.crs.empty()) throw Error(footprints_path, "footprints have no coordinate reference system");
-        if (footprints.crs.geographic) throw Error(footprints_path, "footprints are in a geographic CRS; reproject them to a projected CRS first");
-        st = tiled_heights_stage(std::move(footprints), cloud_path, o, progress.sub(0.0, 0.95), tiles);
+        PolygonLayer footprints = read_footprints_for_heights(footprints_path, o);
+        st = tiled_heights_stage(std::move(footprints), footprints_path, cloud_path, o, progress.sub(0.0, 0.95), tiles);
     } else {
         st = compute_heights_stage(footprints_path, cloud_path, o, progress.sub(0.0, 0.95));
     }

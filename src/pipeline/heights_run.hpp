@@ -26,7 +26,19 @@ struct HeightsRunOptions {
     uint64_t max_points_in_memory = 60'000'000;
     double tile_m = 1000.0;           ///< tile edge, metres
     double tile_margin_m = 30.0;      ///< window margin around a tile's footprints (>= 4 x the ground buffer), metres
+    /// Fields a later stage writes (roofs, export): input fields of these
+    /// names are replaced too, like those of heights_output_fields().
+    std::vector<std::string> later_fields;
 };
+
+/// The fields `heights` adds to the footprints' own (source_fid, ground_z,
+/// roof_z_*, height_m, ..., z_crs). Input fields of these names are replaced
+/// (drop_colliding_fields) so that heights runs on its own output.
+const std::vector<std::string>& heights_output_fields();
+
+/// The footprints of `path` (layer o.footprint_layer) ready for heights: a
+/// projected CRS, input fields that collide with ours left out (a warning).
+PolygonLayer read_footprints_for_heights(const std::string& path, const HeightsRunOptions& o);
 
 struct HeightsRunReport {
     std::string output_path;

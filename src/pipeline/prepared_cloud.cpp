@@ -1,10 +1,14 @@
 #include "pipeline/prepared_cloud.hpp"
 
+#include <cstdio>
+#include <filesystem>
+
 #include "core/geometry.hpp"
 
 #include "cloud/cloud_reader.hpp"
 #include "core/error.hpp"
 #include "core/log.hpp"
+#include "io/cloud_crs.hpp"
 
 namespace cityforge {
 
@@ -13,16 +17,11 @@ PreparedCloud prepare_cloud(const std::string& cloud_path, const std::string& cl
     outliers.validate();
     ground.validate();
     PreparedCloud p;
-    std::string file_wkt;
     // The CRS first (from the header), so that a crop can be applied while reading.
-    const std::string header_wkt = CloudReader(cloud_path).crs_wkt();
-    if (!cloud_crs_override.empty()) p.source_crs = crs_from_user_input(cloud_crs_override, "--cloud-crs");
-    else if (!header_wkt.empty()) p.source_crs = crs_from_wkt(header_wkt, cloud_path);
-    else throw Error(cloud_path, "point cloud has no CRS; give it with --cloud-crs (e.g. EPSG:7415)");
+    p.source_crs = require_cloud_crs(cloud_path, cloud_crs_override);
     const bool same = target.empty() || same_horizontal_crs(p.source_crs, target);
-    if (crop && same) p.cloud = read_point_cloud_in(cloud_path, crop->min_x, crop->min_y, crop->max_x, crop->max_y, &file_wkt);
-    else p.cloud = read_point_cloud(cloud_path, &file_wkt);
-    if (p.source_crs.geographic) throw Error(cloud_path, "point cloud is in a geographic CRS; a projected CRS is needed");
+    if (crop && same) p.cloud = read_point_cloud_in(cloud_path, crop->min_x, crop->min_y, crop->max_x, crop->max_y);
+    else p.cloud = read_point_cloud(cloud_path);
     p.crs = p.source_crs;
     if (!target.empty() && !same_horizontal_crs(p.source_crs, target)) {
         log::info("reprojecting " + cloud_path + " from " + p.source_crs.label() + " to " + target.label());
@@ -70,6 +69,52 @@ CloudSample sample_cloud(const std::string& cloud_path, const std::string& cloud
     const PreparedCloud sample = prepare_cloud(cloud_path, cloud_crs_override, target, outliers, trust, &box);
     if (!sample.cloud.size()) return {};
     return {sample.outlier_limit_m, point_density_m2(sample)};
+}
+
+Extent kept_extent(const PreparedCloud& pc) {
+    Extent e = empty_extent();
+    for (std::size_t i = 0; i < pc.cloud.size(); ++i)
+        if (pc.keep.empty() || pc.keep[i]) {
+            e.min_x = std::min(e.min_x, pc.cloud.x[i]), e.max_x = std::max(e.max_x, pc.cloud.x[i]);
+            e.min_y = std::min(e.min_y, pc.cloud.y[i]), e.max_y = std::max(e.max_y, pc.cloud.y[i]);
+        }
+    return e;
+}
+
+std::string describe_extent(const Extent& e, const CrsInfo& crs) {
+    char buf[200];
+    const int digits = crs.geographic ? 6 : 1;
+    std::snprintf(buf, sizeof buf, "%.*f, %.*f - %.*f, %.*f", digits, e.min_x, digits, e.min_y, digits, e.max_x, digits, e.max_y);
+    // The horizontal CRS only: extents say nothing of heights.
+    return std::string(buf) + " " + (crs.horizontal_epsg ? "EPSG:" + std::to_string(*crs.horizontal_epsg) : crs.label());
+}
+
+void require_cloud_overlap(const PreparedCloud& pc, const std::string& cloud_path, const Extent& extent, const std::string& other_path) {
+    for (std::size_t i = 0; i < pc.cloud.size(); ++i)
+        if ((pc.keep.empty() || pc.keep[i]) && pc.cloud.x[i] >= extent.min_x && pc.cloud.x[i] <= extent.max_x &&
+            pc.cloud.y[i] >= extent.min_y && pc.cloud.y[i] <= extent.max_y)
+            return;
+    throw Error(cloud_path, "does not overlap " + other_path + ": cloud " + describe_extent(kept_extent(pc), pc.crs) + ", " +
+                                std::filesystem::path(other_path).filename().string() + " " + describe_extent(extent, pc.crs));
+}
+
+std::size_t check_footprint_overlap(const PreparedCloud& pc, const std::string& cloud_path, const std::vector<Extent>& extents,
+                                    const std::string& footprints_path) {
+    if (extents.empty()) return 0;
+    const Extent c = kept_extent(pc);
+    Extent all = empty_extent();
+    std::size_t outside = 0;
+    for (const Extent& e : extents) {
+        include(all, e);
+        if (e.max_x < c.min_x || e.min_x > c.max_x || e.max_y < c.min_y || e.min_y > c.max_y) ++outside;
+    }
+    if (outside == extents.size())
+        throw Error(footprints_path, "no footprint overlaps the cloud " + cloud_path + ": footprints " + describe_extent(all, pc.crs) +
+                                         ", cloud " + (c.min_x <= c.max_x ? describe_extent(c, pc.crs) : std::string("without points")));
+    if (outside > 0)
+        log::warning(footprints_path + ": " + std::to_string(outside) + " of " + std::to_string(extents.size()) +
+                     " footprints lie outside the cloud " + cloud_path + " (they get no heights)");
+    return outside;
 }
 
 double point_density_m2(const PreparedCloud& pc) {

@@ -45,6 +45,25 @@ struct CloudSample {
 CloudSample sample_cloud(const std::string& cloud_path, const std::string& cloud_crs_override, const CrsInfo& target,
                          const OutlierFilterOptions& outliers, const MapPoint& centre);
 
+/// Bounding box of the kept points (in pc.crs); empty_extent() when none.
+Extent kept_extent(const PreparedCloud& pc);
+
+/// "min_x, min_y - max_x, max_y CRS" with a precision fit for the unit.
+std::string describe_extent(const Extent& e, const CrsInfo& crs);
+
+/// Throws Error naming both files and their extents in the cloud's
+/// (prepared, common) CRS when no kept point of `pc` falls inside `extent`:
+/// an input that cannot produce a result is an error, not an empty output.
+void require_cloud_overlap(const PreparedCloud& pc, const std::string& cloud_path, const Extent& extent,
+                           const std::string& other_path);
+
+/// How many of `extents` (footprint bounding boxes, in pc.crs) hold no kept
+/// point's bounding box at all. When none overlaps, throws Error naming both
+/// files and their extents in pc.crs; when only some do, logs a warning with
+/// the count. Returns the count outside.
+std::size_t check_footprint_overlap(const PreparedCloud& pc, const std::string& cloud_path, const std::vector<Extent>& extents,
+                                    const std::string& footprints_path);
+
 /// Kept points per m² over their bounding box (0 for fewer than 2 points).
 double point_density_m2(const PreparedCloud& pc);
 

@@ -28,11 +28,12 @@ CityModel build_lod2_model(const HeightsStage& st, const CrsInfo& crs, const Roo
     tbb::parallel_for(std::size_t(0), model.buildings.size(), [&](std::size_t i) {
         const Building& b = model.buildings[i];
         const BuildingHeight& h = st.heights[i];
-        if (!h.ground_z) return;
+        // No solid without a height: a building without roof points keeps its footprint only.
+        if (!h.ground_z || !h.roof_z_70p || !b.height_m) return;
         std::vector<std::array<double, 3>> pts;
         pts.reserve(h.roof_points.size());
         for (uint32_t k : h.roof_points) pts.push_back({cloud.x[k], cloud.y[k], cloud.z[k]});
-        const double flat = h.roof_z_70p ? *h.roof_z_70p : *h.ground_z + 3.0 / lo.z_unit_m;
+        const double flat = *h.roof_z_70p;
         results[i] = reconstruct_lod2(b.footprint, pts, *h.ground_z, flat, lo);
     });
     rep.lod2_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t1).count();
@@ -58,6 +59,11 @@ CityModel build_lod2_model(const HeightsStage& st, const CrsInfo& crs, const Roo
         else ++rep.lod2, rmse_sum += r.rmse_m;
         complete_building(b, model.crs, o.model.validity);
     }
+    for (const auto& [name, type] : std::initializer_list<std::pair<const char*, FieldType>>{
+             {"roof_planes", FieldType::integer}, {"roof_slope_deg", FieldType::real}, {"roof_azimuth_deg", FieldType::real},
+             {"lod2_rmse_m", FieldType::real}, {"lod2_median_residual_m", FieldType::real}, {"lod2_fallback", FieldType::string},
+             {"lod2_kind", FieldType::string}})
+        model.attribute_types.emplace_back(name, type);
     rep.mean_rmse_m = rep.lod2 ? rmse_sum / double(rep.lod2) : 0.0;
     return model;
 }
@@ -69,6 +75,9 @@ RoofsRunReport run_roofs(const std::string& footprints_path, const std::string& 
     RoofsRunReport rep;
     HeightsRunOptions ho = o.heights;
     ho.heights.keep_roof_points = true;
+    // The roof attributes written below replace input fields of their names (re-runs).
+    for (const char* n : {"roof_planes", "roof_slope_deg", "roof_azimuth_deg", "lod2_rmse_m", "lod2_median_residual_m", "lod2_fallback", "lod2_kind"})
+        ho.later_fields.push_back(n);
     HeightsStage st = compute_heights_stage(footprints_path, cloud_path, ho, progress.sub(0.0, 0.6));
     rep.heights = st.report;
     CrsInfo crs = st.table.crs;

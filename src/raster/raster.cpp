@@ -5,6 +5,7 @@
 #include <filesystem>
 #include <gdal_priv.h>
 #include <gdal_utils.h>
+#include <gdalwarper.h>
 
 #include "core/atomic_file.hpp"
 #include "core/error.hpp"
@@ -51,15 +52,36 @@ std::string to_string(SampleType t) {
 }
 
 struct RasterReader::Impl {
-    GDALDataset* ds = nullptr;
+    GDALDataset* ds = nullptr;      // what is read: the file, or the warped VRT over it
+    GDALDataset* source = nullptr;  // the file when `ds` is a warped VRT
     ~Impl() {
         if (ds) GDALClose(ds);
+        if (source) GDALClose(source);
     }
 };
 
+namespace {
+// Geotransform, CRS-dependent measures and extent of `ds` into `info`.
+void describe_grid(RasterInfo& info, const std::array<double, 6>& gt) {
+    info.transform = GeoTransform::from_gdal(gt);
+    info.gsd = ground_sample_distance(info.crs, info.transform, info.width, info.height);
+    info.metres_per_unit = ground_metres_per_unit(info.crs, info.transform, info.width, info.height);
+    const MapPoint a = info.transform.pixel_to_map({0.0, 0.0});
+    const MapPoint b = info.transform.pixel_to_map({double(info.width), double(info.height)});
+    info.extent = {std::min(a.x, b.x), std::min(a.y, b.y), std::max(a.x, b.x), std::max(a.y, b.y)};
+}
+}  // namespace
+
+CrsInfo working_crs_for(const RasterInfo& info, const std::string& working_crs) {
+    if (!working_crs.empty()) return crs_from_user_input(working_crs, "--working-crs");
+    if (!info.crs.geographic) return info.crs;
+    const MapPoint c = info.transform.pixel_to_map({info.width / 2.0, info.height / 2.0});
+    return utm_crs_for(info.crs, c);
+}
+
 RasterReader::RasterReader(const std::string& path, const RasterOpenOptions& options) : impl_(new Impl) {
     ensure_gdal_registered();
-    if (!std::filesystem::exists(path) && path.rfind("/vsi", 0) != 0) throw Error(path, "file not found");
+    require_dataset_exists(path);
     GdalErrorCapture capture;
     impl_->ds = GDALDataset::FromHandle(GDALOpenEx(path.c_str(), GDAL_OF_RASTER | GDAL_OF_READONLY, nullptr, nullptr, nullptr));
     if (!impl_->ds) throw Error(path, "not a raster GDAL can read" + capture.suffix());
@@ -106,11 +128,26 @@ RasterReader::RasterReader(const std::string& path, const RasterOpenOptions& opt
         }
         if (!has_gt) gt = {0.0, 1.0, 0.0, 0.0, 0.0, -1.0};
     }
-    info_.transform = GeoTransform::from_gdal(gt);
-    info_.gsd = ground_sample_distance(info_.crs, info_.transform, info_.width, info_.height);
-    const MapPoint a = info_.transform.pixel_to_map({0.0, 0.0});
-    const MapPoint b = info_.transform.pixel_to_map({double(info_.width), double(info_.height)});
-    info_.extent = {std::min(a.x, b.x), std::min(a.y, b.y), std::max(a.x, b.x), std::max(a.y, b.y)};
+    describe_grid(info_, gt);
+    info_.source_crs = info_.crs;
+    if (!info_.georeferenced) return;
+    const bool warp = !options.working_crs.empty() || (options.project_geographic && info_.crs.geographic);
+    if (!warp) return;
+    const CrsInfo target = working_crs_for(info_, options.working_crs);
+    if (same_crs(target, info_.crs)) return;
+    // A warped VRT over the file: reads go through GDAL's warper, on demand.
+    GDALDatasetH vrt = GDALAutoCreateWarpedVRT(GDALDataset::ToHandle(&ds), info_.crs.wkt.c_str(), target.wkt.c_str(), GRA_Bilinear, 0.125, nullptr);
+    if (!vrt) throw Error(path, "cannot warp onto " + target.label() + capture.suffix());
+    impl_->source = impl_->ds;
+    impl_->ds = GDALDataset::FromHandle(vrt);
+    GDALDataset& w = *impl_->ds;
+    info_.warped = true;
+    info_.crs = target;
+    info_.width = w.GetRasterXSize(), info_.height = w.GetRasterYSize();
+    w.GetRasterBand(1)->GetBlockSize(&info_.block_width, &info_.block_height);
+    std::array<double, 6> wgt{};
+    w.GetGeoTransform(wgt.data());
+    describe_grid(info_, wgt);
 }
 
 RasterReader::~RasterReader() = default;
@@ -196,7 +233,7 @@ void write_geotiff(const std::string& path, const Image<T>& image, const GeoTran
     if (static_cast<double>(image.pixel_count()) * image.bands * sizeof(T) > 3.5e9) co.SetNameValue("BIGTIFF", "YES");
 
     GDALDataset* ds = driver->Create(tmp.c_str(), image.width, image.height, image.bands, gdal_type<T>(), co.List());
-    if (!ds) throw Error(path, "cannot create GeoTIFF" + capture.suffix());
+    if (!ds) throw Error(path, "cannot create GeoTIFF" + user_named(capture.suffix(), tmp, path));
     bool ok = true;
     auto gt = transform.to_gdal();
     ok = ok && ds->SetGeoTransform(gt.data()) == CE_None;
@@ -216,7 +253,7 @@ void write_geotiff(const std::string& path, const Image<T>& image, const GeoTran
     GDALClose(ds);
     ok = ok && CPLGetLastErrorType() < CE_Failure;
     if (!ok) {
-        const std::string why = capture.suffix();
+        const std::string why = user_named(capture.suffix(), tmp, path);
         discard_file(tmp);
         throw Error(path, "writing GeoTIFF failed" + why);
     }

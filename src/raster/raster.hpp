@@ -36,9 +36,14 @@ struct RasterInfo {
     std::vector<RasterBandInfo> bands;
     bool georeferenced = false;  ///< false only when opened with allow_pixel_coordinates
     GeoTransform transform;      ///< identity-like (1, -1) when not georeferenced
-    CrsInfo crs;                 ///< horizontal (+ vertical) CRS
-    GroundSampleDistance gsd;    ///< metres per pixel along x and y at the centre
+    CrsInfo crs;                 ///< horizontal (+ vertical) CRS of the grid read (the working CRS when warped)
+    GroundSampleDistance gsd;    ///< ground metres per pixel along x and y at the centre
+    double metres_per_unit = 1.0;  ///< ground metres per CRS unit at the centre (ground_metres_per_unit; 0 = geographic)
     Extent extent;               ///< in CRS units
+    /// True when the file is read through a warped grid (RasterOpenOptions::
+    /// project_geographic / working_crs); `source_crs` is then the file's CRS.
+    bool warped = false;
+    CrsInfo source_crs;          ///< the file's own CRS (same as `crs` when not warped)
 
     int band_count() const { return static_cast<int>(bands.size()); }
 };
@@ -50,6 +55,15 @@ struct RasterOpenOptions {
     /// CRS to assume (or override with) when the raster has none; any
     /// SetFromUserInput text ("EPSG:32616"). Empty = use the file's.
     std::string assume_crs;
+    /// Read a raster in a geographic CRS (lon/lat) through a warped grid in
+    /// a local projected CRS: the UTM zone of its centre (or `working_crs`),
+    /// bilinear, about the same number of pixels. Commands that measure in
+    /// metres (footprints, run) set it; `info` and `segment` describe and
+    /// label the file's own grid.
+    bool project_geographic = false;
+    /// Read the raster warped onto this CRS ("EPSG:32723"), whatever its own
+    /// CRS (empty = its own, or UTM for a geographic one with project_geographic).
+    std::string working_crs;
 };
 
 /// A pixel window: columns [col, col + width), rows [row, row + height).
@@ -103,6 +117,11 @@ private:
 /// image band holds its source band's nodata value, else 1. `bands` = the
 /// 1-based source band of each image band (empty: image band k is band k+1).
 std::vector<uint8_t> data_mask(const Image<float>& image, const RasterInfo& info, const std::vector<int>& bands = {});
+
+/// The working CRS for a raster `info` describes (in its own CRS): `working_crs`
+/// when given, else the UTM zone of its centre when it is geographic, else its
+/// own CRS. Every command that needs metres on a lon/lat input uses it.
+CrsInfo working_crs_for(const RasterInfo& info, const std::string& working_crs = {});
 
 /// Convenience: open `path` and return its header information.
 RasterInfo read_raster_info(const std::string& path, const RasterOpenOptions& options = {});

@@ -83,5 +83,5 @@ TEST_CASE("LAS through the common reader keeps its CRS WKT", "[cloud]") {
     CloudReader r(shared_data("autzen_oregon/autzen_trim.las"));
     CHECK(r.format() == CloudFormat::las);
     CHECK(r.announced_points() == 110000);
-    CHECK(r.crs_wkt().find("Lambert") != std::string::npos);
+    CHECK(r.crs_records().wkt.find("Lambert") != std::string::npos);
 }

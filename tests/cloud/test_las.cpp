@@ -47,7 +47,7 @@ TEST_CASE("LAS 1.4 format 7 round trip keeps coordinates - attributes and CRS", 
     CHECK(h.version_minor == 4);
     CHECK(h.point_format == 7);
     CHECK(h.point_count == 1000);
-    CHECK(h.crs_wkt == "PROJCS[\"dummy\"]");
+    CHECK(h.crs.wkt == "PROJCS[\"dummy\"]");
     REQUIRE(r.size() == 1000);
     for (std::size_t i = 0; i < r.size(); ++i) {
         REQUIRE(r.x[i] == Approx(c.x[i]).margin(0.0005));
@@ -76,7 +76,7 @@ TEST_CASE("Real LAS 1.2 files: Autzen (format 3 - RGB - CRS) and AHN3 Delft (for
     CHECK(h.point_format == 3);
     CHECK(autzen.size() == 110000);
     CHECK(autzen.has_color());
-    CHECK_FALSE(h.crs_wkt.empty());
+    CHECK_FALSE(h.crs.wkt.empty());
     std::size_t ground = 0, unclassified = 0;
     for (uint8_t c : autzen.classification) ground += c == 2, unclassified += c == 1;
     CHECK(ground == 26107);
@@ -85,12 +85,11 @@ TEST_CASE("Real LAS 1.2 files: Autzen (format 3 - RGB - CRS) and AHN3 Delft (for
 
     // autzen_thin_srs keeps its WKT in libLAS's "liblas" 2112 record.
     LasReader thin(shared_data("autzen_oregon/autzen_thin_srs.las"));
-    CHECK(thin.header().crs_wkt.find("NAD_1983_HARN_Lambert_Conformal_Conic") != std::string::npos);
+    CHECK(thin.header().crs.liblas_wkt.find("NAD_1983_HARN_Lambert_Conformal_Conic") != std::string::npos);
 
     LasReader delft(shared_data("delft_ahn3_bgt_west/ahn3_delft_west.las"));
     CHECK(delft.header().point_count == 675339);
-    CHECK(delft.header().crs_wkt.empty());
-    CHECK(delft.header().geokey_horizontal_epsg == 0);
+    CHECK(delft.header().crs.empty());
     PointCloud chunk;
     std::size_t total = 0;
     while (std::size_t n = delft.read_chunk(chunk, 100000)) {

@@ -222,7 +222,7 @@ TEST_CASE("cloud translate crops, converts XYZ and refuses to overwrite", "[laz]
     CHECK(crop.header().point_count == inside);
     CHECK(crop.header().min[0] >= 636500);
     CHECK(crop.header().max[1] <= 849300);
-    CHECK(crop.header().crs_wkt == LasReader(o.input).header().crs_wkt);
+    CHECK(crop.header().crs.wkt == LasReader(o.input).header().crs.wkt);
     CHECK_THROWS_WITH(translate_cloud(o), Catch::Contains("crop.las") && Catch::Contains("--overwrite"));
     o.bounds = std::array<double, 4>{0, 0, 1, 1};
     o.overwrite = true;
