@@ -23,6 +23,10 @@ struct SynthOptions {
     double origin_y = 4400000.0;    ///< lower-left corner northing, CRS units
     double cloud_density_m2 = 8.0;  ///< points per square metre; 0 = no cloud
     CloudMode cloud_mode = CloudMode::lidar;
+    double lidar_sigma_m = 0.03;    ///< vertical noise of LiDAR points, metres (photo mode: 0.12)
+    double sun_azimuth_deg = 135.0; ///< sun bearing, clockwise from north (shading and cast shadows)
+    double sun_elevation_deg = 48.0;///< sun elevation above the horizon, degrees (5..90)
+    synth::SceneVariation variation;///< terrain, roof colours, terraces, oblique corners, roof mix (defaults: the default town)
     /// Throws Error on out-of-range values (size 20..20000 m, GSD 0.05..10 m, ...).
     void validate() const;
 };
