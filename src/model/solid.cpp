@@ -91,6 +91,50 @@ std::optional<double> face_z_at(const Face& f, double x, double y) {
     return cz - (n[0] * (x - cx) + n[1] * (y - cy)) / n[2];
 }
 
+double distance_to_face(const Face& f, const Point3& p) {
+    if (f.outer.size() < 3) return INFINITY;
+    const auto n = newell(f.outer);
+    const double len = norm(n);
+    auto segment = [&](const Point3& a, const Point3& b) {
+        const double ux = b.x - a.x, uy = b.y - a.y, uz = b.z - a.z;
+        const double l2 = ux * ux + uy * uy + uz * uz;
+        double t = l2 > 0 ? ((p.x - a.x) * ux + (p.y - a.y) * uy + (p.z - a.z) * uz) / l2 : 0.0;
+        t = std::clamp(t, 0.0, 1.0);
+        const double dx = p.x - (a.x + t * ux), dy = p.y - (a.y + t * uy), dz = p.z - (a.z + t * uz);
+        return std::sqrt(dx * dx + dy * dy + dz * dz);
+    };
+    if (len > 0) {
+        const double nx = n[0] / len, ny = n[1] / len, nz = n[2] / len;
+        const Point3& o = f.outer[0];
+        const double d = (p.x - o.x) * nx + (p.y - o.y) * ny + (p.z - o.z) * nz;
+        // Inside test in the plane of the two axes the normal is least along.
+        const int drop = std::abs(nx) >= std::abs(ny) && std::abs(nx) >= std::abs(nz) ? 0 : std::abs(ny) >= std::abs(nz) ? 1 : 2;
+        auto uv = [&](const Point3& q) { return drop == 0 ? MapPoint{q.y, q.z} : drop == 1 ? MapPoint{q.z, q.x} : MapPoint{q.x, q.y}; };
+        Polygon plan;
+        for (const Point3& q : f.outer) plan.outer.push_back(uv(q));
+        for (const Ring3& h : f.holes) {
+            plan.holes.emplace_back();
+            for (const Point3& q : h) plan.holes.back().push_back(uv(q));
+        }
+        const Point3 proj{p.x - d * nx, p.y - d * ny, p.z - d * nz};
+        const MapPoint pp = uv(proj);
+        if (point_in_polygon(plan, pp.x, pp.y)) return std::abs(d);
+    }
+    double best = INFINITY;
+    auto ring = [&](const Ring3& r) {
+        for (std::size_t i = 0; i < r.size(); ++i) best = std::min(best, segment(r[i], r[(i + 1) % r.size()]));
+    };
+    ring(f.outer);
+    for (const Ring3& h : f.holes) ring(h);
+    return best;
+}
+
+double distance_to_solid(const Solid& s, const Point3& p) {
+    double best = INFINITY;
+    for (const Face& f : s.faces) best = std::min(best, distance_to_face(f, p));
+    return best;
+}
+
 double face_area(const Face& f) {
     const auto n = newell(f.outer);
     const double len = norm(n);
@@ -129,8 +173,13 @@ double solid_volume(const Solid& s) {
 namespace {
 
 bool segments_cross(double ax, double ay, double bx, double by, double cx, double cy, double dx, double dy) {
+    // Orientation with a relative tolerance: nearly collinear triples (an
+    // outline edge split by partition lines) count as collinear, so rounding
+    // cannot make two disjoint collinear pieces of one edge "cross".
     auto orient = [](double px, double py, double qx, double qy, double rx, double ry) {
         const double v = (qx - px) * (ry - py) - (qy - py) * (rx - px);
+        const double scale = std::hypot(qx - px, qy - py) * std::hypot(rx - px, ry - py);
+        if (std::abs(v) <= 1e-9 * scale) return 0;
         return (v > 0) - (v < 0);
     };
     auto on = [](double px, double py, double qx, double qy, double rx, double ry) {
