@@ -1,0 +1,144 @@
+// cityforge run / plan / merge-tiles: the whole chain in tiles.
+#include <cstdio>
+#include <cstdlib>
+#include <memory>
+
+#include "commands/commands.hpp"
+#include "core/error.hpp"
+#include "pipeline/city_run.hpp"
+
+namespace cityforge::cli {
+
+namespace {
+
+// The rank and size of this process under mpirun (Open MPI, MPICH/PMI, PMIx).
+RunShare mpi_share() {
+    auto env = [](const char* a, const char* b, const char* c) -> const char* {
+        for (const char* k : {a, b, c})
+            if (const char* v = std::getenv(k)) return v;
+        return nullptr;
+    };
+    const char* rank = env("OMPI_COMM_WORLD_RANK", "PMI_RANK", "PMIX_RANK");
+    const char* size = env("OMPI_COMM_WORLD_SIZE", "PMI_SIZE", "MPI_LOCALNRANKS");
+    if (!rank || !size) throw Error("--mpi", "no MPI rank in the environment; start with mpirun -np N");
+    RunShare s;
+    s.rank = std::atoi(rank), s.size = std::atoi(size);
+    return s;
+}
+
+// The inputs `run` and `plan` share; given options override the config file.
+struct RunInputs {
+    std::string ortho, cloud, cloud_crs, footprints, config, formats, lods, vertical_crs, id_field, fit;
+    int tile_size = 0, threads = -1;
+    double overlap_m = -1;
+};
+
+void add_run_inputs(CLI::App* cmd, RunInputs& r) {
+    cmd->add_option("--ortho", r.ortho, "Ortho: the pixel grid and CRS of the run");
+    cmd->add_option("--cloud", r.cloud, "Dense point cloud (LAS, PLY, XYZ)");
+    cmd->add_option("--cloud-crs", r.cloud_crs, "CRS of the cloud, e.g. EPSG:7415");
+    cmd->add_option("--footprints", r.footprints, "Existing footprints: skip extraction, compute heights, roofs and models");
+    cmd->add_option("--config", r.config, "JSON config (schemas/run_config.schema.json); command-line options override it");
+    cmd->add_option("--tile-size", r.tile_size, "Tile core edge in pixels (default 4000)");
+    cmd->add_option("--overlap-m", r.overlap_m, "Context around each tile, metres (default 100)");
+    cmd->add_option("--threads", r.threads, "Threads (default: all cores)");
+    cmd->add_option("--formats", r.formats, "Comma-separated: geojson, gpkg, citygml, cityjson, cityjsonseq");
+    cmd->add_option("--lod", r.lods, "Comma-separated levels of detail: 0, 1, 2");
+    cmd->add_option("--vertical-crs", r.vertical_crs, "Vertical CRS when the cloud names none, e.g. EPSG:5709");
+    cmd->add_option("--id-field", r.id_field, "Building id attribute of given footprints");
+    cmd->add_option("--fit", r.fit, "Footprint geometry: recursive, regularised, rectangle or raw");
+}
+
+// The run's plan from the config file and the options given.
+RunManifest plan_from(const RunInputs& rc) {
+    RunOptions ro;
+    if (!rc.config.empty()) ro = run_options_from_json(read_json_file(rc.config), rc.config);
+    if (!rc.ortho.empty()) ro.ortho = rc.ortho;
+    if (!rc.cloud.empty()) ro.cloud = rc.cloud;
+    if (!rc.cloud_crs.empty()) ro.cloud_crs = rc.cloud_crs;
+    if (!rc.footprints.empty()) ro.footprints = rc.footprints;
+    if (rc.tile_size > 0) ro.tile_size_px = rc.tile_size;
+    if (rc.overlap_m >= 0) ro.overlap_m = rc.overlap_m;
+    if (rc.threads >= 0) ro.threads = rc.threads;
+    if (!rc.formats.empty()) ro.buildings.model.formats = split_list(rc.formats);
+    if (!rc.lods.empty()) ro.buildings.model.lods = parse_lods(rc.lods);
+    if (!rc.vertical_crs.empty()) ro.buildings.model.vertical_crs = rc.vertical_crs;
+    if (!rc.id_field.empty()) ro.buildings.model.id_field = rc.id_field;
+    if (!rc.fit.empty()) ro.extraction.fit = footprint_fit_from_string(rc.fit);
+    return plan_run(ro);
+}
+
+}  // namespace
+
+void add_run_commands(CLI::App& parent, const GlobalFlags& g, CommandList& out) {
+    struct RunState {
+        RunInputs inputs;
+        std::string out, manifest;
+        int tile = -1;
+        bool mpi = false;
+    };
+    auto rs = std::make_shared<RunState>();
+    auto* run_cmd = parent.add_subcommand("run", "The whole chain in tiles: cloud -> footprints -> heights -> LOD2 roofs -> city models");
+    add_run_inputs(run_cmd, rs->inputs);
+    run_cmd->add_option("--out", rs->out, "Output folder (buildings.*, run_report.json, tiles/)")->required();
+    run_cmd->add_option("--manifest", rs->manifest, "Run the tiles of a manifest from `cityforge plan`");
+    run_cmd->add_option("--tile", rs->tile, "Run only this tile of the manifest (Slurm arrays: $SLURM_ARRAY_TASK_ID); merge with merge-tiles");
+    run_cmd->add_flag("--mpi", rs->mpi, "Share the tiles among MPI ranks (mpirun -np N); rank 0 merges");
+    out.push_back({run_cmd, [rs, &g]() {
+                       const RunManifest manifest = rs->manifest.empty() ? plan_from(rs->inputs) : read_manifest(rs->manifest);
+                       if (rs->tile >= 0) {
+                           const TileReport r = run_tile(manifest, rs->tile, rs->out, make_progress(g));
+                           if (!g.quiet)
+                               std::fprintf(stderr, "cityforge: tile %d %s: %zu buildings%s%s\n", r.index, r.status.c_str(), r.buildings,
+                                            r.reason.empty() ? "" : ": ", r.reason.c_str());
+                           return r.status == "failed" ? 1 : 0;
+                       }
+                       RunShare share;
+                       if (rs->mpi) share = mpi_share();
+                       const RunReport r = run_city(manifest, rs->out, share, make_progress(g));
+                       if (!g.quiet && share.rank == 0) {
+                           std::size_t failed = 0;
+                           for (const auto& t : r.tiles) failed += t.status == "failed";
+                           std::fprintf(stderr,
+                                        "cityforge: %zu buildings from %zu tiles (%zu failed); LOD1 valid %zu, LOD2 valid %zu; %zu warnings; %.1f s, peak %.0f MB -> %s\n",
+                                        r.buildings, r.tiles.size(), failed, r.valid_lod1, r.valid_lod2, r.warnings.size(), r.seconds,
+                                        r.peak_memory_mb, r.report_path.c_str());
+                       }
+                       return 0;
+                   }});
+
+    struct PlanState {
+        RunInputs inputs;
+        std::string out;
+    };
+    auto ps = std::make_shared<PlanState>();
+    auto* plan_cmd = parent.add_subcommand("plan", "Write the tile manifest of a run (for --tile, --mpi or Slurm)");
+    add_run_inputs(plan_cmd, ps->inputs);
+    plan_cmd->add_option("--out", ps->out, "Manifest file (.json)")->required();
+    out.push_back({plan_cmd, [ps, &g]() {
+                       const RunManifest manifest = plan_from(ps->inputs);
+                       write_manifest(ps->out, manifest);
+                       if (!g.quiet)
+                           std::fprintf(stderr, "cityforge: %zu tiles of %d px (+%d px overlap) over %d x %d px -> %s\n", manifest.tiles.size(),
+                                        manifest.options.tile_size_px, manifest.overlap_px, manifest.grid.width, manifest.grid.height,
+                                        ps->out.c_str());
+                       return 0;
+                   }});
+
+    struct MergeState {
+        std::string manifest, out;
+    };
+    auto ms = std::make_shared<MergeState>();
+    auto* merge_cmd = parent.add_subcommand("merge-tiles", "Assemble the finished tiles of a run into its city models");
+    merge_cmd->add_option("--manifest", ms->manifest, "The run's manifest")->required();
+    merge_cmd->add_option("--out", ms->out, "The run's output folder")->required();
+    out.push_back({merge_cmd, [ms, &g]() {
+                       const RunReport r = merge_tiles(read_manifest(ms->manifest), ms->out, make_progress(g));
+                       if (!g.quiet)
+                           std::fprintf(stderr, "cityforge: %zu buildings from %zu tiles -> %s\n", r.buildings, r.tiles.size(),
+                                        r.report_path.c_str());
+                       return 0;
+                   }});
+}
+
+}  // namespace cityforge::cli
