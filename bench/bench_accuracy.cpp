@@ -127,7 +127,19 @@ int main(int argc, char** argv) try {
                 ++p.second;
                 if (b.roof_type == t) ++correct, ++p.first;
                 else ++confusion[t + "->" + (b.roof_type.empty() ? "none" : b.roof_type)];
-                valid += !b.lod2.empty() && b.lod2_errors.empty();
+                const bool ok = !b.lod2.empty() && b.lod2_errors.empty();
+                valid += ok;
+                if (kv.count("verbose") && (!ok || b.roof_type != t)) {
+                    std::string fb;
+                    for (const auto& [k, a] : b.attributes) {
+                        if (k == "lod2_fallback" && std::holds_alternative<std::string>(a)) fb = std::get<std::string>(a);
+                        if ((k == "roof_planes" || k == "roof_slope_deg" || k == "n_points_roof") && !std::holds_alternative<std::monostate>(a))
+                            fb += " " + k + "=" + (std::holds_alternative<double>(a) ? std::to_string(std::get<double>(a)) : std::to_string(std::get<int64_t>(a)));
+                    }
+                    std::printf("  id %lld %s/%s -> %s%s%s%s\n", (long long)field(truth, i, "id"), text(truth, i, "shape").c_str(), t.c_str(),
+                                b.roof_type.c_str(), fb.empty() ? "" : (" fallback: " + fb).c_str(), ok ? "" : " INVALID ",
+                                b.lod2_errors.empty() ? "" : b.lod2_errors.front().c_str());
+                }
                 for (const auto& [k, a] : b.attributes)
                     if (k == "lod2_rmse_m" && std::holds_alternative<double>(a)) rmse.push_back(std::get<double>(a));
             }

@@ -172,14 +172,13 @@ double solid_volume(const Solid& s) {
 
 namespace {
 
-bool segments_cross(double ax, double ay, double bx, double by, double cx, double cy, double dx, double dy) {
-    // Orientation with a relative tolerance: nearly collinear triples (an
-    // outline edge split by partition lines) count as collinear, so rounding
-    // cannot make two disjoint collinear pieces of one edge "cross".
-    auto orient = [](double px, double py, double qx, double qy, double rx, double ry) {
+bool segments_cross(double ax, double ay, double bx, double by, double cx, double cy, double dx, double dy, double tol) {
+    // Orientation with a tolerance: a point within `tol` of the line counts
+    // as on it, so rounding (map coordinates, an outline edge split by
+    // partition lines) cannot make disjoint collinear pieces of one edge "cross".
+    auto orient = [tol](double px, double py, double qx, double qy, double rx, double ry) {
         const double v = (qx - px) * (ry - py) - (qy - py) * (rx - px);
-        const double scale = std::hypot(qx - px, qy - py) * std::hypot(rx - px, ry - py);
-        if (std::abs(v) <= 1e-9 * scale) return 0;
+        if (std::abs(v) <= tol * std::hypot(qx - px, qy - py)) return 0;
         return (v > 0) - (v < 0);
     };
     auto on = [](double px, double py, double qx, double qy, double rx, double ry) {
@@ -194,7 +193,7 @@ bool segments_cross(double ax, double ay, double bx, double by, double cx, doubl
 
 // True when two non-adjacent edges of the ring (projected on the plane most
 // parallel to it) touch or cross.
-bool ring_self_intersects(const Ring3& r, int drop_axis) {
+bool ring_self_intersects(const Ring3& r, int drop_axis, double tol) {
     const std::size_t n = r.size();
     auto uv = [&](const Point3& p) {
         return drop_axis == 0 ? std::pair{p.y, p.z} : drop_axis == 1 ? std::pair{p.z, p.x} : std::pair{p.x, p.y};
@@ -206,7 +205,7 @@ bool ring_self_intersects(const Ring3& r, int drop_axis) {
             const auto [bx, by] = uv(r[(i + 1) % n]);
             const auto [cx, cy] = uv(r[j]);
             const auto [dx, dy] = uv(r[(j + 1) % n]);
-            if (segments_cross(ax, ay, bx, by, cx, cy, dx, dy)) return true;
+            if (segments_cross(ax, ay, bx, by, cx, cy, dx, dy, tol)) return true;
         }
     return false;
 }
@@ -255,7 +254,7 @@ std::vector<std::string> validate_solid(const Solid& s, const SolidValidityOptio
                 }
                 ++directed[{a, b}];
             }
-            if (ring_self_intersects(*r, drop)) add("104 RING_SELF_INTERSECTION: " + face);
+            if (ring_self_intersects(*r, drop, o.snap_tolerance)) add("104 RING_SELF_INTERSECTION: " + face);
             if (len > 0) {
                 // Plane through the outer ring's centroid with Newell's normal.
                 double cx = 0, cy = 0, cz = 0;
