@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <limits>
 #include <map>
 #include <set>
 #include <tuple>
@@ -173,12 +174,13 @@ double solid_volume(const Solid& s) {
 namespace {
 
 bool segments_cross(double ax, double ay, double bx, double by, double cx, double cy, double dx, double dy, double tol) {
-    // Orientation with a tolerance: a point within `tol` of the line counts
-    // as on it, so rounding (map coordinates, an outline edge split by
+    // Orientation with a tolerance: a point within `tol` (a few ulps of the
+    // coordinates) or 1e-9 of its distance from the line counts as on it, so rounding (map coordinates, an outline edge split by
     // partition lines) cannot make disjoint collinear pieces of one edge "cross".
     auto orient = [tol](double px, double py, double qx, double qy, double rx, double ry) {
         const double v = (qx - px) * (ry - py) - (qy - py) * (rx - px);
-        if (std::abs(v) <= tol * std::hypot(qx - px, qy - py)) return 0;
+        const double pq = std::hypot(qx - px, qy - py), pr = std::hypot(rx - px, ry - py);
+        if (std::abs(v) <= std::max(tol * (pq + pr), 1e-9 * pq * pr)) return 0;
         return (v > 0) - (v < 0);
     };
     auto on = [](double px, double py, double qx, double qy, double rx, double ry) {
@@ -193,11 +195,17 @@ bool segments_cross(double ax, double ay, double bx, double by, double cx, doubl
 
 // True when two non-adjacent edges of the ring (projected on the plane most
 // parallel to it) touch or cross.
-bool ring_self_intersects(const Ring3& r, int drop_axis, double tol) {
+bool ring_self_intersects(const Ring3& r, int drop_axis) {
     const std::size_t n = r.size();
     auto uv = [&](const Point3& p) {
         return drop_axis == 0 ? std::pair{p.y, p.z} : drop_axis == 1 ? std::pair{p.z, p.x} : std::pair{p.x, p.y};
     };
+    double magnitude = 0;
+    for (const Point3& p : r) {
+        const auto [u, v] = uv(p);
+        magnitude = std::max({magnitude, std::abs(u), std::abs(v)});
+    }
+    const double tol = 16 * std::numeric_limits<double>::epsilon() * magnitude;  // rounding of the stored coordinates
     for (std::size_t i = 0; i < n; ++i)
         for (std::size_t j = i + 1; j < n; ++j) {
             if (j == i + 1 || (i == 0 && j == n - 1)) continue;  // adjacent edges share a vertex
@@ -254,7 +262,7 @@ std::vector<std::string> validate_solid(const Solid& s, const SolidValidityOptio
                 }
                 ++directed[{a, b}];
             }
-            if (ring_self_intersects(*r, drop, o.snap_tolerance)) add("104 RING_SELF_INTERSECTION: " + face);
+            if (ring_self_intersects(*r, drop)) add("104 RING_SELF_INTERSECTION: " + face);
             if (len > 0) {
                 // Plane through the outer ring's centroid with Newell's normal.
                 double cx = 0, cy = 0, cz = 0;
