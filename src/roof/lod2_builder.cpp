@@ -609,25 +609,51 @@ Lod2Result reconstruct_lod2(const std::vector<Polygon>& footprint, const std::ve
         std::vector<int> pp;
         for (std::size_t i = 0; i < local.size(); ++i)
             if (point_in_polygon(part, local[i][0], local[i][1])) pts.push_back(local[i]), pp.push_back(point_plane[i]);
+        // The partition with the partition lines reaching line_extension_m
+        // beyond their planes' boundary; when that solid fails to close
+        // (four step walls meeting in one vertical edge, sliver faces), the
+        // same planes partitioned with shorter and longer lines.
         PartResult pr;
-        try {
-            pr = build_part(part, pts, planes, pp, 0.0, o);
-        } catch (const std::exception& e) {
-            return fallback(std::string("partition failed: ") + e.what());
+        std::string failure;
+        for (const double ext : {o.line_extension_m, 0.5 * o.line_extension_m, 1.5 * o.line_extension_m + 0.5}) {
+            Lod2Options oe = o;
+            oe.line_extension_m = ext;
+            try {
+                pr = build_part(part, pts, planes, pp, 0.0, oe);
+            } catch (const std::exception& e) {
+                if (failure.empty()) failure = std::string("partition failed: ") + e.what();
+                continue;
+            }
+            if (!pr.failure.empty()) {
+                if (failure.empty()) failure = pr.failure;
+                continue;
+            }
+            const auto errors = validate_solid(pr.solid);
+            if (!errors.empty()) {
+                if (failure.empty()) failure = "reconstructed solid invalid: " + errors.front();
+                continue;
+            }
+            // Again in map coordinates, where the exporters check it: rounding there can make a near-touch a touch.
+            Solid in_map = pr.solid;
+            for (Face& f : in_map.faces) {
+                auto back = [&](Ring3& ring) {
+                    for (Point3& q : ring) q = {ox + q.x / o.unit_m, oy + q.y / o.unit_m, ground_z + q.z / o.z_unit_m};
+                };
+                back(f.outer);
+                for (Ring3& h : f.holes) back(h);
+            }
+            const auto map_errors = validate_solid(in_map);
+            if (!map_errors.empty()) {
+                if (failure.empty()) failure = "reconstructed solid invalid in map coordinates: " + map_errors.front();
+                continue;
+            }
+            pr.solid = std::move(in_map);
+            failure.clear();
+            break;
         }
-        if (!pr.failure.empty()) return fallback(pr.failure);
-        const auto errors = validate_solid(pr.solid);
-        if (!errors.empty()) return fallback("reconstructed solid invalid: " + errors.front());
+        if (!failure.empty()) return fallback(failure);
         used.insert(pr.used_planes.begin(), pr.used_planes.end());
         eave_min = std::min(eave_min, pr.eave_min), eave_max = std::max(eave_max, pr.eave_max);
-        // Back to map coordinates.
-        for (Face& f : pr.solid.faces) {
-            auto back = [&](Ring3& ring) {
-                for (Point3& q : ring) q = {ox + q.x / o.unit_m, oy + q.y / o.unit_m, ground_z + q.z / o.z_unit_m};
-            };
-            back(f.outer);
-            for (Ring3& h : f.holes) back(h);
-        }
         r.solids.push_back(std::move(pr.solid));
     }
     std::vector<RoofPlane> used_planes;
