@@ -287,6 +287,9 @@ std::vector<BuildingHeight> compute_building_heights(const PointCloud& c, const 
                     q.reserve(in_ring.size());
                     for (std::size_t k : in_ring)
                         q.push_back({(ground_xy[k][0] - centroid[0]) * o.unit_m, (ground_xy[k][1] - centroid[1]) * o.unit_m, ground_z[k] * o.z_unit_m});
+                    // Sums in coordinate order, not in the grid index's cell order (which depends on
+                    // the cloud window): the same ring gives the same bits in any tile.
+                    std::sort(q.begin(), q.end());
                     const GroundFit g = fit_ground(q, o.ground_outlier_m);
                     b.ground_z = g.z / o.z_unit_m;
                     b.ground_method = g.plane ? "ring_plane" : "ring_median";
