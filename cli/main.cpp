@@ -39,6 +39,7 @@ int main(int argc, char** argv) {
     cli::add_roofs_command(app, g, commands);
     cli::add_run_commands(app, g, commands);
     cli::add_audit_commands(app, g, commands);
+    cli::add_view_command(app, g, commands);
 
     try {
         app.parse(argc, argv);

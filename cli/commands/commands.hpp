@@ -16,6 +16,7 @@ void add_footprints_command(CLI::App& parent, const GlobalFlags& g, CommandList&
 void add_export_command(CLI::App& parent, const GlobalFlags& g, CommandList& out);      // commands/export.cpp
 void add_roofs_command(CLI::App& parent, const GlobalFlags& g, CommandList& out);       // commands/roofs.cpp
 void add_run_commands(CLI::App& parent, const GlobalFlags& g, CommandList& out);        // commands/run.cpp (run, plan, merge-tiles)
+void add_view_command(CLI::App& parent, const GlobalFlags& g, CommandList& out);         // commands/view.cpp
 void add_audit_commands(CLI::App& parent, const GlobalFlags& g, CommandList& out);      // commands/audit.cpp (audit footprints, ...)
 
 }  // namespace cityforge::cli
