@@ -12,6 +12,7 @@ void add_heights_command(CLI::App& parent, const GlobalFlags& g, CommandList& ou
         std::string footprints, cloud, out;
         HeightsRunOptions options;
         bool recompute_ground = false, no_outliers = false;
+        std::string ground_method = "plane";
     };
     auto s = std::make_shared<State>();
     auto& o = s->options;
@@ -22,7 +23,14 @@ void add_heights_command(CLI::App& parent, const GlobalFlags& g, CommandList& ou
     cmd->add_option("--cloud-crs", o.cloud_crs, "CRS of the cloud, e.g. EPSG:7415 (overrides the file's)");
     cmd->add_option("--layer", o.footprint_layer, "Footprint layer name (default: first)");
     cmd->add_option("--roof-percentile", o.heights.roof_percentile, "Roof percentile used for height_m")->capture_default_str();
-    cmd->add_option("--ground-percentile", o.heights.ground_percentile, "Percentile of ground z around the footprint")->capture_default_str();
+    cmd->add_option("--ground-method", s->ground_method,
+                    "Ground under a footprint: plane (robust plane through the ground ring at the footprint's centroid) or percentile")
+        ->check(CLI::IsMember({"plane", "percentile"}))
+        ->capture_default_str();
+    cmd->add_option("--ground-percentile", o.heights.ground_percentile, "Percentile of ground z around the footprint (--ground-method percentile)")
+        ->capture_default_str();
+    cmd->add_option("--ground-outlier-m", o.heights.ground_outlier_m, "Plane method: ring points farther from the plane are left out, metres")
+        ->capture_default_str();
     cmd->add_option("--ground-buffer-m", o.heights.ground_buffer_m, "Width of the ring searched for ground points, metres")->capture_default_str();
     cmd->add_option("--min-height-m", o.heights.min_height_above_ground_m, "Roof points must be this far above the ground, metres")->capture_default_str();
     cmd->add_option("--min-roof-points", o.heights.min_roof_points, "Fewer roof points -> null percentiles")->capture_default_str();
@@ -40,6 +48,7 @@ void add_heights_command(CLI::App& parent, const GlobalFlags& g, CommandList& ou
                        HeightsRunOptions opt = s->options;
                        opt.ground.trust_classification = !s->recompute_ground;
                        opt.outliers.enabled = !s->no_outliers;
+                       opt.heights.ground_method = ground_method_from_string(s->ground_method);
                        refuse_existing_output(g, s->out);
                        const HeightsRunReport r = run_heights(s->footprints, s->cloud, s->out, opt, make_progress(g));
                        if (!g.quiet) {

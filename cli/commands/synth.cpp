@@ -27,14 +27,28 @@ void add_synth_command(CLI::App& parent, const GlobalFlags& g, CommandList& out)
     cmd->add_option("--cloud-mode", s->cloud_mode, "lidar or photo (dense image matching: noisier, gaps)")
         ->check(CLI::IsMember({"lidar", "photo"}))
         ->capture_default_str();
-    auto& v = s->options.views;
-    cmd->add_option("--views", v.views, "Perspective aerial photos to render into OUT/views (0 = none), with OUT/surface.las")
+    auto& views = s->options.views;
+    cmd->add_option("--views", views.views, "Perspective aerial photos to render into OUT/views (0 = none), with OUT/surface.las")
         ->capture_default_str();
-    cmd->add_option("--view-gsd", v.gsd_m, "Photo ground sample distance at mean terrain height, metres")->capture_default_str();
+    cmd->add_option("--view-gsd", views.gsd_m, "Photo ground sample distance at mean terrain height, metres")->capture_default_str();
     cmd->add_option("--view-size", s->view_size, "Photo width and height in pixels (default 640 480)")->expected(2);
-    cmd->add_option("--forward-overlap", v.forward_overlap, "Along-strip overlap of neighbouring photos")->capture_default_str();
-    cmd->add_option("--side-overlap", v.side_overlap, "Overlap of neighbouring strips")->capture_default_str();
-    cmd->add_option("--surface-spacing", v.surface_spacing_m, "Sample spacing of OUT/surface.las, metres")->capture_default_str();
+    cmd->add_option("--forward-overlap", views.forward_overlap, "Along-strip overlap of neighbouring photos")->capture_default_str();
+    cmd->add_option("--side-overlap", views.side_overlap, "Overlap of neighbouring strips")->capture_default_str();
+    cmd->add_option("--surface-spacing", views.surface_spacing_m, "Sample spacing of OUT/surface.las, metres")->capture_default_str();
+    // Variations of the town (defaults: the default town, byte for byte).
+    synth::SceneVariation& v = s->options.variation;
+    cmd->add_option("--lidar-sigma-m", s->options.lidar_sigma_m, "Vertical noise of LiDAR points, metres")->capture_default_str();
+    cmd->add_option("--sun-azimuth-deg", s->options.sun_azimuth_deg, "Sun bearing, clockwise from north")->capture_default_str();
+    cmd->add_option("--sun-elevation-deg", s->options.sun_elevation_deg, "Sun elevation, degrees")->capture_default_str();
+    cmd->add_option("--terrain-slope", v.terrain_slope_max, "Largest terrain gradient per axis (0.1 = 10 %)")->capture_default_str();
+    cmd->add_option("--terrain-undulation-m", v.terrain_undulation_m, "Amplitude of the terrain undulation, metres")->capture_default_str();
+    cmd->add_option("--dark-roof-share", v.dark_roof_share, "Share of roofs absorbing most LiDAR pulses")->capture_default_str();
+    cmd->add_option("--tree-touch-share", v.tree_touch_share, "Share of buildings with a crown touching them")->capture_default_str();
+    cmd->add_option("--ground-like-roof-share", v.ground_like_roof_share, "Share of roofs coloured like grass, soil or road")->capture_default_str();
+    cmd->add_option("--terraced-share", v.terraced_block_share, "Share of blocks built as terraces of equal height")->capture_default_str();
+    cmd->add_option("--oblique-share", v.oblique_share, "Share of rectangles with a corner cut at an oblique angle")->capture_default_str();
+    cmd->add_flag("--all-roof-families", v.all_roof_families, "Flat, shed, gable and hip roofs in equal shares");
+    cmd->add_flag("--base-at-area-centroid", v.base_at_area_centroid, "Building base at the terrain height of the footprint's area centroid");
     out.push_back({cmd, [s, &g]() {
                        SynthOptions o = s->options;
                        if (s->origin.size() == 2) o.origin_x = s->origin[0], o.origin_y = s->origin[1];

@@ -1,6 +1,7 @@
 #include "heights/building_heights.hpp"
 
 #include <algorithm>
+#include <array>
 #include <atomic>
 #include <cmath>
 #include <tbb/parallel_for.h>
@@ -9,8 +10,17 @@
 
 namespace cityforge {
 
+std::string to_string(GroundMethod m) { return m == GroundMethod::plane ? "plane" : "percentile"; }
+
+GroundMethod ground_method_from_string(const std::string& s, const std::string& option) {
+    if (s == "plane") return GroundMethod::plane;
+    if (s == "percentile") return GroundMethod::percentile;
+    throw Error(option, "must be 'plane' or 'percentile', not '" + s + "'");
+}
+
 void HeightOptions::validate() const {
     if (!(ground_buffer_m > 0.0)) throw Error("--ground-buffer-m", "must be > 0");
+    if (!(ground_outlier_m > 0.0)) throw Error("--ground-outlier-m", "must be > 0");
     if (!(ground_percentile >= 0.0 && ground_percentile <= 100.0)) throw Error("--ground-percentile", "must be between 0 and 100");
     if (!(roof_percentile >= 0.0 && roof_percentile <= 100.0)) throw Error("--roof-percentile", "must be between 0 and 100");
     if (min_ground_points < 1) throw Error("--min-ground-points", "must be >= 1");
@@ -96,6 +106,123 @@ Extent extent_of(const std::vector<Polygon>& parts, double grow) {
     return e;
 }
 
+// Area centroid of the footprint parts (holes subtracted), CRS units.
+std::array<double, 2> area_centroid(const std::vector<Polygon>& parts) {
+    double a = 0, cx = 0, cy = 0;
+    auto ring = [&](const Ring& r, double sign) {
+        if (r.size() < 3) return;
+        const double x0 = r[0].x, y0 = r[0].y;  // relative to a vertex: no cancellation in map coordinates
+        double ra = 0, rx = 0, ry = 0;
+        for (std::size_t i = 0; i < r.size(); ++i) {
+            const double px = r[i].x - x0, py = r[i].y - y0;
+            const double qx = r[(i + 1) % r.size()].x - x0, qy = r[(i + 1) % r.size()].y - y0;
+            const double c = px * qy - qx * py;
+            ra += c, rx += (px + qx) * c, ry += (py + qy) * c;
+        }
+        if (ra == 0) return;
+        const double ar = std::abs(ra) / 2;
+        const double gx = x0 + rx / (3 * ra), gy = y0 + ry / (3 * ra);
+        a += sign * ar, cx += sign * ar * gx, cy += sign * ar * gy;
+    };
+    for (const Polygon& p : parts) {
+        ring(p.outer, 1.0);
+        for (const Ring& h : p.holes) ring(h, -1.0);
+    }
+    if (!(a > 0)) {
+        const Extent e = parts_extent(parts);
+        return {0.5 * (e.min_x + e.max_x), 0.5 * (e.min_y + e.max_y)};
+    }
+    return {cx / a, cy / a};
+}
+
+struct GroundFit {
+    double z = 0, rmse_m = 0, slope_deg = 0;
+    int64_t outliers = 0;
+    bool plane = false;
+};
+
+// Robust ground under the footprint from ring points (x, y relative to the
+// footprint centroid, metres; z in metres). Plane by least squares, trimmed
+// three times at max(outlier_m, 3 x 1.4826 MAD); evaluated at (0, 0). A ring
+// that cannot hold a plane (fewer than 6 points, spread under 1 m across, or
+// a value outside the ring's z range) gives the median.
+GroundFit fit_ground(const std::vector<std::array<double, 3>>& q, double outlier_m) {
+    GroundFit g;
+    std::vector<double> zs;
+    for (const auto& p : q) zs.push_back(p[2]);
+    std::vector<double> zsorted = zs;
+    const double med = *percentile(zsorted, 50.0);
+    const double zmin = zsorted.front(), zmax = zsorted.back();
+    auto median_fit = [&]() {
+        GroundFit m;
+        m.z = med;
+        std::vector<double> dev;
+        for (double z : zs) dev.push_back(std::abs(z - med));
+        const double mad = *percentile(dev, 50.0);
+        const double lim = std::max(outlier_m, 3.0 * 1.4826 * mad);
+        double s2 = 0;
+        std::size_t n = 0;
+        for (double z : zs)
+            if (std::abs(z - med) <= lim) s2 += (z - med) * (z - med), ++n;
+            else ++m.outliers;
+        m.rmse_m = n ? std::sqrt(s2 / double(n)) : 0.0;
+        return m;
+    };
+    if (q.size() < 6) return median_fit();
+    std::vector<uint8_t> use(q.size(), 1);
+    double a = 0, b = 0, c = med;
+    for (int iter = 0; iter < 4; ++iter) {
+        double n = 0, mx = 0, my = 0, mz = 0;
+        for (std::size_t i = 0; i < q.size(); ++i)
+            if (use[i]) n += 1, mx += q[i][0], my += q[i][1], mz += q[i][2];
+        if (n < 6) return median_fit();
+        mx /= n, my /= n, mz /= n;
+        double sxx = 0, sxy = 0, syy = 0, sxz = 0, syz = 0;
+        for (std::size_t i = 0; i < q.size(); ++i)
+            if (use[i]) {
+                const double dx = q[i][0] - mx, dy = q[i][1] - my, dz = q[i][2] - mz;
+                sxx += dx * dx, sxy += dx * dy, syy += dy * dy, sxz += dx * dz, syz += dy * dz;
+            }
+        // Spread across the narrowest direction: the smaller eigenvalue of the xy covariance.
+        const double tr = (sxx + syy) / n, det = (sxx * syy - sxy * sxy) / (n * n);
+        const double lmin = 0.5 * tr - std::sqrt(std::max(0.0, 0.25 * tr * tr - det));
+        if (!(lmin > 1.0)) return median_fit();  // std < 1 m across: the ring is a line
+        const double d = sxx * syy - sxy * sxy;
+        a = (sxz * syy - syz * sxy) / d, b = (syz * sxx - sxz * sxy) / d;
+        c = mz - a * mx - b * my;
+        std::vector<double> res;
+        for (std::size_t i = 0; i < q.size(); ++i) res.push_back(std::abs(q[i][2] - (a * q[i][0] + b * q[i][1] + c)));
+        std::vector<double> kept;
+        for (std::size_t i = 0; i < q.size(); ++i)
+            if (use[i]) kept.push_back(res[i]);
+        const double mad = *percentile(kept, 50.0);
+        const double lim = std::max(outlier_m, 3.0 * 1.4826 * mad);
+        bool changed = false;
+        for (std::size_t i = 0; i < q.size(); ++i) {
+            const uint8_t u = res[i] <= lim;
+            changed = changed || u != use[i];
+            use[i] = u;
+        }
+        if (!changed && iter > 0) break;
+    }
+    if (!(c >= zmin - 0.5 && c <= zmax + 0.5) || !std::isfinite(c)) return median_fit();
+    g.plane = true;
+    g.z = c;
+    g.slope_deg = std::atan(std::hypot(a, b)) * 180.0 / 3.14159265358979323846;
+    double s2 = 0;
+    std::size_t n = 0;
+    for (std::size_t i = 0; i < q.size(); ++i) {
+        if (!use[i]) {
+            ++g.outliers;
+            continue;
+        }
+        const double r = q[i][2] - (a * q[i][0] + b * q[i][1] + c);
+        s2 += r * r, ++n;
+    }
+    g.rmse_m = n ? std::sqrt(s2 / double(n)) : 0.0;
+    return g;
+}
+
 bool is_roof_candidate(uint8_t cls) {
     return cls != las_class::ground && cls != las_class::water && cls != las_class::low_noise && cls != las_class::high_noise;
 }
@@ -119,6 +246,7 @@ std::vector<BuildingHeight> compute_building_heights(const PointCloud& c, const 
         const double area_m2 = parts_area(parts) * o.unit_m * o.unit_m;
         // Candidates: points in the bounding box grown by the widest ground ring.
         std::vector<double> roof, ground_dist, ground_z;
+        std::vector<std::array<double, 2>> ground_xy;
         std::vector<std::pair<double, double>> roof_xy;
         std::vector<uint32_t> roof_id;
         std::vector<uint8_t> roof_is_building;
@@ -128,7 +256,7 @@ std::vector<BuildingHeight> compute_building_heights(const PointCloud& c, const 
             if (is_ground[i]) {
                 if (!inside) {
                     const double d = distance_to_parts(parts, x, y);
-                    if (d <= max_buffer) ground_dist.push_back(d), ground_z.push_back(c.z[i]);
+                    if (d <= max_buffer) ground_dist.push_back(d), ground_z.push_back(c.z[i]), ground_xy.push_back({x, y});
                 }
             } else if (inside && is_roof_candidate(c.classification[i])) {
                 roof.push_back(c.z[i]);
@@ -138,15 +266,37 @@ std::vector<BuildingHeight> compute_building_heights(const PointCloud& c, const 
             }
         });
         // Ground: the narrowest ring (1x, 2x, 4x the buffer) with enough points.
+        const std::array<double, 2> centroid = area_centroid(parts);
         std::string quality = "good";
         for (int widen = 0; widen < 3; ++widen) {
             const double ring = o.ground_buffer_m * (1 << widen) / o.unit_m;
             std::vector<double> z;
+            std::vector<std::size_t> in_ring;
             for (std::size_t k = 0; k < ground_z.size(); ++k)
-                if (ground_dist[k] <= ring) z.push_back(ground_z[k]);
+                if (ground_dist[k] <= ring) z.push_back(ground_z[k]), in_ring.push_back(k);
             if (static_cast<int>(z.size()) >= o.min_ground_points || (widen == 2 && !z.empty())) {
                 b.n_points_ground = static_cast<int64_t>(z.size());
-                b.ground_z = percentile(z, o.ground_percentile);
+                if (o.ground_method == GroundMethod::percentile) {
+                    b.ground_z = percentile(z, o.ground_percentile);
+                    b.ground_method = "ring_percentile";
+                    double s2 = 0;
+                    for (double v : z) s2 += (v - *b.ground_z) * (v - *b.ground_z);
+                    b.ground_rmse_m = std::sqrt(s2 / double(z.size())) * o.z_unit_m;
+                } else {
+                    std::vector<std::array<double, 3>> q;
+                    q.reserve(in_ring.size());
+                    for (std::size_t k : in_ring)
+                        q.push_back({(ground_xy[k][0] - centroid[0]) * o.unit_m, (ground_xy[k][1] - centroid[1]) * o.unit_m, ground_z[k] * o.z_unit_m});
+                    // Sums in coordinate order, not in the grid index's cell order (which depends on
+                    // the cloud window): the same ring gives the same bits in any tile.
+                    std::sort(q.begin(), q.end());
+                    const GroundFit g = fit_ground(q, o.ground_outlier_m);
+                    b.ground_z = g.z / o.z_unit_m;
+                    b.ground_method = g.plane ? "ring_plane" : "ring_median";
+                    b.ground_rmse_m = g.rmse_m;
+                    if (g.plane) b.ground_slope_deg = g.slope_deg;
+                    b.n_points_ground_outliers = g.outliers;
+                }
                 b.ground_buffer_used_m = ring * o.unit_m;
                 if (static_cast<int>(z.size()) < o.min_ground_points) quality = "few_ground_points";
                 else if (widen > 0) quality = "ground_buffer_widened";

@@ -16,9 +16,23 @@
 
 namespace cityforge {
 
+/// How the ground height under a footprint is estimated from the ground ring.
+/// plane: robust (iteratively trimmed) least-squares plane through the ring's
+/// ground points, evaluated at the footprint's area centroid = the mean
+/// terrain height under a planar footprint; unbiased on sloping terrain.
+/// Falls back to the ring's median ("ring_median") when the ring cannot hold
+/// a plane (too few points, all on a line, extrapolation beyond the ring).
+/// percentile: the ground_percentile of the ring's z (biased low on slopes).
+enum class GroundMethod { plane, percentile };
+std::string to_string(GroundMethod m);
+/// "plane" or "percentile"; throws Error naming `option` otherwise.
+GroundMethod ground_method_from_string(const std::string& s, const std::string& option = "--ground-method");
+
 struct HeightOptions {
     double ground_buffer_m = 3.0;          ///< ring around the footprint searched for ground points
-    double ground_percentile = 10.0;       ///< percentile of ground z taken as the building's ground
+    GroundMethod ground_method = GroundMethod::plane;  ///< see GroundMethod
+    double ground_percentile = 10.0;       ///< percentile of ground z taken as the building's ground (method percentile)
+    double ground_outlier_m = 0.3;         ///< plane method: ring points farther than max(this, 3 robust sigma) from the plane are left out
     int min_ground_points = 5;             ///< fewer -> ring widened (x2, x4), then flagged
     double roof_percentile = 70.0;         ///< percentile of roof z used for height_m (LOD1)
     double min_height_above_ground_m = 0.5;///< roof points must be this far above ground_z
@@ -41,6 +55,11 @@ struct HeightOptions {
 /// measured" (see height_quality), never a made-up number.
 struct BuildingHeight {
     std::optional<double> ground_z;
+    /// "ring_plane", "ring_median" (plane not possible), "ring_percentile"; empty without ground.
+    std::string ground_method;
+    std::optional<double> ground_rmse_m;    ///< RMS residual of the ring's kept ground points about the ground model, metres
+    std::optional<double> ground_slope_deg; ///< slope of the ground plane (ring_plane only)
+    int64_t n_points_ground_outliers = 0;   ///< ring points left out of the plane fit
     std::optional<double> roof_z_min, roof_z_50p, roof_z_70p, roof_z_90p, roof_z_max;
     std::optional<double> height_m;  ///< roof_percentile z - ground_z, metres
     int64_t n_points_roof = 0;

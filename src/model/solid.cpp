@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <limits>
 #include <map>
 #include <set>
 #include <tuple>
@@ -91,6 +92,50 @@ std::optional<double> face_z_at(const Face& f, double x, double y) {
     return cz - (n[0] * (x - cx) + n[1] * (y - cy)) / n[2];
 }
 
+double distance_to_face(const Face& f, const Point3& p) {
+    if (f.outer.size() < 3) return INFINITY;
+    const auto n = newell(f.outer);
+    const double len = norm(n);
+    auto segment = [&](const Point3& a, const Point3& b) {
+        const double ux = b.x - a.x, uy = b.y - a.y, uz = b.z - a.z;
+        const double l2 = ux * ux + uy * uy + uz * uz;
+        double t = l2 > 0 ? ((p.x - a.x) * ux + (p.y - a.y) * uy + (p.z - a.z) * uz) / l2 : 0.0;
+        t = std::clamp(t, 0.0, 1.0);
+        const double dx = p.x - (a.x + t * ux), dy = p.y - (a.y + t * uy), dz = p.z - (a.z + t * uz);
+        return std::sqrt(dx * dx + dy * dy + dz * dz);
+    };
+    if (len > 0) {
+        const double nx = n[0] / len, ny = n[1] / len, nz = n[2] / len;
+        const Point3& o = f.outer[0];
+        const double d = (p.x - o.x) * nx + (p.y - o.y) * ny + (p.z - o.z) * nz;
+        // Inside test in the plane of the two axes the normal is least along.
+        const int drop = std::abs(nx) >= std::abs(ny) && std::abs(nx) >= std::abs(nz) ? 0 : std::abs(ny) >= std::abs(nz) ? 1 : 2;
+        auto uv = [&](const Point3& q) { return drop == 0 ? MapPoint{q.y, q.z} : drop == 1 ? MapPoint{q.z, q.x} : MapPoint{q.x, q.y}; };
+        Polygon plan;
+        for (const Point3& q : f.outer) plan.outer.push_back(uv(q));
+        for (const Ring3& h : f.holes) {
+            plan.holes.emplace_back();
+            for (const Point3& q : h) plan.holes.back().push_back(uv(q));
+        }
+        const Point3 proj{p.x - d * nx, p.y - d * ny, p.z - d * nz};
+        const MapPoint pp = uv(proj);
+        if (point_in_polygon(plan, pp.x, pp.y)) return std::abs(d);
+    }
+    double best = INFINITY;
+    auto ring = [&](const Ring3& r) {
+        for (std::size_t i = 0; i < r.size(); ++i) best = std::min(best, segment(r[i], r[(i + 1) % r.size()]));
+    };
+    ring(f.outer);
+    for (const Ring3& h : f.holes) ring(h);
+    return best;
+}
+
+double distance_to_solid(const Solid& s, const Point3& p) {
+    double best = INFINITY;
+    for (const Face& f : s.faces) best = std::min(best, distance_to_face(f, p));
+    return best;
+}
+
 double face_area(const Face& f) {
     const auto n = newell(f.outer);
     const double len = norm(n);
@@ -128,9 +173,14 @@ double solid_volume(const Solid& s) {
 
 namespace {
 
-bool segments_cross(double ax, double ay, double bx, double by, double cx, double cy, double dx, double dy) {
-    auto orient = [](double px, double py, double qx, double qy, double rx, double ry) {
+bool segments_cross(double ax, double ay, double bx, double by, double cx, double cy, double dx, double dy, double tol) {
+    // Orientation with a tolerance: a point within `tol` (a few ulps of the
+    // coordinates) or 1e-9 of its distance from the line counts as on it, so rounding (map coordinates, an outline edge split by
+    // partition lines) cannot make disjoint collinear pieces of one edge "cross".
+    auto orient = [tol](double px, double py, double qx, double qy, double rx, double ry) {
         const double v = (qx - px) * (ry - py) - (qy - py) * (rx - px);
+        const double pq = std::hypot(qx - px, qy - py), pr = std::hypot(rx - px, ry - py);
+        if (std::abs(v) <= std::max(tol * (pq + pr), 1e-9 * pq * pr)) return 0;
         return (v > 0) - (v < 0);
     };
     auto on = [](double px, double py, double qx, double qy, double rx, double ry) {
@@ -150,6 +200,12 @@ bool ring_self_intersects(const Ring3& r, int drop_axis) {
     auto uv = [&](const Point3& p) {
         return drop_axis == 0 ? std::pair{p.y, p.z} : drop_axis == 1 ? std::pair{p.z, p.x} : std::pair{p.x, p.y};
     };
+    double magnitude = 0;
+    for (const Point3& p : r) {
+        const auto [u, v] = uv(p);
+        magnitude = std::max({magnitude, std::abs(u), std::abs(v)});
+    }
+    const double tol = 16 * std::numeric_limits<double>::epsilon() * magnitude;  // rounding of the stored coordinates
     for (std::size_t i = 0; i < n; ++i)
         for (std::size_t j = i + 1; j < n; ++j) {
             if (j == i + 1 || (i == 0 && j == n - 1)) continue;  // adjacent edges share a vertex
@@ -157,7 +213,7 @@ bool ring_self_intersects(const Ring3& r, int drop_axis) {
             const auto [bx, by] = uv(r[(i + 1) % n]);
             const auto [cx, cy] = uv(r[j]);
             const auto [dx, dy] = uv(r[(j + 1) % n]);
-            if (segments_cross(ax, ay, bx, by, cx, cy, dx, dy)) return true;
+            if (segments_cross(ax, ay, bx, by, cx, cy, dx, dy, tol)) return true;
         }
     return false;
 }

@@ -48,6 +48,14 @@ Polygon face_plan(const Face& face);
 /// nullopt outside it or for vertical faces.
 std::optional<double> face_z_at(const Face& face, double x, double y);
 
+/// Euclidean 3-D distance from p to a planar face (holes excluded): to its
+/// plane where p projects inside it, else to its nearest edge. Same units as
+/// the coordinates (x, y and z must share a unit).
+double distance_to_face(const Face& face, const Point3& p);
+
+/// Smallest distance_to_face over the solid's faces (roofs, walls, ground).
+double distance_to_solid(const Solid& solid, const Point3& p);
+
 /// Area of a planar face (holes subtracted), CRS units².
 double face_area(const Face& face);
 

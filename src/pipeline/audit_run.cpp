@@ -372,6 +372,13 @@ HeightAuditReport audit_heights(const std::string& pred_path, const std::string&
     const int pf = field_index(lp.pred, o.pred_field, pred_path), rf = field_index(lp.ref, o.ref_field, ref_path);
     const Parts p = parts_of(lp.pred), r = parts_of(lp.ref);
     const FootprintScores scores = match_footprints(p, r, o.iou_threshold);
+    // Written by `cityforge heights`: how each ground was found, and its fit residual.
+    auto optional_field = [&](const std::string& name) {
+        const auto& names = lp.pred.field_names;
+        const auto it = std::find(names.begin(), names.end(), name);
+        return it == names.end() ? -1 : static_cast<int>(it - names.begin());
+    };
+    const int gmf = optional_field("ground_method"), grf = optional_field("ground_rmse_m");
     HeightAuditReport rep;
     rep.matched = scores.true_positives, rep.reference = r.size();
     double sum = 0, sum_abs = 0, sum2 = 0;
@@ -380,13 +387,25 @@ HeightAuditReport audit_heights(const std::string& pred_path, const std::string&
         const auto pv = number(lp.pred.features[m.predicted].values[pf]);
         const auto rv = number(lp.ref.features[m.reference].values[rf]);
         if (!pv || !rv) continue;
-        HeightError e{lp.ref.fids[m.reference], lp.pred.fids[m.predicted], *pv, *rv, *pv - *rv};
+        HeightError e{lp.ref.fids[m.reference], lp.pred.fids[m.predicted], *pv, *rv, *pv - *rv, {}, {}};
+        if (gmf >= 0) {
+            const AttributeValue& v = lp.pred.features[m.predicted].values[gmf];
+            e.ground_method = std::holds_alternative<std::string>(v) ? std::get<std::string>(v) : "none";
+            HeightErrorGroup& g = rep.by_ground_method[e.ground_method];
+            ++g.count, g.mae += std::abs(e.error), g.bias += e.error;
+        }
+        if (grf >= 0) {
+            e.ground_rmse_m = number(lp.pred.features[m.predicted].values[grf]);
+            if (gmf >= 0 && e.ground_rmse_m) rep.by_ground_method[e.ground_method].mean_ground_rmse_m += *e.ground_rmse_m;
+        }
         sum += e.error, sum_abs += std::abs(e.error), sum2 += e.error * e.error;
         rep.max_abs = std::max(rep.max_abs, std::abs(e.error));
         rep.rows.push_back(e);
         err_of_ref[m.reference] = e.error;
     }
     rep.with_values = rep.rows.size();
+    for (auto& [method, g] : rep.by_ground_method)
+        if (g.count) g.mae /= double(g.count), g.bias /= double(g.count), g.mean_ground_rmse_m /= double(g.count);
     std::map<std::string, double> measures{{"coverage", r.empty() ? 0.0 : double(rep.with_values) / double(r.size())}};
     if (!rep.rows.empty()) {
         const double n = double(rep.rows.size());
@@ -401,28 +420,43 @@ HeightAuditReport audit_heights(const std::string& pred_path, const std::string&
     j["totals"] = {{"matched", rep.matched}, {"with_values", rep.with_values}, {"mae_m", rep.mae}, {"rmse_m", rep.rmse},
                    {"bias_m", rep.bias}, {"max_abs_m", rep.max_abs}};
     j["reference_study"] = {{"buildings", 10}, {"mae_m", 0.80}, {"max_abs_m", 1.77}};
+    if (gmf >= 0) {
+        nlohmann::json g = nlohmann::json::object();
+        for (const auto& [method, v] : rep.by_ground_method)
+            g[method] = {{"buildings", v.count}, {"mae_m", v.mae}, {"bias_m", v.bias}, {"mean_ground_rmse_m", v.mean_ground_rmse_m}};
+        j["by_ground_method"] = g;
+    }
     nlohmann::json rows = nlohmann::json::array();
     std::vector<std::vector<std::string>> table;
     std::vector<double> errs, pv, rv;
     for (const HeightError& e : rep.rows) {
-        rows.push_back({{"reference_fid", e.reference_fid}, {"predicted_fid", e.predicted_fid}, {"predicted_m", e.predicted},
-                        {"reference_m", e.reference}, {"error_m", e.error}});
-        table.push_back({std::to_string(e.reference_fid), std::to_string(e.predicted_fid), fmt(e.predicted), fmt(e.reference), fmt(e.error)});
+        nlohmann::json row{{"reference_fid", e.reference_fid}, {"predicted_fid", e.predicted_fid}, {"predicted_m", e.predicted},
+                           {"reference_m", e.reference}, {"error_m", e.error}};
+        if (gmf >= 0) row["ground_method"] = e.ground_method;
+        if (grf >= 0) row["ground_rmse_m"] = e.ground_rmse_m ? nlohmann::json(*e.ground_rmse_m) : nlohmann::json(nullptr);
+        rows.push_back(std::move(row));
+        table.push_back({std::to_string(e.reference_fid), std::to_string(e.predicted_fid), fmt(e.predicted), fmt(e.reference), fmt(e.error),
+                         e.ground_method.empty() ? "-" : e.ground_method, e.ground_rmse_m ? fmt(*e.ground_rmse_m) : "-"});
         errs.push_back(e.error), pv.push_back(e.predicted), rv.push_back(e.reference);
     }
     j["buildings"] = rows;
-    const std::vector<std::vector<std::string>> totals{
+    std::vector<std::vector<std::string>> totals{
         {"footprints matched", std::to_string(rep.matched) + " of " + std::to_string(rep.reference)},
         {"with both heights", std::to_string(rep.with_values)}, {"MAE (m)", fmt(rep.mae)}, {"RMSE (m)", fmt(rep.rmse)},
         {"bias, predicted - reference (m)", fmt(rep.bias)}, {"max |error| (m)", fmt(rep.max_abs)},
         {"reference study (10 buildings)", "MAE 0.80 m, max 1.77 m"}};
+    for (const auto& [method, g] : rep.by_ground_method)
+        totals.push_back({"ground " + method, std::to_string(g.count) + " buildings, MAE " + fmt(g.mae) + " m, bias " + fmt(g.bias) +
+                                                   " m, mean ground fit RMSE " + fmt(g.mean_ground_rmse_m) + " m"});
     std::ostringstream md;
     md << "# Height audit\n\n- predicted: `" << pred_path << "`, field `" << o.pred_field << "`" << (lp.reprojected ? " (reprojected)" : "")
        << "\n- reference: `" << ref_path << "`, field `" << o.ref_field << "` (" << rep.reference << " footprints, " << lp.ref.crs.label()
        << ")\n- footprints matched one to one at IoU >= " << o.iou_threshold << "\n\n| measure | value |\n|---|---|\n";
     for (const auto& t : totals) md << "| " << md_cell(t[0]) << " | " << md_cell(t[1]) << " |\n";
-    md << "\n| reference fid | predicted fid | predicted (m) | reference (m) | error (m) |\n|---|---|---|---|---|\n";
-    for (const auto& t : table) md << "| " << md_cell(t[0]) << " | " << md_cell(t[1]) << " | " << md_cell(t[2]) << " | " << md_cell(t[3]) << " | " << md_cell(t[4]) << " |\n";
+    md << "\n| reference fid | predicted fid | predicted (m) | reference (m) | error (m) | ground method | ground RMSE (m) |\n|---|---|---|---|---|---|---|\n";
+    for (const auto& t : table)
+        md << "| " << md_cell(t[0]) << " | " << md_cell(t[1]) << " | " << md_cell(t[2]) << " | " << md_cell(t[3]) << " | " << md_cell(t[4])
+           << " | " << md_cell(t[5]) << " | " << md_cell(t[6]) << " |\n";
     HtmlReport html("Height audit");
     html.paragraph("Predicted: " + pred_path + ", field " + o.pred_field + ". Reference: " + ref_path + ", field " + o.ref_field + " (" +
                    lp.ref.crs.label() + "). Footprints matched one to one at IoU >= " + fmt(o.iou_threshold) + ".");
@@ -434,7 +468,7 @@ HeightAuditReport audit_heights(const std::string& pred_path, const std::string&
                 "Reference footprints coloured by height error (predicted - reference); red outline: no matched height");
     html.figure(svg_histogram(errs, "height error (m)"), "Predicted minus reference height");
     html.figure(svg_scatter(rv, pv, "reference height (m)", "predicted height (m)"), "Dashed: y = x");
-    html.table({"reference fid", "predicted fid", "predicted (m)", "reference (m)", "error (m)"}, table);
+    html.table({"reference fid", "predicted fid", "predicted (m)", "reference (m)", "error (m)", "ground method", "ground RMSE (m)"}, table);
     rep.output = finish_report(out_dir, j, md.str(), html, measures, o.gates);
     return rep;
 }

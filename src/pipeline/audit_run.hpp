@@ -7,6 +7,7 @@
 // (self-contained, SVG charts). Gates (`--fail-below`, `--fail-above`) turn a
 // report into pass/fail for CI.
 #include <map>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -99,12 +100,21 @@ std::vector<std::string> height_audit_measures();
 struct HeightError {
     int64_t reference_fid = 0, predicted_fid = 0;
     double predicted = 0.0, reference = 0.0, error = 0.0;  ///< metres (predicted - reference)
+    std::string ground_method;              ///< the prediction's ground_method attribute, empty when it has none
+    std::optional<double> ground_rmse_m;    ///< the prediction's ground_rmse_m attribute (ground fit residual), metres
+};
+
+/// Errors of the buildings whose ground came from one method.
+struct HeightErrorGroup {
+    std::size_t count = 0;
+    double mae = 0.0, bias = 0.0, mean_ground_rmse_m = 0.0;  ///< metres
 };
 
 struct HeightAuditReport {
     std::size_t matched = 0, with_values = 0, reference = 0;
     double mae = 0.0, rmse = 0.0, bias = 0.0, max_abs = 0.0;  ///< metres
     std::vector<HeightError> rows;
+    std::map<std::string, HeightErrorGroup> by_ground_method;  ///< only when the prediction has ground_method
     AuditOutput output;
 };
 

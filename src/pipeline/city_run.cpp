@@ -118,6 +118,7 @@ json to_json(const RunOptions& o) {
               {"outlier_limit_m", o.buildings.heights.outliers.max_mean_distance}}},
             {"heights",
              {{"roof_percentile", h.roof_percentile},
+              {"ground_method", to_string(h.ground_method)},
               {"ground_percentile", h.ground_percentile},
               {"ground_buffer_m", h.ground_buffer_m},
               {"min_height_m", h.min_height_above_ground_m},
@@ -175,7 +176,12 @@ RunOptions run_options_from_json(const json& j, const std::string& where, RunOpt
         const json& x = j["heights"];
         const std::string w = where + ": heights";
         auto& h = o.buildings.heights.heights;
-        check_keys(x, {"roof_percentile", "ground_percentile", "ground_buffer_m", "min_height_m", "min_roof_points"}, w);
+        check_keys(x, {"roof_percentile", "ground_method", "ground_percentile", "ground_buffer_m", "min_height_m", "min_roof_points"}, w);
+        if (x.contains("ground_method")) {
+            std::string m;
+            take(x, "ground_method", m, w);
+            h.ground_method = ground_method_from_string(m, w + ".ground_method");
+        }
         take(x, "roof_percentile", h.roof_percentile, w), take(x, "ground_percentile", h.ground_percentile, w);
         take(x, "ground_buffer_m", h.ground_buffer_m, w), take(x, "min_height_m", h.min_height_above_ground_m, w);
         take(x, "min_roof_points", h.min_roof_points, w);

@@ -91,6 +91,11 @@ HeightsStage compute_heights_stage(PolygonLayer footprints_in, PreparedCloud clo
     fields.push_back({"n_points_roof", FieldType::integer});
     fields.push_back({"n_points_ground", FieldType::integer});
     fields.push_back({"height_quality", FieldType::string});
+    fields.push_back({"ground_method", FieldType::string});
+    for (const char* n : {"ground_rmse_m", "ground_slope_deg"}) fields.push_back({n, FieldType::real});
+    fields.push_back({"n_points_ground_outliers", FieldType::integer});
+    // 3DBAG's names for the same values (absolute z in the vertical datum; 3DBAG 2 prefixes them with b3_).
+    for (const char* n : {"h_maaiveld", "h_dak_min", "h_dak_50p", "h_dak_70p", "h_dak_max"}) fields.push_back({n, FieldType::real});
     fields.push_back({"z_crs", FieldType::string});
     for (const FieldDefinition& f : fields) t.field_names.push_back(f.name), t.field_types.push_back(f.type);
     const std::string z_crs = z_crs_label(cloud_crs);
@@ -109,6 +114,11 @@ HeightsStage compute_heights_stage(PolygonLayer footprints_in, PreparedCloud clo
         f.values.push_back(h.n_points_roof);
         f.values.push_back(h.n_points_ground);
         f.values.push_back(h.height_quality);
+        f.values.push_back(h.ground_method.empty() ? AttributeValue() : AttributeValue(h.ground_method));
+        f.values.push_back(opt(h.ground_rmse_m));
+        f.values.push_back(opt(h.ground_slope_deg));
+        f.values.push_back(h.n_points_ground_outliers);
+        for (const auto& v : {opt(h.ground_z), opt(h.roof_z_min), opt(h.roof_z_50p), opt(h.roof_z_70p), opt(h.roof_z_max)}) f.values.push_back(v);
         f.values.push_back(z_crs);
         ++rep.quality_counts[h.height_quality];
         t.features.push_back(std::move(f));

@@ -534,6 +534,30 @@ PartResult build_part(const Polygon& part, const std::vector<std::array<double, 
     return res;
 }
 
+// RMS of the 3-D distances of the points to the solids (roofs, walls,
+// ground), in metres: map coordinates moved to a local metric frame first.
+double rmse_to_solids(const std::vector<Solid>& solids, const std::vector<std::array<double, 3>>& pts, double ox, double oy, double oz,
+                      const Lod2Options& o) {
+    if (pts.empty() || solids.empty()) return 0.0;
+    std::vector<Solid> local = solids;
+    for (Solid& s : local)
+        for (Face& f : s.faces) {
+            auto to_local = [&](Ring3& r) {
+                for (Point3& q : r) q = {(q.x - ox) * o.unit_m, (q.y - oy) * o.unit_m, (q.z - oz) * o.z_unit_m};
+            };
+            to_local(f.outer);
+            for (Ring3& h : f.holes) to_local(h);
+        }
+    double s2 = 0;
+    for (const auto& q : pts) {
+        const Point3 p{(q[0] - ox) * o.unit_m, (q[1] - oy) * o.unit_m, (q[2] - oz) * o.z_unit_m};
+        double d = INFINITY;
+        for (const Solid& s : local) d = std::min(d, distance_to_solid(s, p));
+        if (std::isfinite(d)) s2 += d * d;
+    }
+    return std::sqrt(s2 / double(pts.size()));
+}
+
 }  // namespace
 
 Lod2Result reconstruct_lod2(const std::vector<Polygon>& footprint, const std::vector<std::array<double, 3>>& roof_points, double ground_z,
@@ -551,9 +575,8 @@ Lod2Result reconstruct_lod2(const std::vector<Polygon>& footprint, const std::ve
             orient_polygon(p);
             r.solids.push_back(extrude_prism(p, ground_z, top));
         }
-        double s2 = 0;
-        for (const auto& q : roof_points) s2 += (q[2] - top) * (q[2] - top);
-        r.rmse_m = roof_points.empty() ? 0.0 : std::sqrt(s2 / double(roof_points.size())) * o.z_unit_m;
+        if (!footprint.empty() && !footprint[0].outer.empty())
+            r.rmse_m = rmse_to_solids(r.solids, roof_points, footprint[0].outer[0].x, footprint[0].outer[0].y, ground_z, o);
         return r;
     };
     if (footprint.empty()) return fallback("no footprint");
@@ -586,25 +609,51 @@ Lod2Result reconstruct_lod2(const std::vector<Polygon>& footprint, const std::ve
         std::vector<int> pp;
         for (std::size_t i = 0; i < local.size(); ++i)
             if (point_in_polygon(part, local[i][0], local[i][1])) pts.push_back(local[i]), pp.push_back(point_plane[i]);
+        // The partition with the partition lines reaching line_extension_m
+        // beyond their planes' boundary; when that solid fails to close
+        // (four step walls meeting in one vertical edge, sliver faces), the
+        // same planes partitioned with shorter and longer lines.
         PartResult pr;
-        try {
-            pr = build_part(part, pts, planes, pp, 0.0, o);
-        } catch (const std::exception& e) {
-            return fallback(std::string("partition failed: ") + e.what());
+        std::string failure;
+        for (const double ext : {o.line_extension_m, 0.5 * o.line_extension_m, 1.5 * o.line_extension_m + 0.5}) {
+            Lod2Options oe = o;
+            oe.line_extension_m = ext;
+            try {
+                pr = build_part(part, pts, planes, pp, 0.0, oe);
+            } catch (const std::exception& e) {
+                if (failure.empty()) failure = std::string("partition failed: ") + e.what();
+                continue;
+            }
+            if (!pr.failure.empty()) {
+                if (failure.empty()) failure = pr.failure;
+                continue;
+            }
+            const auto errors = validate_solid(pr.solid);
+            if (!errors.empty()) {
+                if (failure.empty()) failure = "reconstructed solid invalid: " + errors.front();
+                continue;
+            }
+            // Again in map coordinates, where the exporters check it: rounding there can make a near-touch a touch.
+            Solid in_map = pr.solid;
+            for (Face& f : in_map.faces) {
+                auto back = [&](Ring3& ring) {
+                    for (Point3& q : ring) q = {ox + q.x / o.unit_m, oy + q.y / o.unit_m, ground_z + q.z / o.z_unit_m};
+                };
+                back(f.outer);
+                for (Ring3& h : f.holes) back(h);
+            }
+            const auto map_errors = validate_solid(in_map);
+            if (!map_errors.empty()) {
+                if (failure.empty()) failure = "reconstructed solid invalid in map coordinates: " + map_errors.front();
+                continue;
+            }
+            pr.solid = std::move(in_map);
+            failure.clear();
+            break;
         }
-        if (!pr.failure.empty()) return fallback(pr.failure);
-        const auto errors = validate_solid(pr.solid);
-        if (!errors.empty()) return fallback("reconstructed solid invalid: " + errors.front());
+        if (!failure.empty()) return fallback(failure);
         used.insert(pr.used_planes.begin(), pr.used_planes.end());
         eave_min = std::min(eave_min, pr.eave_min), eave_max = std::max(eave_max, pr.eave_max);
-        // Back to map coordinates.
-        for (Face& f : pr.solid.faces) {
-            auto back = [&](Ring3& ring) {
-                for (Point3& q : ring) q = {ox + q.x / o.unit_m, oy + q.y / o.unit_m, ground_z + q.z / o.z_unit_m};
-            };
-            back(f.outer);
-            for (Ring3& h : f.holes) back(h);
-        }
         r.solids.push_back(std::move(pr.solid));
     }
     std::vector<RoofPlane> used_planes;
@@ -613,9 +662,7 @@ Lod2Result reconstruct_lod2(const std::vector<Polygon>& footprint, const std::ve
     r.roof_type = classify_roof(used_planes, eave_max - eave_min, o.flat_slope_deg);
     const RoofPlane& main = planes[*used.begin()];  // planes are ordered by support: the lowest used index is the largest
     r.roof_slope_deg = main.slope_deg, r.roof_azimuth_deg = main.azimuth_deg;
-    // RMSE: each point against the roof surface above it (the highest roof face containing it in plan).
-    double s2 = 0;
-    std::size_t n = 0;
+    // Median residual: each point against the roof surface above it (the first roof face containing it in plan).
     std::vector<double> residuals;
     for (const Solid& s : r.solids)
         for (const auto& q : roof_points) {
@@ -623,12 +670,12 @@ Lod2Result reconstruct_lod2(const std::vector<Polygon>& footprint, const std::ve
                 if (f.type != SurfaceType::roof) continue;
                 const std::optional<double> zf = face_z_at(f, q[0], q[1]);
                 if (!zf) continue;
-                s2 += (q[2] - *zf) * (q[2] - *zf), ++n;
                 residuals.push_back(std::abs(q[2] - *zf));
                 break;
             }
         }
-    r.rmse_m = n ? std::sqrt(s2 / double(n)) * o.z_unit_m : 0.0;
+    // RMSE: 3-D distance of every roof point to the model (facade points lie on its walls), as roofer reports it.
+    r.rmse_m = rmse_to_solids(r.solids, roof_points, ox, oy, ground_z, o);
     if (!residuals.empty()) {
         std::nth_element(residuals.begin(), residuals.begin() + residuals.size() / 2, residuals.end());
         r.median_residual_m = residuals[residuals.size() / 2] * o.z_unit_m;

@@ -38,7 +38,9 @@ struct Lod2Result {
     int roof_planes = 0;               ///< planes used in the roof
     double roof_slope_deg = 0.0;       ///< of the main (largest) roof plane
     double roof_azimuth_deg = 0.0;     ///< downhill direction of the main plane, clockwise from north
-    double rmse_m = 0.0;               ///< vertical RMS distance of the roof points to the model, metres
+    /// RMS of the 3-D distances of the building's points to the model (roof,
+    /// wall and ground faces), metres; like 3DBAG's b3_rmse_lod22.
+    double rmse_m = 0.0;
     double median_residual_m = 0.0;    ///< median vertical distance (robust to chimneys, trees and wall points), metres
 };
 

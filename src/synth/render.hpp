@@ -22,9 +22,10 @@ struct Rendered {
     Image<uint8_t> rgb;         ///< filled by colourise()
 };
 
-/// Pixel-centre rasterisation of buildings and trees, the DSM and cast shadows.
-Rendered render(const Scene& scene, double gsd, const Progress& progress);
-/// Sun-shaded, textured colours of `r` (r.rgb).
-void colourise(const Scene& scene, double gsd, Rendered& r);
+/// Pixel-centre rasterisation of buildings and trees, the DSM and cast shadows
+/// for a sun at bearing `sun_az_deg` (clockwise from north) and elevation `sun_el_deg`.
+Rendered render(const Scene& scene, double gsd, double sun_az_deg, double sun_el_deg, const Progress& progress);
+/// Sun-shaded, textured colours of `r` (r.rgb), same sun as render().
+void colourise(const Scene& scene, double gsd, double sun_az_deg, double sun_el_deg, Rendered& r);
 
 }  // namespace cityforge::synth

@@ -5,6 +5,7 @@
 #include <limits>
 #include <numbers>
 
+#include "core/error.hpp"
 #include "core/random.hpp"
 
 namespace cityforge::synth {
@@ -147,6 +148,15 @@ std::array<double, 2> SceneBuilding::to_scene(LocalPoint p) const {
 
 bool SceneBuilding::contains(double x, double y) const {
     const LocalPoint p = to_local(x, y);
+    if (oblique) {
+        bool in = false;
+        for (std::size_t i = 0, j = outline.size() - 1; i < outline.size(); j = i++) {
+            const LocalPoint& a = outline[i];
+            const LocalPoint& b = outline[j];
+            if ((a.v > p.v) != (b.v > p.v) && p.u < (b.u - a.u) * (p.v - a.v) / (b.v - a.v) + a.u) in = !in;
+        }
+        return in;
+    }
     for (const Wing& w : wings)
         if (w.contains(p.u, p.v)) return true;
     return false;
@@ -190,7 +200,7 @@ double SceneTree::crown_z(double x, double y) const {
 
 double Scene::terrain_z(double x, double y) const {
     return terrain[0] + terrain[1] * x + terrain[2] * y +
-           1.2 * std::sin(2 * kPi * x / 830.0) * std::cos(2 * kPi * y / 610.0);
+           undulation_m * std::sin(2 * kPi * x / 830.0) * std::cos(2 * kPi * y / 610.0);
 }
 
 bool Scene::on_road(double x, double y) const {
@@ -229,14 +239,67 @@ struct Lot {
     double x0, y0, x1, y1;
 };
 
+const std::array<std::array<uint8_t, 3>, 3> kGroundLikeColours{{{93, 133, 63}, {150, 130, 100}, {97, 97, 101}}};
+
+// Area centroid of the outline minus its holes, local frame.
+LocalPoint area_centroid(const SceneBuilding& b) {
+    double a = 0, cu = 0, cv = 0;
+    auto ring = [&](const std::vector<LocalPoint>& r) {
+        for (std::size_t i = 0; i < r.size(); ++i) {
+            const LocalPoint& p = r[i];
+            const LocalPoint& q = r[(i + 1) % r.size()];
+            const double c = p.u * q.v - q.u * p.v;
+            a += c, cu += (p.u + q.u) * c, cv += (p.v + q.v) * c;
+        }
+    };
+    ring(b.outline);
+    for (const auto& h : b.holes) ring(h);  // clockwise: subtracts
+    if (a == 0) return {0, 0};
+    return {cu / (3 * a), cv / (3 * a)};
+}
+
+// Cuts corner k (0..3, counter-clockwise from (-a, -c)) of a rectangle W x D at an oblique angle.
+void cut_corner(SceneBuilding& b, double W, double D, int k, double fu, double fv) {
+    const double a = W / 2, c = D / 2;
+    const Pts corners{{-a, -c}, {a, -c}, {a, c}, {-a, c}};
+    Pts out;
+    for (int i = 0; i < 4; ++i) {
+        if (i != k) {
+            out.push_back(corners[i]);
+            continue;
+        }
+        const LocalPoint prev = corners[(i + 3) % 4], next = corners[(i + 1) % 4], p = corners[i];
+        // Along the edge from prev and towards next, by the fraction of that edge's length.
+        const double lp = std::hypot(p.u - prev.u, p.v - prev.v), ln = std::hypot(next.u - p.u, next.v - p.v);
+        const double f_prev = (std::abs(p.u - prev.u) > 0 ? fu : fv), f_next = (std::abs(next.u - p.u) > 0 ? fu : fv);
+        out.push_back({p.u + (prev.u - p.u) / lp * f_prev * lp, p.v + (prev.v - p.v) / lp * f_prev * lp});
+        out.push_back({p.u + (next.u - p.u) / ln * f_next * ln, p.v + (next.v - p.v) / ln * f_next * ln});
+    }
+    b.outline = out;
+    b.oblique = true;
+}
+
 }  // namespace
+
+void SceneVariation::validate() const {
+    if (!(terrain_slope_max >= 0 && terrain_slope_max <= 0.5)) throw Error("--terrain-slope", "must be between 0 and 0.5");
+    if (!(terrain_undulation_m >= 0 && terrain_undulation_m <= 50)) throw Error("--terrain-undulation-m", "must be between 0 and 50 m");
+    for (const auto& [name, v] : {std::pair<const char*, double>{"--dark-roof-share", dark_roof_share}, {"--tree-touch-share", tree_touch_share},
+                                  {"--ground-like-roof-share", ground_like_roof_share}, {"--terraced-share", terraced_block_share},
+                                  {"--oblique-share", oblique_share}})
+        if (!(v >= 0 && v <= 1)) throw Error(name, "must be between 0 and 1");
+}
 
 Scene generate_scene(const SceneLayout& layout) {
     Scene scene;
     scene.size_m = layout.size_m;
     scene.seed = layout.seed;
+    const SceneVariation& var = layout.variation;
+    var.validate();
     Rng rng(layout.seed, 1);
-    scene.terrain = {rng.uniform(20.0, 60.0), rng.uniform(-0.008, 0.008), rng.uniform(-0.008, 0.008)};
+    const double slope = var.terrain_slope_max;
+    scene.terrain = {rng.uniform(20.0, 60.0), rng.uniform(-slope, slope), rng.uniform(-slope, slope)};
+    scene.undulation_m = var.terrain_undulation_m;
 
     std::vector<std::array<double, 2>> bx, by;
     lay_roads(rng, layout.size_m, scene.roads_x, bx);
@@ -294,6 +357,47 @@ Scene generate_scene(const SceneLayout& layout) {
                     }
                 }
             }
+            // Terrace: the row's lots built wall to wall, one height, one roof type.
+            Rng vr(layout.seed, 700000 + block_index);
+            if (var.terraced_block_share > 0 && lots.size() >= 2 && !(roll < 0.19 && iw >= 45.0 && ih >= 45.0) &&
+                vr.chance(var.terraced_block_share)) {
+                const bool along_x = iw >= ih;
+                const double gap = vr.uniform(2.0, 4.0);
+                const double eave = vr.uniform(4.0, 14.0);
+                const RoofType roof = vr.chance(0.5) ? RoofType::flat : RoofType::gable;
+                const double pitch = std::tan(vr.uniform(25.0, 40.0) * kPi / 180.0);
+                const auto base = roof == RoofType::flat ? kFlatColours[vr.integer(0, int(kFlatColours.size()) - 1)]
+                                                         : kPitchedColours[vr.integer(0, int(kPitchedColours.size()) - 1)];
+                for (const Lot& lot : lots) {
+                    Lot l = lot;
+                    auto at = [](double v, double edge) { return std::abs(v - edge) < 1e-9; };
+                    if (along_x) {
+                        l.y0 += gap, l.y1 -= gap;
+                        if (at(l.x0, inner.x0)) l.x0 += gap;
+                        if (at(l.x1, inner.x1)) l.x1 -= gap;
+                    } else {
+                        l.x0 += gap, l.x1 -= gap;
+                        if (at(l.y0, inner.y0)) l.y0 += gap;
+                        if (at(l.y1, inner.y1)) l.y1 -= gap;
+                    }
+                    const double W = l.x1 - l.x0, D = l.y1 - l.y0;
+                    if (std::min(W, D) < 7.0) continue;
+                    SceneBuilding b;
+                    b.shape = BuildingShape::rectangle;
+                    b.roof = roof;
+                    b.cx = 0.5 * (l.x0 + l.x1), b.cy = 0.5 * (l.y0 + l.y1);
+                    b.angle_rad = 0.0;
+                    make_shape(b, W, D, 0.0);
+                    b.ground_z = scene.terrain_z(b.cx, b.cy);
+                    b.eave_height_m = eave;
+                    b.pitch_tan = roof == RoofType::flat ? 0.0 : pitch;
+                    b.ridge_height_m = eave + (roof == RoofType::flat ? 0.0 : 0.5 * std::min(W, D) * pitch);
+                    b.color = jitter_colour(vr, base);
+                    b.id = static_cast<int>(scene.buildings.size()) + 1;
+                    scene.buildings.push_back(std::move(b));
+                }
+                continue;
+            }
             for (const Lot& lot : lots) {
                 const double lw = lot.x1 - lot.x0, lh = lot.y1 - lot.y0;
                 const double gap = br.uniform(2.0, 4.0);
@@ -324,12 +428,25 @@ Scene generate_scene(const SceneLayout& layout) {
                     b.roof = roof_roll < 0.3 ? RoofType::flat : roof_roll < 0.45 ? RoofType::shed : roof_roll < 0.75 ? RoofType::gable : RoofType::hip;
                 else
                     b.roof = roof_roll < 0.4 ? RoofType::flat : roof_roll < 0.75 ? RoofType::gable : RoofType::hip;
+                // Variations: own random stream per building, so the default town stays the same.
+                Rng bv(layout.seed, 5000000 + static_cast<uint64_t>(scene.buildings.size()));
+                if (var.all_roof_families) {
+                    const RoofType families[] = {RoofType::flat, RoofType::shed, RoofType::gable, RoofType::hip};
+                    b.roof = families[bv.integer(0, 3)];
+                }
                 const double slack_x = avail_w - (W * c + D * s), slack_y = avail_h - (W * s + D * c);
                 b.cx = lot.x0 + gap + (W * c + D * s) / 2 + br.uniform(0.0, std::max(0.0, slack_x));
                 b.cy = lot.y0 + gap + (W * s + D * c) / 2 + br.uniform(0.0, std::max(0.0, slack_y));
                 b.angle_rad = angle;
                 make_shape(b, W, D, t);
-                b.ground_z = scene.terrain_z(b.cx, b.cy);
+                if (b.shape == BuildingShape::rectangle && var.oblique_share > 0 && bv.chance(var.oblique_share))
+                    cut_corner(b, W, D, bv.integer(0, 3), bv.uniform(0.25, 0.7), bv.uniform(0.25, 0.7));
+                if (var.base_at_area_centroid) {
+                    const auto xy = b.to_scene(area_centroid(b));
+                    b.ground_z = scene.terrain_z(xy[0], xy[1]);
+                } else {
+                    b.ground_z = scene.terrain_z(b.cx, b.cy);
+                }
                 if (b.roof == RoofType::flat) {
                     b.eave_height_m = br.uniform(3.5, 24.0);
                     b.pitch_tan = 0.0;
@@ -346,7 +463,9 @@ Scene generate_scene(const SceneLayout& layout) {
                     ridge = std::max(ridge, b.roof == RoofType::shed ? 2 * half_short * b.pitch_tan : half_short * b.pitch_tan);
                 }
                 b.ridge_height_m = b.eave_height_m + ridge;
-                b.dark_roof = br.chance(0.05);
+                if (var.ground_like_roof_share > 0 && bv.chance(var.ground_like_roof_share))
+                    b.color = jitter_colour(bv, kGroundLikeColours[bv.integer(0, int(kGroundLikeColours.size()) - 1)]);
+                b.dark_roof = br.chance(var.dark_roof_share);
                 b.id = static_cast<int>(scene.buildings.size()) + 1;
 
                 // Trees in the lot's free space, and sometimes one touching the building.
@@ -359,7 +478,7 @@ Scene generate_scene(const SceneLayout& layout) {
                     if (std::abs(p.u) < W / 2 + r * 0.8 && std::abs(p.v) < D / 2 + r * 0.8) continue;
                     add_tree(br, x, y, r);
                 }
-                if (br.chance(0.25)) {
+                if (br.chance(var.tree_touch_share)) {
                     const double r = br.uniform(2.5, 4.5);
                     const double side = br.chance(0.5) ? 1.0 : -1.0;
                     const auto xy = b.to_scene({side * (W / 2 + 0.6 * r), br.uniform(-D / 3, D / 3)});

@@ -42,6 +42,9 @@ struct SceneBuilding {
     double pitch_tan = 0;            ///< roof slope as tan(pitch); 0 for flat
     std::array<uint8_t, 3> color{};  ///< roof base colour
     bool dark_roof = false;          ///< low LiDAR reflectance: most returns missing
+    /// The outline is not the union of the wings (a corner cut off at an
+    /// oblique angle): containment tests the outline, roofs still come from the wings.
+    bool oblique = false;
 
     /// Local frame coordinates of a scene point.
     LocalPoint to_local(double x, double y) const;
@@ -68,15 +71,35 @@ struct SceneTree {
     double crown_z(double x, double y) const;
 };
 
+/// How far a town departs from the default generator. The defaults give the
+/// default town (same seed, same scene, byte for byte); every share is a
+/// probability in [0, 1] drawn from its own random stream.
+struct SceneVariation {
+    double terrain_slope_max = 0.008;    ///< |dz/dx| and |dz/dy| of the planar terrain drawn up to this (0.1 = 10 %)
+    double terrain_undulation_m = 1.2;   ///< amplitude of the terrain's long-wave undulation, metres
+    double dark_roof_share = 0.05;       ///< roofs that absorb most LiDAR pulses
+    double tree_touch_share = 0.25;      ///< buildings with a tree crown touching their side
+    double ground_like_roof_share = 0.0; ///< roofs coloured like grass, soil or road
+    double terraced_block_share = 0.0;   ///< blocks built as terraces: touching buildings of equal height
+    double oblique_share = 0.0;          ///< rectangular buildings with a corner cut off at an oblique angle
+    bool all_roof_families = false;      ///< roof types drawn with equal shares (flat, shed, gable, hip) instead of the default mix
+    /// Building base at the terrain height of the footprint's area centroid
+    /// (the mean terrain under it) instead of at its bounding-box centre.
+    bool base_at_area_centroid = false;
+    void validate() const;               ///< throws Error naming the option
+};
+
 struct SceneLayout {
     double size_m = 500;
     uint64_t seed = 1;
+    SceneVariation variation;
 };
 
 struct Scene {
     double size_m = 500;
     uint64_t seed = 1;
     std::array<double, 3> terrain{};    ///< z0, dz/dx, dz/dy of the planar part
+    double undulation_m = 1.2;          ///< amplitude of the long-wave part
     std::vector<std::array<double, 2>> roads_x;  ///< [x0, x1] intervals of north–south roads
     std::vector<std::array<double, 2>> roads_y;  ///< [y0, y1] intervals of east–west roads
     std::vector<SceneBuilding> buildings;

@@ -37,13 +37,17 @@ void SynthOptions::validate() const {
     if (!(cloud_density_m2 >= 0.0 && cloud_density_m2 <= 200.0)) throw Error("--cloud-density", "must be between 0 and 200 points/m2");
     if (!std::isfinite(origin_x) || !std::isfinite(origin_y)) throw Error("--origin", "must be finite");
     if (views.views != 0) views.validate();
+    if (!(lidar_sigma_m >= 0.0 && lidar_sigma_m <= 1.0)) throw Error("--lidar-sigma-m", "must be between 0 and 1 m");
+    if (!(sun_azimuth_deg >= 0.0 && sun_azimuth_deg < 360.0)) throw Error("--sun-azimuth-deg", "must be in [0, 360)");
+    if (!(sun_elevation_deg >= 5.0 && sun_elevation_deg <= 90.0)) throw Error("--sun-elevation-deg", "must be between 5 and 90");
+    variation.validate();
 }
 
 namespace synth {
 
 
 // Pixel-centre rasterisation of buildings and trees plus the DSM.
-Rendered render(const Scene& scene, double gsd, const Progress& progress) {
+Rendered render(const Scene& scene, double gsd, double sun_az_deg, double sun_el_deg, const Progress& progress) {
     const int n = static_cast<int>(std::lround(scene.size_m / gsd));
     Rendered r;
     r.building = Image<uint32_t>(n, n, 1, 0u);
@@ -96,7 +100,30 @@ Rendered render(const Scene& scene, double gsd, const Progress& progress) {
     // Cast shadows: one sweep along the sun direction (towards the south-east =
     // +col, +row). H is the height of the sun ray grazing the highest obstacle.
     r.shadow = Image<uint8_t>(n, n, 1, 0);
-    {
+    if (sun_az_deg != kSunAzimuthDeg || sun_el_deg != kSunElevationDeg) {
+        // Any other sun: march from every pixel towards the sun until the ray
+        // clears the highest surface of the scene.
+        const double az = sun_az_deg * std::numbers::pi / 180.0;
+        const double rise = std::tan(sun_el_deg * std::numbers::pi / 180.0);  // ray height gained per metre
+        const double dx = std::sin(az), dy = std::cos(az);                      // towards the sun, scene axes
+        float zmax = -1e30f;
+        for (float v : r.dsm.data) zmax = std::max(zmax, v);
+        tbb::parallel_for(0, n, [&](int row) {
+            for (int col = 0; col < n; ++col) {
+                const float z0 = r.dsm.at(0, col, row);
+                const double reach = (zmax - z0) / rise;
+                for (double d = gsd; d <= reach; d += gsd) {
+                    const int cc = static_cast<int>(std::floor(col + 0.5 + dx * d / gsd));
+                    const int rr = static_cast<int>(std::floor(row + 0.5 - dy * d / gsd));
+                    if (cc < 0 || rr < 0 || cc >= n || rr >= n) break;
+                    if (r.dsm.at(0, cc, rr) > z0 + d * rise + 0.05) {
+                        r.shadow.at(0, col, row) = 1;
+                        break;
+                    }
+                }
+            }
+        });
+    } else {
         const double drop = gsd * std::sqrt(2.0) * std::tan(kSunElevationDeg * std::numbers::pi / 180.0);
         std::vector<float> below(n + 1, -1e30f), cur(n + 1, -1e30f);
         for (int row = n - 1; row >= 0; --row) {
@@ -114,10 +141,10 @@ Rendered render(const Scene& scene, double gsd, const Progress& progress) {
     return r;
 }
 
-void colourise(const Scene& scene, double gsd, Rendered& r) {
+void colourise(const Scene& scene, double gsd, double sun_az_deg, double sun_el_deg, Rendered& r) {
     const int n = r.building.width;
     r.rgb = Image<uint8_t>(n, n, 3, 0);
-    const double az = kSunAzimuthDeg * std::numbers::pi / 180.0, el = kSunElevationDeg * std::numbers::pi / 180.0;
+    const double az = sun_az_deg * std::numbers::pi / 180.0, el = sun_el_deg * std::numbers::pi / 180.0;
     const double sun[3] = {std::sin(az) * std::cos(el), std::cos(az) * std::cos(el), std::sin(el)};
     const uint64_t seed = scene.seed;
     tbb::parallel_for(0, n, [&](int row) {
@@ -246,7 +273,7 @@ void cloud_row(const Scene& scene, const Rendered& r, double gsd, const SynthOpt
             if (!photo && hit && hit->dark_roof && g < 0.8) continue;
             if (photo && in_shadow && g < 0.5) continue;
             if (photo && value_noise(seed + 9, x, y, 30.0) > 0.85 && g < 0.9) continue;
-            double sigma = photo ? 0.12 : 0.03;
+            double sigma = photo ? 0.12 : o.lidar_sigma_m;
             if (photo && in_shadow) sigma *= 2.0;
             if (photo && edge && cls == las_class::building) {
                 // Dense matching smears roof edges towards the ground.
@@ -312,10 +339,10 @@ SynthResult write_synthetic_town(const std::string& out_dir, const SynthOptions&
     res.truth_raster_path = (fs::path(out_dir) / "truth_buildings.tif").string();
     res.scene_path = (fs::path(out_dir) / "scene.json").string();
 
-    const Scene scene = synth::generate_scene({o.size_m, o.seed});
+    const Scene scene = synth::generate_scene({o.size_m, o.seed, o.variation});
     progress(0.05, "scene");
-    Rendered r = synth::render(scene, o.gsd_m, progress.sub(0.05, 0.35));
-    synth::colourise(scene, o.gsd_m, r);
+    Rendered r = synth::render(scene, o.gsd_m, o.sun_azimuth_deg, o.sun_elevation_deg, progress.sub(0.05, 0.35));
+    synth::colourise(scene, o.gsd_m, o.sun_azimuth_deg, o.sun_elevation_deg, r);
     res.width = res.height = r.building.width;
     const GeoTransform gt{o.origin_x, o.gsd_m, o.origin_y + res.height * o.gsd_m, -o.gsd_m};
     GeoTiffWriteOptions rgb_options;
@@ -372,9 +399,21 @@ SynthResult write_synthetic_town(const std::string& out_dir, const SynthOptions&
     j["crs"] = crs.label();
     j["origin_is"] = "lower-left corner of the scene";
     j["ortho"] = {{"file", "ortho.tif"}, {"width", res.width}, {"height", res.height}};
-    j["sun"] = {{"azimuth_deg", kSunAzimuthDeg}, {"elevation_deg", kSunElevationDeg}};
+    j["sun"] = {{"azimuth_deg", o.sun_azimuth_deg}, {"elevation_deg", o.sun_elevation_deg}};
     j["terrain"] = {{"z0_m", scene.terrain[0]}, {"dz_dx", scene.terrain[1]}, {"dz_dy", scene.terrain[2]},
-                    {"undulation_amplitude_m", 1.2}};
+                    {"undulation_amplitude_m", scene.undulation_m}};
+    const synth::SceneVariation& v = o.variation;
+    const synth::SceneVariation d;
+    if (o.lidar_sigma_m != 0.03) j["parameters"]["lidar_sigma_m"] = o.lidar_sigma_m;
+    if (v.terrain_slope_max != d.terrain_slope_max || v.terrain_undulation_m != d.terrain_undulation_m ||
+        v.dark_roof_share != d.dark_roof_share || v.tree_touch_share != d.tree_touch_share || v.ground_like_roof_share != d.ground_like_roof_share ||
+        v.terraced_block_share != d.terraced_block_share || v.oblique_share != d.oblique_share || v.all_roof_families != d.all_roof_families ||
+        v.base_at_area_centroid != d.base_at_area_centroid)
+        j["variation"] = {{"terrain_slope_max", v.terrain_slope_max}, {"terrain_undulation_m", v.terrain_undulation_m},
+                          {"dark_roof_share", v.dark_roof_share},      {"tree_touch_share", v.tree_touch_share},
+                          {"ground_like_roof_share", v.ground_like_roof_share}, {"terraced_block_share", v.terraced_block_share},
+                          {"oblique_share", v.oblique_share},          {"all_roof_families", v.all_roof_families},
+                          {"base_at_area_centroid", v.base_at_area_centroid}};
     j["counts"] = {{"buildings", res.buildings}, {"trees", res.trees}, {"points", res.points},
                    {"roads_ns", scene.roads_x.size()}, {"roads_ew", scene.roads_y.size()},
                    {"shapes", shape_counts}, {"roof_types", roof_counts}};

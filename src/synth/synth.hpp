@@ -26,6 +26,10 @@ struct SynthOptions {
     CloudMode cloud_mode = CloudMode::lidar;
     /// Perspective photos and the exact surface (views/, surface.las); views.views = 0 (default) = none.
     synth::ViewsOptions views;
+    double lidar_sigma_m = 0.03;    ///< vertical noise of LiDAR points, metres (photo mode: 0.12)
+    double sun_azimuth_deg = 135.0; ///< sun bearing, clockwise from north (shading and cast shadows)
+    double sun_elevation_deg = 48.0;///< sun elevation above the horizon, degrees (5..90)
+    synth::SceneVariation variation;///< terrain, roof colours, terraces, oblique corners, roof mix (defaults: the default town)
     /// Throws Error on out-of-range values (size 20..20000 m, GSD 0.05..10 m, ...).
     void validate() const;
 };

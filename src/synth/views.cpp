@@ -212,8 +212,8 @@ ViewsResult write_views(const std::string& out_dir, const Scene& scene, const Vi
     const fs::path views_dir = fs::path(out_dir) / "views";
     ensure_directory(views_dir);
 
-    Rendered r = render(scene, texel, progress.sub(0.0, 0.2));
-    colourise(scene, texel, r);
+    Rendered r = render(scene, texel, kSunAzimuthDeg, kSunElevationDeg, progress.sub(0.0, 0.2));
+    colourise(scene, texel, kSunAzimuthDeg, kSunElevationDeg, r);
     const HeightField hf(r.dsm, texel, scene.size_m);
     const double az = kSunAzimuthDeg * kPi / 180.0, el = kSunElevationDeg * kPi / 180.0;
     const Sampler sampler{scene, r, hf, seed, {std::sin(az) * std::cos(el), std::cos(az) * std::cos(el), std::sin(el)}};

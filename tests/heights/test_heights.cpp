@@ -103,9 +103,23 @@ TEST_CASE("Delft AHN3 - roof p90 agrees with 3dfier's reference (median |diff| <
         ground.push_back(std::abs(*r.num.at("ground_z") - std::stod(r.text.at("ref_ground_nap_m"))));
         CHECK(r.text.at("z_crs") == "EPSG:5709");
     }
-    INFO("median |roof p90 - ref| = " << median(roof) << ", median |ground - ref| = " << median(ground));
+    INFO("median |roof p90 - ref| = " << median(roof) << ", median |ground (plane) - ref| = " << median(ground));
     CHECK(median(roof) <= 0.40);
-    CHECK(median(ground) <= 0.05);
+    // 3dfier's reference ground is a low percentile of the ring: the plane
+    // (the mean terrain under the footprint) sits a little above it ...
+    CHECK(median(ground) <= 0.15);
+    // ... and our percentile method reproduces 3dfier's convention.
+    HeightsRunOptions po = o;
+    po.heights.ground_method = GroundMethod::percentile;
+    run_heights(shared_data("delft_ahn3_bgt_west/bgt_pand_west_with_ref_heights.geojson"), shared_data("delft_ahn3_bgt_west/ahn3_delft_west.las"),
+                dir / "delft_pct.gpkg", po);
+    std::vector<double> ground_pct;
+    for (const Row& r : read_rows(dir / "delft_pct.gpkg")) {
+        CHECK(r.text.at("ground_method") == "ring_percentile");
+        ground_pct.push_back(std::abs(*r.num.at("ground_z") - std::stod(r.text.at("ref_ground_nap_m"))));
+    }
+    INFO("median |ground (percentile) - ref| = " << median(ground_pct));
+    CHECK(median(ground_pct) <= 0.05);
     // The cloud has no CRS: without --cloud-crs it is refused, naming the file.
     CHECK_THROWS_WITH(run_heights(shared_data("delft_ahn3_bgt_west/bgt_pand_west_with_ref_heights.geojson"),
                                   shared_data("delft_ahn3_bgt_west/ahn3_delft_west.las"), dir / "x.gpkg", HeightsRunOptions{}),
@@ -178,6 +192,13 @@ TEST_CASE("audit heights on Delft - our roof p90 against 3dfier's reference", "[
     CHECK(j["totals"]["with_values"] == 135);
     CHECK(j["totals"]["mae_m"].get<double>() < 0.8);
     CHECK(std::abs(j["totals"]["bias_m"].get<double>()) < 0.3);  // no systematic offset against 3dfier (+0.01 m when written)
+    // The ground method and its fit residual, per building and per method.
+    REQUIRE(j.contains("by_ground_method"));
+    CHECK(j["by_ground_method"]["ring_plane"]["buildings"].get<int>() >= 120);
+    CHECK(j["by_ground_method"]["ring_plane"]["mean_ground_rmse_m"].get<double>() < 0.3);
+    CHECK(j["buildings"][0].contains("ground_method"));
+    CHECK(j["buildings"][0].contains("ground_rmse_m"));
+    CHECK(test::slurp(dir / "audit/report.md").find("ground method") != std::string::npos);
     CHECK(test::validate_json(test::source_dir() + "/schemas/audit_report.schema.json", dir / "audit/report.json").exit_code == 0);
     const auto gated = test::run_cli("audit heights --pred " + (dir / "h.gpkg") + " --ref " + ref +
                                      " --pred-field roof_z_90p --ref-field ref_roof_nap_m --out " + (dir / "g") + " --fail-above mae=0.05");
@@ -206,8 +227,21 @@ TEST_CASE("heights read window by window (cloud larger than the memory budget) e
     for (std::size_t i = 0; i < a.field_names.size(); ++i)
         if (a.field_names[i] == "height_m") h = static_cast<int>(i);
     REQUIRE(h >= 0);
+    // The ground plane is a least-squares fit: the few ring points the outlier
+    // filter judges differently in a window move it by micrometres, not more.
     int same = 0;
-    for (std::size_t i = 0; i < a.features.size(); ++i)
-        same += a.features[i].values[h] == b.features[i].values[h];
+    double worst = 0;
+    for (std::size_t i = 0; i < a.features.size(); ++i) {
+        const auto& va = a.features[i].values[h];
+        const auto& vb = b.features[i].values[h];
+        if (std::holds_alternative<double>(va) && std::holds_alternative<double>(vb)) {
+            const double d = std::abs(std::get<double>(va) - std::get<double>(vb));
+            worst = std::max(worst, d);
+            same += d <= 0.005;
+        } else {
+            same += va == vb;
+        }
+    }
+    INFO("largest height difference whole vs windows " << worst << " m");
     CHECK(same >= static_cast<int>(a.features.size()) - 2);  // 135 of 135 when written
 }
