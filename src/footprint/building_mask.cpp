@@ -97,7 +97,7 @@ BuildingCells building_cells(const Image<float>& ndsm, const Image<float>& dsm, 
                 // Exact ties (a cell with as many building as other points, common
                 // at 1-2 points per cell) alternate in a checkerboard so that
                 // edge cells are neither all in nor all out: no outward bias.
-                if (b < o.min_building_share || (b == o.min_building_share && ((x + y) & 1))) continue;
+                if (b < o.min_building_share || (b == o.min_building_share && ((static_cast<long>(x) + y + o.grid_col0 + o.grid_row0) & 1))) continue;
             } else {
                 // Roughness: residual of the 3x3 DSM neighbourhood around its best plane,
                 // approximated by the mean absolute second difference over the

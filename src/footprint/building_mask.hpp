@@ -27,6 +27,11 @@ struct BuildingMaskOptions {
     /// (dormers, chimneys, roof superstructures), stay with their neighbour.
     double min_split_part_m2 = 15.0;
     int opening_radius_px = 0;          ///< morphological opening removing thin artefacts (0 = none; 1 shrinks outlines ~2 %)
+    /// Position of the rasters' first cell in the run's global grid (in cells
+    /// of these rasters): position-dependent choices (the checkerboard of
+    /// exact share ties) follow global cells, so a tile's window decides its
+    /// cells as the whole grid would.
+    int grid_col0 = 0, grid_row0 = 0;
     void validate() const;
 };
 
