@@ -4,6 +4,7 @@
 #include <cmath>
 #include <limits>
 #include <numeric>
+#include <tuple>
 #include <tbb/parallel_for.h>
 
 #include "cloud/kd_tree.hpp"
@@ -29,6 +30,29 @@ void GroundFilterOptions::validate() const {
 }
 
 
+void canonical_order(PointCloud& c) {
+    const std::size_t n = c.size();
+    std::vector<std::size_t> order(n);
+    std::iota(order.begin(), order.end(), std::size_t(0));
+    const bool gps = c.has_gps_time(), rgb = c.has_color();
+    auto key = [&](std::size_t i) {
+        return std::make_tuple(c.x[i], c.y[i], c.z[i], gps ? c.gps_time[i] : 0.0, c.intensity[i], c.classification[i], c.return_number[i],
+                               c.number_of_returns[i], rgb ? c.red[i] : 0, rgb ? c.green[i] : 0, rgb ? c.blue[i] : 0);
+    };
+    bool sorted = true;
+    for (std::size_t i = 1; i < n && sorted; ++i) sorted = !(key(i) < key(i - 1));
+    if (sorted) return;
+    std::sort(order.begin(), order.end(), [&](std::size_t a, std::size_t b) { return key(a) < key(b); });
+    auto permute = [&](auto& v) {
+        if (v.empty()) return;
+        std::remove_reference_t<decltype(v)> out(n);
+        for (std::size_t i = 0; i < n; ++i) out[i] = v[order[i]];
+        v.swap(out);
+    };
+    permute(c.x), permute(c.y), permute(c.z), permute(c.gps_time), permute(c.intensity), permute(c.classification);
+    permute(c.return_number), permute(c.number_of_returns), permute(c.red), permute(c.green), permute(c.blue);
+}
+
 OutlierFilterResult filter_outliers(const PointCloud& c, const OutlierFilterOptions& o) {
     o.validate();
     OutlierFilterResult r;
@@ -39,33 +63,42 @@ OutlierFilterResult filter_outliers(const PointCloud& c, const OutlierFilterOpti
     if (!o.enabled || n < static_cast<std::size_t>(o.k_neighbours) + 1) return r;
     double ox = INFINITY, oy = INFINITY, oz = INFINITY;
     for (std::size_t i = 0; i < n; ++i) ox = std::min(ox, c.x[i]), oy = std::min(oy, c.y[i]), oz = std::min(oz, c.z[i]);
+    // A local origin at multiples of 256 units: windows of one cloud mostly round alike.
+    ox = std::floor(ox / 256.0) * 256.0, oy = std::floor(oy / 256.0) * 256.0, oz = std::floor(oz / 256.0) * 256.0;
     const LocalPoints local = local_points(c, ox, oy, oz);
     PointTree tree(3, local, nanoflann::KDTreeSingleIndexAdaptorParams(16));
     tree.buildIndex();
     // One k-nearest-neighbour pass serves both filters: the isolated-point test
     // only needs the distance to the m-th neighbour (m = isolated_min_neighbours).
-    const std::size_t k = static_cast<std::size_t>(std::max(o.k_neighbours, o.isolated_min_neighbours)) + 1;  // self first
+    // A few more candidates than needed are asked of the float tree and ranked
+    // again by (double distance, index): with points in canonical order the
+    // neighbours do not depend on the tree's shape (the window), not even at ties.
+    const std::size_t want = static_cast<std::size_t>(std::max(o.k_neighbours, o.isolated_min_neighbours)) + 1;  // self first
+    const std::size_t k = std::min(n, want + 4);
     const auto m = static_cast<std::size_t>(o.isolated_min_neighbours);
     std::vector<double> mean_dist(n, 0.0);
     std::vector<uint8_t> isolated(n, 0);
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, 4096), [&](const tbb::blocked_range<std::size_t>& range) {
         std::vector<uint32_t> idx(k);
         std::vector<float> d2(k);
+        std::vector<std::pair<double, uint32_t>> ranked(k);
         for (std::size_t i = range.begin(); i != range.end(); ++i) {
             const float* q = &local.xyz[3 * i];
             const std::size_t found = tree.knnSearch(q, k, idx.data(), d2.data());
-            double s = 0.0;
-            const std::size_t used = std::min(found, static_cast<std::size_t>(o.k_neighbours) + 1);
-            // Distances again in double from the source coordinates: the float
-            // tree's rounding depends on the local origin (the cloud's extent).
-            for (std::size_t j = 1; j < used; ++j) {
+            ranked.clear();
+            for (std::size_t j = 0; j < found; ++j) {
                 const std::size_t a = idx[j];
                 const double dx = c.x[a] - c.x[i], dy = c.y[a] - c.y[i], dz = c.z[a] - c.z[i];
-                s += std::sqrt(dx * dx + dy * dy + dz * dz);
+                // The point itself first, whatever the rounding.
+                ranked.emplace_back(a == i ? -1.0 : std::sqrt(dx * dx + dy * dy + dz * dz), idx[j]);
             }
+            std::sort(ranked.begin(), ranked.end());
+            const std::size_t have = std::min(found, want);
+            double s = 0.0;
+            const std::size_t used = std::min(have, static_cast<std::size_t>(o.k_neighbours) + 1);
+            for (std::size_t j = 1; j < used; ++j) s += ranked[j].first;
             mean_dist[i] = used > 1 ? s / static_cast<double>(used - 1) : 0.0;
-            if (o.isolated_radius > 0.0 && m > 0)
-                isolated[i] = found <= m || d2[m] > o.isolated_radius * o.isolated_radius;
+            if (o.isolated_radius > 0.0 && m > 0) isolated[i] = have <= m || ranked[m].first > o.isolated_radius;
         }
     });
     // Sums in index order: the threshold does not depend on the thread count.
@@ -106,6 +139,9 @@ GroundResult classify_ground(const PointCloud& c, const std::vector<uint8_t>& ke
     for (std::size_t i = 0; i < n; ++i)
         if (kept(i)) minx = std::min(minx, c.x[i]), maxx = std::max(maxx, c.x[i]), miny = std::min(miny, c.y[i]), maxy = std::max(maxy, c.y[i]);
     if (!std::isfinite(minx)) return g;
+    // Cells anchored at multiples of the cell size: every window of a cloud
+    // uses the same cells, so its ground does not depend on where it starts.
+    minx = std::floor(minx / o.cell) * o.cell, miny = std::floor(miny / o.cell) * o.cell;
     const int w = static_cast<int>((maxx - minx) / o.cell) + 1, h = static_cast<int>((maxy - miny) / o.cell) + 1;
     if (static_cast<double>(w) * h > 4e8) throw Error("ground filter", "cloud extent too large for one SMRF grid; tile it first");
     std::vector<double> zmin(static_cast<std::size_t>(w) * h, INFINITY);
