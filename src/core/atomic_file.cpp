@@ -15,8 +15,28 @@ fs::path temporary_path_for(const fs::path& final_path) {
     return tmp;
 }
 
+namespace {
+// Files a driver writes beside its main file (Shapefile's .shx, .dbf, ...):
+// they belong to the temporary and move or go with it.
+const char* const kSidecars[] = {".shx", ".dbf", ".prj", ".cpg", ".qpj", ".sbn", ".sbx", ".qix"};
+fs::path sibling(const fs::path& p, const char* ext) {
+    fs::path s = p;
+    s.replace_filename(p.stem().string() + ext);
+    return s;
+}
+}  // namespace
+
 void commit_file(const fs::path& tmp, const fs::path& final_path) {
     std::error_code ec;
+    for (const char* ext : kSidecars) {
+        const fs::path from = sibling(tmp, ext);
+        if (!fs::exists(from, ec)) continue;
+        fs::rename(from, sibling(final_path, ext), ec);
+        if (ec) {
+            discard_file(tmp);
+            throw Error(final_path.string(), "cannot move finished output into place: " + ec.message());
+        }
+    }
     fs::rename(tmp, final_path, ec);
     if (ec) {
         discard_file(tmp);
@@ -27,6 +47,8 @@ void commit_file(const fs::path& tmp, const fs::path& final_path) {
 void discard_file(const fs::path& tmp) noexcept {
     std::error_code ec;
     fs::remove(tmp, ec);
+    for (const char* ext : kSidecars) fs::remove(sibling(tmp, ext), ec);
+    for (const char* suffix : {"-journal", "-wal", "-shm"}) fs::remove(fs::path(tmp.string() + suffix), ec);
 }
 
 void write_text_file(const fs::path& path, const std::string& content) {

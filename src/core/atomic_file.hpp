@@ -10,10 +10,12 @@ namespace cityforge {
 /// the rename is atomic and keeps the extension so that drivers recognise it).
 std::filesystem::path temporary_path_for(const std::filesystem::path& final_path);
 
-/// Renames `tmp` onto `final_path` (replacing it). Throws Error naming final_path.
+/// Renames `tmp` onto `final_path` (replacing it), with the sidecar files a
+/// driver wrote beside it (.shx, .dbf, .prj, ... of a Shapefile). Throws
+/// Error naming final_path.
 void commit_file(const std::filesystem::path& tmp, const std::filesystem::path& final_path);
 
-/// Removes `tmp` if present; never throws (used on the error path).
+/// Removes `tmp` and its sidecars if present; never throws (used on the error path).
 void discard_file(const std::filesystem::path& tmp) noexcept;
 
 /// Writes `content` to `path` atomically. Throws Error naming the path.

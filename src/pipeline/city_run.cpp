@@ -850,6 +850,11 @@ RunReport merge_tiles(const RunManifest& m, const std::string& out_dir, const Pr
             }
         }
     }
+    // Every tile failed: nothing to model, and empty city models would read as
+    // "no buildings here". The tiles' reports (DIR/tiles/) keep every reason.
+    if (!rep.tiles.empty() && std::all_of(rep.tiles.begin(), rep.tiles.end(), [](const TileReport& t) { return t.status == "failed"; }))
+        throw Error(out_dir, "every tile failed (" + std::to_string(rep.tiles.size()) + " of " + std::to_string(rep.tiles.size()) +
+                                 "; tile " + std::to_string(rep.tiles.front().index) + ": " + rep.tiles.front().reason + "); no city model written");
     progress(0.3, "tiles read");
     // One order whatever the tiling: by numeric id when ids are numbers, else as text.
     auto key = [](const std::string& id) {
