@@ -1,98 +1,122 @@
 #!/usr/bin/env bash
-# Segmentation against the tools a user would otherwise pick (Debian packages):
-# scikit-image (watershed; RAG + merge_hierarchical on OUR watershed regions),
-# GRASS GIS i.segment (region growing seeded with OUR watershed regions) and
-# Orfeo ToolBox (otbcli_Segmentation watershed). Prints seconds and ratios.
+# Segmentation side by side with the tools a user would otherwise pick, on the
+# SAME image window, the SAME seeds and the SAME final region count:
+#  - watershed: cityforge (multi-band Sobel gradient, --h-minima 0, no
+#    smoothing: every regional minimum a region) against scikit-image
+#    watershed(sobel(gray)) (also every regional minimum), region counts printed;
+#  - merging: GRASS GIS i.segment seeded with OUR watershed regions (threshold
+#    --grass-threshold) gives K regions; cityforge merges the same seeds until
+#    exactly K regions remain (RegionMergingOptions::min_regions), mutual queue;
+#  - optionally Orfeo ToolBox otbcli_Segmentation (watershed) when installed.
+# Prints wall and CPU seconds of each side and the ratios (peer / cityforge).
+# The machine may be shared: CPU seconds are the fairer figure; both are printed.
 #
-#   bash bench/compare_peers.sh [size_m]     (default 1000 m = 2000 x 2000 px)
-# Needs: build/bin/cityforge (scripts/build.sh) and, installed by this script,
-# python3-skimage grass-core otb-bin.
+#   bash bench/compare_peers.sh [--raster FILE] [--window col,row,w,h] [--synth SIZE_M]
+#                               [--grass-threshold T]
+# Default: the Autzen ortho (shared data), 2000 x 2000 px around its centre,
+# native 1 ft resolution. --synth SIZE_M uses a synthetic town instead.
+# Needs build/bin/bench_segment (and build/bin/cityforge for --synth), GDAL
+# tools, python3-skimage and grass-core (Debian packages).
 set -euo pipefail
 here="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
-size="${1:-1000}"
-cf="$here/build/bin/cityforge"
-export DEBIAN_FRONTEND=noninteractive
-for p in python3-skimage grass-core otb-bin; do
-  dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || apt-get install -y -qq --no-install-recommends "$p" >/dev/null
+raster="$here/../shared/data/autzen_oregon/autzen_ortho_1ft_epsg2994.tif"
+window="624,1192,2000,2000"
+synth=""
+grass_threshold="0.1"
+while [ $# -gt 0 ]; do
+  case "$1" in
+    --raster) raster="$2"; shift 2 ;;
+    --window) window="$2"; shift 2 ;;
+    --synth) synth="$2"; window=""; shift 2 ;;
+    --grass-threshold) grass_threshold="$2"; shift 2 ;;
+    *) echo "compare_peers.sh: unknown argument $1" >&2; exit 2 ;;
+  esac
 done
+bench="$here/build/bin/bench_segment"
+py=/usr/bin/python3
+[ -x "$bench" ] || { echo "compare_peers.sh: build bench_segment first (cmake --build build --target bench_segment)" >&2; exit 1; }
+"$py" -c 'import skimage' 2>/dev/null || { echo "compare_peers.sh: python3-skimage is not installed" >&2; exit 1; }
+command -v grass >/dev/null || { echo "compare_peers.sh: grass-core is not installed" >&2; exit 1; }
 work="$(mktemp -d /tmp/cityforge_peers.XXXXXX)"
 trap 'rm -rf "$work"' EXIT
-"$cf" synth --quiet --out "$work/scene" --size-m "$size" --cloud-density 0
-ortho="$work/scene/ortho.tif"
-now() { date +%s.%N; }
+if [ -n "$synth" ]; then
+  "$here/build/bin/cityforge" synth --quiet --out "$work/scene" --size-m "$synth" --cloud-density 0
+  raster="$work/scene/ortho.tif"
+fi
+# The window as a plain 3-band GeoTIFF that every tool reads alike.
+if [ -n "$window" ]; then
+  IFS=, read -r c r w h <<< "$window"
+  gdal_translate -q -of GTiff -co COMPRESS=NONE -b 1 -b 2 -b 3 -srcwin "$c" "$r" "$w" "$h" "$raster" "$work/ortho.tif"
+else
+  gdal_translate -q -of GTiff -co COMPRESS=NONE -b 1 -b 2 -b 3 "$raster" "$work/ortho.tif"
+fi
+ortho="$work/ortho.tif"
+size=$(gdalinfo "$ortho" | sed -n 's/^Size is \(.*\), \(.*\)/\1 x \2/p')
+echo "image: $raster${window:+ window $window} ($size px); load average: $(cut -d' ' -f1-3 /proc/loadavg)"
+json() { "$py" -c "import json,sys; d=json.load(open(sys.argv[1])); print(eval(sys.argv[2], {}, {'d': d}))" "$@"; }
+cpu_of() { awk '{print $2 + $3}' "$1"; }  # /usr/bin/time -f "%e %U %S": user + sys
+wall_of() { awk '{print $1}' "$1"; }
 
-echo "== cityforge (watershed + mutual merging, scales 10..60)"
-"$cf" segment --quiet --ortho "$ortho" --out "$work/cf" --scales 10,20,30,40,50,60 --strategy mutual
-/usr/bin/python3 - "$work/cf/segment_report.json" > "$work/cf.txt" <<'PY'
-import json, sys
-r = json.load(open(sys.argv[1]))
-merge = sum(s["seconds"] for s in r["scales"])
-print(r["oversegmentation"]["regions"], r["oversegmentation"]["seconds"], merge, r["scales"][-1]["regions_after"])
-PY
-read -r cf_regions cf_ws cf_merge cf_final < "$work/cf.txt"
-echo "watershed: $cf_regions regions in $cf_ws s; merging 6 scales: $cf_merge s (-> $cf_final regions)"
+echo "== cityforge watershed (--h-minima 0, no smoothing)"
+"$bench" --raster "$ortho" --h-minima 0 --smoothing 0 --scales 0.001 --strategies mutual \
+  --seeds-out "$work/seeds.tif" --json "$work/cf_ws.json" > "$work/cf_ws.txt"
+cf_regions=$(json "$work/cf_ws.json" 'd["watershed"]["regions"]')
+cf_ws=$(json "$work/cf_ws.json" 'd["watershed"]["seconds"]')
+echo "watershed: $cf_regions regions in $cf_ws s"
 
-echo "== scikit-image $(/usr/bin/python3 -c 'import skimage; print(skimage.__version__)')"
-gdal_translate -q -of GTiff -co COMPRESS=NONE "$ortho" "$work/ortho_plain.tif"
-gdal_translate -q -of GTiff -co COMPRESS=NONE -ot UInt32 "$work/cf/oversegmentation.tif" "$work/seeds_plain.tif"
-/usr/bin/python3 - "$work/ortho_plain.tif" "$work/seeds_plain.tif" > "$work/sk.txt" <<'PY'
+echo "== scikit-image $("$py" -c 'import skimage; print(skimage.__version__)') watershed(sobel(rgb2gray))"
+/usr/bin/time -f "%e %U %S" -o "$work/sk.time" "$py" - "$ortho" > "$work/sk.txt" <<'PY'
 import sys, time, numpy as np
 from skimage import io, filters, segmentation, color
-try:
-    from skimage import graph
-    graph.rag_mean_color
-except AttributeError:  # scikit-image < 0.20 keeps the RAG in skimage.future
-    from skimage.future import graph
-img = io.imread(sys.argv[1]).astype(np.float64)
+img = io.imread(sys.argv[1])
 t = time.perf_counter()
-grad = filters.sobel(color.rgb2gray(img / 255.0))
-ws = segmentation.watershed(grad)
-t_ws = time.perf_counter() - t
-seeds = io.imread(sys.argv[2]).astype(np.int64)
-t = time.perf_counter()
-rag = graph.rag_mean_color(img, seeds)
-t_rag = time.perf_counter() - t
-def weight(g, src, dst, n):
-    diff = g.nodes[dst]['mean color'] - g.nodes[n]['mean color']
-    return {'weight': np.linalg.norm(diff)}
-def merge(g, src, dst):
-    g.nodes[dst]['total color'] += g.nodes[src]['total color']
-    g.nodes[dst]['pixel count'] += g.nodes[src]['pixel count']
-    g.nodes[dst]['mean color'] = g.nodes[dst]['total color'] / g.nodes[dst]['pixel count']
-t = time.perf_counter()
-out = graph.merge_hierarchical(seeds, rag, thresh=20, rag_copy=False, in_place_merge=True,
-                               merge_func=merge, weight_func=weight)
-t_merge = time.perf_counter() - t
-print(len(np.unique(ws)), t_ws, t_rag, t_merge, len(np.unique(out)))
+ws = segmentation.watershed(filters.sobel(color.rgb2gray(img)))
+print(int(ws.max()), time.perf_counter() - t)
 PY
-read -r sk_regions sk_ws sk_rag sk_merge sk_final < "$work/sk.txt"
-echo "watershed: $sk_regions regions in $sk_ws s; RAG on our $cf_regions regions $sk_rag s + merge_hierarchical $sk_merge s (-> $sk_final regions)"
+read -r sk_regions sk_ws < "$work/sk.txt"
+echo "watershed: $sk_regions regions in $sk_ws s"
 
-echo "== GRASS GIS i.segment (seeds = our watershed regions)"
+echo "== GRASS GIS $(grass --version 2>&1 | head -1 | awk '{print $3}') i.segment seeds=<our $cf_regions regions> threshold=$grass_threshold"
 cat > "$work/grass.sh" <<SH
 set -e
 r.in.gdal --quiet input="$ortho" output=ortho
-r.in.gdal --quiet input="$work/cf/oversegmentation.tif" output=seeds
-g.region raster=ortho.red
-i.group group=g input=ortho.red,ortho.green,ortho.blue
-t=\$(date +%s.%N)
-i.segment --quiet group=g output=seg seeds=seeds threshold=0.05 minsize=1 memory=4000
-echo "\$t \$(date +%s.%N)" > "$work/grass.txt"
+r.in.gdal --quiet input="$work/seeds.tif" output=seeds_raw
+bands=\$(g.list type=raster pattern='ortho.*' separator=,)
+g.region raster=\$(echo "\$bands" | cut -d, -f1)
+r.mapcalc --quiet "seeds = int(seeds_raw)"
+i.group --quiet group=g input="\$bands"
+/usr/bin/time -f "%e %U %S" -o "$work/grass.time" i.segment --quiet group=g output=seg seeds=seeds threshold=$grass_threshold minsize=1 memory=4000
+r.stats --quiet -n seg | wc -l > "$work/grass.count"
 SH
-grass --tmp-location "$ortho" --exec bash "$work/grass.sh" >/dev/null 2>&1 || echo "GRASS run failed"
-if [ -s "$work/grass.txt" ]; then read -r g0 g1 < "$work/grass.txt"; grass_s=$(echo "$g1 - $g0" | bc -l); else grass_s=nan; fi
-echo "i.segment on the same seeds: $grass_s s"
+grass --tmp-location "$ortho" --exec bash "$work/grass.sh" > "$work/grass.log" 2>&1 || { echo "GRASS run failed:"; tail -5 "$work/grass.log"; exit 1; }
+grass_regions=$(tr -d ' ' < "$work/grass.count")
+echo "i.segment: $grass_regions regions in $(wall_of "$work/grass.time") s wall, $(cpu_of "$work/grass.time") s CPU"
 
-echo "== Orfeo ToolBox otbcli_Segmentation (watershed)"
-t0=$(now)
-timeout "${OTB_TIMEOUT:-900}" otbcli_Segmentation -in "$ortho" -filter watershed -mode raster -mode.raster.out "$work/otb.tif" uint32 >/dev/null 2>&1 || echo "OTB run failed or timed out after ${OTB_TIMEOUT:-900} s"
-otb_s=$(echo "$(now) - $t0" | bc -l)
-echo "otbcli_Segmentation watershed: $otb_s s"
+echo "== cityforge merging the same seeds to $grass_regions regions (mutual queue)"
+"$bench" --raster "$ortho" --seeds-in "$work/seeds.tif" --scales 1e9 --min-regions "$grass_regions" --strategies mutual \
+  --json "$work/cf_merge.json" > "$work/cf_merge.txt"
+cf_final=$(json "$work/cf_merge.json" 'd["merging"]["mutual"]["regions"]')
+cf_merge=$(json "$work/cf_merge.json" 'd["merging"]["mutual"]["seconds"]')
+cf_merge_cpu=$(json "$work/cf_merge.json" 'd["merging"]["mutual"]["cpu_seconds"]')
+echo "merging: $cf_regions -> $cf_final regions in $cf_merge s wall, $cf_merge_cpu s CPU (region graph included)"
 
-echo "== ratios (peer seconds / cityforge seconds)"
-/usr/bin/python3 - "$cf_ws" "$cf_merge" "$sk_ws" "$sk_rag" "$sk_merge" "$grass_s" "$otb_s" <<'PY'
+otb_s=""
+if command -v otbcli_Segmentation >/dev/null; then
+  echo "== Orfeo ToolBox otbcli_Segmentation (watershed)"
+  t0=$(date +%s.%N)
+  timeout "${OTB_TIMEOUT:-900}" otbcli_Segmentation -in "$ortho" -filter watershed -mode raster -mode.raster.out "$work/otb.tif" uint32 >/dev/null 2>&1 && otb_s=$(echo "$(date +%s.%N) - $t0" | bc -l) || echo "OTB failed or timed out"
+  [ -n "$otb_s" ] && echo "otbcli_Segmentation watershed: $otb_s s"
+fi
+
+echo "== ratios (peer / cityforge)"
+"$py" - "$cf_ws" "$cf_regions" "$sk_ws" "$sk_regions" "$(wall_of "$work/grass.time")" "$(cpu_of "$work/grass.time")" \
+  "$grass_regions" "$cf_merge" "$cf_merge_cpu" "$cf_final" "${otb_s:-nan}" <<'PY'
 import sys
-cf_ws, cf_merge, sk_ws, sk_rag, sk_merge, grass, otb = map(float, sys.argv[1:])
-print(f"watershed: skimage / cityforge = {sk_ws / cf_ws:.1f}x; OTB / cityforge = {otb / cf_ws:.1f}x")
-print(f"merging:   skimage RAG+merge / cityforge = {(sk_rag + sk_merge) / cf_merge:.0f}x; GRASS i.segment / cityforge = {grass / cf_merge:.0f}x")
+cf_ws, cf_n, sk_ws, sk_n, g_wall, g_cpu, g_n, cf_m, cf_m_cpu, cf_final, otb = map(float, sys.argv[1:])
+print(f"watershed: scikit-image {sk_ws:.2f} s ({sk_n:.0f} regions) / cityforge {cf_ws:.2f} s ({cf_n:.0f} regions) = {sk_ws / cf_ws:.1f}x")
+if otb == otb:
+    print(f"watershed: OTB {otb:.2f} s / cityforge {cf_ws:.2f} s = {otb / cf_ws:.1f}x")
+print(f"merging {cf_n:.0f} seeds -> {g_n:.0f} (GRASS) / {cf_final:.0f} (cityforge) regions: "
+      f"GRASS i.segment {g_wall:.2f} s wall / cityforge {cf_m:.3f} s wall = {g_wall / cf_m:.0f}x; "
+      f"CPU {g_cpu:.2f} s / {cf_m_cpu:.3f} s = {g_cpu / cf_m_cpu:.0f}x")
 PY

@@ -18,7 +18,7 @@ void add_rasterize_command(CLI::App& cloud, const GlobalFlags& g, CommandList& o
     auto s = std::make_shared<State>();
     auto& o = s->options;
     auto* cmd = cloud.add_subcommand("rasterize", "DSM, DTM, nDSM and point density GeoTIFFs from a cloud");
-    cmd->add_option("--cloud", s->cloud, "Point cloud (LAS, PLY, XYZ/CSV)")->required();
+    cmd->add_option("--cloud", s->cloud, "Point cloud (LAS, LAZ, COPC, PLY, XYZ/CSV)")->required();
     cmd->add_option("--out", s->out, "Output folder")->required();
     cmd->add_option("--grid", o.grid_raster, "Use this raster's grid exactly (origin, size, GSD, CRS), e.g. the ortho");
     cmd->add_option("--gsd", o.gsd_m, "Cell size in metres when no --grid is given")->capture_default_str();
@@ -45,6 +45,7 @@ void add_cloud_commands(CLI::App& parent, const GlobalFlags& g, CommandList& out
     auto* cloud = parent.add_subcommand("cloud", "Point cloud tools");
     cloud->require_subcommand(1);
     add_rasterize_command(*cloud, g, out);
+    add_cloud_translate_command(*cloud, g, out);
 }
 
 }  // namespace cityforge::cli

@@ -11,6 +11,7 @@ void add_synth_command(CLI::App& parent, const GlobalFlags& g, CommandList& out)
 void add_segment_command(CLI::App& parent, const GlobalFlags& g, CommandList& out);     // commands/segment.cpp
 void add_heights_command(CLI::App& parent, const GlobalFlags& g, CommandList& out);     // commands/heights.cpp
 void add_cloud_commands(CLI::App& parent, const GlobalFlags& g, CommandList& out);      // commands/cloud.cpp (cloud rasterize, ...)
+void add_cloud_translate_command(CLI::App& cloud, const GlobalFlags& g, CommandList& out);  // commands/cloud_translate.cpp (under `cloud`)
 void add_footprints_command(CLI::App& parent, const GlobalFlags& g, CommandList& out);  // commands/footprints.cpp
 void add_export_command(CLI::App& parent, const GlobalFlags& g, CommandList& out);      // commands/export.cpp
 void add_roofs_command(CLI::App& parent, const GlobalFlags& g, CommandList& out);       // commands/roofs.cpp

@@ -15,7 +15,7 @@ void add_footprints_command(CLI::App& parent, const GlobalFlags& g, CommandList&
     auto s = std::make_shared<State>();
     auto& o = s->options;
     auto* cmd = parent.add_subcommand("footprints", "Building footprints with rectangle fits (ortho + cloud, ortho-only or cloud-only detection)");
-    cmd->add_option("--cloud", o.cloud, "Point cloud (LAS, PLY, XYZ/CSV)");
+    cmd->add_option("--cloud", o.cloud, "Point cloud (LAS, LAZ, COPC, PLY, XYZ/CSV)");
     cmd->add_option("--ortho", o.ortho, "Ortho (any GDAL raster): its grid and CRS are used");
     cmd->add_option("--ndsm", o.ndsm, "Heights without a cloud: nDSM raster (height above ground), aligned with the ortho's grid");
     cmd->add_option("--ndsm-band", o.ndsm_band, "Heights without a cloud: 1-based band of the ortho holding the nDSM");

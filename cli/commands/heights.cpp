@@ -17,7 +17,7 @@ void add_heights_command(CLI::App& parent, const GlobalFlags& g, CommandList& ou
     auto& o = s->options;
     auto* cmd = parent.add_subcommand("heights", "Per-building heights from a dense point cloud (LOD1 attributes)");
     cmd->add_option("--footprints", s->footprints, "Footprint polygons (GeoPackage, Shapefile, GeoJSON, ...)")->required();
-    cmd->add_option("--cloud", s->cloud, "Point cloud (LAS 1.0-1.4, PLY, XYZ/CSV)")->required();
+    cmd->add_option("--cloud", s->cloud, "Point cloud (LAS 1.0-1.4, LAZ, COPC, PLY, XYZ/CSV)")->required();
     cmd->add_option("--out", s->out, "Output .gpkg (layer buildings), .geojson, .fgb or .shp")->required();
     cmd->add_option("--cloud-crs", o.cloud_crs, "CRS of the cloud, e.g. EPSG:7415 (overrides the file's)");
     cmd->add_option("--layer", o.footprint_layer, "Footprint layer name (default: first)");

@@ -17,7 +17,7 @@ void add_roofs_command(CLI::App& parent, const GlobalFlags& g, CommandList& out)
     auto& o = s->options;
     auto* cmd = parent.add_subcommand("roofs", "LOD2 buildings (roof planes, walls, ground) from footprints and a dense cloud, written as city models");
     cmd->add_option("--footprints", s->footprints, "Footprint polygons (any OGR layer)")->required();
-    cmd->add_option("--cloud", s->cloud, "Point cloud (LAS 1.0-1.4, PLY, XYZ/CSV)")->required();
+    cmd->add_option("--cloud", s->cloud, "Point cloud (LAS 1.0-1.4, LAZ, COPC, PLY, XYZ/CSV)")->required();
     cmd->add_option("--out", s->out, "Output folder (buildings.gpkg, .geojson, _lod1.gml, _lod2.gml, .city.json, .city.jsonl)")->required();
     cmd->add_option("--cloud-crs", o.heights.cloud_crs, "CRS of the cloud, e.g. EPSG:7415 (overrides the file's)");
     cmd->add_option("--layer", o.heights.footprint_layer, "Footprint layer name (default: first)");

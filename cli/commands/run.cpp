@@ -35,7 +35,7 @@ struct RunInputs {
 
 void add_run_inputs(CLI::App* cmd, RunInputs& r) {
     cmd->add_option("--ortho", r.ortho, "Ortho: the pixel grid and CRS of the run");
-    cmd->add_option("--cloud", r.cloud, "Dense point cloud (LAS, PLY, XYZ)");
+    cmd->add_option("--cloud", r.cloud, "Dense point cloud (LAS, LAZ, COPC, PLY, XYZ)");
     cmd->add_option("--cloud-crs", r.cloud_crs, "CRS of the cloud, e.g. EPSG:7415");
     cmd->add_option("--footprints", r.footprints, "Existing footprints: skip extraction, compute heights, roofs and models");
     cmd->add_option("--config", r.config, "JSON config (schemas/run_config.schema.json); command-line options override it");

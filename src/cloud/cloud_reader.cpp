@@ -7,9 +7,11 @@
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <optional>
 #include <sstream>
 #include <vector>
 
+#include "cloud/copc.hpp"
 #include "cloud/las.hpp"
 #include "core/error.hpp"
 
@@ -33,9 +35,19 @@ std::string lower(std::string s) {
 
 class LasFormatReader final : public CloudFormatReader {
 public:
-    explicit LasFormatReader(const std::string& path) : reader_(path) {}
+    explicit LasFormatReader(const std::string& path) : path_(path), reader_(path) {
+        if (reader_.laz_source()) copc_ = read_copc_hierarchy(path, reader_.header());
+    }
     std::size_t read_chunk(PointCloud& out, std::size_t max_points) override { return reader_.read_chunk(out, max_points); }
+    void restrict_to_box(double min_x, double min_y, double max_x, double max_y) override {
+        if (!copc_) return;
+        // Pad by one quantum: points sit on the scale grid, the cubes need not.
+        const double pad = std::max(reader_.header().scale[0], reader_.header().scale[1]);
+        reader_.select_laz_chunks(copc_chunks_in_box(*copc_, reader_.laz_source()->chunks(), min_x, min_y, max_x, max_y, pad, -1, path_));
+    }
+    std::string path_;
     LasReader reader_;
+    std::optional<CopcHierarchy> copc_;
 };
 
 // ------------------------------------------------------------------ PLY
@@ -350,6 +362,7 @@ CloudReader::CloudReader(const std::string& path) : path_(path) {
         auto las = std::make_unique<LasFormatReader>(path);
         crs_wkt_ = las->reader_.header().crs_wkt;
         announced_ = las->reader_.header().point_count;
+        copc_ = las->copc_.has_value();
         format_ = CloudFormat::las;
         impl_ = std::move(las);
     } else if (std::memcmp(magic, "ply", 3) == 0 || ext == ".ply") {
@@ -380,6 +393,7 @@ PointCloud read_point_cloud(const std::string& path, std::string* crs_wkt) {
 PointCloud read_point_cloud_in(const std::string& path, double min_x, double min_y, double max_x, double max_y, std::string* crs_wkt) {
     CloudReader reader(path);
     if (crs_wkt) *crs_wkt = reader.crs_wkt();
+    reader.restrict_to_box(min_x, min_y, max_x, max_y);
     PointCloud out, chunk;
     while (true) {
         chunk.clear();

@@ -1,5 +1,5 @@
 #pragma once
-// Point cloud readers behind one interface: LAS (las.hpp), PLY (ASCII and
+// Point cloud readers behind one interface: LAS and LAZ/COPC (las.hpp), PLY (ASCII and
 // binary, x/y/z plus optional colour, classification, intensity) and XYZ/CSV
 // text. Streamed in chunks. No GDAL here: the CRS is passed on as the WKT the
 // file carries (empty when it has none); callers resolve overrides.
@@ -20,6 +20,8 @@ public:
     virtual ~CloudFormatReader() = default;
     /// Appends up to `max_points` points to `out`; returns how many (0 = end).
     virtual std::size_t read_chunk(PointCloud& out, std::size_t max_points) = 0;
+    /// See CloudReader::restrict_to_box; the default reads everything.
+    virtual void restrict_to_box(double /*min_x*/, double /*min_y*/, double /*max_x*/, double /*max_y*/) {}
 };
 
 /// Opens `path` by its content (LAS signature, "ply" magic) or extension
@@ -39,12 +41,20 @@ public:
     /// Point count announced by the header (LAS, PLY); 0 when unknown (XYZ).
     uint64_t announced_points() const { return announced_; }
     std::size_t read_chunk(PointCloud& out, std::size_t max_points) { return impl_->read_chunk(out, max_points); }
+    /// True for a COPC file (LAZ with the COPC info VLR and hierarchy).
+    bool copc() const { return copc_; }
+    /// A hint before the first read: the caller keeps only points with
+    /// min_x <= x < max_x, min_y <= y < max_y (file CRS). COPC files then
+    /// decode only the octree nodes whose cube meets the box; other formats
+    /// still hand out every point (the caller filters).
+    void restrict_to_box(double min_x, double min_y, double max_x, double max_y) { impl_->restrict_to_box(min_x, min_y, max_x, max_y); }
 
 private:
     std::string path_;
     CloudFormat format_ = CloudFormat::las;
     std::string crs_wkt_;
     uint64_t announced_ = 0;
+    bool copc_ = false;
     std::unique_ptr<CloudFormatReader> impl_;
 };
 

@@ -105,9 +105,8 @@ LasReader::LasReader(const std::string& path) : path_(path) {
     h.offset_to_points = get<uint32_t>(hdr + 96);
     const auto n_vlr = get<uint32_t>(hdr + 100);
     const auto raw_format = static_cast<uint8_t>(hdr[104]);
-    if (raw_format & 0xC0)
-        throw Error(path, "LAZ-compressed points are not supported (Debian 12 has no LASzip): convert to LAS first, e.g. 'laszip -i in.laz -o out.las' or 'pdal translate in.laz out.las'");
-    h.point_format = raw_format;
+    const bool compressed = (raw_format & 0xC0) != 0;  // LASzip sets bit 7 (old writers bit 6)
+    h.point_format = raw_format & 0x3F;
     if (h.point_format > 10) throw Error(path, "unknown LAS point format " + std::to_string(h.point_format));
     h.point_record_length = get<uint16_t>(hdr + 105);
     if (h.point_record_length < las_min_record_length(h.point_format))
@@ -127,6 +126,12 @@ LasReader::LasReader(const std::string& path) : path_(path) {
     if (h.version_minor >= 4 && header_size >= 375 && got >= 375) {
         const auto count64 = get<uint64_t>(hdr + 247);
         if (count64 != 0 || h.point_count == 0) h.point_count = count64;
+    }
+    h.header_size = header_size;
+    h.vlr_count = n_vlr;
+    if (h.version_minor >= 4 && header_size >= 375 && got >= 375) {
+        h.evlr_offset = get<uint64_t>(hdr + 235);
+        h.evlr_count = get<uint32_t>(hdr + 243);
     }
     if (header_size < 227 || h.offset_to_points < header_size || h.offset_to_points > file_size)
         throw Error(path, "corrupt LAS header (header size / offset to point data)");
@@ -151,6 +156,12 @@ LasReader::LasReader(const std::string& path) : path_(path) {
             if (record_id == 2112) h.crs_wkt = trimmed(data.data(), data.size());
             else parse_geokeys(data, h);
         }
+        if (compressed && user == "laszip encoded" && record_id == 22204) {
+            std::vector<char> data(length);
+            in_.read(data.data(), length);
+            if (!in_) throw Error(path, "truncated LASzip VLR");
+            h.laz = parse_laszip_vlr(data, path);
+        }
         pos += 54 + length;
     }
     // LAS 1.4 may keep the WKT in an extended VLR after the points.
@@ -174,6 +185,13 @@ LasReader::LasReader(const std::string& path) : path_(path) {
             epos += 60 + length;
         }
     }
+    total_ = h.point_count;
+    if (compressed) {
+        if (!h.laz) throw Error(path, "LAZ-compressed points (point format byte " + std::to_string(raw_format) + ") but no LASzip VLR (laszip encoded/22204)");
+        check_laz_supported(*h.laz, h.point_format, h.point_record_length, path);
+        laz_ = std::make_unique<LazPointSource>(path, *h.laz, h.offset_to_points, h.point_count, h.point_record_length);
+        return;
+    }
     const uint64_t needed = h.offset_to_points + h.point_count * static_cast<uint64_t>(h.point_record_length);
     if (needed > file_size)
         throw Error(path, "header says " + std::to_string(h.point_count) + " points but the file holds only " +
@@ -181,15 +199,34 @@ LasReader::LasReader(const std::string& path) : path_(path) {
     in_.seekg(h.offset_to_points);
 }
 
-std::size_t LasReader::read_chunk(PointCloud& out, std::size_t max_points) {
+std::size_t LasReader::read_records(std::vector<char>& buf, std::size_t max_points) {
+    if (laz_ && read_ == 0 && &buf != &buffer_) laz_->set_point_fields_only(false);
     const auto n = static_cast<std::size_t>(std::min<uint64_t>(max_points, points_remaining()));
+    buf.resize(n * static_cast<std::size_t>(header_.point_record_length));
+    if (n == 0) return 0;
+    if (laz_) {
+        if (laz_->read(buf.data(), n) != n) throw Error(path_, "LAZ chunks hold fewer points than the header announces");
+    } else {
+        in_.read(buf.data(), static_cast<std::streamsize>(buf.size()));
+        if (static_cast<std::size_t>(in_.gcount()) != buf.size()) throw Error(path_, "truncated point records");
+    }
+    read_ += n;
+    return n;
+}
+
+void LasReader::select_laz_chunks(const std::vector<bool>& keep) {
+    if (!laz_ || read_ != 0) throw Error(path_, "chunk selection needs a LAZ file before its first read");
+    laz_->select_chunks(keep);
+    total_ = laz_->selected_points();
+}
+
+std::size_t LasReader::read_chunk(PointCloud& out, std::size_t max_points) {
+    if (laz_ && read_ == 0) laz_->set_point_fields_only(true);  // LAZ: skip layers a PointCloud does not hold
+    std::vector<char>& buf = buffer_;  // reused between chunks: no page faults per chunk
+    const std::size_t n = read_records(buf, max_points);
     if (n == 0) return 0;
     const LasHeader& h = header_;
     const std::size_t rl = h.point_record_length;
-    std::vector<char>& buf = buffer_;  // reused between chunks: no page faults per chunk
-    buf.resize(n * rl);
-    in_.read(buf.data(), static_cast<std::streamsize>(buf.size()));
-    if (static_cast<std::size_t>(in_.gcount()) != buf.size()) throw Error(path_, "truncated point records");
     const bool extended = h.point_format >= 6;
     const bool color = h.has_color();
     const bool gps = h.has_gps_time();
@@ -225,7 +262,6 @@ std::size_t LasReader::read_chunk(PointCloud& out, std::size_t max_points) {
             out.blue[k] = get<uint16_t>(p + rgb + 4);
         }
     }
-    read_ += n;
     return n;
 }
 

@@ -6,9 +6,11 @@
 #include <cstdint>
 #include <fstream>
 #include <memory>
+#include <optional>
 #include <string>
 #include <vector>
 
+#include "cloud/laz_decoder.hpp"
 #include "cloud/point_cloud.hpp"
 
 namespace cityforge {
@@ -30,6 +32,11 @@ struct LasHeader {
     std::string crs_wkt;             ///< from the OGC WKT VLR (2112), if present
     int geokey_horizontal_epsg = 0;  ///< from the GeoKeyDirectory VLR (34735), 0 = none
     int geokey_vertical_epsg = 0;
+    uint16_t header_size = 0;         ///< bytes of the public header block
+    uint32_t vlr_count = 0;
+    uint64_t evlr_offset = 0;         ///< LAS 1.4: start of the first EVLR (0 = none)
+    uint32_t evlr_count = 0;
+    std::optional<LazInfo> laz;      ///< LASzip VLR, when the points are LAZ-compressed
     bool has_color() const;
     bool has_gps_time() const;
 };
@@ -37,24 +44,38 @@ struct LasHeader {
 /// Minimum record length of LAS point format `format` (0..10); throws otherwise.
 int las_min_record_length(int format);
 
-/// Streams points from a LAS file. Validates the header on open: throws Error
-/// naming the file for a missing file, a non-LAS file, LAZ compression, an
-/// unknown point format, a bad scale or a point count the file cannot hold.
+/// Streams points from a LAS or LAZ file (LAZ decoded by laz_decoder.hpp,
+/// chunks in parallel, handed out in file order). Validates the header on
+/// open: throws Error naming the file for a missing file, a non-LAS file, an
+/// unsupported LAZ variant, an unknown point format, a bad scale or a point
+/// count the file cannot hold.
 class LasReader {
 public:
     explicit LasReader(const std::string& path);
     const LasHeader& header() const { return header_; }
     /// Appends up to `max_points` points to `out`; returns how many were read
     /// (0 at the end). Throws Error on a truncated file.
+    /// A reader is used either through read_chunk or through read_records
+    /// (LAZ: read_chunk skips the layers a PointCloud does not hold).
     std::size_t read_chunk(PointCloud& out, std::size_t max_points);
-    uint64_t points_remaining() const { return header_.point_count - read_; }
+    /// Replaces `records` with up to `max_points` raw point records
+    /// (point_record_length bytes each, as stored in an uncompressed LAS,
+    /// decoded for LAZ); returns how many (0 at the end).
+    std::size_t read_records(std::vector<char>& records, std::size_t max_points);
+    uint64_t points_remaining() const { return total_ - read_; }
+    /// LAZ only: the chunk decoder (chunk table, chunk selection); null for LAS.
+    LazPointSource* laz_source() { return laz_.get(); }
+    /// LAZ only, before the first read: decode only the chunks with keep[i].
+    void select_laz_chunks(const std::vector<bool>& keep);
 
 private:
     std::string path_;
     std::ifstream in_;
     LasHeader header_;
     uint64_t read_ = 0;
+    uint64_t total_ = 0;  ///< points this reader hands out (all, or the selected chunks')
     std::vector<char> buffer_;
+    std::unique_ptr<LazPointSource> laz_;
 };
 
 /// Reads the whole file into memory (explicit: callers that know it fits).

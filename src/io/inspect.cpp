@@ -30,6 +30,11 @@ CloudInfo inspect_cloud(const std::string& path, const InspectOptions& options) 
     CloudInfo info;
     info.path = path;
     info.header = reader.header();
+    if (LazPointSource* laz = reader.laz_source()) {
+        info.laz_chunks = laz->chunks().size();
+        info.laz_chunk_table = laz->has_chunk_table();
+        info.copc = read_copc_hierarchy(path, info.header);
+    }
     if (!options.assume_crs.empty()) info.crs = crs_from_user_input(options.assume_crs, path);
     else if (!info.header.crs_wkt.empty()) info.crs = crs_from_wkt(info.header.crs_wkt, path);
     else if (info.header.geokey_horizontal_epsg) {
@@ -62,9 +67,6 @@ DatasetInfo inspect_dataset(const std::string& path, const InspectOptions& optio
     if (!std::filesystem::exists(path)) throw Error(path, "file not found");
     DatasetInfo info;
     const std::string ext = lower_ext(path);
-    if (ext == ".laz") {
-        LasReader probe(path);  // throws the LAZ message
-    }
     if (has_las_signature(path)) {
         info.cloud = inspect_cloud(path, options);
         return info;
@@ -153,6 +155,25 @@ nlohmann::json to_json(const DatasetInfo& info) {
             j["class_counts"] = cc;
         }
         if (c.measured_bounds) j["measured_bounds"] = *c.measured_bounds;
+        if (h.laz) {
+            json items = json::array();
+            for (const LazItem& it : h.laz->items) items.push_back({{"type", to_string(it)}, {"size", it.size}, {"version", it.version}});
+            j["laz"] = {{"compressor", h.laz->compressor_name()},
+                        {"coder", h.laz->coder},
+                        {"laszip_version", std::to_string(h.laz->version_major) + "." + std::to_string(h.laz->version_minor) + " r" +
+                                               std::to_string(h.laz->version_revision)},
+                        {"chunk_size", h.laz->variable_chunks() ? json("variable") : json(h.laz->chunk_size)},
+                        {"chunks", c.laz_chunks},
+                        {"chunk_table", c.laz_chunk_table},
+                        {"items", items}};
+        }
+        if (c.copc) {
+            const CopcInfo& ci = c.copc->info;
+            j["copc"] = {{"center", {ci.center_x, ci.center_y, ci.center_z}}, {"halfsize", ci.halfsize},
+                         {"spacing", ci.spacing}, {"nodes", c.copc->nodes.size()},
+                         {"max_level", c.copc->max_level}, {"hierarchy_pages", c.copc->pages},
+                         {"gps_time", {ci.gps_time_min, ci.gps_time_max}}};
+        }
         if (!c.crs.empty() && !c.crs.geographic) {
             const double area = (h.max[0] - h.min[0]) * (h.max[1] - h.min[1]) * c.crs.linear_unit_m * c.crs.linear_unit_m;
             if (area > 0) j["mean_density_pts_m2"] = static_cast<double>(h.point_count) / area;
@@ -207,6 +228,22 @@ std::string to_text(const DatasetInfo& info) {
         o << "CRS:       " << crs_line(c.crs) << "\n";
         o << "Bounds:    x " << h.min[0] << " - " << h.max[0] << ", y " << h.min[1] << " - " << h.max[1] << ", z "
           << h.min[2] << " - " << h.max[2] << "\n";
+        if (h.laz) {
+            o << "LAZ:       compressor " << h.laz->compressor_name() << ", LASzip " << h.laz->version_major << "."
+              << h.laz->version_minor << " r" << h.laz->version_revision << ", chunk size "
+              << (h.laz->variable_chunks() ? std::string("variable") : std::to_string(h.laz->chunk_size)) << ", " << c.laz_chunks
+              << " chunks" << (c.laz_chunk_table ? "" : " (no chunk table)") << "\n";
+            o << "Items:     ";
+            for (std::size_t i = 0; i < h.laz->items.size(); ++i)
+                o << (i ? " + " : "") << to_string(h.laz->items[i]) << " (" << h.laz->items[i].size << " B)";
+            o << "\n";
+        }
+        if (c.copc) {
+            const CopcInfo& ci = c.copc->info;
+            o << "COPC:      " << c.copc->nodes.size() << " nodes with points, levels 0-" << c.copc->max_level << ", "
+              << c.copc->pages << " hierarchy page(s), root cube centre " << ci.center_x << ", " << ci.center_y << ", "
+              << ci.center_z << " half size " << ci.halfsize << ", spacing " << ci.spacing << "\n";
+        }
         for (auto [k, v] : c.class_counts) o << "Class " << k << ":   " << v << " points\n";
     } else if (info.vector) {
         const VectorInfo& v = *info.vector;

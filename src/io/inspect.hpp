@@ -6,6 +6,7 @@
 
 #include <nlohmann/json.hpp>
 
+#include "cloud/copc.hpp"
 #include "cloud/las.hpp"
 #include "io/vector.hpp"
 #include "raster/raster.hpp"
@@ -26,6 +27,9 @@ struct CloudInfo {
     CrsInfo crs;
     std::map<int, uint64_t> class_counts;  ///< only with cloud_statistics
     std::optional<std::array<double, 6>> measured_bounds;  ///< minx, miny, minz, maxx, maxy, maxz
+    uint64_t laz_chunks = 0;          ///< LAZ: chunks of compressed points
+    bool laz_chunk_table = false;     ///< LAZ: the file has a (valid) chunk table
+    std::optional<CopcHierarchy> copc;  ///< COPC: info VLR and octree hierarchy
 };
 
 /// What `info` found; exactly one of the three is set.

@@ -367,6 +367,10 @@ void split_cloud(const RunManifest& m, const std::string& out_dir) {
         write_text_file(dir / "not_split", "tiles read the source cloud (not LAS, or not in the grid's CRS)\n");
         return;
     }
+    if (probe.copc()) {  // each tile decodes only the octree nodes it needs
+        write_text_file(dir / "not_split", "tiles read the COPC source's nodes in their window\n");
+        return;
+    }
     LasReader reader(o.cloud);
     const LasHeader header = reader.header();
     struct Window {

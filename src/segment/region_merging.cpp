@@ -3,6 +3,10 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <cstddef>
+#include <cstdlib>
+#include <ctime>
+#include <new>
 #include <queue>
 #include <tbb/enumerable_thread_specific.h>
 #include <tbb/parallel_reduce.h>
@@ -59,25 +63,79 @@ Image<uint32_t> relabel(const Image<uint32_t>& labels, const std::vector<uint32_
 
 namespace {
 
+double thread_cpu_seconds() {
+    timespec ts{};
+    clock_gettime(CLOCK_THREAD_CPUTIME_ID, &ts);
+    return double(ts.tv_sec) + 1e-9 * double(ts.tv_nsec);
+}
+
 __extension__ typedef __int128 int128;  // exact sums of squared fixed-point values
 
+// One entry of a region's adjacency: a neighbouring node and the length of
+// the shared boundary. Lists are flat arrays sorted by node.
 struct Neighbour {
-    uint32_t id;
-    double shared;  // boundary length in pixel edges
+    uint32_t id;      // node
+    uint32_t shared;  // boundary length in pixel edges
+    double cost = 0;  // fusion cost of the edge, cached by the nearest-neighbour strategies
 };
 
+// A candidate merge. Order: (cost, lower key, higher key) — keys are the
+// lowest input label of each region, so the order does not depend on which
+// storage slot a region lives in.
 struct QueueEntry {
     double cost;
-    uint32_t a, b;    // a < b
+    uint32_t ka, kb;  // keys, ka < kb
+    uint32_t a, b;    // nodes
     uint32_t va, vb;  // versions of a and b when the cost was computed
     bool operator>(const QueueEntry& o) const {
         if (cost != o.cost) return cost > o.cost;
-        if (a != o.a) return a > o.a;
-        return b > o.b;
+        if (ka != o.ka) return ka > o.ka;
+        return kb > o.kb;
     }
 };
 
+// Region graph. A region lives in a node (storage slot); when two regions
+// merge, the one with the longer adjacency list keeps its slot (so a region
+// with thousands of neighbours is never copied and its neighbours' lists are
+// not rewritten), and the merged region takes the lower of the two keys. Keys
+// alone decide every tie, so the merge sequence is the one defined in the
+// header whatever slot a region lives in.
+//
+// Everything the merge loop reads about a node sits in one cache-aligned
+// record: NodeHead, Σ and Σ² per band, then room for the adjacency of a
+// typical region (14 neighbours for 3 bands in 256 bytes; longer lists move
+// to a heap block). A cost evaluation, a nearest-neighbour offer or an
+// adjacency edit touches one record per neighbour, and the records of all
+// neighbours are prefetched together before they are used: the loop is bound
+// by these memory reads, not by arithmetic.
+struct NodeHead {
+    double n = 0, l = 0;           // area (pixels), perimeter (pixel edges)
+    double lsq = 0, smooth = 0;    // l·√n, n·l/b (b = bounding-box perimeter)
+    double colour = 0;             // Σ_b w_b n σ_b
+    double nn_cost = INFINITY;     // cost to the nearest neighbour
+    int32_t x0 = INT32_MAX, y0 = INT32_MAX, x1 = -1, y1 = -1;  // bounding box, pixels
+    uint32_t nn = 0;               // nearest neighbour node (0 = none)
+    uint32_t key = 0;              // lowest input label of the region
+    uint32_t version = 0;          // bumped by every merge of the region
+    uint32_t alive = 0;
+    Neighbour* list = nullptr;     // sorted adjacency: the record's inline slots or a heap block
+    uint32_t degree = 0, capacity = 0;
+};
+
+// Read-only view of a node's adjacency.
+struct NeighbourSpan {
+    const Neighbour* first;
+    const Neighbour* last;
+    const Neighbour* begin() const { return first; }
+    const Neighbour* end() const { return last; }
+    std::size_t size() const { return static_cast<std::size_t>(last - first); }
+};
+
 class RegionGraph {
+    struct alignas(64) Line {
+        std::byte bytes[64];
+    };
+
 public:
     RegionGraph(const Image<float>& image, const Image<uint32_t>& labels, uint32_t n_regions, const RegionMergingOptions& o)
         : bands_(image.bands), n_(n_regions + 1), wc_(o.color_weight), wcmp_(o.compactness) {
@@ -87,18 +145,24 @@ public:
             for (double w : o.band_weights) s += w;
             for (int b = 0; b < bands_; ++b) weights_[b] = o.band_weights[b] / s;
         }
-        build(image, labels);
-        for (auto& list : adj_) std::sort(list.begin(), list.end(), [](const Neighbour& p, const Neighbour& q) { return p.id < q.id; });
-        alive_.assign(n_, 0);
-        version_.assign(n_, 0);
-        color_term_.assign(n_, 0.0);
-        for (uint32_t r = 1; r < n_; ++r) {
-            alive_[r] = area_[r] > 0;
-            alive_count_ += alive_[r];
-            color_term_[r] = color_term(r);
+        const std::size_t fixed_bytes = sizeof(NodeHead) + 2 * sizeof(double) * bands_;
+        lines_ = (fixed_bytes + 10 * sizeof(Neighbour) + sizeof(Line) - 1) / sizeof(Line);
+        inline_capacity_ = static_cast<uint32_t>((lines_ * sizeof(Line) - fixed_bytes) / sizeof(Neighbour));
+        storage_.resize(static_cast<std::size_t>(n_) * lines_);
+        for (uint32_t r = 0; r < n_; ++r) {
+            NodeHead* h = new (head_ptr(r)) NodeHead();
+            new (sums_ptr(r)) double[2 * static_cast<std::size_t>(bands_)]();
+            h->list = new (sums_ptr(r) + 2 * sizeof(double) * bands_) Neighbour[inline_capacity_];
+            h->capacity = inline_capacity_;
         }
-        nn_.assign(n_, 0);
-        nn_cost_.assign(n_, INFINITY);
+        build(image, labels);
+        for (uint32_t r = 1; r < n_; ++r) {
+            NodeHead& R = head(r);
+            R.key = r;
+            R.alive = R.n > 0;
+            alive_count_ += R.alive;
+            derive(r);
+        }
     }
 
     // Region statistics and adjacency from the label raster, in parallel over
@@ -164,34 +228,52 @@ public:
                 }
             }
         });
-        area_.assign(n_, 0.0), perimeter_.assign(n_, 0.0), sum_.assign(nb, 0.0), sumsq_.assign(nb, 0.0);
-        x0_.assign(n_, INT32_MAX), y0_.assign(n_, INT32_MAX), x1_.assign(n_, -1), y1_.assign(n_, -1);
         std::vector<int64_t> area(n_, 0), perimeter(n_, 0), sum(nb, 0);
         std::vector<int128> sumsq(nb, 0);
+        std::vector<int> x0(n_, INT32_MAX), y0(n_, INT32_MAX), x1(n_, -1), y1(n_, -1);
         std::vector<std::pair<uint64_t, uint32_t>> pairs;
+        std::size_t pair_count = 0;
+        for (Partial& P : partials) pair_count += P.pairs.size();
+        pairs.reserve(pair_count);
         for (Partial& P : partials) {
             for (uint32_t r = 0; r < n_; ++r) {
                 area[r] += P.area[r], perimeter[r] += P.perimeter[r];
-                x0_[r] = std::min(x0_[r], P.x0[r]), x1_[r] = std::max(x1_[r], P.x1[r]);
-                y0_[r] = std::min(y0_[r], P.y0[r]), y1_[r] = std::max(y1_[r], P.y1[r]);
+                x0[r] = std::min(x0[r], P.x0[r]), x1[r] = std::max(x1[r], P.x1[r]);
+                y0[r] = std::min(y0[r], P.y0[r]), y1[r] = std::max(y1[r], P.y1[r]);
             }
             for (std::size_t k = 0; k < nb; ++k) sum[k] += P.sum[k], sumsq[k] += P.sumsq[k];
             pairs.insert(pairs.end(), P.pairs.begin(), P.pairs.end());
+            std::vector<std::pair<uint64_t, uint32_t>>().swap(P.pairs);
         }
-        for (uint32_t r = 0; r < n_; ++r) area_[r] = static_cast<double>(area[r]), perimeter_[r] = static_cast<double>(perimeter[r]);
-        for (std::size_t k = 0; k < nb; ++k) {
-            sum_[k] = static_cast<double>(sum[k]) / fixed;
-            sumsq_[k] = static_cast<double>(sumsq[k]) / (fixed * fixed);
+        partials.clear();
+        for (uint32_t r = 0; r < n_; ++r) {
+            NodeHead& R = head(r);
+            double* S = sums(r);
+            R.n = static_cast<double>(area[r]), R.l = static_cast<double>(perimeter[r]);
+            R.x0 = x0[r], R.y0 = y0[r], R.x1 = x1[r], R.y1 = y1[r];
+            for (int b = 0; b < bands_; ++b) {
+                S[2 * b] = static_cast<double>(sum[std::size_t(r) * bands_ + b]) / fixed;
+                S[2 * b + 1] = static_cast<double>(sumsq[std::size_t(r) * bands_ + b]) / (fixed * fixed);
+            }
         }
         tbb::parallel_sort(pairs.begin(), pairs.end());
-        adj_.assign(n_, {});
+        // Pairs are sorted by (lower, higher): appending in that order keeps
+        // every list sorted (a node's lower neighbours come first, from pairs
+        // whose lower end is below it, then its higher ones).
+        std::vector<uint32_t> degree(n_, 0);
+        for (std::size_t k = 0; k < pairs.size(); ++k)
+            if (k == 0 || pairs[k].first != pairs[k - 1].first)
+                ++degree[pairs[k].first >> 32], ++degree[pairs[k].first & 0xFFFFFFFFu];
+        for (uint32_t r = 0; r < n_; ++r) reserve(r, degree[r]);
         for (std::size_t k = 0; k < pairs.size();) {
             std::size_t e = k;
             uint32_t shared = 0;
             while (e < pairs.size() && pairs[e].first == pairs[k].first) shared += pairs[e++].second;
             const auto a = static_cast<uint32_t>(pairs[k].first >> 32), b = static_cast<uint32_t>(pairs[k].first & 0xFFFFFFFFu);
-            adj_[a].push_back({b, double(shared)});
-            adj_[b].push_back({a, double(shared)});
+            NodeHead& A = head(a);
+            NodeHead& B = head(b);
+            A.list[A.degree++] = {b, shared};
+            B.list[B.degree++] = {a, shared};
             k = e;
         }
     }
@@ -201,134 +283,195 @@ public:
     }
     uint32_t size() const { return n_; }
     uint32_t alive_count() const { return alive_count_; }
-    bool alive(uint32_t r) const { return alive_[r]; }
-    uint32_t version(uint32_t r) const { return version_[r]; }
-    const std::vector<Neighbour>& neighbours(uint32_t r) const { return adj_[r]; }
-
-    // Σ_b w_b n σ_b of region r.
-    double color_term(uint32_t r) const {
-        const double n = area_[r];
-        double t = 0.0;
-        for (int b = 0; b < bands_; ++b) {
-            const double m = sum_[r * bands_ + b] / n;
-            const double var = std::max(0.0, sumsq_[r * bands_ + b] / n - m * m);
-            t += weights_[b] * n * std::sqrt(var);
+    bool alive(uint32_t r) const { return head(r).alive; }
+    uint32_t version(uint32_t r) const { return head(r).version; }
+    uint32_t key_of(uint32_t r) const { return head(r).key; }
+    NeighbourSpan neighbours(uint32_t r) const { return {head(r).list, head(r).list + head(r).degree}; }
+    // Starts loading the records of r's neighbours (they are about to be read).
+    void prefetch_neighbours(uint32_t r, int lines) const {
+        for (const Neighbour& k : neighbours(r)) {
+            const std::byte* p = storage_[static_cast<std::size_t>(k.id) * lines_].bytes;
+            for (int l = 0; l < lines; ++l) __builtin_prefetch(p + l * sizeof(Line));
         }
-        return t;
     }
+    ~RegionGraph() {
+        for (uint32_t r = 0; r < n_; ++r) release(r);
+    }
+    RegionGraph(const RegionGraph&) = delete;
+    RegionGraph& operator=(const RegionGraph&) = delete;
 
-    // Baatz–Schäpe fusion cost of a < b sharing `shared` pixel edges.
-    double cost(uint32_t a, uint32_t b, double shared) const {
-        const double na = area_[a], nb = area_[b], nm = na + nb;
-        double hc = 0.0;
-        for (int k = 0; k < bands_; ++k) {
-            const double s = sum_[a * bands_ + k] + sum_[b * bands_ + k];
-            const double q = sumsq_[a * bands_ + k] + sumsq_[b * bands_ + k];
-            const double m = s / nm;
-            hc += weights_[k] * nm * std::sqrt(std::max(0.0, q / nm - m * m));
+    // Baatz–Schäpe fusion cost of two adjacent regions sharing `shared`
+    // pixel edges. Symmetric in (a, b) bit for bit.
+    double cost(uint32_t a, uint32_t b, uint32_t shared) const {
+        switch (bands_) {  // the band loop unrolled for the usual band counts
+            case 1: return cost_bands<1>(a, b, shared);
+            case 3: return cost_bands<3>(a, b, shared);
+            case 4: return cost_bands<4>(a, b, shared);
+            default: return cost_bands<0>(a, b, shared);
         }
-        hc -= color_term_[a] + color_term_[b];
+    }
+    template <int Bands>  // 0 = bands_
+    double cost_bands(uint32_t a, uint32_t b, uint32_t shared) const {
+        const int bands = Bands ? Bands : bands_;
+        const NodeHead& A = head(a);
+        const NodeHead& B = head(b);
+        const double* SA = sums(a);
+        const double* SB = sums(b);
+        const double nm = A.n + B.n;
+        const double inv = 1.0 / nm;
+        double hc = 0.0;
+        for (int k = 0; k < bands; ++k) {
+            const double m = (SA[2 * k] + SB[2 * k]) * inv;
+            const double var = (SA[2 * k + 1] + SB[2 * k + 1]) * inv - m * m;
+            hc += weights_[k] * std::sqrt(std::max(0.0, var));
+        }
+        hc = hc * nm - (A.colour + B.colour);
         if (wc_ >= 1.0) return hc;
-        const double la = perimeter_[a], lb = perimeter_[b], lm = la + lb - 2.0 * shared;
-        const double bba = bbox_perimeter(a), bbb = bbox_perimeter(b);
-        const double bbm = 2.0 * ((std::max(x1_[a], x1_[b]) - std::min(x0_[a], x0_[b]) + 1) +
-                                  (std::max(y1_[a], y1_[b]) - std::min(y0_[a], y0_[b]) + 1));
-        const double h_cmpct = lm * std::sqrt(nm) - (la * std::sqrt(na) + lb * std::sqrt(nb));
-        const double h_smooth = nm * lm / bbm - (na * la / bba + nb * lb / bbb);
+        const double lm = A.l + B.l - 2.0 * shared;
+        const double bbm = 2.0 * ((std::max(A.x1, B.x1) - std::min(A.x0, B.x0) + 1) + (std::max(A.y1, B.y1) - std::min(A.y0, B.y0) + 1));
+        const double h_cmpct = lm * std::sqrt(nm) - (A.lsq + B.lsq);
+        const double h_smooth = nm * lm / bbm - (A.smooth + B.smooth);
         return wc_ * hc + (1.0 - wc_) * (wcmp_ * h_cmpct + (1.0 - wcmp_) * h_smooth);
     }
 
-    double pair_cost(uint32_t r, const Neighbour& k) const { return r < k.id ? cost(r, k.id, k.shared) : cost(k.id, r, k.shared); }
-
-    // Nearest neighbour of r: lowest (cost, id).
-    // Returns true when r's nearest neighbour or its cost changed.
-    bool update_nn(uint32_t r) {
-        const uint32_t old = nn_[r];
-        const double old_cost = nn_cost_[r];
-        uint32_t best = 0;
+    // Nearest neighbour of r: lowest (cost, key).
+    // Also caches the cost on r's side of each edge.
+    void update_nn(uint32_t r) {
+        uint32_t best = 0, best_key = UINT32_MAX;
         double best_cost = INFINITY;
-        for (const Neighbour& k : adj_[r]) {
-            const double c = pair_cost(r, k);
-            if (c < best_cost || (c == best_cost && k.id < best)) best = k.id, best_cost = c;
+        NodeHead& R = head(r);
+        for (Neighbour* k = R.list; k != R.list + R.degree; ++k) {
+            const double c = k->cost = cost(r, k->id, k->shared);
+            if (c < best_cost || (c == best_cost && key_of(k->id) < best_key)) best = k->id, best_cost = c, best_key = key_of(k->id);
         }
-        nn_[r] = best;
-        nn_cost_[r] = best_cost;
-        return best != old || best_cost != old_cost;
+        set_nn(r, best, best_cost);
     }
-    // Makes `candidate` r's nearest neighbour if it beats the current one on (cost, id).
+    // Nearest neighbour of r from the cached edge costs (exact: an edge's
+    // cost changes only when one of its regions merges, and score_merged
+    // then rewrites it on both sides).
+    void rescan_nn(uint32_t r) {
+        uint32_t best = 0, best_key = UINT32_MAX;  // best_key loaded only on a tie
+        double best_cost = INFINITY;
+        for (const Neighbour& k : neighbours(r)) {
+            if (k.cost < best_cost) {
+                best = k.id, best_cost = k.cost, best_key = UINT32_MAX;
+            } else if (k.cost == best_cost) {
+                if (best_key == UINT32_MAX) best_key = key_of(best);
+                if (key_of(k.id) < best_key) best = k.id, best_key = key_of(k.id);
+            }
+        }
+        set_nn(r, best, best_cost);
+    }
+    // After a merge of a and b into m: one cost per neighbour of m, cached on
+    // both sides of the edge, gives m's nearest neighbour and is offered to
+    // the neighbour (its costs changed only towards m). Neighbours whose
+    // nearest neighbour was a or b go to `rescan`, those whose nearest
+    // neighbour became m to `changed`.
+    void score_merged(uint32_t m, uint32_t a, uint32_t b, std::vector<uint32_t>& changed, std::vector<uint32_t>& rescan) {
+        NodeHead& M = head(m);
+        uint32_t best = 0, best_key = UINT32_MAX;
+        double best_cost = INFINITY;
+        for (Neighbour* e = M.list; e != M.list + M.degree; ++e) {
+            const double c = e->cost = cost(m, e->id, e->shared);
+            NodeHead& K = head(e->id);
+            find(K, m)->cost = c;
+            if (c < best_cost || (c == best_cost && K.key < best_key)) best = e->id, best_cost = c, best_key = K.key;
+            // A neighbour that pointed at the merged pair always needs a
+            // fresh entry: its old one carries the pair's old versions.
+            if (K.nn == a || K.nn == b) rescan.push_back(e->id);
+            else if (offer_candidate(e->id, m, c)) changed.push_back(e->id);
+        }
+        set_nn(m, best, best_cost);
+    }
+    // Makes `candidate` r's nearest neighbour if it beats the current one on (cost, key).
     bool offer_candidate(uint32_t r, uint32_t candidate, double c) {
-        if (c < nn_cost_[r] || (c == nn_cost_[r] && candidate < nn_[r])) {
-            nn_[r] = candidate, nn_cost_[r] = c;
+        NodeHead& R = head(r);
+        if (c < R.nn_cost || (c == R.nn_cost && (R.nn == 0 || key_of(candidate) < key_of(R.nn)))) {
+            R.nn = candidate, R.nn_cost = c;
             return true;
         }
         return false;
     }
-    uint32_t nn(uint32_t r) const { return nn_[r]; }
-    double nn_cost(uint32_t r) const { return nn_cost_[r]; }
+    void set_nn(uint32_t r, uint32_t best, double c) { head(r).nn = best, head(r).nn_cost = c; }
+    uint32_t nn(uint32_t r) const { return head(r).nn; }
+    double nn_cost(uint32_t r) const { return head(r).nn_cost; }
 
-    // Merges b into a (a < b). Returns a.
+    // Merges regions a and b; returns the node of the merged region.
     uint32_t merge(uint32_t a, uint32_t b) {
-        double shared = 0.0;
-        for (const Neighbour& k : adj_[a])
-            if (k.id == b) shared = k.shared;
-        area_[a] += area_[b];
-        for (int k = 0; k < bands_; ++k) {
-            sum_[a * bands_ + k] += sum_[b * bands_ + k];
-            sumsq_[a * bands_ + k] += sumsq_[b * bands_ + k];
+        const uint32_t s = head(a).degree >= head(b).degree ? a : b;  // survivor slot
+        const uint32_t t = s == a ? b : a;                            // dies
+        prefetch_neighbours(t, static_cast<int>(lines_));  // their lists are edited below
+        prefetch_neighbours(s, static_cast<int>(lines_));  // scored, and their lists updated, after the merge
+        NodeHead& S = head(s);
+        NodeHead& T = head(t);
+        const uint32_t shared = find(S, t)->shared;
+        double* SS = sums(s);
+        const double* ST = sums(t);
+        S.n = S.n + T.n;
+        for (int k = 0; k < 2 * bands_; ++k) SS[k] = SS[k] + ST[k];
+        S.l = S.l + T.l - 2.0 * shared;
+        S.x0 = std::min(S.x0, T.x0), S.x1 = std::max(S.x1, T.x1);
+        S.y0 = std::min(S.y0, T.y0), S.y1 = std::max(S.y1, T.y1);
+        derive(s);
+        S.key = std::min(S.key, T.key);
+        // The dying region's neighbours now border the survivor instead: move
+        // their entry for t to s (one shift within their sorted list).
+        for (const Neighbour& k : neighbours(t)) {
+            if (k.id == s) continue;
+            NodeHead& K = head(k.id);
+            Neighbour* const end = K.list + K.degree;
+            Neighbour* it_t = find(K, t);
+            Neighbour* it_s = find(K, s);
+            if (it_s != end && it_s->id == s) {
+                it_s->shared += it_t->shared;
+                std::move(it_t + 1, end, it_t);
+                --K.degree;
+            } else {
+                const Neighbour moved{s, it_t->shared};
+                if (it_s <= it_t) std::move_backward(it_s, it_t, it_t + 1), *it_s = moved;
+                else std::move(it_t + 1, it_s, it_t), *(it_s - 1) = moved;
+            }
         }
-        perimeter_[a] = perimeter_[a] + perimeter_[b] - 2.0 * shared;
-        x0_[a] = std::min(x0_[a], x0_[b]), x1_[a] = std::max(x1_[a], x1_[b]);
-        y0_[a] = std::min(y0_[a], y0_[b]), y1_[a] = std::max(y1_[a], y1_[b]);
-        color_term_[a] = color_term(a);
-        // Union of the two sorted neighbour lists, without a and b.
-        std::vector<Neighbour> merged;
-        merged.reserve(adj_[a].size() + adj_[b].size());
-        auto ia = adj_[a].begin(), ib = adj_[b].begin();
-        while (ia != adj_[a].end() || ib != adj_[b].end()) {
-            if (ib == adj_[b].end() || (ia != adj_[a].end() && ia->id < ib->id)) merged.push_back(*ia++);
-            else if (ia == adj_[a].end() || ib->id < ia->id) merged.push_back(*ib++);
-            else merged.push_back({ia->id, ia->shared + ib->shared}), ++ia, ++ib;
+        // Union of the two sorted lists without s and t.
+        scratch_.clear();
+        scratch_.reserve(std::size_t(S.degree) + T.degree);
+        const Neighbour *is = S.list, *it = T.list;
+        const Neighbour *es = S.list + S.degree, *et = T.list + T.degree;
+        while (is != es || it != et) {
+            Neighbour next;
+            if (it == et || (is != es && is->id < it->id)) next = *is++;
+            else if (is == es || it->id < is->id) next = *it++;
+            else next = {is->id, is->shared + it->shared}, ++is, ++it;
+            if (next.id != s && next.id != t) scratch_.push_back(next);
         }
-        merged.erase(std::remove_if(merged.begin(), merged.end(), [&](const Neighbour& k) { return k.id == a || k.id == b; }),
-                     merged.end());
-        // Neighbours of b now border a instead.
-        for (const Neighbour& k : adj_[b]) {
-            if (k.id == a) continue;
-            auto& list = adj_[k.id];
-            double len = 0.0;
-            list.erase(std::remove_if(list.begin(), list.end(), [&](const Neighbour& q) {
-                           if (q.id == b) len = q.shared;
-                           return q.id == b;
-                       }),
-                       list.end());
-            auto it = std::lower_bound(list.begin(), list.end(), a, [](const Neighbour& q, uint32_t id) { return q.id < id; });
-            if (it != list.end() && it->id == a) it->shared += len;
-            else list.insert(it, {a, len});
-        }
-        adj_[a] = std::move(merged);
-        adj_[b].clear();
-        adj_[b].shrink_to_fit();
-        alive_[b] = 0;
+        reserve(s, static_cast<uint32_t>(scratch_.size()));
+        std::copy(scratch_.begin(), scratch_.end(), S.list);
+        S.degree = static_cast<uint32_t>(scratch_.size());
+        release(t);
+        T.alive = 0;
         --alive_count_;
-        ++version_[a];
-        ++version_[b];
-        return a;
+        ++S.version;
+        ++T.version;
+        return s;
     }
 
     // Invariants of the graph: totals over alive regions equal the totals of
-    // the initial regions, adjacency is symmetric with equal shared lengths.
+    // the initial regions, adjacency is sorted and symmetric with equal shared lengths.
     void verify(const std::vector<double>& totals) const {
         std::vector<double> now(totals.size(), 0.0);
         for (uint32_t r = 1; r < n_; ++r) {
-            if (!alive_[r]) {
-                if (!adj_[r].empty()) throw Error("region merging", "dead region " + std::to_string(r) + " still has neighbours");
+            if (!alive(r)) {
+                if (head(r).degree) throw Error("region merging", "dead region " + std::to_string(r) + " still has neighbours");
                 continue;
             }
-            now[0] += area_[r];
-            for (int b = 0; b < bands_; ++b) now[1 + b] += sum_[r * bands_ + b], now[1 + bands_ + b] += sumsq_[r * bands_ + b];
-            for (const Neighbour& k : adj_[r]) {
-                if (!alive_[k.id]) throw Error("region merging", "region " + std::to_string(r) + " borders a dead region");
-                const auto& other = adj_[k.id];
+            now[0] += head(r).n;
+            for (int b = 0; b < bands_; ++b) now[1 + b] += sums(r)[2 * b], now[1 + bands_ + b] += sums(r)[2 * b + 1];
+            const NeighbourSpan list = neighbours(r);
+            for (std::size_t i = 0; i < list.size(); ++i) {
+                const Neighbour& k = list.first[i];
+                if (i > 0 && !(list.first[i - 1].id < k.id)) throw Error("region merging", "adjacency of " + std::to_string(r) + " is not sorted");
+                if (!alive(k.id)) throw Error("region merging", "region " + std::to_string(r) + " borders a dead region");
+                const NeighbourSpan other = neighbours(k.id);
                 const auto it = std::lower_bound(other.begin(), other.end(), r, [](const Neighbour& q, uint32_t id) { return q.id < id; });
                 if (it == other.end() || it->id != r || it->shared != k.shared)
                     throw Error("region merging", "adjacency of " + std::to_string(r) + " and " + std::to_string(k.id) + " is not symmetric");
@@ -341,27 +484,73 @@ public:
     std::vector<double> totals() const {
         std::vector<double> t(1 + 2 * static_cast<std::size_t>(bands_), 0.0);
         for (uint32_t r = 1; r < n_; ++r) {
-            if (!alive_[r]) continue;
-            t[0] += area_[r];
-            for (int b = 0; b < bands_; ++b) t[1 + b] += sum_[r * bands_ + b], t[1 + bands_ + b] += sumsq_[r * bands_ + b];
+            if (!alive(r)) continue;
+            t[0] += head(r).n;
+            for (int b = 0; b < bands_; ++b) t[1 + b] += sums(r)[2 * b], t[1 + bands_ + b] += sums(r)[2 * b + 1];
         }
         return t;
     }
 
 private:
-    double bbox_perimeter(uint32_t r) const { return 2.0 * ((x1_[r] - x0_[r] + 1) + (y1_[r] - y0_[r] + 1)); }
+    std::byte* head_ptr(uint32_t r) { return storage_[static_cast<std::size_t>(r) * lines_].bytes; }
+    std::byte* sums_ptr(uint32_t r) { return head_ptr(r) + sizeof(NodeHead); }
+    NodeHead& head(uint32_t r) { return *std::launder(reinterpret_cast<NodeHead*>(head_ptr(r))); }
+    const NodeHead& head(uint32_t r) const {
+        return *std::launder(reinterpret_cast<const NodeHead*>(storage_[static_cast<std::size_t>(r) * lines_].bytes));
+    }
+    double* sums(uint32_t r) { return std::launder(reinterpret_cast<double*>(sums_ptr(r))); }
+    const double* sums(uint32_t r) const {
+        return std::launder(reinterpret_cast<const double*>(storage_[static_cast<std::size_t>(r) * lines_].bytes + sizeof(NodeHead)));
+    }
+    static Neighbour* find(NodeHead& h, uint32_t id) {
+        return std::lower_bound(h.list, h.list + h.degree, id, [](const Neighbour& q, uint32_t v) { return q.id < v; });
+    }
+    Neighbour* inline_list(uint32_t r) {
+        return std::launder(reinterpret_cast<Neighbour*>(sums_ptr(r) + 2 * sizeof(double) * bands_));
+    }
+    // Room for `count` neighbours in r's list (contents kept).
+    void reserve(uint32_t r, uint32_t count) {
+        NodeHead& h = head(r);
+        if (count <= h.capacity) return;
+        const uint32_t capacity = std::max(count, 2 * h.capacity);
+        auto* block = static_cast<Neighbour*>(std::malloc(sizeof(Neighbour) * capacity));
+        if (!block) throw std::bad_alloc();
+        std::copy(h.list, h.list + h.degree, block);
+        if (h.list != inline_list(r)) std::free(h.list);
+        h.list = block, h.capacity = capacity;
+    }
+    void release(uint32_t r) {
+        NodeHead& h = head(r);
+        if (h.list && h.list != inline_list(r)) std::free(h.list);
+        h.list = inline_list(r), h.capacity = inline_capacity_, h.degree = 0;
+    }
+    // Derived terms of r: l·√n, n·l/b and Σ_b w_b n σ_b.
+    void derive(uint32_t r) {
+        NodeHead& R = head(r);
+        const double* S = sums(r);
+        const double n = R.n;
+        if (!(n > 0)) return;
+        const double bb = 2.0 * ((R.x1 - R.x0 + 1) + (R.y1 - R.y0 + 1));
+        R.lsq = R.l * std::sqrt(n);
+        R.smooth = n * R.l / bb;
+        const double inv = 1.0 / n;
+        double t = 0.0;
+        for (int b = 0; b < bands_; ++b) {
+            const double m = S[2 * b] * inv;
+            const double var = S[2 * b + 1] * inv - m * m;
+            t += weights_[b] * std::sqrt(std::max(0.0, var));
+        }
+        R.colour = t * n;
+    }
 
     int bands_;
     uint32_t n_;
     double wc_, wcmp_;
     std::vector<double> weights_;
-    std::vector<double> area_, perimeter_, sum_, sumsq_, color_term_;
-    std::vector<int> x0_, y0_, x1_, y1_;
-    std::vector<std::vector<Neighbour>> adj_;
-    std::vector<uint8_t> alive_;
-    std::vector<uint32_t> version_;
-    std::vector<uint32_t> nn_;
-    std::vector<double> nn_cost_;
+    std::size_t lines_ = 1;        // cache lines per node record
+    std::vector<Line> storage_;    // node records
+    uint32_t inline_capacity_ = 0;
+    std::vector<Neighbour> scratch_;
     uint32_t alive_count_ = 0;
 };
 
@@ -380,91 +569,92 @@ RegionMergingResult merge_regions(const Image<float>& image, const Image<uint32_
     const uint32_t n = g.size();
     for (uint32_t r = 1; r < n; ++r) result.adjacent_pairs += g.neighbours(r).size();
     result.adjacent_pairs /= 2;
-    std::vector<uint32_t> uf(n);  // absorbed region -> survivor (union-find)
+    std::vector<uint32_t> uf(n);  // absorbed node -> node it merged into (union-find)
     for (uint32_t r = 0; r < n; ++r) uf[r] = r;
     auto find = [&](uint32_t x) {
         while (uf[x] != x) x = uf[x] = uf[uf[x]];
         return x;
     };
     const bool uses_nn = o.strategy != QueueStrategy::rag;
-    if (uses_nn)
-        for (uint32_t r = 1; r < n; ++r)
-            if (g.alive(r)) g.update_nn(r);
+    if (uses_nn)  // independent per region: in parallel, same result
+        tbb::parallel_for(tbb::blocked_range<uint32_t>(1, n, 4096), [&](const tbb::blocked_range<uint32_t>& rr) {
+            for (uint32_t r = rr.begin(); r != rr.end(); ++r)
+                if (g.alive(r)) g.update_nn(r);
+        });
 
     result.graph_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t_graph).count();
     const std::vector<double> initial_totals = o.verify_invariants ? g.totals() : std::vector<double>{};
-    std::vector<uint32_t> previous_compact(n, 0);  // survivor id -> label at previous level
-    {
-        for (uint32_t r = 1; r < n; ++r) previous_compact[r] = g.alive(r) ? r : 0;
-    }
+    std::vector<uint32_t> previous_compact(n, 0);  // alive node -> label at previous level
+    for (uint32_t r = 1; r < n; ++r) previous_compact[r] = g.alive(r) ? r : 0;
     uint32_t previous_count = region_count;
+    std::vector<uint32_t> changed, rescan;
     for (std::size_t s = 0; s < o.scales.size(); ++s) {
         const auto t0 = std::chrono::steady_clock::now();
+        const double c0 = thread_cpu_seconds();
         const double threshold = o.scales[s] * o.scales[s];
         ScaleLevel level;
         level.scale = o.scales[s];
         level.regions_before = g.alive_count();
-        Heap heap;
-        auto push_pair = [&](uint32_t a, uint32_t b, double c) {
-            if (a > b) std::swap(a, b);
-            heap.push({c, a, b, g.version(a), g.version(b)});
-            ++level.queue_pushes;
+        std::vector<QueueEntry> initial;
+        auto entry = [&](uint32_t a, uint32_t b, double c) {
+            if (g.key_of(a) > g.key_of(b)) std::swap(a, b);
+            return QueueEntry{c, g.key_of(a), g.key_of(b), a, b, g.version(a), g.version(b)};
         };
-        // Pushes r's nearest-neighbour pair if the strategy queues it.
-        auto offer_nn = [&](uint32_t r) {
+        // r's nearest-neighbour pair if the strategy queues it.
+        auto queued_nn = [&](uint32_t r) {
             const uint32_t k = g.nn(r);
-            if (!k || !(g.nn_cost(r) < threshold)) return;
-            if (o.strategy == QueueStrategy::mutual && g.nn(k) != r) return;
-            push_pair(r, k, g.nn_cost(r));
+            if (!k || !(g.nn_cost(r) < threshold)) return false;
+            return o.strategy != QueueStrategy::mutual || g.nn(k) == r;
         };
         for (uint32_t r = 1; r < n; ++r) {
             if (!g.alive(r)) continue;
             if (o.strategy == QueueStrategy::rag) {
                 for (const Neighbour& k : g.neighbours(r))
-                    if (k.id > r) push_pair(r, k.id, g.cost(r, k.id, k.shared));
-            } else if (o.strategy == QueueStrategy::nng || g.nn(r) > r) {
-                offer_nn(r);  // mutual pairs are offered once, from their lower id
+                    if (k.id > r) initial.push_back(entry(r, k.id, g.cost(r, k.id, k.shared)));
+            } else if ((o.strategy == QueueStrategy::nng || g.nn(r) > r) && queued_nn(r)) {
+                initial.push_back(entry(r, g.nn(r), g.nn_cost(r)));  // mutual pairs once, from their lower node
             }
         }
-        level.initial_queue_length = heap.size();
-        std::vector<uint32_t> changed;
-        while (!heap.empty()) {
+        level.initial_queue_length = initial.size();
+        level.queue_pushes = initial.size();
+        Heap heap(std::greater<QueueEntry>(), std::move(initial));
+        auto push_pair = [&](uint32_t a, uint32_t b, double c) {
+            heap.push(entry(a, b, c));
+            ++level.queue_pushes;
+        };
+        auto offer_nn = [&](uint32_t r) {
+            if (queued_nn(r)) push_pair(r, g.nn(r), g.nn_cost(r));
+        };
+        while (!heap.empty() && g.alive_count() > o.min_regions) {
             const QueueEntry e = heap.top();
             heap.pop();
             if (!g.alive(e.a) || !g.alive(e.b) || g.version(e.a) != e.va || g.version(e.b) != e.vb) continue;
             if (!(e.cost < threshold)) break;  // rag holds every pair: the cheapest is too dear
             const uint32_t m = g.merge(e.a, e.b);
-            uf[e.b] = m;
+            uf[m == e.a ? e.b : e.a] = m;
             ++level.merges;
+            level.max_degree = std::max(level.max_degree, static_cast<uint32_t>(g.neighbours(m).size()));
             if (o.strategy == QueueStrategy::rag) {
-                for (const Neighbour& k : g.neighbours(m)) push_pair(m, k.id, g.pair_cost(m, k));
-            } else {
-                g.update_nn(m);
-                // A neighbour's costs changed only towards m: rescan it fully only
-                // when its nearest neighbour was one of the merged pair. Only
-                // regions whose nearest neighbour changed need a (new) queue
-                // entry: an unchanged pair keeps its valid entry, since its cost
-                // can only change through a merge of one of its regions.
-                changed.clear();
-                for (const Neighbour& k : g.neighbours(m)) {
-                    // A neighbour that pointed at the merged pair always needs a
-                    // fresh entry: its old one carries the pair's old versions.
-                    bool moved = true;
-                    if (g.nn(k.id) == e.a || g.nn(k.id) == e.b) g.update_nn(k.id);
-                    else moved = g.offer_candidate(k.id, m, g.pair_cost(k.id, {m, k.shared}));
-                    if (moved) changed.push_back(k.id);
-                }
-                offer_nn(m);
-                for (uint32_t k : changed) offer_nn(k);
+                for (const Neighbour& k : g.neighbours(m)) push_pair(m, k.id, g.cost(m, k.id, k.shared));
+                continue;
             }
+            changed.clear(), rescan.clear();
+            g.score_merged(m, e.a, e.b, changed, rescan);
+            for (uint32_t k : rescan) g.rescan_nn(k);
+            offer_nn(m);
+            for (uint32_t k : rescan) offer_nn(k);
+            for (uint32_t k : changed) offer_nn(k);
         }
         level.regions_after = g.alive_count();
         if (o.verify_invariants) g.verify(initial_totals);
-        // Contiguous labels of this level in ascending survivor id; hierarchy links.
+        // Contiguous labels of this level in ascending key; hierarchy links.
+        std::vector<uint32_t> node_of_key(n, 0);
+        for (uint32_t r = 1; r < n; ++r)
+            if (g.alive(r)) node_of_key[g.key_of(r)] = r;
         std::vector<uint32_t> compact(n, 0);
         uint32_t next = 0;
-        for (uint32_t r = 1; r < n; ++r)
-            if (g.alive(r)) compact[r] = ++next;
+        for (uint32_t k = 1; k < n; ++k)
+            if (node_of_key[k]) compact[node_of_key[k]] = ++next;
         level.label_of_input.assign(n, 0);
         for (uint32_t r = 1; r < n; ++r) level.label_of_input[r] = compact[find(r)];
         level.parent.assign(previous_count + 1, 0);
@@ -473,6 +663,7 @@ RegionMergingResult merge_regions(const Image<float>& image, const Image<uint32_
         previous_compact = compact;
         previous_count = next;
         level.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+        level.cpu_seconds = thread_cpu_seconds() - c0;
         result.levels.push_back(std::move(level));
         progress(double(s + 1) / double(o.scales.size()), "merging");
     }

@@ -45,6 +45,10 @@ struct RegionMergingOptions {
     double compactness = 0.5;      ///< w_cmpct in [0, 1] within the shape term
     std::vector<double> band_weights;  ///< one per band (empty = equal)
     QueueStrategy strategy = QueueStrategy::mutual;
+    /// Stop merging once this many regions remain (0 = no limit): the merge
+    /// sequence is the same, only cut short, so every strategy still gives
+    /// the same labels. Used to match another tool's final region count.
+    uint32_t min_regions = 0;
     /// After every scale, check that region statistics still add up to the
     /// image totals (area, band sums and sums of squares) and that adjacency
     /// is symmetric; throws Error if not. For tests and debugging (O(regions)).
@@ -61,7 +65,9 @@ struct ScaleLevel {
     uint64_t initial_queue_length = 0;  ///< queue entries when the scale started
     uint64_t merges = 0;
     uint64_t queue_pushes = 0;          ///< all pushes during the scale (initial included)
-    double seconds = 0.0;
+    uint32_t max_degree = 0;            ///< most neighbours of a region formed during the scale
+    double seconds = 0.0;               ///< wall time of the scale
+    double cpu_seconds = 0.0;           ///< CPU time of the merging thread (less sensitive to machine load)
     /// Label at this scale (1..regions_after) of every over-segmentation
     /// region (index = input label, entry 0 = 0). Use relabel() for a raster.
     std::vector<uint32_t> label_of_input;

@@ -1,6 +1,9 @@
 #include <catch2/catch.hpp>
 
+#include <tbb/global_control.h>
+
 #include "cloud/cloud_filters.hpp"
+#include "cloud/kd_tree.hpp"
 #include "cloud/las.hpp"
 #include "core/random.hpp"
 #include "synth/synth.hpp"
@@ -10,6 +13,48 @@
 using namespace cityforge;
 using cityforge::test::make_town;
 using cityforge::test::ScratchDir;
+using cityforge::test::shared_data;
+
+namespace {
+// The outlier filter as it was with one k-d tree over the whole cloud: the
+// oracle for the grid search (same neighbours, same distances, same flags).
+std::vector<uint8_t> kd_tree_outlier_keep(const PointCloud& c, const OutlierFilterOptions& o) {
+    const std::size_t n = c.size();
+    std::vector<uint8_t> keep(n, 1);
+    for (std::size_t i = 0; i < n; ++i)
+        if (c.classification[i] == las_class::low_noise || c.classification[i] == las_class::high_noise) keep[i] = 0;
+    double ox = INFINITY, oy = INFINITY, oz = INFINITY;
+    for (std::size_t i = 0; i < n; ++i) ox = std::min(ox, c.x[i]), oy = std::min(oy, c.y[i]), oz = std::min(oz, c.z[i]);
+    const LocalPoints local = local_points(c, ox, oy, oz);
+    PointTree tree(3, local, nanoflann::KDTreeSingleIndexAdaptorParams(16));
+    tree.buildIndex();
+    const std::size_t k = static_cast<std::size_t>(std::max(o.k_neighbours, o.isolated_min_neighbours)) + 1;
+    const auto m = static_cast<std::size_t>(o.isolated_min_neighbours);
+    std::vector<double> mean(n, 0.0);
+    std::vector<uint8_t> isolated(n, 0);
+    std::vector<uint32_t> idx(k);
+    std::vector<float> d2(k);
+    for (std::size_t i = 0; i < n; ++i) {
+        const std::size_t found = tree.knnSearch(&local.xyz[3 * i], k, idx.data(), d2.data());
+        const std::size_t used = std::min(found, static_cast<std::size_t>(o.k_neighbours) + 1);
+        double s = 0.0;
+        for (std::size_t j = 1; j < used; ++j) {
+            const std::size_t a = idx[j];
+            const double dx = c.x[a] - c.x[i], dy = c.y[a] - c.y[i], dz = c.z[a] - c.z[i];
+            s += std::sqrt(dx * dx + dy * dy + dz * dz);
+        }
+        mean[i] = used > 1 ? s / double(used - 1) : 0.0;
+        isolated[i] = found <= m || d2[m] > o.isolated_radius * o.isolated_radius;
+    }
+    double sum = 0.0, sum2 = 0.0;
+    for (double d : mean) sum += d, sum2 += d * d;
+    const double mu = sum / double(n), sigma = std::sqrt(std::max(0.0, sum2 / double(n) - mu * mu));
+    const double limit = mu + o.std_multiplier * sigma;
+    for (std::size_t i = 0; i < n; ++i)
+        if (keep[i] && (mean[i] > limit || isolated[i])) keep[i] = 0;
+    return keep;
+}
+}  // namespace
 
 TEST_CASE("Statistical outlier removal drops far points and keeps a clean surface", "[cloud][filters]") {
     PointCloud c;
@@ -47,4 +92,31 @@ TEST_CASE("SMRF ground agrees with the synthetic scene's exact ground class", "[
     CHECK(double(agree) / double(c.size()) > 0.95);
     GroundFilterOptions trust;
     CHECK(classify_ground(c, {}, trust).from_classification);
+}
+
+TEST_CASE("Outlier filter on grid neighbourhoods flags exactly the points of a whole-cloud k-d tree, for any thread count", "[cloud][filters]") {
+    // Real AHN3 lidar (Delft, 675 k points) and IGN Lidar HD; plus far
+    // isolated points above and below, which make the grid search reach out.
+    for (const char* rel : {"delft_ahn3_bgt_west/ahn3_delft_west.las", "ign_lidarhd_bdtopo_west/lidarhd_870200_6617083_west.las"}) {
+        INFO(rel);
+        PointCloud c = read_las(shared_data(rel));
+        REQUIRE(c.size() > 10000);
+        for (const double dz : {80.0, -60.0, 300.0}) {
+            PointCloud one;
+            one.reserve(1, c.has_color(), c.has_gps_time());
+            one.append(c, c.size() / 3);
+            one.z[0] += dz;
+            c.append(one, 0);
+        }
+        OutlierFilterOptions o;
+        const std::vector<uint8_t> oracle = kd_tree_outlier_keep(c, o);
+        const OutlierFilterResult r = filter_outliers(c, o);
+        std::size_t differ = 0, removed = 0;
+        for (std::size_t i = 0; i < c.size(); ++i) differ += r.keep[i] != oracle[i], removed += !r.keep[i];
+        CHECK(differ == 0);
+        CHECK(removed >= 3);
+        for (std::size_t i = c.size() - 3; i < c.size(); ++i) CHECK_FALSE(r.keep[i]);
+        tbb::global_control one_thread(tbb::global_control::max_allowed_parallelism, 1);
+        CHECK(filter_outliers(c, o).keep == r.keep);
+    }
 }

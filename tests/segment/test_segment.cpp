@@ -184,3 +184,54 @@ TEST_CASE("Segmentation gives the same labels with 1 thread and with all threads
     CHECK(all_threads.first == one_thread.first);
     CHECK(all_threads.second == one_thread.second);
 }
+
+TEST_CASE("Merging with regions of thousands of neighbours: same labels for every strategy, invariants kept", "[segment][merging]") {
+    // A flat background cut into 3 x 3 blocks with 2 x 2 dots of varied
+    // colour every 6 pixels: the background merges into one region that
+    // borders every dot (1600), then absorbs them as the scale grows. Many
+    // costs tie exactly (identical blocks), so the tie order is exercised too.
+    const int size = 240;
+    Image<float> img(size, size, 3, 100.0f);
+    Image<uint32_t> labels(size, size, 1, 0u), truth(size, size, 1, 0u);
+    uint32_t next = 0;
+    std::map<std::pair<int, int>, uint32_t> block;
+    for (int y = 0; y < size; ++y)
+        for (int x = 0; x < size; ++x) {
+            const bool dot = x % 6 >= 2 && x % 6 < 4 && y % 6 >= 2 && y % 6 < 4;
+            const auto cell = dot ? std::make_pair(-1 - x / 6, y / 6) : std::make_pair(x / 3, y / 3);
+            auto [it, inserted] = block.emplace(cell, 0);
+            if (inserted) it->second = ++next;
+            labels.at(0, x, y) = it->second;
+            truth.at(0, x, y) = dot ? it->second : 0;
+            if (dot) {
+                const uint32_t h = (uint32_t(x / 6) * 73856093u) ^ (uint32_t(y / 6) * 19349663u);
+                for (int b = 0; b < 3; ++b) img.at(b, x, y) = 100.0f + float(int((h >> (4 * b)) % 41) - 20);
+            }
+        }
+    RegionMergingOptions mo;
+    mo.scales = {1, 20, 30};
+    mo.color_weight = 1.0;  // flat blocks merge at cost 0, ties broken by labels
+    mo.verify_invariants = true;
+    std::vector<std::vector<uint32_t>> tables[3];
+    uint32_t max_degree = 0;
+    int k = 0;
+    for (auto s : {QueueStrategy::rag, QueueStrategy::nng, QueueStrategy::mutual}) {
+        INFO(to_string(s));
+        mo.strategy = s;
+        const auto res = merge_regions(img, labels, next, mo);
+        for (const auto& l : res.levels) {
+            CHECK(l.regions_before - l.regions_after == l.merges);
+            tables[k].push_back(l.label_of_input);
+            max_degree = std::max(max_degree, l.max_degree);
+        }
+        // Finest scale: exactly the background and the 1600 dots; then the
+        // background absorbs every dot.
+        CHECK(res.levels[0].regions_after == 1601);
+        CHECK(same_partition(relabel(labels, res.levels[0].label_of_input), truth));
+        CHECK(res.levels[2].regions_after == 1);
+        ++k;
+    }
+    CHECK(max_degree >= 1500);  // the background borders (nearly) every dot
+    CHECK(tables[0] == tables[1]);
+    CHECK(tables[0] == tables[2]);
+}

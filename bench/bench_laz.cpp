@@ -1,0 +1,116 @@
+// LAZ decoding speed over a corpus folder, checked against its oracle.
+//   bench_laz [CORPUS_DIR] [--repeat N] [--points]
+// CORPUS_DIR defaults to ../shared/data/laz_corpus. Prints, per file, points,
+// decode time and whether the sha256 of the decoded records equals
+// oracle.json's; then the total in M points/s (all chunks of a file decoded
+// in parallel with TBB; set the thread count with TBB's usual arena, e.g.
+// `taskset -c 0,1`). --points also times the PointCloud path (LasReader::
+// read_chunk, which skips the layers a PointCloud does not hold).
+#include <sys/resource.h>
+
+#include <chrono>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <nlohmann/json.hpp>
+#include <string>
+#include <vector>
+
+#include "cloud/las.hpp"
+#include "core/error.hpp"
+#include "core/sha256.hpp"
+
+namespace {
+// User + system CPU seconds of this process (all threads).
+double cpu_seconds() {
+    rusage u{};
+    getrusage(RUSAGE_SELF, &u);
+    return static_cast<double>(u.ru_utime.tv_sec + u.ru_stime.tv_sec) + 1e-6 * static_cast<double>(u.ru_utime.tv_usec + u.ru_stime.tv_usec);
+}
+}  // namespace
+
+int main(int argc, char** argv) {
+    namespace fs = std::filesystem;
+    std::string dir = CITYFORGE_SHARED_DATA "/laz_corpus";
+    int repeat = 3;
+    bool points_path = false;
+    for (int i = 1; i < argc; ++i) {
+        const std::string a = argv[i];
+        if (a == "--points") points_path = true;
+        else if (a == "--repeat" && i + 1 < argc) repeat = std::max(1, std::atoi(argv[++i]));
+        else dir = a;
+    }
+    nlohmann::json oracle;
+    if (std::ifstream f(dir + "/oracle.json"); f) oracle = nlohmann::json::parse(f);
+    std::vector<fs::path> files;
+    for (const auto& e : fs::directory_iterator(dir))
+        if (e.path().extension() == ".laz") files.push_back(e.path());
+    std::sort(files.begin(), files.end());
+    double total_s = 0.0, total_points_s = 0.0, total_cpu = 0.0;
+    uint64_t total_points = 0;
+    int mismatches = 0;
+    std::printf("%-55s %10s %9s %8s  %s\n", "file", "points", "ms", "Mpts/s", "oracle");
+    for (const fs::path& p : files) {
+        const std::string name = p.filename().string();
+        try {
+            double best = 1e30;
+            std::string hash;
+            uint64_t points = 0;
+            const double cpu0 = cpu_seconds();
+            for (int r = 0; r < repeat; ++r) {
+                const auto t0 = std::chrono::steady_clock::now();
+                cityforge::LasReader reader(p.string());
+                cityforge::Sha256 sha;
+                std::vector<char> records;
+                points = 0;
+                while (std::size_t n = reader.read_records(records, 1u << 20)) {
+                    sha.update(records.data(), records.size());
+                    points += n;
+                }
+                const double s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+                best = std::min(best, s);
+                hash = sha.hex();
+            }
+            total_cpu += (cpu_seconds() - cpu0) / repeat;
+            double best_points = 0.0;
+            std::printf("CPU (user+system, all threads, SHA-256 included): %.3f s per pass = %.2f M points per CPU-second\n", total_cpu,
+                total_cpu > 0 ? static_cast<double>(total_points) / total_cpu / 1e6 : 0.0);
+    if (points_path) {
+                best_points = 1e30;
+                for (int r = 0; r < repeat; ++r) {
+                    const auto t0 = std::chrono::steady_clock::now();
+                    cityforge::LasReader reader(p.string());
+                    cityforge::PointCloud cloud;
+                    while (true) {
+                        cloud.clear();
+                        if (reader.read_chunk(cloud, 1u << 20) == 0) break;
+                    }
+                    best_points = std::min(best_points, std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
+                }
+            }
+            total_points_s += best_points;
+            std::string status = "no oracle";
+            for (const auto& entry : oracle.is_array() ? oracle : oracle.value("files", nlohmann::json::array())) {
+                if (entry.value("file", "") != name) continue;
+                if (!entry.value("decoded", true) || !entry.contains("points_sha256")) break;
+                const bool ok = entry["points_sha256"].get<std::string>() == hash;
+                status = ok ? "match" : "MISMATCH";
+                if (!ok) ++mismatches;
+            }
+            std::printf("%-55s %10llu %9.2f %8.2f  %s\n", name.c_str(), static_cast<unsigned long long>(points), best * 1e3,
+                        best > 0 ? static_cast<double>(points) / best / 1e6 : 0.0, status.c_str());
+            total_s += best;
+            total_points += points;
+        } catch (const cityforge::Error& e) {
+            std::printf("%-55s refused: %s\n", name.c_str(), e.what());
+        }
+    }
+    std::printf("TOTAL %llu points in %.3f s: %.2f M points/s (best of %d)\n", static_cast<unsigned long long>(total_points), total_s,
+                total_s > 0 ? static_cast<double>(total_points) / total_s / 1e6 : 0.0, repeat);
+    std::printf("CPU (user+system, all threads, SHA-256 included): %.3f s per pass = %.2f M points per CPU-second\n", total_cpu,
+                total_cpu > 0 ? static_cast<double>(total_points) / total_cpu / 1e6 : 0.0);
+    if (points_path)
+        std::printf("TOTAL PointCloud path: %.3f s: %.2f M points/s\n", total_points_s,
+                    total_points_s > 0 ? static_cast<double>(total_points) / total_points_s / 1e6 : 0.0);
+    return mismatches == 0 ? 0 : 1;
+}

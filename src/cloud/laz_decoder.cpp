@@ -1,0 +1,1283 @@
+#include "cloud/laz_decoder.hpp"
+
+#include <tbb/parallel_for.h>
+#include <tbb/task_arena.h>
+
+#include <algorithm>
+#include <array>
+#include <cstring>
+#include <filesystem>
+#include <limits>
+
+#include "core/error.hpp"
+
+// Our own implementation of the LASzip format (LASzip's public description and
+// the behaviour of its reference decoder): an adaptive arithmetic decoder
+// (Said/Moffat style, 32-bit interval, 15-bit symbol and 13-bit bit models),
+// integer correctors coded by magnitude class, and the item predictors.
+namespace cityforge {
+namespace {
+
+// Thrown inside the decoder, turned into an Error naming file and chunk.
+struct Corrupt {
+    const char* what;
+};
+
+template <typename T>
+T load(const uint8_t* p) {
+    T v;
+    std::memcpy(&v, p, sizeof(T));
+    return v;
+}
+template <typename T>
+void store(uint8_t* p, T v) {
+    std::memcpy(p, &v, sizeof(T));
+}
+
+// ------------------------------------------------------------ byte input
+// Bytes of one arithmetic-coded stream. Past its end it yields zeros and
+// counts them: a decoder that needs more than the 4 look-ahead bytes of its
+// initialisation has run off its buffer (corrupt input).
+class ByteIn {
+public:
+    ByteIn() = default;
+    ByteIn(const uint8_t* p, std::size_t n) : p_(p), n_(n) {}
+    uint32_t get() {
+        if (pos_ < n_) return p_[pos_++];
+        if (++overrun_ > 4) throw Corrupt{"arithmetic decoder ran off the end of its data"};
+        return 0;
+    }
+    std::size_t pos() const { return pos_; }
+
+private:
+    const uint8_t* p_ = nullptr;
+    std::size_t n_ = 0, pos_ = 0, overrun_ = 0;
+};
+
+constexpr uint32_t kMinLength = 0x01000000u;
+constexpr uint32_t kMaxLength = 0xFFFFFFFFu;
+constexpr uint32_t kBitShift = 13;
+constexpr uint32_t kBitMaxCount = 1u << kBitShift;
+constexpr uint32_t kSymShift = 15;
+constexpr uint32_t kSymMaxCount = 1u << kSymShift;
+
+// Adaptive binary model.
+struct BitModel {
+    uint32_t update_cycle = 4, until_update = 4;
+    uint32_t bit0_prob = 1u << (kBitShift - 1), bit0_count = 1, bit_count = 2;
+    void update() {
+        if ((bit_count += update_cycle) > kBitMaxCount) {
+            bit_count = (bit_count + 1) >> 1;
+            bit0_count = (bit0_count + 1) >> 1;
+            if (bit0_count == bit_count) ++bit_count;
+        }
+        const uint32_t scale = 0x80000000u / bit_count;
+        bit0_prob = (bit0_count * scale) >> (31 - kBitShift);
+        update_cycle = std::min<uint32_t>((5 * update_cycle) >> 2, 64);
+        until_update = update_cycle;
+    }
+};
+
+// Adaptive multi-symbol model with a decoding look-up table for > 16 symbols.
+class SymbolModel {
+public:
+    explicit SymbolModel(uint32_t symbols) : symbols_(symbols), last_symbol_(symbols - 1) {
+        if (symbols > 16) {
+            uint32_t bits = 3;
+            while (symbols > (1u << (bits + 2))) ++bits;
+            table_size_ = 1u << bits;
+            table_shift_ = kSymShift - bits;
+            table_.assign(table_size_ + 2, 0);
+        }
+        distribution_.assign(symbols, 0);
+        count_.assign(symbols, 1);
+        total_count_ = 0;
+        update_cycle_ = symbols;
+        update();
+        until_update_ = update_cycle_ = (symbols + 6) >> 1;
+    }
+    void update() {
+        if ((total_count_ += update_cycle_) > kSymMaxCount) {
+            total_count_ = 0;
+            for (uint32_t n = 0; n < symbols_; ++n) total_count_ += (count_[n] = (count_[n] + 1) >> 1);
+        }
+        uint32_t sum = 0, s = 0;
+        const uint32_t scale = 0x80000000u / total_count_;
+        if (table_size_ == 0) {
+            for (uint32_t k = 0; k < symbols_; ++k) {
+                distribution_[k] = (scale * sum) >> (31 - kSymShift);
+                sum += count_[k];
+            }
+        } else {
+            for (uint32_t k = 0; k < symbols_; ++k) {
+                distribution_[k] = (scale * sum) >> (31 - kSymShift);
+                sum += count_[k];
+                const uint32_t w = distribution_[k] >> table_shift_;
+                while (s < w) table_[++s] = k - 1;
+            }
+            table_[0] = 0;
+            while (s <= table_size_) table_[++s] = symbols_ - 1;
+        }
+        update_cycle_ = std::min((5 * update_cycle_) >> 2, (symbols_ + 6) << 3);
+        until_update_ = update_cycle_;
+    }
+
+    uint32_t symbols_, last_symbol_;
+    uint32_t table_size_ = 0, table_shift_ = 0;
+    uint32_t total_count_ = 0, update_cycle_ = 0, until_update_ = 0;
+    std::vector<uint32_t> distribution_, count_, table_;
+};
+
+class ArithDecoder {
+public:
+    void init(ByteIn* in) {
+        in_ = in;
+        length_ = kMaxLength;
+        value_ = in_->get() << 24;
+        value_ |= in_->get() << 16;
+        value_ |= in_->get() << 8;
+        value_ |= in_->get();
+    }
+    uint32_t decode_bit(BitModel& m) {
+        const uint32_t x = m.bit0_prob * (length_ >> kBitShift);
+        const uint32_t sym = value_ >= x;
+        if (sym == 0) {
+            length_ = x;
+            ++m.bit0_count;
+        } else {
+            value_ -= x;
+            length_ -= x;
+        }
+        if (length_ < kMinLength) renorm();
+        if (--m.until_update == 0) m.update();
+        return sym;
+    }
+    uint32_t decode_symbol(SymbolModel& m) {
+        uint32_t n, sym, x, y = length_;
+        if (m.table_size_) {
+            const uint32_t dv = value_ / (length_ >>= kSymShift);
+            const uint32_t t = std::min(dv >> m.table_shift_, m.table_size_);
+            sym = m.table_[t];
+            n = m.table_[t + 1] + 1;
+            while (n > sym + 1) {
+                const uint32_t k = (sym + n) >> 1;
+                if (m.distribution_[k] > dv) n = k;
+                else sym = k;
+            }
+            x = m.distribution_[sym] * length_;
+            if (sym != m.last_symbol_) y = m.distribution_[sym + 1] * length_;
+        } else {
+            x = sym = 0;
+            length_ >>= kSymShift;
+            uint32_t k = (n = m.symbols_) >> 1;
+            do {
+                const uint32_t z = length_ * m.distribution_[k];
+                if (z > value_) {
+                    n = k;
+                    y = z;
+                } else {
+                    sym = k;
+                    x = z;
+                }
+            } while ((k = (sym + n) >> 1) != sym);
+        }
+        value_ -= x;
+        length_ = y - x;
+        if (length_ < kMinLength) renorm();
+        ++m.count_[sym];
+        if (--m.until_update_ == 0) m.update();
+        return sym;
+    }
+    uint32_t read_bits(uint32_t bits) {
+        if (bits > 19) {
+            const uint32_t low = read_short();
+            return (read_bits(bits - 16) << 16) | low;
+        }
+        const uint32_t sym = value_ / (length_ >>= bits);
+        value_ -= length_ * sym;
+        if (length_ < kMinLength) renorm();
+        if (sym >= (1u << bits)) throw Corrupt{"invalid raw bits in the arithmetic-coded stream"};
+        return sym;
+    }
+    uint32_t read_short() {
+        const uint32_t sym = value_ / (length_ >>= 16);
+        value_ -= length_ * sym;
+        if (length_ < kMinLength) renorm();
+        if (sym >= (1u << 16)) throw Corrupt{"invalid raw bits in the arithmetic-coded stream"};
+        return sym;
+    }
+    uint32_t read_int() {
+        const uint32_t low = read_short();
+        return (read_short() << 16) | low;
+    }
+
+private:
+    void renorm() {
+        do {
+            value_ = (value_ << 8) | in_->get();
+        } while ((length_ <<= 8) < kMinLength);
+    }
+    ByteIn* in_ = nullptr;
+    uint32_t value_ = 0, length_ = kMaxLength;
+};
+
+// Integer corrector: the magnitude class k of (real - prediction) is coded
+// with a context model, then the offset within the class.
+class IntegerDecompressor {
+public:
+    IntegerDecompressor(uint32_t bits, uint32_t contexts, uint32_t bits_high = 8) : bits_high_(bits_high) {
+        if (bits && bits < 32) {
+            corr_bits_ = bits;
+            corr_range_ = 1u << bits;
+            corr_min_ = -static_cast<int32_t>(corr_range_ / 2);
+        } else {
+            corr_bits_ = 32;
+            corr_range_ = 0;
+            corr_min_ = std::numeric_limits<int32_t>::min();
+        }
+        for (uint32_t i = 0; i < contexts; ++i) k_models_.emplace_back(corr_bits_ + 1);
+        for (uint32_t i = 1; i <= corr_bits_; ++i) corrector_.emplace_back(i <= bits_high_ ? (1u << i) : (1u << bits_high_));
+    }
+    int32_t decompress(ArithDecoder& dec, int32_t pred, uint32_t context = 0) {
+        uint32_t real = static_cast<uint32_t>(pred) + static_cast<uint32_t>(read_corrector(dec, k_models_[context]));
+        const int32_t sreal = static_cast<int32_t>(real);
+        if (sreal < 0) real += corr_range_;
+        else if (real >= corr_range_) real -= corr_range_;
+        return static_cast<int32_t>(real);
+    }
+    uint32_t k() const { return k_; }
+
+private:
+    int32_t read_corrector(ArithDecoder& dec, SymbolModel& model) {
+        k_ = dec.decode_symbol(model);
+        if (k_ == 0) return static_cast<int32_t>(dec.decode_bit(bit_));
+        if (k_ >= 32) return corr_min_;
+        uint32_t c;
+        if (k_ <= bits_high_) {
+            c = dec.decode_symbol(corrector_[k_ - 1]);
+        } else {
+            const uint32_t k1 = k_ - bits_high_;
+            c = dec.decode_symbol(corrector_[k_ - 1]);
+            c = (c << k1) | dec.read_bits(k1);
+        }
+        if (c >= (1u << (k_ - 1))) c += 1;
+        else c -= (1u << k_) - 1;
+        return static_cast<int32_t>(c);
+    }
+    uint32_t bits_high_, corr_bits_, corr_range_;
+    int32_t corr_min_;
+    uint32_t k_ = 0;
+    std::vector<SymbolModel> k_models_;
+    BitModel bit_;
+    std::vector<SymbolModel> corrector_;  // [k-1] for k = 1..corr_bits
+};
+
+// Lazily created model (LASzip creates these on first use; a fresh model
+// equals a re-initialised one, so per-chunk creation gives the same stream).
+struct LazyModel {
+    std::unique_ptr<SymbolModel> m;
+    SymbolModel& get(uint32_t symbols) {
+        if (!m) m = std::make_unique<SymbolModel>(symbols);
+        return *m;
+    }
+};
+
+uint8_t fold(int32_t v) { return static_cast<uint8_t>(v & 0xFF); }
+int32_t clamp_u8(int32_t v) { return v < 0 ? 0 : (v > 255 ? 255 : v); }
+
+class Median5 {
+public:
+    void add(int32_t v) {
+        if (high_) {
+            if (v < values_[2]) {
+                values_[4] = values_[3];
+                values_[3] = values_[2];
+                if (v < values_[0]) {
+                    values_[2] = values_[1];
+                    values_[1] = values_[0];
+                    values_[0] = v;
+                } else if (v < values_[1]) {
+                    values_[2] = values_[1];
+                    values_[1] = v;
+                } else {
+                    values_[2] = v;
+                }
+            } else {
+                if (v < values_[3]) {
+                    values_[4] = values_[3];
+                    values_[3] = v;
+                } else {
+                    values_[4] = v;
+                }
+                high_ = false;
+            }
+        } else {
+            if (values_[2] < v) {
+                values_[0] = values_[1];
+                values_[1] = values_[2];
+                if (values_[4] < v) {
+                    values_[2] = values_[3];
+                    values_[3] = values_[4];
+                    values_[4] = v;
+                } else if (values_[3] < v) {
+                    values_[2] = values_[3];
+                    values_[3] = v;
+                } else {
+                    values_[2] = v;
+                }
+            } else {
+                if (values_[1] < v) {
+                    values_[0] = values_[1];
+                    values_[1] = v;
+                } else {
+                    values_[0] = v;
+                }
+                high_ = true;
+            }
+        }
+    }
+    int32_t get() const { return values_[2]; }
+
+private:
+    std::array<int32_t, 5> values_{};
+    bool high_ = true;
+};
+
+// Context tables of the point predictors (return number r, number of returns n).
+constexpr uint8_t kReturnMap[8][8] = {{15, 14, 13, 12, 11, 10, 9, 8}, {14, 0, 1, 3, 6, 10, 10, 9}, {13, 1, 2, 4, 7, 11, 11, 10},
+                                      {12, 3, 4, 5, 8, 12, 12, 11},   {11, 6, 7, 8, 9, 13, 13, 12},  {10, 10, 11, 12, 13, 14, 14, 13},
+                                      {9, 10, 11, 12, 13, 14, 15, 14}, {8, 9, 10, 11, 12, 13, 14, 15}};
+uint32_t return_level(uint32_t n, uint32_t r, uint32_t cap) {
+    const uint32_t d = n > r ? n - r : r - n;
+    return std::min(d, cap);
+}
+constexpr uint8_t kReturnMap6[16][16] = {
+    {0, 1, 2, 3, 4, 5, 3, 4, 4, 5, 5, 5, 5, 5, 5, 5}, {1, 0, 1, 3, 3, 3, 3, 3, 3, 3, 3, 3, 3, 3, 3, 3},
+    {2, 1, 2, 4, 4, 4, 4, 4, 4, 4, 4, 3, 3, 3, 3, 3}, {3, 3, 4, 5, 4, 4, 4, 4, 4, 4, 4, 4, 4, 4, 4, 4},
+    {4, 3, 4, 4, 5, 4, 4, 4, 4, 4, 4, 4, 4, 4, 4, 4}, {5, 3, 4, 4, 4, 5, 4, 4, 4, 4, 4, 4, 4, 4, 4, 4},
+    {3, 3, 4, 4, 4, 4, 5, 4, 4, 4, 4, 4, 4, 4, 4, 4}, {4, 3, 4, 4, 4, 4, 4, 5, 4, 4, 4, 4, 4, 4, 4, 4},
+    {4, 3, 4, 4, 4, 4, 4, 4, 5, 4, 4, 4, 4, 4, 4, 4}, {5, 3, 4, 4, 4, 4, 4, 4, 4, 5, 4, 4, 4, 4, 4, 4},
+    {5, 3, 4, 4, 4, 4, 4, 4, 4, 4, 5, 4, 4, 4, 4, 4}, {5, 3, 3, 4, 4, 4, 4, 4, 4, 4, 4, 5, 5, 4, 4, 4},
+    {5, 3, 3, 4, 4, 4, 4, 4, 4, 4, 4, 5, 5, 5, 4, 4}, {5, 3, 3, 4, 4, 4, 4, 4, 4, 4, 4, 4, 5, 5, 5, 4},
+    {5, 3, 3, 4, 4, 4, 4, 4, 4, 4, 4, 4, 4, 5, 5, 5}, {5, 3, 3, 4, 4, 4, 4, 4, 4, 4, 4, 4, 4, 4, 5, 5}};
+
+// ------------------------------------------------------------ GPS time
+// The GPS time predictor (shared by GPSTIME11 v2 and POINT14 v3, which differ
+// only in their symbol codes): four interleaved sequences, each with its last
+// time and last 32-bit difference.
+struct GpsTimeState {
+    explicit GpsTimeState(bool layered) : v3(layered), multi(layered ? 515 : 516), zero_diff(layered ? 5 : 6), ic(32, 9) {}
+    void reset(uint64_t first) {
+        last = next = 0;
+        diff.fill(0);
+        extreme.fill(0);
+        time = {first, 0, 0, 0};
+    }
+    // Decodes the next time into time[last]; v2 may signal "unchanged".
+    void read(ArithDecoder& dec) {
+        const uint32_t code_full = v3 ? 511 : 512;
+        for (int guard = 0; guard < 8; ++guard) {
+            if (diff[last] == 0) {
+                const uint32_t m = dec.decode_symbol(zero_diff);
+                const uint32_t d32 = v3 ? 0 : 1, full = v3 ? 1 : 2;
+                if (!v3 && m == 0) return;  // unchanged
+                if (m == d32) {
+                    diff[last] = ic.decompress(dec, 0, 0);
+                    time[last] += static_cast<uint64_t>(static_cast<int64_t>(diff[last]));
+                    extreme[last] = 0;
+                } else if (m == full) {
+                    read_full(dec);
+                } else {
+                    last = (last + m - (v3 ? 1 : 2)) & 3;
+                    continue;
+                }
+                return;
+            }
+            const uint32_t m = dec.decode_symbol(multi);
+            if (m == 1) {
+                time[last] += static_cast<uint64_t>(static_cast<int64_t>(ic.decompress(dec, diff[last], 1)));
+                extreme[last] = 0;
+            } else if (m < 511) {
+                int32_t d;
+                const uint32_t ld = static_cast<uint32_t>(diff[last]);
+                if (m == 0) {
+                    d = ic.decompress(dec, 0, 7);
+                    bump(d);
+                } else if (m < 500) {
+                    d = ic.decompress(dec, static_cast<int32_t>(m * ld), m < 10 ? 2 : 3);
+                } else if (m == 500) {
+                    d = ic.decompress(dec, static_cast<int32_t>(500u * ld), 4);
+                    bump(d);
+                } else {
+                    const int32_t mm = 500 - static_cast<int32_t>(m);  // -1 .. -10
+                    if (mm > -10) {
+                        d = ic.decompress(dec, static_cast<int32_t>(static_cast<uint32_t>(mm) * ld), 5);
+                    } else {
+                        d = ic.decompress(dec, static_cast<int32_t>(static_cast<uint32_t>(-10) * ld), 6);
+                        bump(d);
+                    }
+                }
+                time[last] += static_cast<uint64_t>(static_cast<int64_t>(d));
+            } else if (!v3 && m == 511) {
+                return;  // unchanged
+            } else if (m == code_full) {
+                read_full(dec);
+            } else {
+                last = (last + m - code_full) & 3;
+                continue;
+            }
+            return;
+        }
+        throw Corrupt{"GPS time sequence switches without end"};
+    }
+    void bump(int32_t d) {
+        if (++extreme[last] > 3) {
+            diff[last] = d;
+            extreme[last] = 0;
+        }
+    }
+    void read_full(ArithDecoder& dec) {
+        next = (next + 1) & 3;
+        const int32_t high = ic.decompress(dec, static_cast<int32_t>(time[last] >> 32), 8);
+        time[next] = (static_cast<uint64_t>(static_cast<uint32_t>(high)) << 32) | dec.read_int();
+        last = next;
+        diff[last] = 0;
+        extreme[last] = 0;
+    }
+    bool v3;
+    uint32_t last = 0, next = 0;
+    std::array<uint64_t, 4> time{};
+    std::array<int32_t, 4> diff{};
+    std::array<int32_t, 4> extreme{};
+    SymbolModel multi, zero_diff;
+    IntegerDecompressor ic;
+};
+
+// RGB predictor shared by RGB12 v2 and RGB14/RGBNIR14 v3.
+struct RgbModels {
+    SymbolModel used{128};
+    std::array<SymbolModel, 6> diff{SymbolModel(256), SymbolModel(256), SymbolModel(256),
+                                    SymbolModel(256), SymbolModel(256), SymbolModel(256)};
+    void read(ArithDecoder& dec, const uint16_t* last, uint16_t* out) {
+        const uint32_t sym = dec.decode_symbol(used);
+        auto lo = [](uint16_t v) { return static_cast<int32_t>(v & 0xFF); };
+        auto hi = [](uint16_t v) { return static_cast<int32_t>(v >> 8); };
+        int32_t r_lo = lo(last[0]), r_hi = hi(last[0]);
+        if (sym & 1) r_lo = fold(static_cast<int32_t>(dec.decode_symbol(diff[0])) + lo(last[0]));
+        if (sym & 2) r_hi = fold(static_cast<int32_t>(dec.decode_symbol(diff[1])) + hi(last[0]));
+        out[0] = static_cast<uint16_t>(r_lo | (r_hi << 8));
+        if (sym & (1 << 6)) {
+            int32_t d = r_lo - lo(last[0]);
+            int32_t g_lo = lo(last[1]), b_lo = lo(last[2]);
+            if (sym & 4) g_lo = fold(static_cast<int32_t>(dec.decode_symbol(diff[2])) + clamp_u8(d + lo(last[1])));
+            if (sym & 16) {
+                const int32_t dd = (d + (g_lo - lo(last[1]))) / 2;
+                b_lo = fold(static_cast<int32_t>(dec.decode_symbol(diff[4])) + clamp_u8(dd + lo(last[2])));
+            }
+            d = r_hi - hi(last[0]);
+            int32_t g_hi = hi(last[1]), b_hi = hi(last[2]);
+            if (sym & 8) g_hi = fold(static_cast<int32_t>(dec.decode_symbol(diff[3])) + clamp_u8(d + hi(last[1])));
+            if (sym & 32) {
+                const int32_t dd = (d + (g_hi - hi(last[1]))) / 2;
+                b_hi = fold(static_cast<int32_t>(dec.decode_symbol(diff[5])) + clamp_u8(dd + hi(last[2])));
+            }
+            out[1] = static_cast<uint16_t>(g_lo | (g_hi << 8));
+            out[2] = static_cast<uint16_t>(b_lo | (b_hi << 8));
+        } else {
+            out[1] = out[2] = out[0];
+        }
+    }
+};
+
+// ============================================================ pointwise v2
+class ItemV2 {
+public:
+    virtual ~ItemV2() = default;
+    virtual void read(ArithDecoder& dec, uint8_t* item) = 0;
+};
+
+class Point10V2 final : public ItemV2 {
+public:
+    explicit Point10V2(const uint8_t* first) {
+        std::memcpy(last_, first, 20);
+        last_[12] = last_[13] = 0;  // intensity predicted from zero
+    }
+    void read(ArithDecoder& dec, uint8_t* item) override {
+        const uint32_t changed = dec.decode_symbol(changed_values_);
+        uint32_t r, n, m, l;
+        if (changed) {
+            if (changed & 32) last_[14] = static_cast<uint8_t>(dec.decode_symbol(bit_byte_[last_[14]].get(256)));
+            r = last_[14] & 7;
+            n = (last_[14] >> 3) & 7;
+            m = kReturnMap[n][r];
+            l = return_level(n, r, 7);
+            if (changed & 16) {
+                const auto v = static_cast<uint16_t>(ic_intensity_.decompress(dec, last_intensity_[m], m < 3 ? m : 3));
+                last_intensity_[m] = v;
+                store<uint16_t>(last_ + 12, v);
+            } else {
+                store<uint16_t>(last_ + 12, last_intensity_[m]);
+            }
+            if (changed & 8) last_[15] = static_cast<uint8_t>(dec.decode_symbol(classification_[last_[15]].get(256)));
+            if (changed & 4) {
+                const uint32_t sd = (last_[14] >> 6) & 1;
+                last_[16] = fold(static_cast<int32_t>(dec.decode_symbol(scan_angle_[sd])) + last_[16]);
+            }
+            if (changed & 2) last_[17] = static_cast<uint8_t>(dec.decode_symbol(user_data_[last_[17]].get(256)));
+            if (changed & 1)
+                store<uint16_t>(last_ + 18, static_cast<uint16_t>(ic_point_source_.decompress(dec, load<uint16_t>(last_ + 18))));
+        } else {
+            r = last_[14] & 7;
+            n = (last_[14] >> 3) & 7;
+            m = kReturnMap[n][r];
+            l = return_level(n, r, 7);
+            store<uint16_t>(last_ + 12, last_intensity_[m]);
+        }
+        const int32_t dx = ic_dx_.decompress(dec, median_x_[m].get(), n == 1);
+        store<uint32_t>(last_, load<uint32_t>(last_) + static_cast<uint32_t>(dx));
+        median_x_[m].add(dx);
+        uint32_t k = ic_dx_.k();
+        const int32_t dy = ic_dy_.decompress(dec, median_y_[m].get(), (n == 1) + (k < 20 ? (k & ~1u) : 20));
+        store<uint32_t>(last_ + 4, load<uint32_t>(last_ + 4) + static_cast<uint32_t>(dy));
+        median_y_[m].add(dy);
+        k = (ic_dx_.k() + ic_dy_.k()) / 2;
+        const int32_t z = ic_z_.decompress(dec, last_height_[l], (n == 1) + (k < 18 ? (k & ~1u) : 18));
+        store<int32_t>(last_ + 8, z);
+        last_height_[l] = z;
+        std::memcpy(item, last_, 20);
+    }
+
+private:
+    uint8_t last_[20];
+    std::array<uint16_t, 16> last_intensity_{};
+    std::array<Median5, 16> median_x_{}, median_y_{};
+    std::array<int32_t, 8> last_height_{};
+    SymbolModel changed_values_{64};
+    IntegerDecompressor ic_intensity_{16, 4};
+    std::array<SymbolModel, 2> scan_angle_{SymbolModel(256), SymbolModel(256)};
+    IntegerDecompressor ic_point_source_{16, 1};
+    std::array<LazyModel, 256> bit_byte_, classification_, user_data_;
+    IntegerDecompressor ic_dx_{32, 2}, ic_dy_{32, 22}, ic_z_{32, 20};
+};
+
+class GpsTime11V2 final : public ItemV2 {
+public:
+    explicit GpsTime11V2(const uint8_t* first) : state_(false) { state_.reset(load<uint64_t>(first)); }
+    void read(ArithDecoder& dec, uint8_t* item) override {
+        state_.read(dec);
+        store<uint64_t>(item, state_.time[state_.last]);
+    }
+
+private:
+    GpsTimeState state_;
+};
+
+class Rgb12V2 final : public ItemV2 {
+public:
+    explicit Rgb12V2(const uint8_t* first) { std::memcpy(last_, first, 6); }
+    void read(ArithDecoder& dec, uint8_t* item) override {
+        uint16_t out[3];
+        models_.read(dec, last_, out);
+        std::memcpy(last_, out, 6);
+        std::memcpy(item, out, 6);
+    }
+
+private:
+    uint16_t last_[3];
+    RgbModels models_;
+};
+
+class ByteV2 final : public ItemV2 {
+public:
+    ByteV2(const uint8_t* first, std::size_t n) : last_(first, first + n) {
+        for (std::size_t i = 0; i < n; ++i) models_.emplace_back(256);
+    }
+    void read(ArithDecoder& dec, uint8_t* item) override {
+        for (std::size_t i = 0; i < last_.size(); ++i) {
+            last_[i] = fold(static_cast<int32_t>(last_[i]) + static_cast<int32_t>(dec.decode_symbol(models_[i])));
+            item[i] = last_[i];
+        }
+    }
+
+private:
+    std::vector<uint8_t> last_;
+    std::vector<SymbolModel> models_;
+};
+
+std::size_t decode_pointwise(const LazInfo& info, int rl, const uint8_t* data, std::size_t size, uint64_t count, char* out_chars) {
+    if (count == 0) return 0;
+    if (size < static_cast<std::size_t>(rl)) throw Corrupt{"truncated chunk (shorter than one raw point)"};
+    auto* out = reinterpret_cast<uint8_t*>(out_chars);
+    std::memcpy(out, data, rl);
+    std::vector<std::unique_ptr<ItemV2>> items;
+    std::vector<std::size_t> offsets;
+    std::size_t off = 0;
+    for (const LazItem& it : info.items) {
+        const uint8_t* first = out + off;
+        switch (it.type) {
+            case 6: items.push_back(std::make_unique<Point10V2>(first)); break;
+            case 7: items.push_back(std::make_unique<GpsTime11V2>(first)); break;
+            case 8: items.push_back(std::make_unique<Rgb12V2>(first)); break;
+            default: items.push_back(std::make_unique<ByteV2>(first, it.size)); break;
+        }
+        offsets.push_back(off);
+        off += it.size;
+    }
+    ByteIn in(data + rl, size - rl);
+    ArithDecoder dec;
+    dec.init(&in);
+    for (uint64_t i = 1; i < count; ++i) {
+        uint8_t* rec = out + i * rl;
+        for (std::size_t k = 0; k < items.size(); ++k) items[k]->read(dec, rec + offsets[k]);
+    }
+    return rl + in.pos();
+}
+
+// ============================================================ layered v3 / v4
+// Item version 4 is version 3 with the two channel-context rules fixed (the
+// channel is always handed on; a switch always predicts from the new channel).
+// One arithmetic-coded layer of a chunk.
+struct Layer {
+    ByteIn in;
+    ArithDecoder dec;
+    bool present = false;  // non-empty: the field changes within the chunk
+    void open(const uint8_t* p, std::size_t n) {
+        in = ByteIn(p, n);
+        present = n > 0;
+        if (present) dec.init(&in);
+    }
+};
+
+// Point record of formats 6-10 (first 30 bytes), unpacked.
+struct Point14 {
+    int32_t x = 0, y = 0, z = 0;
+    uint16_t intensity = 0;
+    uint32_t return_number = 0, number_of_returns = 0;
+    uint32_t class_flags = 0, channel = 0, scan_dir = 0, edge = 0;
+    uint32_t classification = 0, user_data = 0;
+    int16_t scan_angle = 0;
+    uint16_t point_source = 0;
+    uint64_t gps_time = 0;
+    bool gps_time_change = false;
+
+    static Point14 unpack(const uint8_t* p) {
+        Point14 q;
+        q.x = load<int32_t>(p), q.y = load<int32_t>(p + 4), q.z = load<int32_t>(p + 8);
+        q.intensity = load<uint16_t>(p + 12);
+        q.return_number = p[14] & 15, q.number_of_returns = p[14] >> 4;
+        q.class_flags = p[15] & 15, q.channel = (p[15] >> 4) & 3, q.scan_dir = (p[15] >> 6) & 1, q.edge = p[15] >> 7;
+        q.classification = p[16], q.user_data = p[17];
+        q.scan_angle = load<int16_t>(p + 18);
+        q.point_source = load<uint16_t>(p + 20);
+        q.gps_time = load<uint64_t>(p + 22);
+        return q;
+    }
+    void pack(uint8_t* p) const {
+        store<int32_t>(p, x), store<int32_t>(p + 4, y), store<int32_t>(p + 8, z);
+        store<uint16_t>(p + 12, intensity);
+        p[14] = static_cast<uint8_t>(return_number | (number_of_returns << 4));
+        p[15] = static_cast<uint8_t>(class_flags | (channel << 4) | (scan_dir << 6) | (edge << 7));
+        p[16] = static_cast<uint8_t>(classification);
+        p[17] = static_cast<uint8_t>(user_data);
+        store<int16_t>(p + 18, scan_angle);
+        store<uint16_t>(p + 20, point_source);
+        store<uint64_t>(p + 22, gps_time);
+    }
+};
+
+struct Point14Context {
+    Point14 last;
+    std::array<uint16_t, 8> last_intensity{};
+    std::array<Median5, 12> median_x{}, median_y{};
+    std::array<int32_t, 8> last_z{};
+    std::array<SymbolModel, 8> changed_values{SymbolModel(128), SymbolModel(128), SymbolModel(128), SymbolModel(128),
+                                              SymbolModel(128), SymbolModel(128), SymbolModel(128), SymbolModel(128)};
+    SymbolModel scanner_channel{3};
+    std::array<LazyModel, 16> number_of_returns, return_number;
+    SymbolModel return_number_gps_same{13};
+    IntegerDecompressor ic_dx{32, 2}, ic_dy{32, 22}, ic_z{32, 20};
+    std::array<LazyModel, 64> classification, flags, user_data;
+    IntegerDecompressor ic_intensity{16, 4}, ic_scan_angle{16, 2}, ic_point_source{16, 1};
+    GpsTimeState gps{true};
+
+    explicit Point14Context(const Point14& seed) {
+        last = seed;
+        last.gps_time_change = false;
+        last_z.fill(seed.z);
+        last_intensity.fill(seed.intensity);
+        gps.reset(seed.gps_time);
+    }
+};
+
+class Point14V3 {
+public:
+    static constexpr int kLayers = 9;  // xy+returns, z, class, flags, intensity, scan angle, user data, source, gps
+    Point14V3(const uint8_t* first, std::array<Layer, kLayers>& layers, bool v4) : layers_(layers), v4_(v4) {
+        const Point14 p = Point14::unpack(first);
+        current_ = p.channel;
+        item_context_ = current_;
+        contexts_[current_] = std::make_unique<Point14Context>(p);
+    }
+    /// The context the other items of this point use: the scanner channel on
+    /// the first point and on points where it changes, 0 otherwise (LASzip v3
+    /// and laz-perf pass it only on change; the format depends on that).
+    uint32_t context() const { return v4_ ? current_ : item_context_; }  // v4 always passes the channel
+    void read(uint8_t* item) {
+        ArithDecoder& xy = layers_[0].dec;
+        item_context_ = 0;
+        Point14Context* c = contexts_[current_].get();
+        {
+            const Point14& l = c->last;
+            const uint32_t lpr = (l.return_number == 1 ? 1u : 0u) + (l.return_number >= l.number_of_returns ? 2u : 0u) +
+                                 (l.gps_time_change ? 4u : 0u);
+            const uint32_t changed = xy.decode_symbol(c->changed_values[lpr]);
+            changed_ = changed;
+            if (changed & (1 << 6)) {
+                const uint32_t diff = xy.decode_symbol(c->scanner_channel);
+                const uint32_t channel = (current_ + diff + 1) % 4;
+                if (!contexts_[channel]) contexts_[channel] = std::make_unique<Point14Context>(c->last);
+                current_ = channel;
+                item_context_ = channel;
+                c = contexts_[current_].get();
+                c->last.channel = channel;
+            }
+        }
+        Point14& last = c->last;
+        const uint32_t changed = changed_;
+        const bool source_change = changed & (1 << 5);
+        const bool gps_change = changed & (1 << 4);
+        const bool angle_change = changed & (1 << 3);
+        const uint32_t last_n = last.number_of_returns, last_r = last.return_number;
+        uint32_t n = last_n;
+        if (changed & (1 << 2)) {
+            n = xy.decode_symbol(c->number_of_returns[last_n].get(16));
+            last.number_of_returns = n;
+        }
+        uint32_t r;
+        switch (changed & 3) {
+            case 0: r = last_r; break;
+            case 1: r = (last_r + 1) % 16; break;
+            case 2: r = (last_r + 15) % 16; break;
+            default:
+                if (gps_change) r = xy.decode_symbol(c->return_number[last_r].get(16));
+                else r = (last_r + xy.decode_symbol(c->return_number_gps_same) + 2) % 16;
+                break;
+        }
+        last.return_number = r;
+        const uint32_t m = kReturnMap6[n][r];
+        const uint32_t l = return_level(n, r, 7);
+        const uint32_t cpr = (r == 1 ? 2u : 0u) + (r >= n ? 1u : 0u);
+        const uint32_t mi = (m << 1) | (gps_change ? 1u : 0u);
+        const int32_t dx = c->ic_dx.decompress(xy, c->median_x[mi].get(), n == 1);
+        last.x = static_cast<int32_t>(static_cast<uint32_t>(last.x) + static_cast<uint32_t>(dx));
+        c->median_x[mi].add(dx);
+        uint32_t k = c->ic_dx.k();
+        const int32_t dy = c->ic_dy.decompress(xy, c->median_y[mi].get(), (n == 1) + (k < 20 ? (k & ~1u) : 20));
+        last.y = static_cast<int32_t>(static_cast<uint32_t>(last.y) + static_cast<uint32_t>(dy));
+        c->median_y[mi].add(dy);
+        if (layers_[1].present) {
+            k = (c->ic_dx.k() + c->ic_dy.k()) / 2;
+            last.z = c->ic_z.decompress(layers_[1].dec, c->last_z[l], (n == 1) + (k < 18 ? (k & ~1u) : 18));
+            c->last_z[l] = last.z;
+        }
+        if (layers_[2].present) {
+            const uint32_t ccc = ((last.classification & 0x1F) << 1) + (cpr == 3 ? 1u : 0u);
+            last.classification = layers_[2].dec.decode_symbol(c->classification[ccc].get(256));
+        }
+        if (layers_[3].present) {
+            const uint32_t lf = (last.edge << 5) | (last.scan_dir << 4) | last.class_flags;
+            const uint32_t f = layers_[3].dec.decode_symbol(c->flags[lf].get(64));
+            last.edge = (f >> 5) & 1;
+            last.scan_dir = (f >> 4) & 1;
+            last.class_flags = f & 15;
+        }
+        if (layers_[4].present) {
+            const uint32_t ii = (cpr << 1) | (gps_change ? 1u : 0u);
+            const auto v = static_cast<uint16_t>(c->ic_intensity.decompress(layers_[4].dec, c->last_intensity[ii], cpr));
+            c->last_intensity[ii] = v;
+            last.intensity = v;
+        }
+        if (layers_[5].present && angle_change)
+            last.scan_angle = static_cast<int16_t>(c->ic_scan_angle.decompress(layers_[5].dec, last.scan_angle, gps_change ? 1 : 0));
+        if (layers_[6].present) last.user_data = layers_[6].dec.decode_symbol(c->user_data[last.user_data / 4].get(256));
+        if (layers_[7].present && source_change)
+            last.point_source = static_cast<uint16_t>(c->ic_point_source.decompress(layers_[7].dec, last.point_source));
+        if (layers_[8].present && gps_change) {
+            c->gps.read(layers_[8].dec);
+            last.gps_time = c->gps.time[c->gps.last];
+        }
+        last.pack(item);
+        last.gps_time_change = gps_change;
+    }
+
+private:
+    std::array<Layer, kLayers>& layers_;
+    bool v4_;
+    std::array<std::unique_ptr<Point14Context>, 4> contexts_;
+    uint32_t current_ = 0;
+    uint32_t item_context_ = 0;
+    uint32_t changed_ = 0;
+};
+
+// RGB14 / RGBNIR14 v3: per scanner channel contexts, RGB and NIR layers.
+class Rgb14V3 {
+public:
+    Rgb14V3(const uint8_t* first, bool nir, uint32_t context, Layer& rgb, Layer* nir_layer, bool v4)
+        : nir_(nir), v4_(v4), rgb_(rgb), nir_layer_(nir_layer), current_(context) {
+        contexts_[context] = std::make_unique<Ctx>(first, nir ? 8 : 6);
+    }
+    // As in LASzip v3 (and laz-perf): on a switch to a channel seen before in
+    // this chunk, the models are the new channel's but the prediction (and its
+    // update) still uses the previous channel's last value. Part of the format.
+    void read(uint8_t* item, uint32_t context) {
+        uint16_t* last = contexts_[current_]->last;
+        if (context != current_) {
+            current_ = context;
+            if (!contexts_[context]) {
+                contexts_[context] = std::make_unique<Ctx>(reinterpret_cast<const uint8_t*>(last), 8);
+                last = contexts_[context]->last;
+            } else if (v4_) {
+                last = contexts_[context]->last;  // v4 fixed the stale prediction
+            }
+        }
+        Ctx& c = *contexts_[current_];
+        uint16_t out[4];
+        if (rgb_.present) {
+            c.rgb.read(rgb_.dec, last, out);
+            std::memcpy(last, out, 6);
+        }
+        std::memcpy(item, last, 6);
+        if (nir_) {
+            if (nir_layer_->present) {
+                ArithDecoder& d = nir_layer_->dec;
+                const uint32_t sym = d.decode_symbol(c.nir_used);
+                int32_t lo = last[3] & 0xFF, hi = last[3] >> 8;
+                if (sym & 1) lo = fold(static_cast<int32_t>(d.decode_symbol(c.nir_diff[0])) + lo);
+                if (sym & 2) hi = fold(static_cast<int32_t>(d.decode_symbol(c.nir_diff[1])) + hi);
+                last[3] = static_cast<uint16_t>(lo | (hi << 8));
+            }
+            std::memcpy(item + 6, &last[3], 2);
+        }
+    }
+
+private:
+    struct Ctx {
+        Ctx(const uint8_t* seed, std::size_t n) { std::memcpy(last, seed, n); }
+        uint16_t last[4] = {0, 0, 0, 0};
+        RgbModels rgb;
+        SymbolModel nir_used{4};
+        std::array<SymbolModel, 2> nir_diff{SymbolModel(256), SymbolModel(256)};
+    };
+    bool nir_, v4_;
+    Layer& rgb_;
+    Layer* nir_layer_;
+    uint32_t current_;
+    std::array<std::unique_ptr<Ctx>, 4> contexts_;
+};
+
+// BYTE14 v3: one layer per extra byte.
+class Byte14V3 {
+public:
+    Byte14V3(const uint8_t* first, std::size_t n, uint32_t context, Layer* layers, bool v4)
+        : n_(n), v4_(v4), layers_(layers), current_(context) {
+        contexts_[context] = std::make_unique<Ctx>(first, n);
+    }
+    // Same channel-switch rule as Rgb14V3.
+    void read(uint8_t* item, uint32_t context) {
+        uint8_t* last = contexts_[current_]->last.data();
+        if (context != current_) {
+            current_ = context;
+            if (!contexts_[context]) {
+                contexts_[context] = std::make_unique<Ctx>(last, n_);
+                last = contexts_[context]->last.data();
+            } else if (v4_) {
+                last = contexts_[context]->last.data();
+            }
+        }
+        Ctx& c = *contexts_[current_];
+        for (std::size_t i = 0; i < n_; ++i) {
+            if (layers_[i].present)
+                last[i] = fold(static_cast<int32_t>(last[i]) + static_cast<int32_t>(layers_[i].dec.decode_symbol(c.models[i])));
+            item[i] = last[i];
+        }
+    }
+
+private:
+    struct Ctx {
+        Ctx(const uint8_t* seed, std::size_t n) : last(seed, seed + n) {
+            for (std::size_t i = 0; i < n; ++i) models.emplace_back(256);
+        }
+        std::vector<uint8_t> last;
+        std::vector<SymbolModel> models;
+    };
+    std::size_t n_;
+    bool v4_;
+    Layer* layers_;
+    uint32_t current_;
+    std::array<std::unique_ptr<Ctx>, 4> contexts_;
+};
+
+std::size_t decode_layered(const LazInfo& info, int rl, const uint8_t* data, std::size_t size, uint64_t count, char* out_chars,
+                           bool point_fields_only) {
+    if (count == 0) return 0;
+    auto* out = reinterpret_cast<uint8_t*>(out_chars);
+    std::size_t pos = 0;
+    auto need = [&](std::size_t n, const char* what) {
+        if (n > size - pos) throw Corrupt{what};
+    };
+    need(rl, "truncated chunk (shorter than one raw point)");
+    std::memcpy(out, data, rl);
+    pos += rl;
+    need(4, "truncated chunk (no point count)");
+    const uint32_t stored_count = load<uint32_t>(data + pos);
+    pos += 4;
+    if (stored_count != count) throw Corrupt{"chunk point count disagrees with the chunk table"};
+    // Layer sizes, in item order.
+    std::size_t n_layers = 0;
+    for (const LazItem& it : info.items) n_layers += it.type == 10 ? 9 : it.type == 11 ? 1 : it.type == 12 ? 2 : it.size;
+    need(4 * n_layers, "truncated chunk (layer sizes)");
+    std::vector<uint32_t> sizes(n_layers);
+    for (std::size_t i = 0; i < n_layers; ++i, pos += 4) sizes[i] = load<uint32_t>(data + pos);
+    std::vector<Layer> layers(n_layers);
+    std::array<Layer, Point14V3::kLayers> point_layers;
+    std::size_t li = 0;
+    std::vector<Layer*> item_layers;  // first layer of each item
+    for (const LazItem& it : info.items) {
+        const std::size_t nl = it.type == 10 ? 9 : it.type == 11 ? 1 : it.type == 12 ? 2 : it.size;
+        for (std::size_t j = 0; j < nl; ++j, ++li) {
+            need(sizes[li], "truncated chunk (layer runs past the chunk)");
+            Layer& layer = it.type == 10 ? point_layers[j] : layers[li];
+            // Selective decoding: flags, scan angle, user data, point source, NIR
+            // and extra bytes are not needed for a PointCloud; their layers are
+            // independent of the others and are skipped (fields keep the chunk's
+            // first value).
+            const bool skip = point_fields_only && ((it.type == 10 && (j == 3 || j == 5 || j == 6 || j == 7)) ||
+                                                    (it.type == 12 && j == 1) || it.type == 14);
+            layer.open(data + pos, skip ? 0 : sizes[li]);
+            pos += sizes[li];
+        }
+        item_layers.push_back(it.type == 10 ? point_layers.data() : &layers[li - nl]);
+    }
+    // Point14 must be first (checked on open); it hands its scanner channel to the others.
+    const bool v4 = info.items[0].version == 4;  // all items share one version (checked on open)
+    Point14V3 point(out, point_layers, v4);
+    std::vector<std::unique_ptr<Rgb14V3>> rgbs;
+    std::vector<std::unique_ptr<Byte14V3>> bytes;
+    struct Slot {
+        int kind;  // 0 point, 1 rgb, 2 byte
+        std::size_t index, offset;
+    };
+    std::vector<Slot> slots;
+    std::size_t off = 0;
+    for (std::size_t i = 0; i < info.items.size(); ++i) {
+        const LazItem& it = info.items[i];
+        if (it.type == 10) {
+            slots.push_back({0, 0, off});
+        } else if (it.type == 11 || it.type == 12) {
+            rgbs.push_back(std::make_unique<Rgb14V3>(out + off, it.type == 12, point.context(), item_layers[i][0],
+                                                     it.type == 12 ? &item_layers[i][1] : nullptr, v4));
+            slots.push_back({1, rgbs.size() - 1, off});
+        } else {
+            bytes.push_back(std::make_unique<Byte14V3>(out + off, it.size, point.context(), item_layers[i], v4));
+            slots.push_back({2, bytes.size() - 1, off});
+        }
+        off += it.size;
+    }
+    for (uint64_t i = 1; i < count; ++i) {
+        uint8_t* rec = out + i * rl;
+        for (const Slot& s : slots) {
+            if (s.kind == 0) point.read(rec + s.offset);
+            else if (s.kind == 1) rgbs[s.index]->read(rec + s.offset, point.context());
+            else bytes[s.index]->read(rec + s.offset, point.context());
+        }
+    }
+    return pos;
+}
+
+const char* item_name(uint16_t type) {
+    switch (type) {
+        case 0: return "BYTE";
+        case 1: return "SHORT";
+        case 2: return "INT";
+        case 3: return "LONG";
+        case 4: return "FLOAT";
+        case 5: return "DOUBLE";
+        case 6: return "POINT10";
+        case 7: return "GPSTIME11";
+        case 8: return "RGB12";
+        case 9: return "WAVEPACKET13";
+        case 10: return "POINT14";
+        case 11: return "RGB14";
+        case 12: return "RGBNIR14";
+        case 13: return "WAVEPACKET14";
+        case 14: return "BYTE14";
+    }
+    return "UNKNOWN";
+}
+
+}  // namespace
+
+std::string to_string(const LazItem& item) {
+    std::string s = item_name(item.type);
+    if (item.type == 0 || item.type == 14) s += "[" + std::to_string(item.size) + "]";
+    return s + " v" + std::to_string(item.version);
+}
+
+std::string LazInfo::compressor_name() const {
+    switch (compressor) {
+        case 0: return "0 (none)";
+        case 1: return "1 (pointwise)";
+        case 2: return "2 (pointwise chunked)";
+        case 3: return "3 (layered chunked)";
+    }
+    return std::to_string(compressor) + " (unknown)";
+}
+
+LazInfo parse_laszip_vlr(const std::vector<char>& payload, const std::string& path) {
+    if (payload.size() < 34) throw Error(path, "LASzip VLR is too short (" + std::to_string(payload.size()) + " bytes)");
+    const auto* p = reinterpret_cast<const uint8_t*>(payload.data());
+    LazInfo info;
+    info.compressor = load<uint16_t>(p);
+    info.coder = load<uint16_t>(p + 2);
+    info.version_major = p[4];
+    info.version_minor = p[5];
+    info.version_revision = load<uint16_t>(p + 6);
+    info.options = load<uint32_t>(p + 8);
+    info.chunk_size = load<uint32_t>(p + 12);
+    const auto n_items = load<uint16_t>(p + 32);
+    if (payload.size() < 34 + 6u * n_items)
+        throw Error(path, "LASzip VLR lists " + std::to_string(n_items) + " items but holds only " + std::to_string(payload.size()) + " bytes");
+    for (uint16_t i = 0; i < n_items; ++i) {
+        const uint8_t* q = p + 34 + 6 * i;
+        info.items.push_back({load<uint16_t>(q), load<uint16_t>(q + 2), load<uint16_t>(q + 4)});
+    }
+    return info;
+}
+
+void check_laz_supported(const LazInfo& info, int point_format, int record_length, const std::string& path) {
+    auto items = [&] {
+        std::string s;
+        for (const LazItem& it : info.items) s += (s.empty() ? "" : "+") + to_string(it);
+        return s;
+    };
+    if (info.coder != 0) throw Error(path, "LAZ coder " + std::to_string(info.coder) + " is unknown (only 0 = arithmetic exists)");
+    if (info.compressor == 1)
+        throw Error(path, "LAZ compressor 1 (pointwise, not chunked, LASzip 1.x items " + items() +
+                              ") is not supported; re-compress with a current LASzip/laz-perf or convert to LAS");
+    if (info.compressor != 2 && info.compressor != 3)
+        throw Error(path, "LAZ compressor " + info.compressor_name() + " is not supported (only 2 = pointwise chunked and 3 = layered chunked)");
+    if (info.chunk_size == 0) throw Error(path, "LAZ chunk size 0 is invalid");
+    if (info.items.empty()) throw Error(path, "LASzip VLR lists no items");
+    int total = 0;
+    for (std::size_t i = 0; i < info.items.size(); ++i) {
+        const LazItem& it = info.items[i];
+        total += it.size;
+        bool ok;
+        if (info.compressor == 2) {
+            ok = it.version == 2 && ((it.type == 6 && it.size == 20 && i == 0) || (it.type == 7 && it.size == 8) ||
+                                     (it.type == 8 && it.size == 6) || (it.type == 0 && it.size > 0));
+        } else {
+            ok = (it.version == 3 || it.version == 4) && it.version == info.items[0].version &&
+                 ((it.type == 10 && it.size == 30 && i == 0) || (it.type == 11 && it.size == 6) || (it.type == 12 && it.size == 8) ||
+                  (it.type == 14 && it.size > 0));
+        }
+        if (!ok)
+            throw Error(path, "LAZ item " + to_string(it) + " (" + std::to_string(it.size) + " bytes, position " + std::to_string(i) +
+                                  ") is not supported with compressor " + info.compressor_name() + " (items: " + items() + ")");
+    }
+    if (total != record_length)
+        throw Error(path, "LAZ items " + items() + " cover " + std::to_string(total) + " bytes but the point record is " +
+                              std::to_string(record_length));
+    const bool legacy = point_format <= 5;
+    if ((info.compressor == 2) != legacy || point_format == 4 || point_format == 5 || point_format > 8)
+        throw Error(path, "LAZ compressor " + info.compressor_name() + " with point format " + std::to_string(point_format) +
+                              " is not supported");
+}
+
+std::size_t decode_laz_chunk(const LazInfo& info, int record_length, const uint8_t* data, std::size_t size, uint64_t count,
+                             char* out, const std::string& path, std::size_t chunk_index, bool point_fields_only) {
+    try {
+        if (info.compressor == 3) return decode_layered(info, record_length, data, size, count, out, point_fields_only);
+        return decode_pointwise(info, record_length, data, size, count, out);
+    } catch (const Corrupt& c) {
+        throw Error(path, "chunk " + std::to_string(chunk_index) + ": " + c.what);
+    } catch (const std::bad_alloc&) {
+        throw Error(path, "chunk " + std::to_string(chunk_index) + ": out of memory while decoding");
+    }
+}
+
+// ------------------------------------------------------------ streaming
+
+LazPointSource::LazPointSource(const std::string& path, const LazInfo& info, uint64_t offset_to_points, uint64_t point_count,
+                               int record_length)
+    : path_(path), info_(info), record_length_(record_length), point_count_(point_count) {
+    in_.open(path, std::ios::binary);
+    if (!in_) throw Error(path, "cannot open for reading");
+    file_size_ = static_cast<uint64_t>(std::filesystem::file_size(path));
+    const uint64_t chunks_start = offset_to_points + 8;
+    if (point_count == 0) return;
+    if (chunks_start > file_size_) throw Error(path, "LAZ file ends before its first chunk (truncated)");
+    auto read_at = [&](uint64_t pos, void* dst, std::size_t n) {
+        in_.clear();
+        in_.seekg(static_cast<std::streamoff>(pos));
+        in_.read(static_cast<char*>(dst), static_cast<std::streamsize>(n));
+        return static_cast<std::size_t>(in_.gcount()) == n;
+    };
+    int64_t table_pos = 0;
+    read_at(offset_to_points, &table_pos, 8);
+    if (table_pos == -1 && file_size_ >= 8) read_at(file_size_ - 8, &table_pos, 8);
+    const bool table_plausible = table_pos > static_cast<int64_t>(chunks_start) && static_cast<uint64_t>(table_pos) + 8 <= file_size_;
+    const uint64_t expected_fixed = info.variable_chunks() ? 0 : (point_count + info.chunk_size - 1) / info.chunk_size;
+    if (!table_plausible) {
+        if (info.variable_chunks())
+            throw Error(path, "LAZ chunk table is missing or its offset " + std::to_string(table_pos) +
+                                  " lies outside the file (variable-size chunks cannot be read without it)");
+        // Fixed chunks without a table: read them one after the other.
+        for (uint64_t c = 0; c < expected_fixed; ++c) {
+            const uint64_t first = c * info.chunk_size;
+            chunks_.push_back({0, 0, first, std::min<uint64_t>(info.chunk_size, point_count - first)});
+        }
+        sequential_offset_ = chunks_start;
+    } else {
+        uint32_t head[2] = {0, 0};
+        if (!read_at(static_cast<uint64_t>(table_pos), head, 8)) throw Error(path, "LAZ chunk table is truncated");
+        if (head[0] != 0) throw Error(path, "LAZ chunk table version " + std::to_string(head[0]) + " is unknown (expected 0)");
+        const uint32_t n = head[1];
+        const uint64_t span = static_cast<uint64_t>(table_pos) - chunks_start;
+        if (n == 0 || n > span || (!info.variable_chunks() && n != expected_fixed) || (info.variable_chunks() && n > point_count))
+            throw Error(path, "LAZ chunk table lists " + std::to_string(n) + " chunks, which cannot be right for " +
+                                  std::to_string(point_count) + " points in " + std::to_string(span) + " bytes");
+        const uint64_t avail = file_size_ - (static_cast<uint64_t>(table_pos) + 8);
+        std::vector<uint8_t> table(static_cast<std::size_t>(std::min<uint64_t>(avail, 16ull * n + 64)));
+        read_at(static_cast<uint64_t>(table_pos) + 8, table.data(), table.size());
+        try {
+            ByteIn bin(table.data(), table.size());
+            ArithDecoder dec;
+            dec.init(&bin);
+            IntegerDecompressor ic(32, 2);
+            uint64_t offset = chunks_start, first = 0;
+            uint32_t last_count = 0, last_bytes = 0;
+            for (uint32_t i = 0; i < n; ++i) {
+                uint64_t cnt;
+                if (info.variable_chunks()) {
+                    last_count = static_cast<uint32_t>(ic.decompress(dec, static_cast<int32_t>(last_count), 0));
+                    cnt = last_count;
+                } else {
+                    cnt = std::min<uint64_t>(info.chunk_size, point_count - first);
+                }
+                last_bytes = static_cast<uint32_t>(ic.decompress(dec, static_cast<int32_t>(last_bytes), 1));
+                if (last_bytes == 0 || offset + last_bytes > static_cast<uint64_t>(table_pos) || cnt == 0 || first + cnt > point_count)
+                    throw Error(path, "LAZ chunk table entry " + std::to_string(i) + " (" + std::to_string(cnt) + " points, " +
+                                          std::to_string(last_bytes) + " bytes at " + std::to_string(offset) +
+                                          ") runs past the point data or the point count (corrupt chunk table)");
+                chunks_.push_back({offset, last_bytes, first, cnt});
+                offset += last_bytes;
+                first += cnt;
+            }
+            if (first != point_count)
+                throw Error(path, "LAZ chunk table holds " + std::to_string(first) + " points but the header says " +
+                                      std::to_string(point_count) + " (corrupt chunk table)");
+        } catch (const Corrupt&) {
+            throw Error(path, "LAZ chunk table is corrupt (its arithmetic-coded data runs off its end)");
+        }
+        has_table_ = true;
+    }
+    std::vector<bool> all(chunks_.size(), true);
+    select_chunks(all);
+}
+
+LazPointSource::~LazPointSource() = default;
+
+void LazPointSource::select_chunks(const std::vector<bool>& keep) {
+    order_.clear();
+    selected_points_ = 0;
+    for (std::size_t i = 0; i < chunks_.size() && i < keep.size(); ++i)
+        if (keep[i]) {
+            order_.push_back(i);
+            selected_points_ += chunks_[i].point_count;
+        }
+    if (!has_table_ && order_.size() != chunks_.size())
+        throw Error(path_, "LAZ file has no chunk table: chunks cannot be skipped");
+    next_ = 0;
+    decoded_.clear();
+    batch_index_ = batch_pos_ = 0;
+}
+
+void LazPointSource::fill() {
+    batch_index_ = batch_pos_ = 0;
+    if (next_ >= order_.size() || !has_table_) decoded_.clear();
+    if (next_ >= order_.size()) return;
+    const std::size_t rl = static_cast<std::size_t>(record_length_);
+    if (!has_table_) {
+        // Sequential: the end of one chunk is the start of the next.
+        const LazChunk& c = chunks_[order_[next_]];
+        const uint64_t avail = file_size_ - std::min(file_size_, sequential_offset_);
+        const uint64_t want = std::min<uint64_t>(avail, c.point_count * rl * 2 + 65536);
+        std::vector<uint8_t> raw(static_cast<std::size_t>(want));
+        in_.clear();
+        in_.seekg(static_cast<std::streamoff>(sequential_offset_));
+        in_.read(reinterpret_cast<char*>(raw.data()), static_cast<std::streamsize>(raw.size()));
+        std::vector<char> out(static_cast<std::size_t>(c.point_count) * rl);
+        const std::size_t used = decode_laz_chunk(info_, record_length_, raw.data(), raw.size(), c.point_count, out.data(), path_, order_[next_],
+                                              point_fields_only_);
+        sequential_offset_ += used;
+        decoded_.push_back(std::move(out));
+        ++next_;
+        return;
+    }
+    // A batch of chunks: read sequentially, decode in parallel, hand out in order.
+    const std::size_t threads = static_cast<std::size_t>(std::max(1, tbb::this_task_arena::max_concurrency()));
+    std::size_t batch = std::max<std::size_t>(2, 2 * threads);
+    uint64_t budget = 0;
+    std::size_t end = next_;
+    while (end < order_.size() && end - next_ < batch) {
+        budget += chunks_[order_[end]].point_count * rl;
+        ++end;
+        if (budget > (256ull << 20)) break;  // keep a batch's memory bounded
+    }
+    // Buffers keep their capacity from batch to batch (no page faults per chunk).
+    std::vector<std::vector<uint8_t>>& raw = raw_;
+    raw.resize(std::max(raw.size(), end - next_));
+    decoded_.resize(end - next_);
+    for (std::size_t i = next_; i < end; ++i) {
+        const LazChunk& c = chunks_[order_[i]];
+        raw[i - next_].resize(static_cast<std::size_t>(c.bytes));
+        in_.clear();
+        in_.seekg(static_cast<std::streamoff>(c.offset));
+        in_.read(reinterpret_cast<char*>(raw[i - next_].data()), static_cast<std::streamsize>(c.bytes));
+        if (static_cast<uint64_t>(in_.gcount()) != c.bytes)
+            throw Error(path_, "chunk " + std::to_string(order_[i]) + ": truncated (the file ends inside it)");
+        decoded_[i - next_].resize(static_cast<std::size_t>(c.point_count) * rl);
+    }
+    const std::size_t base = next_;
+    tbb::parallel_for(std::size_t(0), end - next_, [&](std::size_t k) {
+        const LazChunk& c = chunks_[order_[base + k]];
+        decode_laz_chunk(info_, record_length_, raw[k].data(), raw[k].size(), c.point_count, decoded_[k].data(), path_, order_[base + k],
+                         point_fields_only_);
+    });
+    next_ = end;
+}
+
+std::size_t LazPointSource::read(char* out, std::size_t max_points) {
+    const std::size_t rl = static_cast<std::size_t>(record_length_);
+    std::size_t done = 0;
+    while (done < max_points) {
+        if (batch_index_ >= decoded_.size()) {
+            fill();
+            if (decoded_.empty()) break;
+        }
+        const std::vector<char>& buf = decoded_[batch_index_];
+        const std::size_t have = buf.size() / rl - batch_pos_;
+        const std::size_t take = std::min(have, max_points - done);
+        std::memcpy(out + done * rl, buf.data() + batch_pos_ * rl, take * rl);
+        done += take;
+        batch_pos_ += take;
+        if (batch_pos_ * rl >= buf.size()) {
+            ++batch_index_;
+            batch_pos_ = 0;
+        }
+    }
+    return done;
+}
+
+}  // namespace cityforge

@@ -1,0 +1,451 @@
+// LAZ / COPC decoding against the corpus oracle (laz-perf's decode of real
+// files from LASzip, laz-perf, PDAL and IGN writers), `cloud translate`,
+// window reads and corrupt input.
+#include <catch2/catch.hpp>
+#include <cstring>
+#include <fstream>
+#include <nlohmann/json.hpp>
+#include <random>
+#include <tbb/global_control.h>
+
+#include "cloud/cloud_reader.hpp"
+#include "cloud/cloud_translate.hpp"
+#include "cloud/copc.hpp"
+#include "cloud/las.hpp"
+#include "core/error.hpp"
+#include "core/sha256.hpp"
+#include "test_support.hpp"
+
+using namespace cityforge;
+using cityforge::test::ScratchDir;
+using cityforge::test::shared_data;
+using cityforge::test::slurp;
+
+namespace {
+
+nlohmann::json oracle() {
+    std::ifstream f(shared_data("laz_corpus/oracle.json"));
+    return nlohmann::json::parse(f);
+}
+std::string corpus(const std::string& name) { return shared_data("laz_corpus/" + name); }
+
+// SHA-256 of every point record `reader` hands out.
+std::string records_sha(LasReader& reader, uint64_t* count = nullptr) {
+    Sha256 sha;
+    std::vector<char> rec;
+    uint64_t n = 0;
+    while (const std::size_t k = reader.read_records(rec, 100000)) {
+        sha.update(rec.data(), rec.size());
+        n += k;
+    }
+    if (count) *count = n;
+    return sha.hex();
+}
+
+// Reads every point; returns the Error message, or "" when it decoded.
+std::string decode_all(const std::string& path) {
+    try {
+        LasReader reader(path);
+        records_sha(reader);
+        return "";
+    } catch (const Error& e) {
+        return e.what();
+    }
+}
+
+void write_file(const std::string& path, const std::string& bytes) { std::ofstream(path, std::ios::binary) << bytes; }
+
+}  // namespace
+
+TEST_CASE("Sha256 matches the FIPS 180-4 test vectors", "[laz]") {
+    Sha256 empty;
+    CHECK(empty.hex() == "e3b0c44298fc1c149afbf4c8996fb92427ae41e4649b934ca495991b7852b855");
+    Sha256 abc;
+    abc.update("abc", 3);
+    CHECK(abc.hex() == "ba7816bf8f01cfea414140de5dae2223b00361a396177a9cb410ff61f20015ad");
+    Sha256 split;  // two blocks, fed in uneven pieces
+    const std::string msg = "abcdbcdecdefdefgefghfghighijhijkijkljklmklmnlmnomnopnopq";
+    split.update(msg.data(), 5);
+    split.update(msg.data() + 5, msg.size() - 5);
+    CHECK(split.hex() == "248d6a61d20638b8e5c026930c3e6039a33ce45964ff2167f6ecedd419db06c1");
+}
+
+TEST_CASE("cloud translate of every corpus LAZ gives laz-perf's point records byte for byte", "[laz][corpus]") {
+    ScratchDir dir("laz_oracle");
+    int checked = 0;
+    const nlohmann::json o_json = oracle();
+    for (const auto& entry : o_json["files"]) {
+        const std::string name = entry["file"];
+        if (!entry.value("decoded", false)) continue;
+        INFO(name);
+        CloudTranslateOptions o;
+        o.input = corpus(name);
+        o.output = dir / (name + ".las");
+        const CloudTranslateResult r = translate_cloud(o);
+        CHECK(r.decompressed);
+        CHECK(r.points_written == entry["point_count"].get<uint64_t>());
+        CHECK(r.points_sha256 == entry["points_sha256"].get<std::string>());
+        // The output is a plain LAS: compression bit cleared, same format, no LASzip/COPC records.
+        LasReader out(o.output);
+        CHECK_FALSE(out.header().laz.has_value());
+        CHECK(out.header().point_format == entry["point_format"].get<int>());
+        CHECK(out.header().point_record_length == entry["point_record_length"].get<int>());
+        CHECK(out.header().point_count == r.points_written);
+        CHECK(records_sha(out) == entry["points_sha256"].get<std::string>());
+        const std::string bytes = slurp(o.output);
+        CHECK(bytes.find("laszip encoded") == std::string::npos);
+        ++checked;
+    }
+    CHECK(checked == 26);
+}
+
+TEST_CASE("LAZ info: compressor, chunks and items are read from the LASzip VLR", "[laz]") {
+    LasReader pointwise(corpus("autzen_trim.laz"));
+    REQUIRE(pointwise.header().laz);
+    CHECK(pointwise.header().laz->compressor == 2);
+    CHECK(pointwise.header().laz->chunk_size == 50000);
+    REQUIRE(pointwise.header().laz->items.size() == 3);
+    CHECK(to_string(pointwise.header().laz->items[0]) == "POINT10 v2");
+    CHECK(pointwise.laz_source()->chunks().size() == 3);
+    CHECK(pointwise.laz_source()->has_chunk_table());
+
+    LasReader layered(corpus("870000_6618000.subset.postValidation.laz"));
+    REQUIRE(layered.header().laz);
+    CHECK(layered.header().laz->compressor == 3);
+    CHECK(layered.header().point_format == 8);
+    CHECK(to_string(layered.header().laz->items.back()) == "BYTE14[56] v3");
+
+    LasReader empty(corpus("no-points-1.3.laz"));
+    CHECK(empty.laz_source()->chunks().empty());
+    uint64_t n = 1;
+    records_sha(empty, &n);
+    CHECK(n == 0);
+}
+
+TEST_CASE("LAZ compressor 1 is refused in one line naming the file", "[laz]") {
+    const std::string p = corpus("simple-laszip-compressor-version-1.2r0.laz");
+    CHECK_THROWS_WITH(LasReader(p), Catch::Contains("simple-laszip-compressor-version-1.2r0.laz") &&
+                                        Catch::Contains("compressor 1") && !Catch::Contains("\n"));
+    CHECK_THROWS_AS(CloudReader(p), Error);
+}
+
+TEST_CASE("LAZ decodes the same points as its uncompressed LAS twin", "[laz]") {
+    // Upstream LAS files written by other software (the oracle's reference check).
+    const std::pair<const char*, const char*> twins[] = {{"laz_corpus/point10.las.laz", "laz_corpus/reference_las/point10.las"},
+                                                         {"laz_corpus/autzen_trim.laz", "autzen_oregon/autzen_trim.las"}};
+    for (const auto& [laz, las] : twins) {
+        INFO(laz);
+        if (!std::filesystem::exists(shared_data(las))) continue;
+        LasReader a(shared_data(laz)), b(shared_data(las));
+        CHECK(records_sha(a) == records_sha(b));
+        const PointCloud ca = read_point_cloud(shared_data(laz)), cb = read_point_cloud(shared_data(las));
+        CHECK(ca.x == cb.x);
+        CHECK(ca.z == cb.z);
+        CHECK(ca.classification == cb.classification);
+    }
+}
+
+TEST_CASE("COPC: every hierarchy node decodes alone to the oracle's node hash", "[laz][copc]") {
+    const nlohmann::json o_json = oracle();
+    int files = 0;
+    for (const auto& entry : o_json["files"]) {
+        if (!entry.contains("copc_nodes_in_file_order")) continue;
+        const std::string name = entry["file"];
+        INFO(name);
+        LasReader probe(corpus(name));
+        const auto h = read_copc_hierarchy(corpus(name), probe.header());
+        REQUIRE(h);
+        const auto& nodes = entry["copc_nodes_in_file_order"];
+        REQUIRE(h->nodes.size() == nodes.size());
+        REQUIRE(probe.laz_source()->chunks().size() == nodes.size());
+        for (std::size_t i = 0; i < nodes.size(); ++i) {
+            CHECK(h->nodes[i].key() == nodes[i]["key"].get<std::string>());
+            CHECK(h->nodes[i].offset == nodes[i]["offset"].get<uint64_t>());
+            LasReader one(corpus(name));
+            std::vector<bool> keep(nodes.size(), false);
+            keep[i] = true;
+            one.select_laz_chunks(keep);
+            uint64_t n = 0;
+            CHECK(records_sha(one, &n) == nodes[i]["points_sha256"].get<std::string>());
+            CHECK(n == nodes[i]["point_count"].get<uint64_t>());
+        }
+        ++files;
+    }
+    CHECK(files == 3);
+}
+
+TEST_CASE("COPC window reads decode only the nodes that meet the window and miss no point", "[laz][copc]") {
+    const std::string p = corpus("lone-star.copc.laz");
+    CloudReader probe(p);
+    CHECK(probe.copc());
+    const PointCloud all = read_point_cloud(p);
+    const double x0 = all.x[0], y0 = all.y[0];
+    const double box[4] = {x0 - 10, y0 - 10, x0 + 10, y0 + 10};
+    std::size_t inside = 0;
+    for (std::size_t i = 0; i < all.size(); ++i)
+        if (all.x[i] >= box[0] && all.x[i] < box[2] && all.y[i] >= box[1] && all.y[i] < box[3]) ++inside;
+    REQUIRE(inside > 0);
+    const PointCloud window = read_point_cloud_in(p, box[0], box[1], box[2], box[3]);
+    CHECK(window.size() == inside);
+    // The hierarchy really is used: fewer nodes than the whole file.
+    LasReader reader(p);
+    const auto h = read_copc_hierarchy(p, reader.header());
+    REQUIRE(h);
+    const auto keep = copc_chunks_in_box(*h, reader.laz_source()->chunks(), box[0], box[1], box[2], box[3], 0.001, -1, p);
+    const auto kept = static_cast<std::size_t>(std::count(keep.begin(), keep.end(), true));
+    CHECK(kept > 0);
+    CHECK(kept < keep.size());
+    // A translate crop of a COPC file skips nodes too and keeps the same points.
+    ScratchDir dir("copc_crop");
+    CloudTranslateOptions o;
+    o.input = p;
+    o.output = dir / "crop.las";
+    o.bounds = std::array<double, 4>{box[0], box[1], box[2] - 1e-9, box[3] - 1e-9};
+    const auto r = translate_cloud(o);
+    CHECK(r.copc_nodes_skipped);
+    CHECK(r.points_written == inside);
+}
+
+TEST_CASE("cloud translate crops, converts XYZ and refuses to overwrite", "[laz]") {
+    ScratchDir dir("translate");
+    CloudTranslateOptions o;
+    o.input = corpus("autzen_trim.laz");
+    o.output = dir / "crop.las";
+    o.bounds = std::array<double, 4>{636500, 849000, 636800, 849300};
+    const auto r = translate_cloud(o);
+    const PointCloud all = read_point_cloud(o.input);
+    std::size_t inside = 0;
+    for (std::size_t i = 0; i < all.size(); ++i)
+        if (all.x[i] >= 636500 && all.x[i] <= 636800 && all.y[i] >= 849000 && all.y[i] <= 849300) ++inside;
+    CHECK(r.points_written == inside);
+    LasReader crop(o.output);
+    CHECK(crop.header().point_count == inside);
+    CHECK(crop.header().min[0] >= 636500);
+    CHECK(crop.header().max[1] <= 849300);
+    CHECK(crop.header().crs_wkt == LasReader(o.input).header().crs_wkt);
+    CHECK_THROWS_WITH(translate_cloud(o), Catch::Contains("crop.las") && Catch::Contains("--overwrite"));
+    o.bounds = std::array<double, 4>{0, 0, 1, 1};
+    o.overwrite = true;
+    CHECK_THROWS_WITH(translate_cloud(o), Catch::Contains("no point lies inside"));
+    CHECK(LasReader(o.output).header().point_count == inside);  // the old output is untouched
+
+    write_file(dir / "pts.xyz", "x y z intensity\n1000.5 2000.25 3.125 7\n1001.5 2001.25 4.5 9\n");
+    CloudTranslateOptions x;
+    x.input = dir / "pts.xyz";
+    x.output = dir / "pts.las";
+    CHECK(translate_cloud(x).points_written == 2);
+    const PointCloud back = read_las(x.output);
+    REQUIRE(back.size() == 2);
+    CHECK(back.x[1] == Approx(1001.5).margin(1e-9));
+    CHECK(back.z[0] == Approx(3.125).margin(1e-9));
+    CHECK(back.intensity[1] == 9);
+}
+
+TEST_CASE("Corrupt LAZ gets a one-line error naming the file and never crashes", "[laz][corrupt]") {
+    ScratchDir dir("laz_corrupt");
+    const std::string pointwise = slurp(corpus("point-color-time.las.laz"));
+    const std::string layered = slurp(corpus("crop_duplicate.laz"));
+    const std::string copc = slurp(corpus("autzen_clip_native.copc.laz"));
+    LasReader pr(corpus("point-color-time.las.laz"));
+    const uint64_t points_at = pr.header().offset_to_points;
+    int64_t table_at = 0;
+    std::memcpy(&table_at, pointwise.data() + points_at, 8);
+
+    SECTION("truncated inside the chunk") {
+        const std::string p = dir / "trunc.laz";
+        std::string b = pointwise.substr(0, points_at + 8 + 3000);
+        b += pointwise.substr(static_cast<std::size_t>(table_at));  // chunk table kept, chunk cut
+        write_file(p, b);
+        const std::string msg = decode_all(p);
+        CHECK_THAT(msg, Catch::Contains("trunc.laz") && !Catch::Contains("\n"));
+    }
+    SECTION("chunk table pointer outside the file / chunk count past the file") {
+        const std::string p = dir / "table.laz";
+        std::string b = pointwise;
+        const int64_t bad = static_cast<int64_t>(b.size()) + 1000;
+        std::memcpy(b.data() + points_at, &bad, 8);
+        write_file(p, b);
+        // Fixed-size chunks can still be read one after the other.
+        CHECK(decode_all(p).empty());
+        b = pointwise;
+        const uint32_t many = 1000000;
+        std::memcpy(b.data() + table_at + 4, &many, 4);
+        write_file(p, b);
+        CHECK_THAT(decode_all(p), Catch::Contains("table.laz") && Catch::Contains("chunk table lists 1000000 chunks"));
+    }
+    SECTION("a layer shorter than its data: the decoder runs off its buffer") {
+        const std::string p = dir / "layer.laz";
+        std::string b = layered;
+        LasReader lr(corpus("crop_duplicate.laz"));
+        const std::size_t chunk = lr.laz_source()->chunks().at(0).offset;
+        const std::size_t xy_size_at = chunk + static_cast<std::size_t>(lr.header().point_record_length) + 4;
+        const uint32_t tiny = 8;
+        std::memcpy(b.data() + xy_size_at, &tiny, 4);
+        write_file(p, b);
+        CHECK_THAT(decode_all(p), Catch::Contains("layer.laz: chunk 0: arithmetic decoder ran off the end of its data"));
+    }
+    SECTION("unknown item type") {
+        const std::string p = dir / "item.laz";
+        std::string b = layered;
+        const std::size_t vlr = b.find("laszip encoded");
+        REQUIRE(vlr != std::string::npos);
+        const std::size_t payload = vlr - 2 + 54;
+        const uint16_t type = 42;
+        std::memcpy(b.data() + payload + 34, &type, 2);  // first item's type
+        write_file(p, b);
+        CHECK_THAT(decode_all(p), Catch::Contains("item.laz") && Catch::Contains("not supported"));
+    }
+    SECTION("mutations: random bytes in the compressed points decode or fail cleanly") {
+        std::mt19937 rng(18);
+        int clean_errors = 0, decoded = 0;
+        const std::pair<const std::string*, const char*> files[] = {{&pointwise, "m_pw.laz"}, {&layered, "m_ly.laz"}, {&copc, "m_copc.laz"}};
+        for (const auto& [bytes, name] : files) {
+            LasReader base([&] {
+                write_file(dir / name, *bytes);
+                return dir / name;
+            }());
+            const std::size_t start = base.header().offset_to_points + 8;
+            for (int it = 0; it < 60; ++it) {
+                std::string b = *bytes;
+                const int flips = 1 + static_cast<int>(rng() % 8);
+                for (int f = 0; f < flips; ++f) {
+                    const std::size_t at = start + rng() % (b.size() - start);
+                    b[at] = static_cast<char>(rng() & 0xFF);
+                }
+                if (it % 10 == 9) b.resize(start + rng() % (b.size() - start));  // and truncations
+                write_file(dir / name, b);
+                const std::string msg = decode_all(dir / name);
+                if (msg.empty()) {
+                    ++decoded;
+                } else {
+                    CHECK_THAT(msg, Catch::Contains(name) && !Catch::Contains("\n"));
+                    ++clean_errors;
+                }
+            }
+        }
+        CHECK(clean_errors > 0);
+        CHECK(clean_errors + decoded == 180);
+    }
+}
+
+TEST_CASE("heights on a LAZ gives the same output bytes as on its LAS twin", "[laz][heights]") {
+    ScratchDir dir("laz_heights");
+    // Four 80 ft squares over the Autzen strip (EPSG:2994, feet).
+    std::string fc = R"({"type":"FeatureCollection","crs":{"type":"name","properties":{"name":"urn:ogc:def:crs:EPSG::2994"}},"features":[)";
+    const double centres[4][2] = {{636300, 849100}, {636600, 849200}, {636900, 849300}, {637100, 849400}};
+    for (int i = 0; i < 4; ++i) {
+        const double x = centres[i][0], y = centres[i][1], h = 40;
+        fc += std::string(i ? "," : "") + R"({"type":"Feature","properties":{"id":)" + std::to_string(i) +
+              R"(},"geometry":{"type":"Polygon","coordinates":[[[)" + std::to_string(x - h) + "," + std::to_string(y - h) + "],[" +
+              std::to_string(x + h) + "," + std::to_string(y - h) + "],[" + std::to_string(x + h) + "," + std::to_string(y + h) + "],[" +
+              std::to_string(x - h) + "," + std::to_string(y + h) + "],[" + std::to_string(x - h) + "," + std::to_string(y - h) + "]]]}}";
+    }
+    fc += "]}";
+    write_file(dir / "fp.geojson", fc);
+    // Same file name in two folders, so that nothing but the encoding differs.
+    std::filesystem::create_directories(dir / "laz");
+    std::filesystem::create_directories(dir / "las");
+    std::filesystem::copy_file(corpus("autzen_trim.laz"), dir / "laz/autzen_trim.cloud");
+    std::filesystem::copy_file(shared_data("autzen_oregon/autzen_trim.las"), dir / "las/autzen_trim.cloud");
+    const auto a = cityforge::test::run_cli("heights --footprints " + dir / "fp.geojson" + " --cloud " + dir / "laz/autzen_trim.cloud" +
+                                            " --out " + dir / "laz.geojson");
+    const auto b = cityforge::test::run_cli("heights --footprints " + dir / "fp.geojson" + " --cloud " + dir / "las/autzen_trim.cloud" +
+                                            " --out " + dir / "las.geojson");
+    INFO(a.err);
+    INFO(b.err);
+    REQUIRE(a.exit_code == 0);
+    REQUIRE(b.exit_code == 0);
+    const std::string la = slurp(dir / "laz.geojson"), lb = slurp(dir / "las.geojson");
+    CHECK(la.size() > 200);
+    CHECK(la == lb);
+}
+
+TEST_CASE("CLI: cloud translate and info on LAZ - refusals are one line and non-zero", "[laz][cli]") {
+    ScratchDir dir("laz_cli");
+    const auto ok = cityforge::test::run_cli("cloud translate " + corpus("Semis_2022_0906_6665_LA93_IGN69_ok.laz") + " " + dir / "o.las");
+    INFO(ok.err);
+    REQUIRE(ok.exit_code == 0);
+    std::string sha;
+    const nlohmann::json o_json = oracle();
+    for (const auto& e : o_json["files"])
+        if (e["file"] == "Semis_2022_0906_6665_LA93_IGN69_ok.laz") sha = e["points_sha256"];
+    CHECK_THAT(ok.err, Catch::Contains(sha) && Catch::Contains("decompressed from LAZ"));
+    const auto again = cityforge::test::run_cli("cloud translate " + corpus("Semis_2022_0906_6665_LA93_IGN69_ok.laz") + " " + dir / "o.las");
+    CHECK(again.exit_code != 0);
+    CHECK_THAT(again.err, Catch::Contains("--overwrite"));
+
+    const auto info = cityforge::test::run_cli("info " + corpus("lone-star.copc.laz"));
+    REQUIRE(info.exit_code == 0);
+    CHECK_THAT(info.out, Catch::Contains("LAZ:       compressor 3 (layered chunked)") && Catch::Contains("chunk size variable") &&
+                             Catch::Contains("POINT14 v3") && Catch::Contains("COPC:"));
+
+    const auto refused = cityforge::test::run_cli("cloud translate " + corpus("simple-laszip-compressor-version-1.2r0.laz") + " " + dir / "s.las");
+    CHECK(refused.exit_code != 0);
+    CHECK_THAT(refused.err, Catch::Contains("simple-laszip-compressor-version-1.2r0.laz") && Catch::Contains("compressor 1"));
+    CHECK(std::count(refused.err.begin(), refused.err.end(), '\n') == 1);
+    CHECK_FALSE(std::filesystem::exists(dir / "s.las"));
+
+    std::string bad = slurp(corpus("crop_duplicate.laz"));
+    bad.resize(bad.size() - 2000);  // cut through the only chunk and the chunk table
+    write_file(dir / "cut.laz", bad);
+    const auto cut = cityforge::test::run_cli("info --stats " + dir / "cut.laz");
+    CHECK(cut.exit_code != 0);
+    CHECK_THAT(cut.err, Catch::Contains("cut.laz") && Catch::Contains("chunk 0"));
+    CHECK(std::count(cut.err.begin(), cut.err.end(), '\n') == 1);
+}
+
+TEST_CASE("Selective layer decoding gives the same PointCloud as a full decode", "[laz]") {
+    ScratchDir dir("laz_selective");
+    for (const char* name : {"las_with_several_extra_byte_bloc.laz", "Semis_2022_0906_6665_LA93_IGN69_ok.laz", "1.2-with-color.copc.laz"}) {
+        INFO(name);
+        CloudTranslateOptions o;
+        o.input = corpus(name);
+        o.output = dir / "full.las";
+        o.overwrite = true;
+        translate_cloud(o);  // full decode, every layer
+        const PointCloud a = read_point_cloud(corpus(name));  // PointCloud path: some layers skipped
+        const PointCloud b = read_point_cloud(o.output);
+        CHECK(a.x == b.x);
+        CHECK(a.y == b.y);
+        CHECK(a.z == b.z);
+        CHECK(a.intensity == b.intensity);
+        CHECK(a.classification == b.classification);
+        CHECK(a.return_number == b.return_number);
+        CHECK(a.number_of_returns == b.number_of_returns);
+        CHECK(a.gps_time == b.gps_time);
+        CHECK(a.red == b.red);
+        CHECK(a.blue == b.blue);
+    }
+}
+
+TEST_CASE("Fixtures of laz-perf (v3, changing scanner channels) and LASzip (item version 4) decode to their LAS twins", "[laz]") {
+    const std::string dir = cityforge::test::source_dir() + "/tests/data/laz/";
+    for (const char* stem : {"pdrf6-1.4", "pdrf8-1.4", "pdrf7-v4-1.4"}) {
+        INFO(stem);
+        LasReader laz(dir + stem + ".laz"), las(dir + stem + ".las");
+        REQUIRE(laz.header().laz);
+        CHECK(laz.header().point_count == 1024);
+        CHECK(laz.header().point_record_length == las.header().point_record_length);
+        uint64_t n = 0;
+        CHECK(records_sha(laz, &n) == records_sha(las));
+        CHECK(n == 1024);
+    }
+    LasReader v4(dir + "pdrf7-v4-1.4.laz");
+    CHECK(v4.header().laz->items[0].version == 4);
+}
+
+TEST_CASE("LAZ decoding gives the same bytes whatever the thread count", "[laz]") {
+    const std::string p = corpus("lone-star.laz");  // 11 chunks
+    std::string one, many;
+    {
+        tbb::global_control single(tbb::global_control::max_allowed_parallelism, 1);
+        LasReader r(p);
+        one = records_sha(r);
+    }
+    LasReader r(p);
+    many = records_sha(r);
+    CHECK(one == many);
+    const nlohmann::json o_json = oracle();
+    for (const auto& e : o_json["files"])
+        if (e["file"] == "lone-star.laz") CHECK(one == e["points_sha256"].get<std::string>());
+}
