@@ -1,6 +1,10 @@
 #include "core/atomic_file.hpp"
 
 #include <fstream>
+#include <vector>
+#include <cerrno>
+#include <csignal>
+#include <regex>
 #include <unistd.h>
 
 #include "core/error.hpp"
@@ -80,6 +84,25 @@ void AtomicTextFile::commit() {
     }
     committed_ = true;
     commit_file(tmp_, final_);
+}
+
+std::size_t remove_stale_temporaries(const fs::path& dir) {
+    std::error_code ec;
+    if (!fs::is_directory(dir, ec)) return 0;
+    static const std::regex part(R"(.*\.part-([0-9]{1,9})(\..*|-journal|-wal|-shm)?)");
+    std::vector<fs::path> stale;
+    for (const auto& e : fs::directory_iterator(dir, ec)) {
+        std::smatch m;
+        const std::string name = e.path().filename().string();
+        if (!std::regex_match(name, m, part)) continue;
+        const long pid = std::stol(m[1].str());
+        if (pid <= 0 || pid == ::getpid()) continue;
+        if (::kill(static_cast<pid_t>(pid), 0) == 0 || errno != ESRCH) continue;  // alive (or not ours to judge)
+        stale.push_back(e.path());
+    }
+    std::size_t removed = 0;
+    for (const fs::path& p : stale) removed += fs::remove(p, ec) ? 1 : 0;
+    return removed;
 }
 
 void ensure_directory(const fs::path& dir) {

@@ -21,6 +21,13 @@ void discard_file(const std::filesystem::path& tmp) noexcept;
 /// Writes `content` to `path` atomically. Throws Error naming the path.
 void write_text_file(const std::filesystem::path& path, const std::string& content);
 
+/// Removes the temporaries of dead processes of this machine in `dir` (not
+/// recursive): files named like temporary_path_for's "NAME.part-PID.EXT" (and
+/// their sidecars) whose PID is not a running process. Returns how many went.
+/// Only for folders no other machine writes to (a PID names a process of this
+/// host only).
+std::size_t remove_stale_temporaries(const std::filesystem::path& dir);
+
 /// Creates `dir` (and parents) or throws Error naming it.
 void ensure_directory(const std::filesystem::path& dir);
 

@@ -927,6 +927,13 @@ RunReport run_city(const RunManifest& m, const std::string& out_dir, const RunSh
     std::unique_ptr<tbb::global_control> limit;
     if (m.options.threads > 0) limit = std::make_unique<tbb::global_control>(tbb::global_control::max_allowed_parallelism, m.options.threads);
     ensure_directory(out_dir);
+    if (share.size == 1) {
+        // Temporaries of an interrupted run (killed while writing) are ours to
+        // remove; with several ranks another host may still be writing them.
+        std::size_t removed = 0;
+        for (const char* sub : {"", "tiles", "cloud_tiles", "rasters"}) removed += remove_stale_temporaries(fs::path(out_dir) / sub);
+        if (removed) log::info("removed " + std::to_string(removed) + " temporaries of an interrupted run in " + out_dir);
+    }
     // Resuming reuses finished tiles: only when they were made with the same plan.
     const fs::path stored = fs::path(out_dir) / "manifest.json";
     const std::string plan_path = stored.string();

@@ -78,3 +78,41 @@ TEST_CASE("run: every tile failed is an error, not empty city models", "[faults]
     CHECK_FALSE(std::filesystem::exists(dir / "run/buildings.geojson"));
     CHECK_FALSE(std::filesystem::exists(dir / "run/buildings.city.json"));
 }
+
+TEST_CASE("results printed to a full stdout are a failed write", "[faults][cli]") {
+    ScratchDir dir("faults_stdout");
+    const SynthResult s = test::make_town(dir, 60, 3, 0.0);
+    const auto full = test::run_command("bash -c '" + test::cli() + " info --json " + s.ortho_path + " >/dev/full'");
+    INFO(full.err);
+    CHECK(full.exit_code == 1);
+    CHECK(full.err.find("stdout: write failed") != std::string::npos);
+    CHECK(test::run_command(test::cli() + " info --json " + s.ortho_path + " >/dev/null").exit_code == 0);
+}
+
+TEST_CASE("run: temporaries of a killed run are removed on the next start, a live process's are kept, the resume is identical", "[faults][run][cli]") {
+    ScratchDir dir("faults_stale");
+    const SynthResult s = test::make_town(dir, 120, 3, 4.0);
+    const std::string cmd = "run --quiet --ortho " + s.ortho_path + " --cloud " + s.cloud_path + " --tile-size 120 --formats geojson --out " + (dir / "run");
+    REQUIRE(test::run_cli(cmd).exit_code == 0);
+    const std::string first = test::slurp(dir / "run/buildings.geojson");
+    // A process that has exited: its PID names no running process.
+    const std::string dead = test::run_command("sh -c 'echo $$'").out;
+    const std::string dead_pid = dead.substr(0, dead.find('\n'));
+    const std::string live_pid = std::to_string(::getpid());
+    const std::vector<std::string> stale = {"cloud_tiles/tile_00000.part-" + dead_pid + ".las", "tiles/tile_00001.part-" + dead_pid + ".jsonl",
+                                            "buildings.part-" + dead_pid + ".geojson"};
+    for (const std::string& f : stale) std::ofstream(dir / ("run/" + f)) << "half-written";
+    std::ofstream(dir / ("run/tiles/tile_00002.part-" + live_pid + ".jsonl")) << "being written";
+    // The last tile lost: the rerun redoes it and gives the same bytes.
+    std::filesystem::remove(dir / "run/tiles/tile_00003.json");
+    std::filesystem::remove(dir / "run/buildings.geojson");
+    const auto again = test::run_cli(cmd);
+    INFO(again.err);
+    REQUIRE(again.exit_code == 0);
+    for (const std::string& f : stale) {
+        INFO(f);
+        CHECK_FALSE(std::filesystem::exists(dir / ("run/" + f)));
+    }
+    CHECK(std::filesystem::exists(dir / ("run/tiles/tile_00002.part-" + live_pid + ".jsonl")));
+    CHECK(test::slurp(dir / "run/buildings.geojson") == first);
+}
