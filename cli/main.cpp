@@ -36,10 +36,12 @@ int main(int argc, char** argv) {
     cli::add_heights_command(app, g, commands);
     cli::add_cloud_commands(app, g, commands);
     cli::add_footprints_command(app, g, commands);
+    cli::add_train_command(app, g, commands);
     cli::add_export_command(app, g, commands);
     cli::add_roofs_command(app, g, commands);
     cli::add_run_commands(app, g, commands);
     cli::add_audit_commands(app, g, commands);
+    cli::add_view_command(app, g, commands);
 
     try {
         app.parse(argc, argv);

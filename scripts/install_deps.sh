@@ -11,7 +11,9 @@ PACKAGES=(
   libopencv-imgproc-dev libopencv-core-dev
   catch2 libtbb-dev nlohmann-json3-dev libcli11-dev libgeos-dev libnanoflann-dev
   libxml2-utils
+  libxgboost-dev
   openmpi-bin
+  chromium postgresql-15 postgresql-15-postgis-3
 )
 
 missing=()
@@ -43,3 +45,13 @@ if [ ! -d "$here/tools/schema_check/node_modules/ajv" ]; then
   echo "cityforge: installing the JSON Schema validator (npm ci)" >&2
   (cd "$here/tools/schema_check" && npm ci --no-audit --no-fund --loglevel=error >/dev/null)
 fi
+
+# glTF validator + headless-Chromium driver (tools/validators) and the web
+# viewer's bundler and libraries (web/), each pinned by its lock file. The
+# browser is Debian's chromium: playwright-core never downloads one.
+for d in tools/validators web; do
+  if [ ! -f "$here/$d/node_modules/.package-lock.json" ] || [ "$here/$d/package-lock.json" -nt "$here/$d/node_modules/.package-lock.json" ]; then
+    echo "cityforge: installing npm packages of $d (npm ci)" >&2
+    (cd "$here/$d" && PLAYWRIGHT_SKIP_BROWSER_DOWNLOAD=1 npm ci --no-audit --no-fund --loglevel=error >/dev/null)
+  fi
+done

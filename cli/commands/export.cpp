@@ -9,15 +9,15 @@ namespace cityforge::cli {
 
 void add_export_command(CLI::App& parent, const GlobalFlags& g, CommandList& out) {
     struct State {
-        std::string in, out, formats = "geojson,gpkg,citygml,cityjson,cityjsonseq", lods = "0,1,2";
+        std::string in, out, formats = "geojson,gpkg,citygml,cityjson,cityjsonseq,3dtiles,gltf", lods = "0,1,2";
         ExportOptions options;
     };
     auto s = std::make_shared<State>();
     auto& o = s->options;
-    auto* cmd = parent.add_subcommand("export", "City models: GeoJSON, GeoPackage, CityGML 2.0, CityJSON 2.0 / CityJSONSeq");
+    auto* cmd = parent.add_subcommand("export", "City models: GeoJSON, GeoPackage, CityGML 2.0, CityJSON 2.0 / CityJSONSeq, 3D Tiles 1.1, glTF 2.0");
     cmd->add_option("--in", s->in, "Buildings with heights (e.g. from `cityforge heights`), any OGR polygon layer")->required();
     cmd->add_option("--out", s->out, "Output folder")->required();
-    cmd->add_option("--formats", s->formats, "Comma-separated: geojson, gpkg, citygml, cityjson, cityjsonseq")->capture_default_str();
+    cmd->add_option("--formats", s->formats, "Comma-separated: geojson, gpkg, citygml, cityjson, cityjsonseq, 3dtiles (3dtiles/tileset.json), gltf (buildings.glb)")->capture_default_str();
     cmd->add_option("--lod", s->lods, "Comma-separated levels of detail: 0 (footprint), 1 (block), 2 (roofs)")->capture_default_str();
     cmd->add_option("--geojson-crs", o.geojson_crs, "rfc7946 (WGS84 lon/lat) or native (real CRS, non-standard crs member)")
         ->check(CLI::IsMember({"rfc7946", "native"}))
@@ -27,6 +27,9 @@ void add_export_command(CLI::App& parent, const GlobalFlags& g, CommandList& out
     cmd->add_option("--id-field", o.id_field, "Building id attribute (absent: the feature id)")->capture_default_str();
     cmd->add_option("--ground-field", o.ground_field, "Ground height attribute (vertical CRS units)")->capture_default_str();
     cmd->add_option("--height-field", o.height_field, "LOD1 height above ground attribute (metres)")->capture_default_str();
+    cmd->add_option("--db", o.database, "Also write the building table to PostGIS: \"PG:dbname=... [tables=NAME]\" (table replaced)");
+    cmd->add_option("--tile-buildings", o.tiles.max_buildings_per_tile, "3D Tiles: most buildings in one tile before the quadtree splits it")
+        ->capture_default_str();
     cmd->add_option("--planarity-tolerance", o.validity.planarity_tolerance, "Validity: max vertex distance to its face plane (CRS units)")
         ->capture_default_str();
     out.push_back({cmd, [s, &g]() {

@@ -9,7 +9,7 @@ namespace cityforge::cli {
 
 void add_footprints_command(CLI::App& parent, const GlobalFlags& g, CommandList& out) {
     struct State {
-        std::string out, fit = "recursive", mode = "auto", regularize = "lines";
+        std::string out, fit = "recursive", mode = "auto", regularize = "lines", detector = "auto";
         FootprintsRunOptions options;
     };
     auto s = std::make_shared<State>();
@@ -25,6 +25,12 @@ void add_footprints_command(CLI::App& parent, const GlobalFlags& g, CommandList&
     cmd->add_option("--mode", s->mode, "Detection: ortho_cloud (segments voted by the cloud), ortho_only, cloud_only; auto = from the inputs")
         ->check(CLI::IsMember({"auto", "ortho_cloud", "ortho_only", "cloud_only"}))
         ->capture_default_str();
+    cmd->add_option("--detector", s->detector,
+                    "ortho_only: model (learned: --model, or the shipped default for the image's bands), rules (hand-set segment rules); "
+                    "auto = model, or rules with --segments")
+        ->check(CLI::IsMember({"auto", "model", "rules"}))
+        ->capture_default_str();
+    cmd->add_option("--model", o.model, "ortho_only: detector model from `cityforge train` (default: models/default_<bands>.cfdet)");
     cmd->add_option("--segments", o.segments, "Ortho modes: labels from `cityforge segment` (GeoTIFF, or its folder: the --segment-scale level)");
     cmd->add_option("--segment-scale", o.segmentation.segment_scale, "Ortho modes: merging scale of the segmentation")->capture_default_str();
     cmd->add_option("--refine-passes", o.segmentation.refine_passes, "Ortho modes: passes moving boundary pixels to the closest-colour segment")
@@ -58,12 +64,14 @@ void add_footprints_command(CLI::App& parent, const GlobalFlags& g, CommandList&
                        FootprintsRunOptions opt = s->options;
                        opt.fit = footprint_fit_from_string(s->fit);
                        opt.mode = detection_mode_from_string(s->mode);
+                       opt.detector = ortho_detector_from_string(s->detector);
                        opt.regularize.method = s->regularize == "cgal" ? RegularizeMethod::cgal_contours : RegularizeMethod::lines;
                        const FootprintsReport r = run_footprints(s->out, opt, make_progress(g));
                        if (!g.quiet)
                            std::fprintf(stderr,
-                                        "cityforge: %zu footprints (%s%s%s, %s, classes %s) on %d x %d cells in %.1f s; mean |fit area error| %.2f %% -> %s\n",
-                                        r.buildings, r.mode.c_str(), r.height_source.empty() ? "" : ", heights from ", r.height_source.c_str(),
+                                        "cityforge: %zu footprints (%s%s%s%s%s, %s, classes %s) on %d x %d cells in %.1f s; mean |fit area error| %.2f %% -> %s\n",
+                                        r.buildings, r.mode.c_str(), r.detector.empty() ? "" : ", detector ", r.detector.c_str(),
+                                        r.height_source.empty() ? "" : ", heights from ", r.height_source.c_str(),
                                         r.crs.c_str(), r.used_classes ? "used" : "absent", r.width, r.height, r.seconds,
                                         r.mean_abs_fit_area_error_pct, s->out.c_str());
                        return 0;

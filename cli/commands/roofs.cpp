@@ -9,7 +9,7 @@ namespace cityforge::cli {
 
 void add_roofs_command(CLI::App& parent, const GlobalFlags& g, CommandList& out) {
     struct State {
-        std::string footprints, cloud, out, formats = "geojson,gpkg,citygml,cityjson,cityjsonseq", lods = "0,1,2";
+        std::string footprints, cloud, out, formats = "geojson,gpkg,citygml,cityjson,cityjsonseq,3dtiles,gltf", lods = "0,1,2";
         RoofsRunOptions options;
         bool recompute_ground = false, no_outliers = false;
     };
@@ -21,8 +21,9 @@ void add_roofs_command(CLI::App& parent, const GlobalFlags& g, CommandList& out)
     cmd->add_option("--out", s->out, "Output folder (buildings.gpkg, .geojson, _lod1.gml, _lod2.gml, .city.json, .city.jsonl)")->required();
     cmd->add_option("--cloud-crs", o.heights.cloud_crs, "CRS of the cloud, e.g. EPSG:7415 (overrides the file's)");
     cmd->add_option("--layer", o.heights.footprint_layer, "Footprint layer name (default: first)");
-    cmd->add_option("--formats", s->formats, "Comma-separated: geojson, gpkg, citygml, cityjson, cityjsonseq")->capture_default_str();
+    cmd->add_option("--formats", s->formats, "Comma-separated: geojson, gpkg, citygml, cityjson, cityjsonseq, 3dtiles (3dtiles/tileset.json), gltf (buildings.glb)")->capture_default_str();
     cmd->add_option("--lod", s->lods, "Comma-separated levels of detail: 0, 1, 2")->capture_default_str();
+    cmd->add_option("--db", o.model.database, "Also write the building table to PostGIS: \"PG:dbname=... [tables=NAME]\" (table replaced)");
     cmd->add_option("--id-field", o.model.id_field, "Building id attribute (absent: the feature id)")->capture_default_str();
     cmd->add_option("--vertical-crs", o.model.vertical_crs, "Vertical CRS of the heights when the cloud names none, e.g. EPSG:5709");
     cmd->add_option("--roof-percentile", o.heights.heights.roof_percentile, "Roof percentile of the LOD1 height and the flat fallback")

@@ -28,7 +28,7 @@ RunShare mpi_share() {
 
 // The inputs `run` and `plan` share; given options override the config file.
 struct RunInputs {
-    std::string ortho, cloud, cloud_crs, footprints, config, formats, lods, vertical_crs, id_field, fit;
+    std::string ortho, cloud, cloud_crs, footprints, config, formats, lods, vertical_crs, id_field, fit, db;
     int tile_size = 0, threads = -1;
     double overlap_m = -1;
 };
@@ -42,8 +42,9 @@ void add_run_inputs(CLI::App* cmd, RunInputs& r) {
     cmd->add_option("--tile-size", r.tile_size, "Tile core edge in pixels (default 4000)");
     cmd->add_option("--overlap-m", r.overlap_m, "Context around each tile, metres (default 100)");
     cmd->add_option("--threads", r.threads, "Threads (default: all cores)");
-    cmd->add_option("--formats", r.formats, "Comma-separated: geojson, gpkg, citygml, cityjson, cityjsonseq");
+    cmd->add_option("--formats", r.formats, "Comma-separated: geojson, gpkg, citygml, cityjson, cityjsonseq, 3dtiles, gltf");
     cmd->add_option("--lod", r.lods, "Comma-separated levels of detail: 0, 1, 2");
+    cmd->add_option("--db", r.db, "Also write the building table to PostGIS: \"PG:dbname=... [tables=NAME]\" (table replaced)");
     cmd->add_option("--vertical-crs", r.vertical_crs, "Vertical CRS when the cloud names none, e.g. EPSG:5709");
     cmd->add_option("--id-field", r.id_field, "Building id attribute of given footprints");
     cmd->add_option("--fit", r.fit, "Footprint geometry: recursive, regularised, rectangle or raw");
@@ -64,6 +65,7 @@ RunManifest plan_from(const RunInputs& rc) {
     if (!rc.lods.empty()) ro.buildings.model.lods = parse_lods(rc.lods);
     if (!rc.vertical_crs.empty()) ro.buildings.model.vertical_crs = rc.vertical_crs;
     if (!rc.id_field.empty()) ro.buildings.model.id_field = rc.id_field;
+    if (!rc.db.empty()) ro.buildings.model.database = rc.db;
     if (!rc.fit.empty()) ro.extraction.fit = footprint_fit_from_string(rc.fit);
     return plan_run(ro);
 }

@@ -1,5 +1,6 @@
 #include "audit/report_html.hpp"
 
+#include "core/base64.hpp"
 #include "core/xml_text.hpp"
 
 #include <algorithm>
@@ -21,24 +22,6 @@ namespace {
 
 constexpr int kWidth = 640, kHeight = 400, kLeft = 60, kRight = 20, kTop = 20, kBottom = 50;
 
-std::string base64(const std::string& bytes) {
-    static const char* table = "ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
-    std::string out;
-    out.reserve((bytes.size() + 2) / 3 * 4);
-    std::size_t i = 0;
-    for (; i + 2 < bytes.size(); i += 3) {
-        const unsigned v = (uint8_t(bytes[i]) << 16) | (uint8_t(bytes[i + 1]) << 8) | uint8_t(bytes[i + 2]);
-        out += table[v >> 18], out += table[(v >> 12) & 63], out += table[(v >> 6) & 63], out += table[v & 63];
-    }
-    if (i + 1 == bytes.size()) {
-        const unsigned v = uint8_t(bytes[i]) << 16;
-        out += table[v >> 18], out += table[(v >> 12) & 63], out += "==";
-    } else if (i + 2 == bytes.size()) {
-        const unsigned v = (uint8_t(bytes[i]) << 16) | (uint8_t(bytes[i + 1]) << 8);
-        out += table[v >> 18], out += table[(v >> 12) & 63], out += table[(v >> 6) & 63], out += '=';
-    }
-    return out;
-}
 
 // "Nice" tick step for a range (1, 2 or 5 times a power of ten).
 double tick_step(double span, int target = 6) {

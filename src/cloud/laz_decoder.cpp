@@ -78,23 +78,63 @@ struct BitModel {
     }
 };
 
-// Adaptive multi-symbol model with a decoding look-up table for > 16 symbols.
+// Adaptive multi-symbol model. The coded stream depends only on the
+// distribution (LASzip's ArithmeticModel); the decoding table is ours and
+// decoder-side only: table_[t] is the symbol whose interval holds
+// t << table_shift_, for every model (LASzip keeps one only for > 16 symbols
+// and searches the rest by bisection with a multiplication per step). The
+// table has about 4 entries per symbol (at most 1024), so the search after
+// the look-up is almost always empty; the symbol found is the same.
 class SymbolModel {
 public:
     explicit SymbolModel(uint32_t symbols) : symbols_(symbols), last_symbol_(symbols - 1) {
-        if (symbols > 16) {
-            uint32_t bits = 3;
-            while (symbols > (1u << (bits + 2))) ++bits;
-            table_size_ = 1u << bits;
-            table_shift_ = kSymShift - bits;
-            table_.assign(table_size_ + 2, 0);
-        }
-        distribution_.assign(symbols, 0);
-        count_.assign(symbols, 1);
+        uint32_t bits = 2;
+        while (bits < 8 && (1u << bits) < 4 * symbols) ++bits;
+        table_size_ = 1u << bits;
+        table_shift_ = kSymShift - bits;
+        // One allocation: distribution (symbols + 1, the last entry
+        // kSymMaxCount as a sentinel), counts (symbols), table (size + 2).
+        store_.assign(2 * static_cast<std::size_t>(symbols) + 1 + table_size_ + 2, 0);
+        distribution_ = store_.data();
+        count_ = distribution_ + symbols + 1;
+        table_ = count_ + symbols;
+        for (uint32_t n = 0; n < symbols; ++n) count_[n] = 1;
+        distribution_[symbols] = kSymMaxCount;
         total_count_ = 0;
         update_cycle_ = symbols;
         update();
         until_update_ = update_cycle_ = (symbols + 6) >> 1;
+    }
+    SymbolModel(const SymbolModel& o) { *this = o; }
+    SymbolModel& operator=(const SymbolModel& o) {
+        if (this == &o) return *this;
+        symbols_ = o.symbols_;
+        last_symbol_ = o.last_symbol_;
+        table_size_ = o.table_size_;
+        table_shift_ = o.table_shift_;
+        total_count_ = o.total_count_;
+        update_cycle_ = o.update_cycle_;
+        until_update_ = o.until_update_;
+        store_ = o.store_;
+        distribution_ = store_.data();
+        count_ = distribution_ + symbols_ + 1;
+        table_ = count_ + symbols_;
+        return *this;
+    }
+    SymbolModel(SymbolModel&& o) noexcept { *this = std::move(o); }
+    SymbolModel& operator=(SymbolModel&& o) noexcept {
+        symbols_ = o.symbols_;
+        last_symbol_ = o.last_symbol_;
+        table_size_ = o.table_size_;
+        table_shift_ = o.table_shift_;
+        total_count_ = o.total_count_;
+        update_cycle_ = o.update_cycle_;
+        until_update_ = o.until_update_;
+        store_ = std::move(o.store_);  // the buffer (and so the pointers) moves along
+        distribution_ = o.distribution_;
+        count_ = o.count_;
+        table_ = o.table_;
+        return *this;
     }
     void update() {
         if ((total_count_ += update_cycle_) > kSymMaxCount) {
@@ -103,29 +143,27 @@ public:
         }
         uint32_t sum = 0, s = 0;
         const uint32_t scale = 0x80000000u / total_count_;
-        if (table_size_ == 0) {
-            for (uint32_t k = 0; k < symbols_; ++k) {
-                distribution_[k] = (scale * sum) >> (31 - kSymShift);
-                sum += count_[k];
-            }
-        } else {
-            for (uint32_t k = 0; k < symbols_; ++k) {
-                distribution_[k] = (scale * sum) >> (31 - kSymShift);
-                sum += count_[k];
-                const uint32_t w = distribution_[k] >> table_shift_;
-                while (s < w) table_[++s] = k - 1;
-            }
-            table_[0] = 0;
-            while (s <= table_size_) table_[++s] = symbols_ - 1;
+        for (uint32_t k = 0; k < symbols_; ++k) {
+            distribution_[k] = (scale * sum) >> (31 - kSymShift);
+            sum += count_[k];
+            const uint32_t w = distribution_[k] >> table_shift_;
+            while (s < w) table_[++s] = k - 1;
         }
+        table_[0] = 0;
+        while (s <= table_size_) table_[++s] = symbols_ - 1;
         update_cycle_ = std::min((5 * update_cycle_) >> 2, (symbols_ + 6) << 3);
         until_update_ = update_cycle_;
     }
 
-    uint32_t symbols_, last_symbol_;
+    uint32_t symbols_ = 0, last_symbol_ = 0;
     uint32_t table_size_ = 0, table_shift_ = 0;
     uint32_t total_count_ = 0, update_cycle_ = 0, until_update_ = 0;
-    std::vector<uint32_t> distribution_, count_, table_;
+    uint32_t* distribution_ = nullptr;
+    uint32_t* count_ = nullptr;
+    uint32_t* table_ = nullptr;
+
+private:
+    std::vector<uint32_t> store_;
 };
 
 class ArithDecoder {
@@ -138,7 +176,7 @@ public:
         value_ |= in_->get() << 8;
         value_ |= in_->get();
     }
-    uint32_t decode_bit(BitModel& m) {
+    [[gnu::always_inline]] uint32_t decode_bit(BitModel& m) {
         const uint32_t x = m.bit0_prob * (length_ >> kBitShift);
         const uint32_t sym = value_ >= x;
         if (sym == 0) {
@@ -152,35 +190,20 @@ public:
         if (--m.until_update == 0) m.update();
         return sym;
     }
-    uint32_t decode_symbol(SymbolModel& m) {
-        uint32_t n, sym, x, y = length_;
-        if (m.table_size_) {
-            const uint32_t dv = value_ / (length_ >>= kSymShift);
-            const uint32_t t = std::min(dv >> m.table_shift_, m.table_size_);
-            sym = m.table_[t];
-            n = m.table_[t + 1] + 1;
-            while (n > sym + 1) {
-                const uint32_t k = (sym + n) >> 1;
-                if (m.distribution_[k] > dv) n = k;
-                else sym = k;
-            }
-            x = m.distribution_[sym] * length_;
-            if (sym != m.last_symbol_) y = m.distribution_[sym + 1] * length_;
-        } else {
-            x = sym = 0;
-            length_ >>= kSymShift;
-            uint32_t k = (n = m.symbols_) >> 1;
-            do {
-                const uint32_t z = length_ * m.distribution_[k];
-                if (z > value_) {
-                    n = k;
-                    y = z;
-                } else {
-                    sym = k;
-                    x = z;
-                }
-            } while ((k = (sym + n) >> 1) != sym);
+    [[gnu::always_inline]] uint32_t decode_symbol(SymbolModel& m) {
+        const uint32_t y0 = length_;
+        length_ >>= kSymShift;
+        const uint32_t dv = value_ / length_;
+        const uint32_t t = std::min(dv >> m.table_shift_, m.table_size_);
+        uint32_t sym = m.table_[t];
+        uint32_t n = m.table_[t + 1] + 1;
+        while (n > sym + 1) {
+            const uint32_t k = (sym + n) >> 1;
+            if (m.distribution_[k] > dv) n = k;
+            else sym = k;
         }
+        const uint32_t x = m.distribution_[sym] * length_;
+        const uint32_t y = sym != m.last_symbol_ ? m.distribution_[sym + 1] * length_ : y0;
         value_ -= x;
         length_ = y - x;
         if (length_ < kMinLength) renorm();
@@ -212,7 +235,7 @@ public:
     }
 
 private:
-    void renorm() {
+    [[gnu::noinline]] void renorm() {
         do {
             value_ = (value_ << 8) | in_->get();
         } while ((length_ <<= 8) < kMinLength);
@@ -238,7 +261,7 @@ public:
         for (uint32_t i = 0; i < contexts; ++i) k_models_.emplace_back(corr_bits_ + 1);
         for (uint32_t i = 1; i <= corr_bits_; ++i) corrector_.emplace_back(i <= bits_high_ ? (1u << i) : (1u << bits_high_));
     }
-    int32_t decompress(ArithDecoder& dec, int32_t pred, uint32_t context = 0) {
+    [[gnu::always_inline]] int32_t decompress(ArithDecoder& dec, int32_t pred, uint32_t context = 0) {
         uint32_t real = static_cast<uint32_t>(pred) + static_cast<uint32_t>(read_corrector(dec, k_models_[context]));
         const int32_t sreal = static_cast<int32_t>(real);
         if (sreal < 0) real += corr_range_;
@@ -604,6 +627,48 @@ private:
     std::vector<SymbolModel> models_;
 };
 
+// WAVEPACKET13 v1 (point formats 4 and 5, 29 bytes): the descriptor index
+// (a byte), then the 64-bit offset to the waveform data, coded as "same",
+// "previous offset + previous packet size", "previous + a 32-bit difference"
+// or raw; the packet size, return point location and x(t), y(t), z(t) (the
+// floats' bit patterns) as integer differences from the previous point.
+class WavePacket13V1 final : public ItemV2 {
+public:
+    explicit WavePacket13V1(const uint8_t* first) { std::memcpy(last_, first + 1, 28); }
+    void read(ArithDecoder& dec, uint8_t* item) override {
+        item[0] = static_cast<uint8_t>(dec.decode_symbol(packet_index_));
+        uint8_t* cur = item + 1;
+        const uint64_t last_offset = load<uint64_t>(last_);
+        const uint32_t last_size = load<uint32_t>(last_ + 8);
+        sym_last_offset_diff_ = dec.decode_symbol(offset_diff_[sym_last_offset_diff_]);
+        uint64_t offset;
+        if (sym_last_offset_diff_ == 0) {
+            offset = last_offset;
+        } else if (sym_last_offset_diff_ == 1) {
+            offset = last_offset + last_size;
+        } else if (sym_last_offset_diff_ == 2) {
+            last_diff_32_ = ic_offset_diff_.decompress(dec, last_diff_32_);
+            offset = last_offset + static_cast<uint64_t>(static_cast<int64_t>(last_diff_32_));
+        } else {
+            const uint64_t low = dec.read_int();
+            offset = (static_cast<uint64_t>(dec.read_int()) << 32) | low;
+        }
+        store<uint64_t>(cur, offset);
+        store<uint32_t>(cur + 8, static_cast<uint32_t>(ic_packet_size_.decompress(dec, load<int32_t>(last_ + 8))));
+        store<int32_t>(cur + 12, ic_return_point_.decompress(dec, load<int32_t>(last_ + 12)));
+        for (uint32_t c = 0; c < 3; ++c) store<int32_t>(cur + 16 + 4 * c, ic_xyz_.decompress(dec, load<int32_t>(last_ + 16 + 4 * c), c));
+        std::memcpy(last_, cur, 28);
+    }
+
+private:
+    uint8_t last_[28];
+    int32_t last_diff_32_ = 0;
+    uint32_t sym_last_offset_diff_ = 0;
+    SymbolModel packet_index_{256};
+    std::array<SymbolModel, 4> offset_diff_{SymbolModel(4), SymbolModel(4), SymbolModel(4), SymbolModel(4)};
+    IntegerDecompressor ic_offset_diff_{32, 1}, ic_packet_size_{32, 1}, ic_return_point_{32, 1}, ic_xyz_{32, 3};
+};
+
 std::size_t decode_pointwise(const LazInfo& info, int rl, const uint8_t* data, std::size_t size, uint64_t count, char* out_chars) {
     if (count == 0) return 0;
     if (size < static_cast<std::size_t>(rl)) throw Corrupt{"truncated chunk (shorter than one raw point)"};
@@ -618,6 +683,7 @@ std::size_t decode_pointwise(const LazInfo& info, int rl, const uint8_t* data, s
             case 6: items.push_back(std::make_unique<Point10V2>(first)); break;
             case 7: items.push_back(std::make_unique<GpsTime11V2>(first)); break;
             case 8: items.push_back(std::make_unique<Rgb12V2>(first)); break;
+            case 9: items.push_back(std::make_unique<WavePacket13V1>(first)); break;
             default: items.push_back(std::make_unique<ByteV2>(first, it.size)); break;
         }
         offsets.push_back(off);
@@ -1074,8 +1140,9 @@ void check_laz_supported(const LazInfo& info, int point_format, int record_lengt
         total += it.size;
         bool ok;
         if (info.compressor == 2) {
-            ok = it.version == 2 && ((it.type == 6 && it.size == 20 && i == 0) || (it.type == 7 && it.size == 8) ||
-                                     (it.type == 8 && it.size == 6) || (it.type == 0 && it.size > 0));
+            ok = (it.version == 2 && ((it.type == 6 && it.size == 20 && i == 0) || (it.type == 7 && it.size == 8) ||
+                                      (it.type == 8 && it.size == 6) || (it.type == 0 && it.size > 0))) ||
+                 (it.version == 1 && it.type == 9 && it.size == 29);
         } else {
             ok = (it.version == 3 || it.version == 4) && it.version == info.items[0].version &&
                  ((it.type == 10 && it.size == 30 && i == 0) || (it.type == 11 && it.size == 6) || (it.type == 12 && it.size == 8) ||
@@ -1089,7 +1156,7 @@ void check_laz_supported(const LazInfo& info, int point_format, int record_lengt
         throw Error(path, "LAZ items " + items() + " cover " + std::to_string(total) + " bytes but the point record is " +
                               std::to_string(record_length));
     const bool legacy = point_format <= 5;
-    if ((info.compressor == 2) != legacy || point_format == 4 || point_format == 5 || point_format > 8)
+    if ((info.compressor == 2) != legacy || point_format > 8)
         throw Error(path, "LAZ compressor " + info.compressor_name() + " with point format " + std::to_string(point_format) +
                               " is not supported");
 }

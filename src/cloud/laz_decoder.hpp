@@ -2,11 +2,11 @@
 // LASzip (LAZ) decoding, our own implementation of the published format
 // (Debian 12 has neither LASzip nor laz-perf). Supports the chunked
 // compressors: 2 = pointwise (item version 2: POINT10, GPSTIME11, RGB12,
-// BYTE extra bytes) for point formats 0-3, and 3 = layered (item versions 3 and 4:
+// BYTE extra bytes; WAVEPACKET13 version 1) for point formats 0-5, and 3 = layered (item versions 3 and 4:
 // POINT14, RGB14, RGBNIR14, BYTE14 extra bytes) for point formats 6-8; fixed
 // and variable chunk sizes, with or without a chunk table. Decoded records
 // are byte-identical to LASzip / laz-perf output (tested against the corpus
-// oracle). Everything else (compressor 1, waveform items, other versions) is
+// oracle). Everything else (compressor 1, WAVEPACKET14 of formats 9/10, other versions) is
 // refused with a one-line Error naming the file.
 #include <cstddef>
 #include <cstdint>

@@ -18,7 +18,7 @@ namespace cityforge {
 
 VectorInfo read_vector_info(const std::string& path) {
     ensure_gdal_registered();
-    if (!std::filesystem::exists(path)) throw Error(path, "file not found");
+    if (!is_database_name(path) && !std::filesystem::exists(path)) throw Error(path, "file not found");
     GdalErrorCapture capture;
     std::unique_ptr<GDALDataset> ds(GDALDataset::Open(path.c_str(), GDAL_OF_VECTOR | GDAL_OF_READONLY));
     if (!ds) throw Error(path, "not a vector dataset OGR can read" + capture.suffix());
@@ -50,9 +50,113 @@ OGRLinearRing to_ogr(const Ring& r) {
 }
 }  // namespace
 
+namespace {
+
+// Creates the layer and writes the features; false on the first failure (GDAL's message stays in the capture).
+bool write_layer(GDALDataset* ds, const std::string& name, OGRSpatialReference* srs, const std::vector<FieldDefinition>& fields,
+                 const std::vector<Feature>& features, CPLStringList& lco, bool layer_transaction) {
+    bool any_multi = false;
+    for (const Feature& f : features) any_multi = any_multi || f.geometry.size() > 1;
+    OGRLayer* layer = ds->CreateLayer(name.c_str(), srs, any_multi ? wkbMultiPolygon : wkbPolygon, lco.List());
+    bool ok = layer != nullptr;
+    for (const FieldDefinition& f : fields) {
+        if (!ok) break;
+        OGRFieldDefn defn(f.name.c_str(), f.type == FieldType::integer ? OFTInteger64
+                                          : f.type == FieldType::real  ? OFTReal
+                                                                       : OFTString);
+        ok = layer->CreateField(&defn) == OGRERR_NONE;
+    }
+    if (ok && layer_transaction) ok = layer->StartTransaction() == OGRERR_NONE;
+    for (const Feature& feature : features) {
+        if (!ok) break;
+        OGRFeature f(layer->GetLayerDefn());
+        for (std::size_t i = 0; i < fields.size() && i < feature.values.size(); ++i) {
+            const AttributeValue& v = feature.values[i];
+            const int idx = static_cast<int>(i);
+            if (std::holds_alternative<int64_t>(v)) f.SetField(idx, static_cast<GIntBig>(std::get<int64_t>(v)));
+            else if (std::holds_alternative<double>(v)) f.SetField(idx, std::get<double>(v));
+            else if (std::holds_alternative<std::string>(v)) f.SetField(idx, std::get<std::string>(v).c_str());
+            else f.SetFieldNull(idx);
+        }
+        OGRMultiPolygon multi;
+        for (const Polygon& part : feature.geometry) {
+            auto* poly = new OGRPolygon;
+            poly->addRingDirectly(new OGRLinearRing(to_ogr(part.outer)));
+            for (const Ring& h : part.holes) poly->addRingDirectly(new OGRLinearRing(to_ogr(h)));
+            multi.addGeometryDirectly(poly);
+        }
+        if (feature.geometry.size() == 1) f.SetGeometry(multi.getGeometryRef(0));
+        else f.SetGeometry(&multi);
+        ok = layer->CreateFeature(&f) == OGRERR_NONE;
+    }
+    if (ok && layer_transaction) ok = layer->CommitTransaction() == OGRERR_NONE;
+    return ok;
+}
+
+// "PG:dbname=x tables=schema.name" -> the connection without `tables=` and the table named by it (or `fallback`).
+std::pair<std::string, std::string> database_and_table(const std::string& path, const std::string& fallback) {
+    std::string conn, table = fallback;
+    std::size_t i = 0;
+    while (i < path.size()) {
+        const std::size_t j = std::min(path.find(' ', i), path.size());
+        const std::string tok = path.substr(i, j - i);
+        if (tok.rfind("tables=", 0) == 0) table = tok.substr(7);
+        else if (!tok.empty()) conn += (conn.empty() ? "" : " ") + tok;
+        i = j + 1;
+    }
+    if (table.find(',') != std::string::npos) throw Error(path, "name one table to write (tables=NAME)");
+    return {conn, table};
+}
+
+// PostGIS: the table is replaced inside one transaction (nothing changes when a write fails); the SRID is the
+// horizontal CRS's EPSG code, the vertical CRS goes into a `crs_vertical` column (PostGIS SRIDs are 2-D).
+void write_database_layer(const std::string& path, const CrsInfo& crs, std::vector<FieldDefinition> fields, std::vector<Feature> features,
+                          const VectorWriteOptions& options) {
+    const auto [conn, table] = database_and_table(path, options.layer);
+    GdalErrorCapture capture;
+    const char* drivers[] = {"PostgreSQL", nullptr};
+    std::unique_ptr<GDALDataset> ds(GDALDataset::Open(conn.c_str(), GDAL_OF_VECTOR | GDAL_OF_UPDATE, drivers));
+    if (!ds) throw Error(path, "cannot open the database for writing" + capture.suffix());
+    OGRSpatialReference srs;
+    if (!crs.empty()) {
+        srs.importFromWkt(crs.wkt.c_str());
+        if (srs.IsCompound()) srs.StripVertical();
+        srs.SetAxisMappingStrategy(OAMS_TRADITIONAL_GIS_ORDER);
+    }
+    if (crs.vertical_epsg || !crs.vertical_name.empty()) {
+        bool present = false;
+        for (const FieldDefinition& f : fields) present = present || f.name == "crs_vertical";
+        if (!present) {
+            const std::string v = crs.vertical_epsg ? "EPSG:" + std::to_string(*crs.vertical_epsg) : crs.vertical_name;
+            fields.push_back({"crs_vertical", FieldType::string});
+            for (Feature& f : features) f.values.resize(fields.size() - 1), f.values.push_back(v);
+        }
+    }
+    CPLStringList lco;
+    lco.SetNameValue("OVERWRITE", "YES");
+    lco.SetNameValue("LAUNDER", "NO");
+    lco.SetNameValue("GEOMETRY_NAME", "geom");
+    lco.SetNameValue("FID", "fid");
+    lco.SetNameValue("PRECISION", "NO");
+    if (ds->StartTransaction(FALSE) != OGRERR_NONE) throw Error(path, "cannot start a transaction" + capture.suffix());
+    bool ok = write_layer(ds.get(), table, crs.empty() ? nullptr : &srs, fields, features, lco, false);
+    ok = ok && CPLGetLastErrorType() < CE_Failure;
+    if (!ok) {
+        const std::string why = capture.suffix();
+        ds->RollbackTransaction();
+        throw Error(path, "writing table '" + table + "' failed" + why);
+    }
+    if (ds->CommitTransaction() != OGRERR_NONE) throw Error(path, "committing table '" + table + "' failed" + capture.suffix());
+}
+
+}  // namespace
+
+bool is_database_name(const std::string& path) { return path.size() > 3 && (path.compare(0, 3, "PG:") == 0 || path.compare(0, 3, "pg:") == 0); }
+
 void write_polygon_features(const std::string& path, const CrsInfo& crs, const std::vector<FieldDefinition>& fields,
                             const std::vector<Feature>& features, const VectorWriteOptions& options) {
     ensure_gdal_registered();
+    if (is_database_name(path)) return write_database_layer(path, crs, fields, features, options);
     GDALDriver* driver = GetGDALDriverManager()->GetDriverByName(options.driver.c_str());
     if (!driver) throw Error(path, "GDAL has no '" + options.driver + "' driver");
     const std::filesystem::path tmp = temporary_path_for(path);
@@ -86,45 +190,9 @@ void write_polygon_features(const std::string& path, const CrsInfo& crs, const s
         if (options.coordinate_precision > 0)
             lco.SetNameValue("COORDINATE_PRECISION", std::to_string(options.coordinate_precision).c_str());
     }
-    bool any_multi = false;
-    for (const Feature& f : features) any_multi = any_multi || f.geometry.size() > 1;
-    OGRLayer* layer = ds->CreateLayer(options.layer.c_str(), crs.empty() ? nullptr : &srs,
-                                      any_multi ? wkbMultiPolygon : wkbPolygon, lco.List());
-    bool ok = layer != nullptr;
-    for (const FieldDefinition& f : fields) {
-        if (!ok) break;
-        OGRFieldDefn defn(f.name.c_str(), f.type == FieldType::integer ? OFTInteger64
-                                          : f.type == FieldType::real  ? OFTReal
-                                                                       : OFTString);
-        ok = layer->CreateField(&defn) == OGRERR_NONE;
-    }
-    if (ok && options.driver == "GPKG") ok = layer->StartTransaction() == OGRERR_NONE;
-    for (const Feature& feature : features) {
-        if (!ok) break;
-        OGRFeature f(layer->GetLayerDefn());
-        for (std::size_t i = 0; i < fields.size() && i < feature.values.size(); ++i) {
-            const AttributeValue& v = feature.values[i];
-            const int idx = static_cast<int>(i);
-            if (std::holds_alternative<int64_t>(v)) f.SetField(idx, static_cast<GIntBig>(std::get<int64_t>(v)));
-            else if (std::holds_alternative<double>(v)) f.SetField(idx, std::get<double>(v));
-            else if (std::holds_alternative<std::string>(v)) f.SetField(idx, std::get<std::string>(v).c_str());
-            else f.SetFieldNull(idx);
-        }
-        OGRMultiPolygon multi;
-        for (const Polygon& part : feature.geometry) {
-            auto* poly = new OGRPolygon;
-            poly->addRingDirectly(new OGRLinearRing(to_ogr(part.outer)));
-            for (const Ring& h : part.holes) poly->addRingDirectly(new OGRLinearRing(to_ogr(h)));
-            multi.addGeometryDirectly(poly);
-        }
-        if (feature.geometry.size() == 1) f.SetGeometry(multi.getGeometryRef(0));
-        else f.SetGeometry(&multi);
-        ok = layer->CreateFeature(&f) == OGRERR_NONE;
-    }
-    if (ok && options.driver == "GPKG") ok = layer->CommitTransaction() == OGRERR_NONE;
+    const bool ok = write_layer(ds, options.layer, crs.empty() ? nullptr : &srs, fields, features, lco, options.driver == "GPKG");
     GDALClose(ds);
-    ok = ok && CPLGetLastErrorType() < CE_Failure;
-    if (!ok) fail("writing features failed");
+    if (!ok || CPLGetLastErrorType() >= CE_Failure) fail("writing features failed");
     // GDAL 3.6's GDALClose reports no error, and drivers do not check every
     // write: a full disk leaves a silently truncated file. Read it back.
     {
@@ -159,7 +227,7 @@ Polygon from_ogr(const OGRPolygon* p) {
 
 PolygonLayer read_polygon_layer(const std::string& path, const std::string& layer_name) {
     ensure_gdal_registered();
-    if (!std::filesystem::exists(path)) throw Error(path, "file not found");
+    if (!is_database_name(path) && !std::filesystem::exists(path)) throw Error(path, "file not found");
     GdalErrorCapture capture;
     std::unique_ptr<GDALDataset> ds(GDALDataset::Open(path.c_str(), GDAL_OF_VECTOR | GDAL_OF_READONLY));
     if (!ds) throw Error(path, "not a vector dataset OGR can read" + capture.suffix());
@@ -205,13 +273,14 @@ PolygonLayer read_polygon_layer(const std::string& path, const std::string& laye
 }
 
 std::string vector_driver_for(const std::string& path) {
+    if (is_database_name(path)) return "PostgreSQL";
     std::string ext = std::filesystem::path(path).extension().string();
     std::transform(ext.begin(), ext.end(), ext.begin(), [](unsigned char c) { return static_cast<char>(std::tolower(c)); });
     if (ext == ".gpkg") return "GPKG";
     if (ext == ".geojson" || ext == ".json") return "GeoJSON";
     if (ext == ".fgb") return "FlatGeobuf";
     if (ext == ".shp") return "ESRI Shapefile";
-    throw Error(path, "unknown vector output format (use .gpkg, .geojson, .fgb or .shp)");
+    throw Error(path, "unknown vector output format (use .gpkg, .geojson, .fgb, .shp or PG:...)");
 }
 
 }  // namespace cityforge

@@ -77,6 +77,12 @@ PolygonLayer read_polygon_layer(const std::string& path, const std::string& laye
 void write_polygon_features(const std::string& path, const CrsInfo& crs, const std::vector<FieldDefinition>& fields,
                             const std::vector<Feature>& features, const VectorWriteOptions& options = {});
 
+/// True for a database connection GDAL opens by name ("PG:dbname=... [tables=NAME]"), which is
+/// never a file: readers do not look for it on disk, and write_polygon_features writes a PostGIS table
+/// (NAME from `tables=`, else VectorWriteOptions::layer) replaced in one transaction, SRID = the
+/// horizontal EPSG code, the vertical CRS in a `crs_vertical` text column.
+bool is_database_name(const std::string& path);
+
 /// Output driver for a path: ".gpkg" -> GPKG, ".geojson"/".json" -> GeoJSON,
 /// ".fgb" -> FlatGeobuf, ".shp" -> ESRI Shapefile; Error otherwise.
 std::string vector_driver_for(const std::string& path);

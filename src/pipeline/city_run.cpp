@@ -1,4 +1,5 @@
 #include "pipeline/city_run.hpp"
+#include "pipeline/view_run.hpp"
 
 #include <algorithm>
 #include <chrono>
@@ -891,6 +892,18 @@ RunReport merge_tiles(const RunManifest& m, const std::string& out_dir, const Pr
     const auto te = std::chrono::steady_clock::now();
     rep.model = write_city_model(model, crs, out_dir, m.options.buildings.model, progress.sub(0.3, 0.95));
     stage_seconds["export"] = since(te);
+    if (fs::exists(fs::path(out_dir) / "buildings.gpkg")) {  // the viewer page, DIR/view/index.html
+        const auto tv = std::chrono::steady_clock::now();
+        try {
+            ViewOptions vo;
+            vo.overwrite = true;
+            rep.model.files["view"] = write_view(out_dir, vo).path;
+        } catch (const Error& e) {
+            rep.warnings.push_back(std::string("viewer page: ") + e.what());
+            log::warning(rep.warnings.back());
+        }
+        stage_seconds["view"] = since(tv);
+    }
     rep.buildings = rep.model.buildings, rep.valid_lod1 = rep.model.valid_lod1, rep.valid_lod2 = rep.model.valid_lod2;
     rep.peak_memory_mb = std::max(rep.peak_memory_mb, peak_memory_mb());
     rep.seconds = since(t0);

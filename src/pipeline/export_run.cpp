@@ -11,14 +11,15 @@
 #include "crs/crs.hpp"
 #include "io/cityjson_writer.hpp"
 #include "io/citygml_writer.hpp"
+#include "io/tiles3d_writer.hpp"
 #include "io/vector.hpp"
 
 namespace cityforge {
 
 namespace {
-const std::vector<std::string> kFormats{"geojson", "gpkg", "citygml", "cityjson", "cityjsonseq"};
+const std::vector<std::string> kFormats{"geojson", "gpkg", "citygml", "cityjson", "cityjsonseq", "3dtiles", "gltf"};
 // Attributes we compute; same-named source attributes are replaced (status and reason merged).
-const std::set<std::string> kOwnFields{"status", "reason", "lod1_valid", "lod1_errors", "lod1_volume_m3",
+const std::set<std::string> kOwnFields{"cityforge_id", "roof_z", "status", "reason", "lod1_valid", "lod1_errors", "lod1_volume_m3",
                                        "lod2_valid", "lod2_errors", "lod2_volume_m3", "roof_type"};
 bool wants(const std::vector<std::string>& v, const std::string& s) { return std::find(v.begin(), v.end(), s) != v.end(); }
 bool wants(const std::vector<int>& v, int s) { return std::find(v.begin(), v.end(), s) != v.end(); }
@@ -48,11 +49,12 @@ std::string join(const std::vector<std::string>& v) {
 void ExportOptions::validate() const {
     if (formats.empty()) throw Error("--formats", "name at least one format");
     for (const std::string& f : formats)
-        if (!wants(kFormats, f)) throw Error("--formats", "unknown format '" + f + "' (geojson, gpkg, citygml, cityjson, cityjsonseq)");
+        if (!wants(kFormats, f)) throw Error("--formats", "unknown format '" + f + "' (geojson, gpkg, citygml, cityjson, cityjsonseq, 3dtiles, gltf)");
     if (lods.empty()) throw Error("--lod", "name at least one level of detail");
     for (int l : lods)
         if (l < 0 || l > 2) throw Error("--lod", "levels of detail are 0, 1 and 2");
     if (geojson_crs != "rfc7946" && geojson_crs != "native") throw Error("--geojson-crs", "must be rfc7946 or native");
+    if (!database.empty() && !is_database_name(database)) throw Error("--db", "give a database connection, PG:\"dbname=... [tables=NAME]\"");
     if (!(validity.planarity_tolerance > 0) || !(validity.snap_tolerance > 0)) throw Error("validity", "tolerances must be > 0");
 }
 
@@ -130,11 +132,11 @@ ExportReport write_city_model(const CityModel& model, const CrsInfo& crs, const 
         const std::string path = (fs::path(out_dir) / file).string();
         write(path);
         rep.seconds[format] = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-        rep.files[format] = path;
+        rep.files.emplace(format, path);  // a writer may have named its main file (3dtiles: tileset.json)
         ++done;
     };
 
-    if (wants(o.formats, "geojson") || wants(o.formats, "gpkg")) {
+    if (wants(o.formats, "geojson") || wants(o.formats, "gpkg") || !o.database.empty()) {
         // Flat tables: the source attributes plus ours, one row per building (failed ones say why).
         std::vector<FieldDefinition> fields{{"cityforge_id", FieldType::string}};
         std::vector<std::string> names;
@@ -192,6 +194,14 @@ ExportReport write_city_model(const CityModel& model, const CrsInfo& crs, const 
                 vo.driver = "GPKG";
                 write_polygon_features(p, crs, fields, features, vo);
             });
+        if (!o.database.empty()) {
+            const auto t0 = std::chrono::steady_clock::now();
+            VectorWriteOptions vo;
+            vo.driver = "PostgreSQL";
+            write_polygon_features(o.database, crs, fields, features, vo);
+            rep.seconds["database"] = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+            rep.files["database"] = o.database;
+        }
     }
     if (wants(o.formats, "citygml")) {
         if (wants(o.lods, 1) || wants(o.lods, 0))
@@ -206,6 +216,16 @@ ExportReport write_city_model(const CityModel& model, const CrsInfo& crs, const 
             CityJsonWriteOptions seq = cj;
             seq.sequence = true;
             write_cityjson(p, model, seq);
+        });
+    if (wants(o.formats, "gltf")) timed("gltf", "buildings.glb", [&](const std::string& p) { write_glb(p, model, wants(o.lods, 2)); });
+    if (wants(o.formats, "3dtiles"))
+        timed("3dtiles", "3dtiles", [&](const std::string& p) {
+            Tiles3dWriteOptions t = o.tiles;
+            t.prefer_lod2 = wants(o.lods, 2);
+            const Tiles3dWriteReport tr = write_3dtiles(p, model, crs, t);
+            rep.files["3dtiles"] = (fs::path(p) / "tileset.json").string();
+            log::info(p + ": " + std::to_string(tr.buildings) + " buildings in " + std::to_string(tr.content_tiles) + " tiles (depth " +
+                      std::to_string(tr.depth) + ", " + std::to_string(tr.triangles) + " triangles)");
         });
     progress(1.0, "written");
     return rep;

@@ -8,6 +8,7 @@
 #include <vector>
 
 #include "core/progress.hpp"
+#include "io/tiles3d_writer.hpp"
 #include "model/building_model.hpp"
 
 namespace cityforge {
@@ -16,8 +17,8 @@ struct PolygonLayer;
 struct CrsInfo;
 
 struct ExportOptions {
-    /// Any of geojson, gpkg, citygml, cityjson, cityjsonseq.
-    std::vector<std::string> formats{"geojson", "gpkg", "citygml", "cityjson", "cityjsonseq"};
+    /// Any of geojson, gpkg, citygml, cityjson, cityjsonseq, 3dtiles (DIR/3dtiles/tileset.json), gltf (DIR/buildings.glb).
+    std::vector<std::string> formats{"geojson", "gpkg", "citygml", "cityjson", "cityjsonseq", "3dtiles", "gltf"};
     std::vector<int> lods{0, 1, 2};          ///< levels of detail written where the format has them
     std::string geojson_crs = "rfc7946";     ///< "rfc7946" (WGS84 lon/lat, 7 decimals) or "native" (non-standard `crs` member)
     std::string vertical_crs;                ///< supplies the vertical CRS when the input has none ("EPSG:5709")
@@ -26,6 +27,10 @@ struct ExportOptions {
     std::string ground_field = "ground_z";   ///< ground height attribute, vertical CRS units
     std::string height_field = "height_m";   ///< LOD1 height above ground attribute, metres
     SolidValidityOptions validity;
+    /// Also write the building table (the GeoPackage's rows) to a database: "PG:dbname=... [tables=NAME]"
+    /// (default table `buildings`, replaced in one transaction); empty = none.
+    std::string database;
+    Tiles3dWriteOptions tiles;               ///< 3D Tiles quadtree (prefer_lod2 follows `lods`)
     void validate() const;
 };
 

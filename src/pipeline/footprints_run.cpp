@@ -16,6 +16,7 @@
 #include "pipeline/cloud_cells.hpp"
 #include "pipeline/ortho_buildings.hpp"
 #include "pipeline/segment_raster.hpp"
+#include "pipeline/train_run.hpp"
 #include "segment/boundary_refine.hpp"
 #include "segment/region_merging.hpp"
 
@@ -55,6 +56,14 @@ std::string to_string(DetectionMode m) {
     return "auto";
 }
 
+OrthoDetector ortho_detector_from_string(const std::string& s) {
+    if (s == "auto") return OrthoDetector::automatic;
+    if (s == "model") return OrthoDetector::model;
+    if (s == "rules") return OrthoDetector::rules;
+    throw Error("--detector", "must be auto, model or rules, not '" + s + "'");
+}
+std::string to_string(OrthoDetector d) { return d == OrthoDetector::automatic ? "auto" : d == OrthoDetector::model ? "model" : "rules"; }
+
 void FootprintsRunOptions::validate() const {
     const bool heights = !cloud.empty() || !ndsm.empty() || ndsm_band > 0;
     if (!heights && ortho.empty()) throw Error("--cloud", "give a point cloud (or an nDSM), an ortho (--ortho) or both");
@@ -72,6 +81,10 @@ void FootprintsRunOptions::validate() const {
         throw Error("--mode", to_string(mode) + " needs an ortho (--ortho)");
     if (!segments.empty() && mode == DetectionMode::cloud_only) throw Error("--segments", "segments need an ortho mode, not cloud_only");
     if (!segments.empty() && ortho.empty()) throw Error("--segments", "segments need the ortho they were made from (--ortho)");
+    if (!model.empty() && detector == OrthoDetector::rules) throw Error("--model", "is used by --detector model, not rules");
+    if (!segments.empty() && detector == OrthoDetector::model)
+        throw Error("--segments", "the model segments the ortho itself (at its own scales); --segments is for --detector rules");
+    if (!segments.empty() && !model.empty()) throw Error("--segments", "the model segments the ortho itself; give --model or --segments");
     segmentation.validate();
     if (!(simplify_m >= 0.0)) throw Error("--simplify-m", "must be >= 0");
     mask.validate();
@@ -152,7 +165,8 @@ FootprintTable footprint_table(const BuildingMask& mask, const Image<float>& nds
         const std::optional<double> h50 = percentile(hv, 50.0);
         f.geometry = {out};
         f.values = {ids.empty() ? int64_t(features.size() + 1) : ids[id], mode, to_string(o.fit), status, reason,
-                    polygon_area(out) * unit * unit, polygon_area(raw) * unit * unit, geodesic_area_m2(rings, crs),
+                    polygon_area(out) * unit * unit, polygon_area(raw) * unit * unit,
+                    crs.empty() ? AttributeValue() : AttributeValue(geodesic_area_m2(rings, crs)),
                     polygon_perimeter(out) * unit, orientation, err, iou, int64_t(vertices),
                     h50 ? AttributeValue(*h50 * z_unit) : AttributeValue()};
         error_sum += std::abs(err);
@@ -277,7 +291,8 @@ FootprintsReport run_footprints(const std::string& output_path, const Footprints
             throw Error(o.ortho, "has " + std::to_string(info.band_count()) + " bands; --ndsm-band " + std::to_string(o.ndsm_band) + " does not exist");
         if (o.nir_band > info.band_count())
             throw Error(o.ortho, "has " + std::to_string(info.band_count()) + " bands; --nir-band " + std::to_string(o.nir_band) + " does not exist");
-        if (mode != DetectionMode::cloud_only || o.ndsm_band > 0) img = read_ortho(*ortho);
+        const bool learned = mode == DetectionMode::ortho_only && o.detector != OrthoDetector::rules && o.segments.empty();  // reads its own bands
+        if ((mode != DetectionMode::cloud_only && !learned) || o.ndsm_band > 0) img = read_ortho(*ortho);
     }
     Image<float> ndsm_band;
     if (o.ndsm_band > 0) {
@@ -337,7 +352,15 @@ FootprintsReport run_footprints(const std::string& output_path, const Footprints
     if (ortho) co.gsd_m = ortho->info().gsd.x_m;
     // The NIR band's index among the colours (the nDSM band left them).
     co.nir_band = o.nir_band > 0 ? o.nir_band - 1 - (o.ndsm_band > 0 && o.ndsm_band < o.nir_band ? 1 : 0) : -1;
-    if (mode == DetectionMode::ortho_only) {
+    if (mode == DetectionMode::ortho_only && o.detector != OrthoDetector::rules && o.segments.empty()) {
+        // Learned detection (src/detect): segments and outlines from the model's own segmentation.
+        const DetectionImage di = read_detection_image(o.ortho, o.nir_band);
+        const std::string path = o.model.empty() ? default_model_path(di.layout) : o.model;
+        const detect::DetectorModel model = detect::read_model_file(path);
+        rep.detector = "model " + path;
+        mask = detect_building_mask(model, di, 0, progress.sub(0.1, 0.55));
+    } else if (mode == DetectionMode::ortho_only) {
+        rep.detector = "rules";
         Image<float> normalised = img.image;
         normalize_bands(normalised, img.valid);
         Image<uint32_t> segments;

@@ -27,6 +27,15 @@ enum class FootprintFit { raw, rectangle, recursive, regularised };
 enum class DetectionMode { automatic, ortho_cloud, ortho_only, cloud_only };
 DetectionMode detection_mode_from_string(const std::string& s);
 std::string to_string(DetectionMode m);
+
+/// Ortho-only detector: a learned model (src/detect; the shipped default
+/// model for the image's bands unless one is given) or the hand-set
+/// segment rules (footprint/segment_classifier); `automatic` = the model,
+/// or the rules when segments made beforehand are given (--segments: the
+/// model segments the ortho itself, at its own scales).
+enum class OrthoDetector { automatic, model, rules };
+OrthoDetector ortho_detector_from_string(const std::string& s);
+std::string to_string(OrthoDetector d);
 FootprintFit footprint_fit_from_string(const std::string& s);
 std::string to_string(FootprintFit f);
 
@@ -54,7 +63,11 @@ struct FootprintsRunOptions {
     /// Segmentation of the ortho (watershed, scale, boundary refinement: both
     /// ortho modes) and the per-building voting of the ortho_cloud mode.
     OrthoRefineOptions segmentation;
-    SegmentClassifierOptions classifier;  ///< ortho-only: segment rules
+    SegmentClassifierOptions classifier;  ///< ortho-only: segment rules (--detector rules)
+    OrthoDetector detector = OrthoDetector::automatic;  ///< ortho-only detector
+    /// ortho-only, --detector model: the model file (`cityforge train`);
+    /// empty = the shipped default for the ortho's bands.
+    std::string model;
     BuildingMaskOptions mask;      ///< detection thresholds (gsd_m is the raster cell)
     double simplify_m = 0.25;      ///< Douglas–Peucker tolerance of the raw outline, metres
     FootprintFit fit = FootprintFit::recursive;  ///< geometry written
@@ -86,6 +99,7 @@ FootprintTable footprint_table(const BuildingMask& mask, const Image<float>& nds
 
 struct FootprintsReport {
     std::string mode;              ///< "ortho_cloud", "ortho_only" or "cloud_only"
+    std::string detector;          ///< ortho_only: "model FILE" or "rules"
     std::string height_source;     ///< "point cloud", "nDSM raster", "ortho band N" or "" (ortho only)
     int cloud_cell_factor = 1;     ///< cloud rasters on cells of this many pixels a side
     uint32_t segments = 0;         ///< ortho modes: merged segments

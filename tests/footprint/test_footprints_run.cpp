@@ -146,8 +146,10 @@ TEST_CASE("Ortho-only footprints on a synthetic town (regression guard)", "[foot
     const SynthResult s = make_town(dir, 300, 4, 0);
     FootprintsRunOptions o;
     o.ortho = s.ortho_path;
+    o.detector = OrthoDetector::rules;  // the hand-set rules; the learned model is tested in tests/detect
     const FootprintsReport rep = run_footprints(dir / "fp.gpkg", o);
     CHECK(rep.mode == "ortho_only");
+    CHECK(rep.detector == "rules");
     const FootprintScores sc = score(read_polygon_layer(dir / "fp.gpkg"), read_polygon_layer(s.truth_path));
     std::printf("ortho-only footprints (seed 4, 300 m): P %.3f R %.3f F1 %.3f mean IoU %.3f |area err| %.2f %%\n", sc.precision, sc.recall,
                 sc.f1, sc.mean_iou, sc.mean_abs_area_error_pct);
@@ -160,6 +162,7 @@ TEST_CASE("SpaceNet Atlanta panchromatic ortho-only footprints against its 25 re
     FootprintsRunOptions o;
     o.ortho = test::shared_data("spacenet4_atlanta_pan_west/atlanta_pan_0p5m_west.tif");
     o.fit = FootprintFit::raw;
+    o.detector = OrthoDetector::rules;  // the shipped pan model was trained on this tile
     const FootprintsReport rep = run_footprints(dir / "sn.gpkg", o);
     CHECK(rep.mode == "ortho_only");
     const PolygonLayer pred = read_polygon_layer(dir / "sn.gpkg");

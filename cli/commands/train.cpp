@@ -1,0 +1,80 @@
+// cityforge train: a building detector learned from labelled footprints.
+#include <cstdio>
+#include <memory>
+
+#include "commands/commands.hpp"
+#include "pipeline/train_run.hpp"
+
+namespace cityforge::cli {
+
+namespace {
+void print_scores(const char* what, const DetectionScores& s) {
+    std::fprintf(stderr, "%s P %.3f R %.3f F1 %.3f (%zu of %zu predicted, %zu reference)", what, s.precision, s.recall, s.f1, s.tp, s.predicted,
+                 s.reference);
+}
+}  // namespace
+
+void add_train_command(CLI::App& parent, const GlobalFlags& g, CommandList& out) {
+    struct State {
+        std::string out;
+        bool overwrite = false;
+        TrainOptions options;
+    };
+    auto s = std::make_shared<State>();
+    auto& o = s->options;
+    auto& d = o.detector;
+    auto* cmd = parent.add_subcommand("train", "Learn a building detector (segment features + gradient-boosted trees) from labelled footprints, "
+                                               "with a spatial k-fold cross-validation");
+    cmd->add_option("--ortho", o.orthos, "Training image(s), any CRS GDAL reads (repeat for several); an alpha band is a mask")->required();
+    cmd->add_option("--labels", o.labels,
+                    "Building labels: one for all images or one per image; any OGR polygon layer in any CRS, or a mask raster on the image's grid (> 0 = building)")
+        ->required();
+    cmd->add_option("--label-layer", o.label_layer, "Layer of the label files (default: the first)");
+    cmd->add_option("--nir-band", o.nir_band, "1-based band of near infrared in every image (NDVI features)");
+    cmd->add_option("--out", s->out, "Model file to write (.cfdet)")->required();
+    cmd->add_flag("--overwrite", s->overwrite, "Replace an existing model file");
+    cmd->add_option("--folds", o.folds, "Spatial k-fold cross-validation (0 = none)")->capture_default_str();
+    cmd->add_option("--fold-block-m", o.fold_block_m, "Fold blocks, metres a side (folds never share a block)")->capture_default_str();
+    cmd->add_option("--thresholds", o.thresholds, "Candidate probability thresholds; the best pooled CV F1 is kept")->delimiter(',');
+    cmd->add_option("--threshold", d.threshold, "Probability threshold when there is no cross-validation")->capture_default_str();
+    cmd->add_option("--scales", d.segmentation.scales, "Merging scales: classified segments first, then context levels")->delimiter(',');
+    cmd->add_option("--h-minima", d.segmentation.watershed.h_minima, "Watershed dynamics threshold (normalised gradient units)")->capture_default_str();
+    cmd->add_option("--rounds", d.booster.rounds, "Boosting rounds (trees)")->capture_default_str();
+    cmd->add_option("--max-depth", d.booster.max_depth, "Depth of each tree")->capture_default_str();
+    cmd->add_option("--learning-rate", d.booster.learning_rate, "Shrinkage (eta)")->capture_default_str();
+    cmd->add_option("--seed", d.booster.seed, "Seed of row/column sampling and of the folds (same data and seed, same model bytes)")
+        ->capture_default_str();
+    cmd->add_option("--min-label-share", d.min_label_share, "A segment is building when this share of its pixels is labelled")->capture_default_str();
+    cmd->add_option("--min-area-m2", d.min_area_m2, "Smallest building kept when applied, square metres")->capture_default_str();
+    out.push_back({cmd, [s, &g]() {
+                       const TrainReport r = run_train(s->out, s->options, s->overwrite, make_progress(g));
+                       if (!g.quiet) {
+                           std::fprintf(stderr, "cityforge: trained on %zu image(s), %s, %zu segments (%zu building), %zu reference buildings, %zu features\n",
+                                        r.images, r.bands.c_str(), r.segments, r.building_segments, r.reference_buildings, r.features);
+                           for (const FoldReport& f : r.folds) {
+                               std::fprintf(stderr, "  fold %d (%zu test segments): ", f.fold, f.test_segments);
+                               print_scores("objects@IoU0.5", f.objects);
+                               std::fprintf(stderr, "; ");
+                               print_scores("segment pixels", f.segments);
+                               std::fprintf(stderr, "\n");
+                           }
+                           for (const auto& [name, sc] : r.per_image) {
+                               std::fprintf(stderr, "  %s: ", name.c_str());
+                               print_scores("objects@IoU0.5", sc);
+                               std::fprintf(stderr, "\n");
+                           }
+                           if (!r.folds.empty()) {
+                               std::fprintf(stderr, "  pooled: ");
+                               print_scores("objects@IoU0.5", r.pooled_objects);
+                               std::fprintf(stderr, "; ");
+                               print_scores("segment pixels", r.pooled_segments);
+                               std::fprintf(stderr, "\n");
+                           }
+                           std::fprintf(stderr, "cityforge: threshold %.2f, fingerprint %s, %zu bytes in %.1f s -> %s\n", r.threshold, r.fingerprint.c_str(),
+                                        r.model_bytes, r.seconds, s->out.c_str());
+                       }
+                       return 0;
+                   }});
+}
+
+}  // namespace cityforge::cli

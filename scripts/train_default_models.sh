@@ -1,0 +1,57 @@
+#!/usr/bin/env bash
+# Trains the detector models shipped in models/ (used by `cityforge footprints`
+# ortho-only when no --model is given), reproducibly, from the dev sets only:
+#   models/default_rgb.cfdet  RGB(A): the five OpenAerialMap places (0.27-0.30 m), the seven SpaceNet-1 Rio tiles
+#                             (0.5 m, EPSG:4326), two synthetic towns (0.5 m and 0.3 m)
+#   models/default_pan.cfdet  one band: SpaceNet-4 Atlanta pan west (UInt16) plus the green band of every RGB set above
+# Never reads ../shared/data/holdout/. Same data, same seed -> same model bytes (whatever the thread count).
+#
+#   scripts/train_default_models.sh [BUILD_DIR]      (default build/; data from ../shared/data or $CITYFORGE_DATA)
+# Prints each model's cross-validation figures (5 spatial folds, 60 m blocks).
+set -euo pipefail
+here="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
+build="${1:-$here/build}"
+cf="$build/bin/cityforge"
+data="${CITYFORGE_DATA:-$here/../shared/data}"
+work="$(mktemp -d)"
+trap 'rm -rf "$work"' EXIT
+[ -x "$cf" ] || { echo "train_default_models: build cityforge first ($cf missing)" >&2; exit 1; }
+
+"$cf" --quiet synth --out "$work/synth_a" --size-m 400 --gsd 0.5 --seed 101 --cloud-density 0
+"$cf" --quiet synth --out "$work/synth_b" --size-m 300 --gsd 0.3 --seed 102 --cloud-density 0
+
+rgb=(
+  oam_zanzibar_rgb/zanzibar_z19_north_rgb.tif oam_zanzibar_rgb/zanzibar_z19_north_buildings.geojson
+  oam_kampala_rgba/kampala_z19_east_rgba.tif oam_kampala_rgba/kampala_z19_east_buildings.geojson
+  oam_nairobi_rgb/nairobi_z19_east_rgb.tif oam_nairobi_rgb/nairobi_z19_east_buildings.geojson
+  oam_catanduanes_banepa/catanduanes_z19_a_rgb.tif oam_catanduanes_banepa/catanduanes_z19_a_buildings.geojson
+  oam_catanduanes_banepa/banepa_z19_a_rgba.tif oam_catanduanes_banepa/banepa_z19_a_buildings.geojson
+)
+for i in 50 51 52 53 54 55 56; do
+  rgb+=(spacenet1_rio_rgb/3band_013022223130_Public_img${i}_rgb.tif spacenet1_rio_rgb/3band_013022223130_Public_img${i}_buildings.geojson)
+done
+args=()
+pan=(--ortho "$data/spacenet4_atlanta_pan_west/atlanta_pan_0p5m_west.tif" --labels "$data/spacenet4_atlanta_pan_west/buildings_west.geojson")
+for ((k = 0; k < ${#rgb[@]}; k += 2)); do
+  img="$data/${rgb[k]}" lab="$data/${rgb[k+1]}"
+  args+=(--ortho "$img" --labels "$lab")
+  # The green band as a panchromatic stand-in (an alpha band stays the mask).
+  g="$work/pan_$(basename "${rgb[k]}")"
+  if gdalinfo "$img" | grep -q "ColorInterp=Alpha"; then
+    gdal_translate -q -b 2 -b 4 -colorinterp gray,alpha "$img" "$g"
+  else
+    gdal_translate -q -b 2 "$img" "$g"
+  fi
+  pan+=(--ortho "$g" --labels "$lab")
+done
+for t in synth_a synth_b; do
+  args+=(--ortho "$work/$t/ortho.tif" --labels "$work/$t/truth.geojson")
+  gdal_translate -q -b 2 "$work/$t/ortho.tif" "$work/pan_$t.tif"
+  pan+=(--ortho "$work/pan_$t.tif" --labels "$work/$t/truth.geojson")
+done
+
+mkdir -p "$here/models"
+echo "== models/default_rgb.cfdet" >&2
+"$cf" train "${args[@]}" --seed 1 --out "$here/models/default_rgb.cfdet" --overwrite
+echo "== models/default_pan.cfdet" >&2
+"$cf" train "${pan[@]}" --seed 1 --out "$here/models/default_pan.cfdet" --overwrite

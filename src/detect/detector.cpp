@@ -1,0 +1,191 @@
+#include "detect/detector.hpp"
+
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <iterator>
+
+#include "core/atomic_file.hpp"
+#include "core/error.hpp"
+
+namespace cityforge::detect {
+
+namespace {
+constexpr char kMagic[] = "CFDET1\n";
+constexpr std::size_t kMagicLen = 7;
+
+void put_u64(std::vector<uint8_t>& out, uint64_t v) {
+    for (int i = 0; i < 8; ++i) out.push_back(static_cast<uint8_t>(v >> (8 * i)));
+}
+uint64_t get_u64(const std::vector<uint8_t>& in, std::size_t at) {
+    uint64_t v = 0;
+    for (int i = 0; i < 8; ++i) v |= uint64_t(in[at + i]) << (8 * i);
+    return v;
+}
+}  // namespace
+
+uint64_t fnv1a64(const void* data, std::size_t n, uint64_t h) {
+    const auto* p = static_cast<const uint8_t*>(data);
+    for (std::size_t i = 0; i < n; ++i) h = (h ^ p[i]) * 0x100000001b3ULL;
+    return h;
+}
+
+std::string hex64(uint64_t v) {
+    char buf[17];
+    std::snprintf(buf, sizeof buf, "%016llx", static_cast<unsigned long long>(v));
+    return buf;
+}
+
+void DetectorOptions::validate(int bands) const {
+    segmentation.validate(bands);
+    booster.validate();
+    if (!(min_label_share > 0.0 && min_label_share < 1.0)) throw Error("min_label_share", "must be in (0, 1)");
+    if (!(threshold > 0.0 && threshold < 1.0)) throw Error("threshold", "must be in (0, 1)");
+    if (!(min_area_m2 >= 0.0)) throw Error("min_area_m2", "must be >= 0");
+    if (!(min_hole_m2 >= 0.0)) throw Error("min_hole_m2", "must be >= 0");
+}
+
+std::string describe_bands(const BandLayout& l) {
+    if (l.bands == 1) return "pan";
+    if (l.bands == 3 && l.nir_band < 0) return "RGB";
+    if (l.bands == 4 && l.nir_band == 3) return "RGB+NIR";
+    return std::to_string(l.bands) + " bands" + (l.nir_band >= 0 ? " (NIR band " + std::to_string(l.nir_band + 1) + ")" : "");
+}
+
+nlohmann::json to_json(const DetectorOptions& o) {
+    const auto& s = o.segmentation;
+    const auto& b = o.booster;
+    return {{"segmentation",
+             {{"h_minima", s.watershed.h_minima}, {"smoothing_sigma_px", s.watershed.smoothing_sigma_px},
+              {"band_weights", s.watershed.band_weights}, {"scales", s.scales}, {"color_weight", s.color_weight}}},
+            {"booster",
+             {{"rounds", b.rounds}, {"max_depth", b.max_depth}, {"learning_rate", b.learning_rate}, {"subsample", b.subsample},
+              {"colsample", b.colsample}, {"min_child_weight", b.min_child_weight}, {"lambda", b.lambda}, {"seed", b.seed}}},
+            {"min_label_share", o.min_label_share},
+            {"threshold", o.threshold},
+            {"min_area_m2", o.min_area_m2},
+            {"min_hole_m2", o.min_hole_m2}};
+}
+
+DetectorOptions detector_options_from_json(const nlohmann::json& j) {
+    DetectorOptions o;
+    const auto& s = j.at("segmentation");
+    o.segmentation.watershed.h_minima = s.at("h_minima").get<double>();
+    o.segmentation.watershed.smoothing_sigma_px = s.at("smoothing_sigma_px").get<double>();
+    o.segmentation.watershed.band_weights = s.at("band_weights").get<std::vector<double>>();
+    o.segmentation.scales = s.at("scales").get<std::vector<double>>();
+    o.segmentation.color_weight = s.at("color_weight").get<double>();
+    const auto& b = j.at("booster");
+    o.booster.rounds = b.at("rounds").get<int>();
+    o.booster.max_depth = b.at("max_depth").get<int>();
+    o.booster.learning_rate = b.at("learning_rate").get<double>();
+    o.booster.subsample = b.at("subsample").get<double>();
+    o.booster.colsample = b.at("colsample").get<double>();
+    o.booster.min_child_weight = b.at("min_child_weight").get<double>();
+    o.booster.lambda = b.at("lambda").get<double>();
+    o.booster.seed = b.at("seed").get<uint64_t>();
+    o.min_label_share = j.at("min_label_share").get<double>();
+    o.threshold = j.at("threshold").get<double>();
+    o.min_area_m2 = j.at("min_area_m2").get<double>();
+    o.min_hole_m2 = j.at("min_hole_m2").get<double>();
+    return o;
+}
+
+std::vector<uint8_t> serialize_model(const DetectorModel& m) {
+    const nlohmann::json header = {{"format", "cityforge-detector"},
+                                   {"format_version", 1},
+                                   {"classifier", "xgboost gbtree (binary:logistic, hist)"},
+                                   {"bands", describe_bands(m.layout)},
+                                   {"band_count", m.layout.bands},
+                                   {"nir_band", m.layout.nir_band},
+                                   {"features", m.features},
+                                   {"options", to_json(m.options)},
+                                   {"fingerprint", m.fingerprint},
+                                   {"training", m.training}};
+    const std::string text = header.dump(1);
+    std::vector<uint8_t> out(kMagic, kMagic + kMagicLen);
+    put_u64(out, text.size());
+    out.insert(out.end(), text.begin(), text.end());
+    put_u64(out, m.booster.size());
+    out.insert(out.end(), m.booster.begin(), m.booster.end());
+    put_u64(out, fnv1a64(out.data(), out.size()));
+    return out;
+}
+
+DetectorModel parse_model(const std::vector<uint8_t>& in, const std::string& subject) {
+    if (in.size() < kMagicLen + 24 || std::memcmp(in.data(), kMagic, kMagicLen) != 0)
+        throw Error(subject, "not a cityforge detector model (train one with `cityforge train`)");
+    const std::size_t n = in.size();
+    const uint64_t hlen = get_u64(in, kMagicLen);
+    if (hlen > n - kMagicLen - 24) throw Error(subject, "truncated detector model (header)");
+    const std::size_t bat = kMagicLen + 8 + hlen;
+    const uint64_t blen = get_u64(in, bat);
+    if (blen != n - bat - 16) throw Error(subject, "truncated or padded detector model (expected " + std::to_string(bat + 16 + blen) + " bytes, found " + std::to_string(n) + ")");
+    if (get_u64(in, n - 8) != fnv1a64(in.data(), n - 8)) throw Error(subject, "corrupt detector model (checksum mismatch)");
+    DetectorModel m;
+    try {
+        const auto header = nlohmann::json::parse(in.begin() + kMagicLen + 8, in.begin() + static_cast<std::ptrdiff_t>(bat));
+        if (header.at("format").get<std::string>() != "cityforge-detector" || header.at("format_version").get<int>() != 1)
+            throw Error(subject, "unsupported detector model format");
+        m.layout.bands = header.at("band_count").get<int>();
+        m.layout.nir_band = header.at("nir_band").get<int>();
+        m.features = header.at("features").get<std::vector<std::string>>();
+        m.options = detector_options_from_json(header.at("options"));
+        m.fingerprint = header.at("fingerprint").get<std::string>();
+        m.training = header.at("training");
+    } catch (const nlohmann::json::exception& e) {
+        throw Error(subject, std::string("invalid detector model header: ") + e.what());
+    }
+    m.options.validate(m.layout.bands);
+    if (m.features != feature_names(m.layout, int(m.options.segmentation.scales.size()) - 1))
+        throw Error(subject, "the model's feature list is not the one this version of cityforge computes");
+    m.booster.assign(in.begin() + static_cast<std::ptrdiff_t>(bat + 8), in.end() - 8);
+    return m;
+}
+
+DetectorModel read_model_file(const std::string& path) {
+    std::ifstream f(path, std::ios::binary);
+    if (!f) throw Error(path, std::filesystem::exists(path) ? "cannot read the model" : "model not found");
+    const std::vector<uint8_t> bytes((std::istreambuf_iterator<char>(f)), std::istreambuf_iterator<char>());
+    return parse_model(bytes, path);
+}
+
+void write_model_file(const std::string& path, const DetectorModel& model) {
+    const std::vector<uint8_t> bytes = serialize_model(model);
+    write_text_file(path, std::string(bytes.begin(), bytes.end()));
+}
+
+void check_bands(const DetectorModel& model, const BandLayout& l, const std::string& image) {
+    if (l.bands != model.layout.bands || l.nir_band != model.layout.nir_band)
+        throw Error(image, "has " + describe_bands(l) + " (" + std::to_string(l.bands) + " band" + (l.bands == 1 ? "" : "s") +
+                               " besides any alpha); the detector model was trained on " + describe_bands(model.layout) + " (" +
+                               std::to_string(model.layout.bands) + " band" + (model.layout.bands == 1 ? "" : "s") + ")");
+}
+
+std::vector<float> segment_probabilities(const DetectorModel& model, const FeatureMatrix& f, int threads) {
+    const std::vector<float> p = predict_booster(model.booster, f.values, f.rows, f.cols, threads);
+    std::vector<float> out(f.rows + 1, 0.0f);
+    std::copy(p.begin(), p.end(), out.begin() + 1);
+    return out;
+}
+
+std::vector<uint8_t> building_pixels(const SceneSegments& s, const std::vector<float>& probability, double threshold) {
+    std::vector<uint8_t> b(s.labels.data.size(), 0);
+    for (std::size_t i = 0; i < b.size(); ++i)
+        if (const uint32_t a = s.labels.data[i]) b[i] = probability[a] >= threshold ? 1 : 0;
+    return b;
+}
+
+Detection detect_buildings(const DetectorModel& model, const Image<float>& normalised, const std::vector<uint8_t>& valid, double gsd_m,
+                           int threads, const Progress& progress) {
+    Detection d;
+    d.segments = segment_scene(normalised, valid, model.options.segmentation, progress.sub(0.0, 0.8));
+    const FeatureMatrix f = segment_features(normalised, valid, d.segments, model.layout, gsd_m);
+    progress(0.9, "features");
+    d.probability = segment_probabilities(model, f, threads);
+    d.building = building_pixels(d.segments, d.probability, model.options.threshold);
+    progress(1.0, "classified");
+    return d;
+}
+
+}  // namespace cityforge::detect

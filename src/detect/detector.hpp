@@ -1,0 +1,87 @@
+#pragma once
+// A learned building detector: segments of our segmentation, their features
+// (segment_features.hpp) and a gradient-boosted classifier (booster.hpp),
+// stored with the options, feature list, expected bands, a fingerprint of
+// the training data and its cross-validation figures in one checksummed
+// file. Pure algorithm and file format; no GDAL.
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include <nlohmann/json.hpp>
+
+#include "core/progress.hpp"
+#include "detect/booster.hpp"
+#include "detect/segment_features.hpp"
+
+namespace cityforge::detect {
+
+/// Everything that decides what a model learns and how it is applied.
+struct DetectorOptions {
+    DetectorSegmentationOptions segmentation;
+    BoosterOptions booster;
+    /// A training segment is "building" when at least this share of its
+    /// pixels lies inside the labels.
+    double min_label_share = 0.5;
+    /// Segments whose probability is at least this are building (the
+    /// training command picks it by cross-validation unless fixed).
+    double threshold = 0.5;
+    double min_area_m2 = 8.0;  ///< building components smaller than this are dropped
+    double min_hole_m2 = 6.0;  ///< holes smaller than this are filled
+    void validate(int bands) const;
+};
+
+/// The bands a model expects, in the image's order (alpha bands are masks,
+/// never counted): "pan" (1), "RGB" (3), "RGB+NIR" (4), or "N bands".
+std::string describe_bands(const BandLayout& layout);
+
+struct DetectorModel {
+    BandLayout layout;
+    std::vector<std::string> features;  ///< column names, feature_names(layout, context levels)
+    DetectorOptions options;
+    std::string fingerprint;            ///< hash of the training images, labels and options (hex)
+    nlohmann::json training;            ///< sources, sample counts, per-fold figures (free form, recorded as given)
+    std::vector<uint8_t> booster;       ///< XGBoost UBJSON model
+};
+
+/// The model's bytes: "CFDET1\n", then header JSON, booster and an FNV-1a
+/// checksum, each length-prefixed; the same model gives the same bytes.
+std::vector<uint8_t> serialize_model(const DetectorModel& model);
+/// Parses bytes from serialize_model. Throws Error naming `subject` when the
+/// magic, a length or the checksum is wrong (truncated or corrupt file) or
+/// the header is incomplete.
+DetectorModel parse_model(const std::vector<uint8_t>& bytes, const std::string& subject);
+DetectorModel read_model_file(const std::string& path);
+/// Written to a temporary sibling and renamed (never half-written).
+void write_model_file(const std::string& path, const DetectorModel& model);
+
+/// Throws a one-line Error naming `image` when its bands are not the ones
+/// the model was trained on.
+void check_bands(const DetectorModel& model, const BandLayout& image_layout, const std::string& image);
+
+/// Building probability of every segment (index = label, 0 unused).
+std::vector<float> segment_probabilities(const DetectorModel& model, const FeatureMatrix& features, int threads = 0);
+
+/// Building pixels (1) of the segments whose probability reaches the
+/// model's threshold (w x h of the labels).
+std::vector<uint8_t> building_pixels(const SceneSegments& segments, const std::vector<float>& probability, double threshold);
+
+/// The whole detection on one image: segmentation with the model's options,
+/// features, probabilities and building pixels. `normalised` = bands scaled
+/// 0..255 (normalize_bands) in the model's band order.
+struct Detection {
+    SceneSegments segments;
+    std::vector<float> probability;  ///< per segment (index = label)
+    std::vector<uint8_t> building;   ///< per pixel
+};
+Detection detect_buildings(const DetectorModel& model, const Image<float>& normalised, const std::vector<uint8_t>& valid, double gsd_m,
+                           int threads = 0, const Progress& progress = {});
+
+/// FNV-1a 64-bit hash, continued from `h` (for fingerprints).
+uint64_t fnv1a64(const void* data, std::size_t n, uint64_t h = 0xcbf29ce484222325ULL);
+std::string hex64(uint64_t v);
+
+nlohmann::json to_json(const DetectorOptions& o);
+DetectorOptions detector_options_from_json(const nlohmann::json& j);
+
+}  // namespace cityforge::detect

@@ -1,0 +1,76 @@
+#pragma once
+// Per-segment features for learned building detection, computed on our own
+// segmentation (watershed + heap-queue Baatz–Schäpe merging at several
+// scales): band statistics for any band count, texture (gradients, edge
+// density, orientation coherence, a local binary pattern histogram), shape
+// (area in m², compactness, rectangularity, elongation), multi-scale features
+// of the coarser regions that contain each segment, and context (neighbour
+// contrast, adjacent dark segments by side, neighbouring vegetation).
+// Pure algorithm: pixel units in, metres from the caller's GSD; no GDAL.
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include "core/image.hpp"
+#include "core/progress.hpp"
+#include "segment/watershed.hpp"
+
+namespace cityforge::detect {
+
+/// How a scene is segmented for detection. The first scale gives the
+/// segments that are classified; the further (larger) scales give the
+/// context regions that contain them. Merging costs are in the units of the
+/// 0..255-normalised bands (normalize_bands), so they mean the same for Byte
+/// and UInt16 images.
+struct DetectorSegmentationOptions {
+    WatershedOptions watershed;                 ///< over-segmentation (h_minima in normalised gradient units)
+    std::vector<double> scales{30.0, 60.0, 120.0};  ///< strictly increasing, > 0
+    double color_weight = 0.9;                  ///< Baatz–Schäpe colour weight (shape = 1 - this)
+    void validate(int bands) const;
+};
+
+/// The classified segments and the context regions that contain them.
+struct SceneSegments {
+    Image<uint32_t> labels;  ///< classified segments 1..count per pixel, 0 = no data
+    uint32_t count = 0;
+    /// context[l][k] = label at scale l+1 of segment k (index 0 unused);
+    /// context_labels[l] the label raster of that scale.
+    std::vector<std::vector<uint32_t>> context;
+    std::vector<Image<uint32_t>> context_labels;
+    std::vector<uint32_t> context_counts;
+};
+
+/// Watershed over-segmentation of `normalised` (bands scaled 0..255),
+/// then one merge sequence through every scale.
+SceneSegments segment_scene(const Image<float>& normalised, const std::vector<uint8_t>& valid,
+                            const DetectorSegmentationOptions& options, const Progress& progress = {});
+
+/// Which bands the image holds: colour bands first (R, G, B when 3+), then
+/// optional near infrared; `nir_band` is its 0-based index or -1.
+struct BandLayout {
+    int bands = 0;
+    int nir_band = -1;
+};
+
+/// Feature names in column order for a layout and a number of context scales.
+std::vector<std::string> feature_names(const BandLayout& layout, int context_levels);
+
+/// Row-major features: row k-1 = segment k.
+struct FeatureMatrix {
+    std::size_t rows = 0, cols = 0;
+    std::vector<float> values;
+    std::vector<double> centroid_col, centroid_row;  ///< per row, pixels
+    std::vector<uint32_t> pixel_count;               ///< per row
+};
+
+/// Features of every segment. `normalised` = the bands scaled 0..255 (as
+/// segmented); `gsd_m` = ground size of a pixel, metres (areas and lengths
+/// are computed in metres so a model carries across resolutions).
+FeatureMatrix segment_features(const Image<float>& normalised, const std::vector<uint8_t>& valid, const SceneSegments& segments,
+                               const BandLayout& layout, double gsd_m);
+
+/// Share of each segment's pixels that are building in `truth` (1 = building,
+/// same size as the labels); index 0 unused.
+std::vector<float> building_share(const SceneSegments& segments, const std::vector<uint8_t>& truth);
+
+}  // namespace cityforge::detect

@@ -1,0 +1,404 @@
+#include "pipeline/train_run.hpp"
+
+#include <tbb/parallel_for.h>
+
+#include <chrono>
+#include <cmath>
+#include <filesystem>
+
+#include "audit/footprint_match.hpp"
+#include "core/error.hpp"
+#include "detect/label_raster.hpp"
+#include "footprint/vectorize.hpp"
+#include "io/vector.hpp"
+#include "pipeline/footprints_run.hpp"
+#include "raster/raster.hpp"
+
+#ifndef CITYFORGE_MODELS_DIR
+#define CITYFORGE_MODELS_DIR "models"
+#endif
+
+namespace cityforge {
+
+namespace fs = std::filesystem;
+
+DetectionImage read_detection_image(const std::string& path, int nir_band) {
+    RasterReader reader(path);
+    const RasterInfo& info = reader.info();
+    DetectionImage d;
+    d.path = path;
+    d.grid = {info.transform, info.width, info.height};
+    d.crs = info.crs;
+    std::vector<int> bands;
+    for (int b = 1; b <= info.band_count(); ++b) {
+        if (info.band_count() > 1 && info.bands[b - 1].color_interpretation == "Alpha" && d.alpha_band == 0) {
+            d.alpha_band = b;
+            continue;
+        }
+        bands.push_back(b);
+    }
+    if (nir_band > info.band_count()) throw Error(path, "has " + std::to_string(info.band_count()) + " bands; --nir-band " + std::to_string(nir_band) + " does not exist");
+    if (nir_band > 0 && nir_band == d.alpha_band) throw Error(path, "band " + std::to_string(nir_band) + " is an alpha band, not near infrared");
+    d.layout.bands = static_cast<int>(bands.size());
+    for (std::size_t k = 0; k < bands.size(); ++k)
+        if (bands[k] == nir_band) d.layout.nir_band = static_cast<int>(k);
+    d.normalised = reader.read_all<float>(bands);
+    d.valid = data_mask(d.normalised, info, bands);
+    if (d.alpha_band) {
+        const Image<float> alpha = reader.read_all<float>({d.alpha_band});
+        for (std::size_t i = 0; i < d.valid.size(); ++i)
+            if (!(alpha.data[i] > 0.0f)) d.valid[i] = 0;
+    }
+    std::size_t valid = 0;
+    for (const uint8_t v : d.valid) valid += v;
+    if (valid == 0) throw Error(path, "has no valid pixel (all nodata or transparent)");
+    normalize_bands(d.normalised, d.valid);
+    // True ground size of the centre pixel for any CRS (Web Mercator's grid
+    // metres are not ground metres away from the equator).
+    if (info.crs.empty()) {
+        d.gsd_m = std::sqrt(info.gsd.x_m * info.gsd.y_m);
+    } else {
+        const GeoTransform& t = info.transform;
+        const double c = info.width / 2.0, r = info.height / 2.0;
+        const std::vector<MapPoint> px{t.pixel_to_map({c, r}), t.pixel_to_map({c + 1, r}), t.pixel_to_map({c + 1, r + 1}), t.pixel_to_map({c, r + 1})};
+        d.gsd_m = std::sqrt(geodesic_area_m2({px}, info.crs));
+    }
+    if (!(d.gsd_m > 0.0)) throw Error(path, "cannot determine the ground sample distance");
+    return d;
+}
+
+namespace {
+
+BuildingMask mask_from_probabilities(const detect::SceneSegments& segments, const std::vector<float>& probability, double threshold,
+                                     double gsd_m, const detect::DetectorOptions& o) {
+    BuildingMaskOptions mo;
+    mo.gsd_m = gsd_m;
+    mo.min_area_m2 = o.min_area_m2;
+    mo.min_hole_m2 = o.min_hole_m2;
+    return label_buildings(detect::building_pixels(segments, probability, threshold), segments.labels.width, segments.labels.height, mo);
+}
+
+// Labelled data of one training image, in its pixel space.
+struct LabelledImage {
+    DetectionImage image;
+    std::vector<uint8_t> truth;                     // 1 = building pixel
+    std::vector<std::vector<Polygon>> reference;    // x = column, y = -row (footprint_table's pixel space)
+    detect::SceneSegments segments;
+    detect::FeatureMatrix features;
+    std::vector<float> share;                       // per segment (index = label)
+    std::vector<int> fold;                          // per segment (index = label - 1)
+};
+
+bool is_raster_path(const std::string& p) {
+    std::string ext = fs::path(p).extension().string();
+    for (char& ch : ext) ch = static_cast<char>(std::tolower(static_cast<unsigned char>(ch)));
+    return ext == ".tif" || ext == ".tiff" || ext == ".vrt" || ext == ".img";
+}
+
+void load_labels(LabelledImage& li, const std::string& path, const std::string& layer) {
+    const int w = li.image.grid.width, h = li.image.grid.height;
+    const GeoTransform& t = li.image.grid.transform;
+    if (is_raster_path(path)) {
+        RasterReader reader(path);
+        const RasterInfo& info = reader.info();
+        if (info.width != w || info.height != h || std::abs(info.transform.origin_x - t.origin_x) > 1e-6 * std::abs(t.pixel_width) ||
+            std::abs(info.transform.origin_y - t.origin_y) > 1e-6 * std::abs(t.pixel_height))
+            throw Error(path, "the label mask is not on the grid of " + li.image.path + " (" + std::to_string(info.width) + " x " +
+                                  std::to_string(info.height) + " vs " + std::to_string(w) + " x " + std::to_string(h) + ")");
+        const Image<float> m = reader.read_all<float>({1});
+        li.truth.assign(m.data.size(), 0);
+        for (std::size_t i = 0; i < m.data.size(); ++i) li.truth[i] = m.data[i] > 0.0f;
+        std::vector<uint32_t> labels, sizes;
+        const uint32_t n = label_components(li.truth, 1, w, h, labels, sizes);
+        Image<uint32_t> img(w, h, 1, 0);
+        std::copy(labels.begin(), labels.end(), img.data.begin());
+        auto polys = vectorize_all(img, GeoTransform{0.0, 1.0, 0.0, -1.0});
+        for (uint32_t k = 1; k <= n; ++k)
+            if (!polys[k].empty()) li.reference.push_back(std::move(polys[k]));
+        return;
+    }
+    const PolygonLayer labels = read_polygon_layer(path, layer);
+    if (labels.crs.empty()) throw Error(path, "the labels have no CRS");
+    const bool reproject = !same_horizontal_crs(labels.crs, li.image.crs);
+    std::vector<Polygon> burn;
+    for (const Feature& f : labels.features) {
+        std::vector<Polygon> parts = f.geometry;
+        for (Polygon& p : parts) {
+            std::vector<Ring*> rings{&p.outer};
+            for (Ring& r : p.holes) rings.push_back(&r);
+            for (Ring* r : rings) {
+                if (reproject) {
+                    std::vector<double> x, y, z;
+                    for (const MapPoint& q : *r) x.push_back(q.x), y.push_back(q.y), z.push_back(0.0);
+                    transform_points(labels.crs, li.image.crs, x, y, z, path);
+                    for (std::size_t i = 0; i < r->size(); ++i) (*r)[i] = {x[i], y[i]};
+                }
+                for (MapPoint& q : *r) {
+                    const PixelPoint pp = t.map_to_pixel(q);
+                    q = {pp.col, pp.row};
+                }
+            }
+        }
+        const Extent e = parts_extent(parts);
+        if (e.max_x <= 0 || e.max_y <= 0 || e.min_x >= w || e.min_y >= h) continue;  // outside this image
+        for (const Polygon& p : parts) burn.push_back(p);
+        const double cx = 0.5 * (e.min_x + e.max_x), cy = 0.5 * (e.min_y + e.max_y);
+        if (cx < 0 || cy < 0 || cx >= w || cy >= h) continue;  // mostly outside: not counted as a reference
+        for (Polygon& p : parts) {
+            for (MapPoint& q : p.outer) q.y = -q.y;
+            for (Ring& r : p.holes)
+                for (MapPoint& q : r) q.y = -q.y;
+            orient_polygon(p);
+        }
+        li.reference.push_back(std::move(parts));
+    }
+    if (burn.empty()) throw Error(path, "no label polygon overlaps " + li.image.path + " (in " + li.image.crs.label() + ")");
+    li.truth = detect::rasterize_polygons(burn, w, h);
+}
+
+// Predicted footprints (recursive rectangle fits, exactly as `footprints`
+// writes them) in the pixel space of the references.
+std::vector<std::vector<Polygon>> predicted_footprints(const BuildingMask& mask, double gsd_m) {
+    FootprintsRunOptions fo;
+    fo.ortho = "x";  // only the outline options are used
+    const FootprintTable table = footprint_table(mask, Image<float>{}, GeoTransform{0.0, 1.0, 0.0, -1.0}, 0, 0, {}, "ortho_only", gsd_m, 1.0, CrsInfo{}, fo);
+    std::vector<std::vector<Polygon>> out;
+    for (const Feature& f : table.features) out.push_back(f.geometry);
+    return out;
+}
+
+int fold_of(const detect::FoldBlocks& folds, std::size_t image, const std::vector<Polygon>& parts) {
+    const Extent e = parts_extent(parts);
+    return folds.fold_at(image, 0.5 * (e.min_x + e.max_x), -0.5 * (e.min_y + e.max_y));
+}
+
+}  // namespace
+
+BuildingMask detect_building_mask(const detect::DetectorModel& model, const DetectionImage& image, int threads, const Progress& progress) {
+    detect::check_bands(model, image.layout, image.path);
+    const detect::Detection d = detect::detect_buildings(model, image.normalised, image.valid, image.gsd_m, threads, progress);
+    return mask_from_probabilities(d.segments, d.probability, model.options.threshold, image.gsd_m, model.options);
+}
+
+std::string default_model_path(const detect::BandLayout& layout) {
+    const char* env = std::getenv("CITYFORGE_MODELS_DIR");
+    const std::string dir = env && *env ? env : CITYFORGE_MODELS_DIR;
+    const std::string name = layout.bands == 1 ? "default_pan.cfdet" : layout.bands == 3 && layout.nir_band < 0 ? "default_rgb.cfdet" : "";
+    if (name.empty())
+        throw Error("--model", "no default model for " + detect::describe_bands(layout) + " images; train one with `cityforge train` and pass --model");
+    return (fs::path(dir) / name).string();
+}
+
+void TrainOptions::validate() const {
+    if (orthos.empty()) throw Error("--ortho", "give at least one training image");
+    if (labels.empty()) throw Error("--labels", "give the building labels (a polygon layer or a mask raster)");
+    if (labels.size() != 1 && labels.size() != orthos.size())
+        throw Error("--labels", "give one label file for all images or one per image (" + std::to_string(orthos.size()) + "), not " +
+                                    std::to_string(labels.size()));
+    if (nir_band < 0) throw Error("--nir-band", "must be >= 1");
+    if (folds == 1 || folds < 0 || folds > 20) throw Error("--folds", "must be 0 (no cross-validation) or 2..20");
+    if (!(fold_block_m > 0.0)) throw Error("--fold-block-m", "must be > 0");
+    for (const double t : thresholds)
+        if (!(t > 0.0 && t < 1.0)) throw Error("--thresholds", "each threshold must be in (0, 1)");
+}
+
+void DetectionScores::add(const DetectionScores& o) { tp += o.tp, predicted += o.predicted, reference += o.reference; }
+void DetectionScores::finish() {
+    precision = predicted ? double(tp) / double(predicted) : 0.0;
+    recall = reference ? double(tp) / double(reference) : 0.0;
+    f1 = precision + recall > 0 ? 2.0 * precision * recall / (precision + recall) : 0.0;
+}
+
+TrainReport run_train(const std::string& out_path, const TrainOptions& o, bool overwrite, const Progress& progress) {
+    const auto t0 = std::chrono::steady_clock::now();
+    o.validate();
+    if (out_path.empty()) throw Error("--out", "give the model file to write");
+    if (fs::exists(out_path) && !overwrite) throw Error(out_path, "exists; pass --overwrite to replace it");
+    TrainReport rep;
+    std::vector<LabelledImage> data(o.orthos.size());
+    uint64_t fp = detect::fnv1a64("cityforge-train", 15);
+    for (std::size_t i = 0; i < o.orthos.size(); ++i) {
+        LabelledImage& li = data[i];
+        li.image = read_detection_image(o.orthos[i], o.nir_band);
+        if (i > 0 && (li.image.layout.bands != data[0].image.layout.bands || li.image.layout.nir_band != data[0].image.layout.nir_band))
+            throw Error(o.orthos[i], "has " + detect::describe_bands(li.image.layout) + ", " + o.orthos[0] + " has " +
+                                         detect::describe_bands(data[0].image.layout) + ": one model is trained on one band set");
+        if (i == 0) o.detector.validate(li.image.layout.bands);
+        load_labels(li, o.labels.size() == 1 ? o.labels[0] : o.labels[i], o.label_layer);
+        li.segments = detect::segment_scene(li.image.normalised, li.image.valid, o.detector.segmentation);
+        li.features = detect::segment_features(li.image.normalised, li.image.valid, li.segments, li.image.layout, li.image.gsd_m);
+        li.share = detect::building_share(li.segments, li.truth);
+        fp = detect::fnv1a64(li.image.normalised.data.data(), li.image.normalised.data.size() * sizeof(float), fp);
+        fp = detect::fnv1a64(li.truth.data(), li.truth.size(), fp);
+        rep.segments += li.segments.count;
+        rep.reference_buildings += li.reference.size();
+        for (uint32_t k = 1; k <= li.segments.count; ++k) rep.building_segments += li.share[k] >= o.detector.min_label_share;
+        progress(0.5 * double(i + 1) / double(o.orthos.size()), "features");
+    }
+    if (rep.building_segments == 0) throw Error(o.labels[0], "no training segment is a building (labels and images do not overlap?)");
+    const detect::BandLayout layout = data[0].image.layout;
+    const std::vector<std::string> names = detect::feature_names(layout, int(o.detector.segmentation.scales.size()) - 1);
+    rep.images = data.size();
+    rep.features = names.size();
+    rep.bands = detect::describe_bands(layout);
+
+    // Rows of a subset: images in order, segments in label order.
+    auto rows_where = [&](auto&& keep, std::vector<float>& X, std::vector<float>& y, std::vector<float>& wt) {
+        for (std::size_t i = 0; i < data.size(); ++i) {
+            const LabelledImage& li = data[i];
+            for (uint32_t k = 1; k <= li.segments.count; ++k) {
+                if (!keep(i, k) || li.features.pixel_count[k - 1] == 0) continue;
+                const float* r = li.features.values.data() + std::size_t(k - 1) * li.features.cols;
+                X.insert(X.end(), r, r + li.features.cols);
+                y.push_back(li.share[k] >= o.detector.min_label_share ? 1.0f : 0.0f);
+                // Every segment counts once: object F1 counts small buildings
+                // like large ones (measured on OAM dev CV: F1 0.511 vs 0.487
+                // with sqrt(size) weights).
+                wt.push_back(1.0f);
+            }
+        }
+    };
+
+    detect::DetectorOptions chosen = o.detector;
+    if (o.folds >= 2) {
+        std::vector<int> ws, hs, bs;
+        for (const LabelledImage& li : data)
+            ws.push_back(li.image.grid.width), hs.push_back(li.image.grid.height),
+                bs.push_back(std::max(1, static_cast<int>(std::lround(o.fold_block_m / li.image.gsd_m))));
+        const detect::FoldBlocks folds = detect::make_folds(ws, hs, bs, o.folds, o.detector.booster.seed);
+        for (std::size_t i = 0; i < data.size(); ++i) {
+            LabelledImage& li = data[i];
+            li.fold.resize(li.segments.count);
+            for (uint32_t k = 1; k <= li.segments.count; ++k)
+                li.fold[k - 1] = folds.fold_at(i, li.features.centroid_col[k - 1] + 0.5, li.features.centroid_row[k - 1] + 0.5);
+        }
+        // Out-of-fold probabilities: fold f predicted by the model trained on the others.
+        std::vector<std::vector<float>> cv(data.size());
+        for (std::size_t i = 0; i < data.size(); ++i) cv[i].assign(data[i].segments.count + 1, 0.0f);
+        rep.folds.resize(o.folds);
+        tbb::parallel_for(0, o.folds, [&](int f) {
+            std::vector<float> X, y, wt;
+            rows_where([&](std::size_t i, uint32_t k) { return data[i].fold[k - 1] != f; }, X, y, wt);
+            rep.folds[f].fold = f + 1;
+            rep.folds[f].train_segments = y.size();
+            std::size_t pos = 0;
+            for (const float v : y) pos += v > 0.5f;
+            if (pos == 0) return;  // no building to learn from: fold predicts nothing
+            const std::vector<uint8_t> model = detect::train_booster(X, y.size(), names.size(), y, wt, o.detector.booster);
+            for (std::size_t i = 0; i < data.size(); ++i) {
+                const LabelledImage& li = data[i];
+                std::vector<float> Xt;
+                std::vector<uint32_t> ks;
+                for (uint32_t k = 1; k <= li.segments.count; ++k)
+                    if (li.fold[k - 1] == f) {
+                        const float* r = li.features.values.data() + std::size_t(k - 1) * li.features.cols;
+                        Xt.insert(Xt.end(), r, r + li.features.cols);
+                        ks.push_back(k);
+                    }
+                const std::vector<float> p = detect::predict_booster(model, Xt, ks.size(), names.size(), 1);
+                for (std::size_t j = 0; j < ks.size(); ++j) cv[i][ks[j]] = p[j];
+                rep.folds[f].test_segments += ks.size();
+            }
+        });
+        progress(0.8, "cross-validation");
+        // Object scores of every threshold; the best pooled F1 is kept.
+        auto evaluate = [&](double threshold, std::vector<FoldReport>* per_fold, std::vector<DetectionScores>* per_image) {
+            DetectionScores pooled;
+            for (std::size_t i = 0; i < data.size(); ++i) {
+                const LabelledImage& li = data[i];
+                const BuildingMask mask = mask_from_probabilities(li.segments, cv[i], threshold, li.image.gsd_m, o.detector);
+                const auto pred = predicted_footprints(mask, li.image.gsd_m);
+                DetectionScores img;
+                for (int f = 0; f < o.folds; ++f) {
+                    std::vector<std::vector<Polygon>> pf, rf;
+                    for (const auto& p : pred)
+                        if (fold_of(folds, i, p) == f) pf.push_back(p);
+                    for (const auto& r : li.reference)
+                        if (fold_of(folds, i, r) == f) rf.push_back(r);
+                    const FootprintScores s = match_footprints(pf, rf, 0.5);
+                    DetectionScores d;
+                    d.tp = s.true_positives, d.predicted = pf.size(), d.reference = rf.size();
+                    pooled.add(d);
+                    img.add(d);
+                    if (per_fold) (*per_fold)[f].objects.add(d);
+                    if (per_fold) {
+                        DetectionScores px;
+                        double tp = 0, pr = 0, rf_px = 0;
+                        for (uint32_t k = 1; k <= li.segments.count; ++k) {
+                            if (li.fold[k - 1] != f) continue;
+                            const double n = li.features.pixel_count[k - 1];
+                            rf_px += li.share[k] * n;
+                            if (cv[i][k] >= threshold) pr += n, tp += li.share[k] * n;
+                        }
+                        px.tp = std::size_t(std::llround(tp)), px.predicted = std::size_t(std::llround(pr)), px.reference = std::size_t(std::llround(rf_px));
+                        (*per_fold)[f].segments.add(px);
+                    }
+                }
+                img.finish();
+                if (per_image) per_image->push_back(img);
+            }
+            pooled.finish();
+            return pooled;
+        };
+        double best_f1 = -1.0;
+        for (const double t : o.thresholds) {
+            const DetectionScores s = evaluate(t, nullptr, nullptr);
+            if (s.f1 > best_f1 + 1e-12) best_f1 = s.f1, chosen.threshold = t;
+        }
+        std::vector<DetectionScores> per_image;
+        rep.pooled_objects = evaluate(chosen.threshold, &rep.folds, &per_image);
+        for (FoldReport& f : rep.folds) {
+            f.objects.finish();
+            f.segments.finish();
+            rep.pooled_segments.add(f.segments);
+        }
+        rep.pooled_segments.finish();
+        for (std::size_t i = 0; i < data.size(); ++i) rep.per_image.emplace_back(o.orthos[i], per_image[i]);
+    }
+    rep.threshold = chosen.threshold;
+
+    // The model: every segment.
+    std::vector<float> X, y, wt;
+    rows_where([](std::size_t, uint32_t) { return true; }, X, y, wt);
+    detect::DetectorModel model;
+    model.layout = layout;
+    model.features = names;
+    model.options = chosen;
+    model.booster = detect::train_booster(X, y.size(), names.size(), y, wt, o.detector.booster);
+    const std::string opts = detect::to_json(o.detector).dump();
+    fp = detect::fnv1a64(opts.data(), opts.size(), fp);
+    model.fingerprint = detect::hex64(fp);
+    rep.fingerprint = model.fingerprint;
+    nlohmann::json sources = nlohmann::json::array();
+    for (std::size_t i = 0; i < data.size(); ++i)
+        sources.push_back({{"ortho", fs::path(o.orthos[i]).filename().string()},
+                           {"labels", fs::path(o.labels.size() == 1 ? o.labels[0] : o.labels[i]).filename().string()},
+                           {"gsd_m", std::round(data[i].image.gsd_m * 1e4) / 1e4},
+                           {"segments", data[i].segments.count},
+                           {"reference_buildings", data[i].reference.size()}});
+    auto scores_json = [](const DetectionScores& s) {
+        auto r3 = [](double v) { return std::round(v * 1000.0) / 1000.0; };
+        return nlohmann::json{{"tp", s.tp}, {"predicted", s.predicted}, {"reference", s.reference},
+                              {"precision", r3(s.precision)}, {"recall", r3(s.recall)}, {"f1", r3(s.f1)}};
+    };
+    nlohmann::json cvj = nullptr;
+    if (o.folds >= 2) {
+        nlohmann::json folds = nlohmann::json::array();
+        for (const FoldReport& f : rep.folds)
+            folds.push_back({{"fold", f.fold}, {"objects_iou_0.5", scores_json(f.objects)}, {"segment_pixels", scores_json(f.segments)}});
+        nlohmann::json images = nlohmann::json::array();
+        for (const auto& [name, s] : rep.per_image) images.push_back({{"ortho", fs::path(name).filename().string()}, {"objects_iou_0.5", scores_json(s)}});
+        cvj = {{"folds", o.folds}, {"fold_block_m", o.fold_block_m}, {"threshold", chosen.threshold}, {"per_fold", folds}, {"per_image", images},
+               {"pooled_objects_iou_0.5", scores_json(rep.pooled_objects)}, {"pooled_segment_pixels", scores_json(rep.pooled_segments)}};
+    }
+    model.training = {{"sources", sources}, {"segments", rep.segments}, {"building_segments", rep.building_segments},
+                      {"cross_validation", cvj}, {"cityforge_version", CITYFORGE_VERSION}};
+    const std::vector<uint8_t> bytes = detect::serialize_model(model);
+    rep.model_bytes = bytes.size();
+    detect::write_model_file(out_path, model);
+    progress(1.0, "written");
+    rep.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    return rep;
+}
+
+}  // namespace cityforge

@@ -1,0 +1,231 @@
+#include <catch2/catch.hpp>
+#include <tbb/global_control.h>
+
+#include <cstdio>
+#include <filesystem>
+#include <set>
+
+#include "audit/footprint_match.hpp"
+#include "core/error.hpp"
+#include "detect/detector.hpp"
+#include "detect/label_raster.hpp"
+#include "io/vector.hpp"
+#include "pipeline/footprints_run.hpp"
+#include "pipeline/train_run.hpp"
+#include "raster/raster.hpp"
+#include "synth_fixture.hpp"
+#include "test_support.hpp"
+
+using namespace cityforge;
+using cityforge::test::make_town;
+using cityforge::test::ScratchDir;
+
+namespace {
+FootprintScores score_files(const std::string& pred, const std::string& truth) {
+    std::vector<std::vector<Polygon>> p, t;
+    for (const auto& f : read_polygon_layer(pred).features) p.push_back(f.geometry);
+    for (const auto& f : read_polygon_layer(truth).features) t.push_back(f.geometry);
+    return match_footprints(p, t, 0.5);
+}
+std::vector<uint8_t> bytes_of(const std::string& path) {
+    const std::string s = test::slurp(path);
+    return {s.begin(), s.end()};
+}
+std::string default_rgb_model() { return default_model_path(detect::BandLayout{3, -1}); }
+}  // namespace
+
+TEST_CASE("A detector trained on one synthetic town finds the buildings of another - CV folds partition the segments - same bytes for 1 and 2 threads",
+          "[detect][synth]") {
+    ScratchDir dir("detect_synth");
+    ScratchDir a_dir("detect_town_a"), b_dir("detect_town_b");
+    const SynthResult a = make_town(a_dir, 300, 21, 0);
+    const SynthResult b = make_town(b_dir, 300, 22, 0);
+    TrainOptions o;
+    o.orthos = {a.ortho_path};
+    o.labels = {a.truth_path};
+    o.folds = 3;
+    o.fold_block_m = 50.0;
+    TrainReport rep;
+    {
+        tbb::global_control one(tbb::global_control::max_allowed_parallelism, 1);
+        rep = run_train(dir / "a1.cfdet", o);
+    }
+    {
+        tbb::global_control two(tbb::global_control::max_allowed_parallelism, 2);
+        run_train(dir / "a2.cfdet", o);
+    }
+    CHECK(bytes_of(dir / "a1.cfdet") == bytes_of(dir / "a2.cfdet"));
+    REQUIRE(rep.folds.size() == 3);
+    std::size_t tested = 0;
+    for (const FoldReport& f : rep.folds) {
+        CHECK(f.test_segments > 0);
+        CHECK(f.train_segments + f.test_segments == rep.segments);  // a segment is in exactly one fold
+        tested += f.test_segments;
+    }
+    CHECK(tested == rep.segments);
+    std::printf("detect synth: CV on town A pooled P %.3f R %.3f F1 %.3f (threshold %.2f, %zu segments, %zu bytes)\n", rep.pooled_objects.precision,
+                rep.pooled_objects.recall, rep.pooled_objects.f1, rep.threshold, rep.segments, rep.model_bytes);
+    CHECK(rep.pooled_objects.f1 >= 0.85);
+
+    // The model file says what it is.
+    const detect::DetectorModel m = detect::read_model_file(dir / "a1.cfdet");
+    CHECK(m.layout.bands == 3);
+    CHECK(m.features.size() == rep.features);
+    CHECK(m.fingerprint == rep.fingerprint);
+    CHECK(m.options.threshold == rep.threshold);
+    CHECK(m.training.at("cross_validation").at("per_fold").size() == 3);
+
+    // Applied to town B, with 1 and 2 threads.
+    FootprintsRunOptions fo;
+    fo.ortho = b.ortho_path;
+    fo.model = dir / "a1.cfdet";
+    FootprintsReport fr;
+    {
+        tbb::global_control one(tbb::global_control::max_allowed_parallelism, 1);
+        fr = run_footprints(dir / "b1.geojson", fo);
+    }
+    {
+        tbb::global_control two(tbb::global_control::max_allowed_parallelism, 2);
+        run_footprints(dir / "b2.geojson", fo);
+    }
+    CHECK(fr.mode == "ortho_only");
+    CHECK(fr.detector.rfind("model ", 0) == 0);
+    CHECK(test::slurp(dir / "b1.geojson") == test::slurp(dir / "b2.geojson"));
+    const FootprintScores s = score_files(dir / "b1.geojson", b.truth_path);
+    std::printf("detect synth: trained on town A, applied to town B: %zu predicted, %zu reference; P %.3f R %.3f F1 %.3f mean IoU %.3f\n", s.predicted,
+                s.reference, s.precision, s.recall, s.f1, s.mean_iou);
+    CHECK(s.f1 >= 0.9);
+}
+
+TEST_CASE("Cross-validation folds are spatially disjoint blocks, balanced over all images", "[detect]") {
+    const std::vector<int> w{1000, 300}, h{600, 900}, block{100, 50};
+    const detect::FoldBlocks f = detect::make_folds(w, h, block, 5, 7);
+    std::vector<int> per_fold(5, 0);
+    for (std::size_t i = 0; i < w.size(); ++i) {
+        REQUIRE(f.fold[i].size() == std::size_t(f.blocks_x[i]) * f.blocks_y[i]);
+        for (const int k : f.fold[i]) ++per_fold[k];
+        // Every pixel of a block is in the block's fold; neighbouring blocks are separate units.
+        for (int by = 0; by < f.blocks_y[i]; ++by)
+            for (int bx = 0; bx < f.blocks_x[i]; ++bx) {
+                const int k = f.fold[i][std::size_t(by) * f.blocks_x[i] + bx];
+                for (const double dx : {0.0, 0.5, 0.999})
+                    for (const double dy : {0.0, 0.5, 0.999})
+                        CHECK(f.fold_at(i, (bx + dx) * block[i], (by + dy) * block[i]) == k);
+            }
+    }
+    const auto [mn, mx] = std::minmax_element(per_fold.begin(), per_fold.end());
+    CHECK(*mn > 0);
+    CHECK(*mx - *mn <= 1);
+    CHECK_THROWS_AS(detect::make_folds({100}, {100}, {100}, 2, 1), Error);  // one block cannot make two folds
+}
+
+TEST_CASE("Label polygons are burnt with the pixel-centre rule, holes kept", "[detect]") {
+    Polygon p;
+    p.outer = {{1.0, 1.0}, {5.0, 1.0}, {5.0, 5.0}, {1.0, 5.0}};
+    p.holes = {{{2.0, 2.0}, {2.0, 3.0}, {3.0, 3.0}, {3.0, 2.0}}};
+    const std::vector<uint8_t> m = detect::rasterize_polygons({p}, 8, 8);
+    int n = 0;
+    for (const uint8_t v : m) n += v;
+    CHECK(n == 15);
+    CHECK(m[2 * 8 + 2] == 0);
+    CHECK(m[1 * 8 + 1] == 1);
+    CHECK(m[4 * 8 + 4] == 1);
+    CHECK(m[5 * 8 + 5] == 0);
+}
+
+TEST_CASE("The shipped RGB model refuses a one-band image, and corrupt or truncated models are refused", "[detect]") {
+    ScratchDir dir("detect_refuse");
+    const std::string model = default_rgb_model();
+    REQUIRE(std::filesystem::exists(model));
+    const SynthResult s = make_town(dir, 120, 5, 0);
+    {
+        RasterReader r(s.ortho_path);
+        const Image<float> red = r.read_all<float>({1});
+        Image<uint16_t> pan(red.width, red.height, 1, 0);
+        for (std::size_t i = 0; i < red.data.size(); ++i) pan.data[i] = static_cast<uint16_t>(red.data[i] * 10.0f);
+        write_geotiff(dir / "pan.tif", pan, r.info().transform, r.info().crs.wkt);
+    }
+    FootprintsRunOptions fo;
+    fo.ortho = dir / "pan.tif";
+    fo.model = model;
+    try {
+        run_footprints(dir / "out.geojson", fo);
+        FAIL("a 1-band image was accepted by a 3-band model");
+    } catch (const Error& e) {
+        const std::string msg = e.what();
+        CHECK(msg.find("pan.tif") != std::string::npos);
+        CHECK(msg.find("trained on RGB") != std::string::npos);
+        CHECK(msg.find('\n') == std::string::npos);
+    }
+    CHECK_FALSE(std::filesystem::exists(dir / "out.geojson"));
+
+    const std::vector<uint8_t> good = bytes_of(model);
+    CHECK_NOTHROW(detect::parse_model(good, "m"));
+    std::vector<uint8_t> truncated(good.begin(), good.begin() + static_cast<std::ptrdiff_t>(good.size() / 2));
+    CHECK_THROWS_WITH(detect::parse_model(truncated, "m.cfdet"), Catch::Contains("m.cfdet") && Catch::Contains("truncated"));
+    std::vector<uint8_t> flipped = good;
+    flipped[flipped.size() - 100] ^= 0x5a;
+    CHECK_THROWS_WITH(detect::parse_model(flipped, "m.cfdet"), Catch::Contains("corrupt"));
+    std::vector<uint8_t> header_flip = good;
+    header_flip[40] ^= 0x01;
+    CHECK_THROWS_AS(detect::parse_model(header_flip, "m.cfdet"), Error);
+    CHECK_THROWS_WITH(detect::parse_model(bytes_of(s.truth_path), "t.geojson"), Catch::Contains("not a cityforge detector model"));
+    // A model file that is not one, through footprints.
+    fo.ortho = s.ortho_path;
+    fo.model = s.truth_path;
+    CHECK_THROWS_WITH(run_footprints(dir / "out2.geojson", fo), Catch::Contains("not a cityforge detector model"));
+    CHECK_FALSE(std::filesystem::exists(dir / "out2.geojson"));
+}
+
+TEST_CASE("Cross-validated detection on a real 0.3 m RGBA drone ortho (OAM Kampala dev) holds its measured F1 (regression floor)", "[detect][real]") {
+    // Spatial 5-fold CV on the dev image alone (never the hold-out): object
+    // F1 at IoU 0.5 of the fitted outlines, as `audit footprints` counts.
+    ScratchDir dir("detect_kampala");
+    TrainOptions o;
+    o.orthos = {test::shared_data("oam_kampala_rgba/kampala_z19_east_rgba.tif")};
+    o.labels = {test::shared_data("oam_kampala_rgba/kampala_z19_east_buildings.geojson")};
+    o.folds = 5;  // 60 m blocks
+    const TrainReport r = run_train(dir / "k.cfdet", o);
+    std::printf("detect Kampala dev CV: P %.3f R %.3f F1 %.3f (%zu/%zu/%zu); segment pixels F1 %.3f; threshold %.2f\n", r.pooled_objects.precision,
+                r.pooled_objects.recall, r.pooled_objects.f1, r.pooled_objects.tp, r.pooled_objects.predicted, r.pooled_objects.reference,
+                r.pooled_segments.f1, r.threshold);
+    CHECK(r.bands == "RGB");  // the alpha band is a mask, not a colour
+    CHECK(r.reference_buildings >= 90);
+    CHECK(r.pooled_objects.f1 >= 0.38);  // measured 0.439 (P 0.576 R 0.355)
+    CHECK(r.pooled_segments.f1 >= 0.70);  // measured 0.764
+}
+
+TEST_CASE("cityforge train and footprints --model from the command line - bad inputs fail in one line", "[detect][cli]") {
+    ScratchDir dir("detect_cli");
+    const SynthResult s = make_town(dir, 150, 8, 0);
+    const std::string model = dir / "m.cfdet";
+    const auto ok = test::run_cli("train --quiet --ortho " + s.ortho_path + " --labels " + s.truth_path + " --folds 2 --fold-block-m 40 --rounds 40 --out " + model);
+    CHECK(ok.exit_code == 0);
+    REQUIRE(std::filesystem::exists(model));
+    // Not overwritten without --overwrite.
+    const auto again = test::run_cli("train --quiet --ortho " + s.ortho_path + " --labels " + s.truth_path + " --folds 0 --out " + model);
+    CHECK(again.exit_code == 1);
+    CHECK(again.err.find("--overwrite") != std::string::npos);
+    const auto fp = test::run_cli("footprints --quiet --ortho " + s.ortho_path + " --model " + model + " --out " + (dir / "fp.geojson"));
+    CHECK(fp.exit_code == 0);
+    CHECK(std::filesystem::exists(dir / "fp.geojson"));
+    // Labels that do not overlap the image (another town's, shifted far away by its CRS origin).
+    SynthOptions far;
+    far.size_m = 60, far.cloud_density_m2 = 0, far.origin_x = 600000.0;
+    const SynthResult f = write_synthetic_town((dir.path / "far").string(), far);
+    const auto miss = test::run_cli("train --quiet --ortho " + s.ortho_path + " --labels " + f.truth_path + " --folds 0 --out " + (dir / "x.cfdet"));
+    CHECK(miss.exit_code == 1);
+    CHECK(miss.err.find("no label polygon overlaps") != std::string::npos);
+    CHECK(test::count_lines(miss.err) == 1);
+    CHECK_FALSE(std::filesystem::exists(dir / "x.cfdet"));
+    // A truncated model.
+    {
+        const std::string bytes = test::slurp(model);
+        std::ofstream(dir / "cut.cfdet", std::ios::binary) << bytes.substr(0, bytes.size() - 10);
+    }
+    const auto cut = test::run_cli("footprints --quiet --ortho " + s.ortho_path + " --model " + (dir / "cut.cfdet") + " --out " + (dir / "fp2.geojson"));
+    CHECK(cut.exit_code == 1);
+    CHECK(cut.err.find("cut.cfdet") != std::string::npos);
+    CHECK(test::count_lines(cut.err) == 1);
+    CHECK_FALSE(std::filesystem::exists(dir / "fp2.geojson"));
+}
