@@ -4,6 +4,7 @@
 // function with a typed options struct.
 #include <CLI/CLI.hpp>
 #include <cstdio>
+#include <iostream>
 #include <new>
 
 #include "cli_support.hpp"
@@ -61,7 +62,17 @@ int main(int argc, char** argv) {
 
     try {
         for (const cli::Command& c : commands)
-            if (c.app->parsed()) return c.run();
+            if (c.app->parsed()) {
+                const int rc = c.run();
+                // Results printed to stdout count as output: a full disk or a
+                // closed pipe (`info --json > /dev/full`) is a failed write.
+                std::cout.flush();
+                if (rc == 0 && (!std::cout || std::fflush(stdout) != 0 || std::ferror(stdout))) {
+                    std::fprintf(stderr, "cityforge: error: stdout: write failed (disk full or closed pipe?)\n");
+                    return 1;
+                }
+                return rc;
+            }
     } catch (const cf::Error& e) {
         std::fprintf(stderr, "cityforge: error: %s\n", e.what());
         return 1;

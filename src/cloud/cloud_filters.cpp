@@ -4,6 +4,7 @@
 #include <cmath>
 #include <limits>
 #include <numeric>
+#include <tuple>
 #include <tbb/parallel_for.h>
 
 #include "core/error.hpp"
@@ -27,6 +28,29 @@ void GroundFilterOptions::validate() const {
     if (!(elevation_threshold > 0.0)) throw Error("--smrf-threshold", "must be > 0");
 }
 
+
+void canonical_order(PointCloud& c) {
+    const std::size_t n = c.size();
+    std::vector<std::size_t> order(n);
+    std::iota(order.begin(), order.end(), std::size_t(0));
+    const bool gps = c.has_gps_time(), rgb = c.has_color();
+    auto key = [&](std::size_t i) {
+        return std::make_tuple(c.x[i], c.y[i], c.z[i], gps ? c.gps_time[i] : 0.0, c.intensity[i], c.classification[i], c.return_number[i],
+                               c.number_of_returns[i], rgb ? c.red[i] : 0, rgb ? c.green[i] : 0, rgb ? c.blue[i] : 0);
+    };
+    bool sorted = true;
+    for (std::size_t i = 1; i < n && sorted; ++i) sorted = !(key(i) < key(i - 1));
+    if (sorted) return;
+    std::sort(order.begin(), order.end(), [&](std::size_t a, std::size_t b) { return key(a) < key(b); });
+    auto permute = [&](auto& v) {
+        if (v.empty()) return;
+        std::remove_reference_t<decltype(v)> out(n);
+        for (std::size_t i = 0; i < n; ++i) out[i] = v[order[i]];
+        v.swap(out);
+    };
+    permute(c.x), permute(c.y), permute(c.z), permute(c.gps_time), permute(c.intensity), permute(c.classification);
+    permute(c.return_number), permute(c.number_of_returns), permute(c.red), permute(c.green), permute(c.blue);
+}
 
 namespace {
 
@@ -155,6 +179,8 @@ OutlierFilterResult filter_outliers(const PointCloud& c, const OutlierFilterOpti
     if (!o.enabled || n < static_cast<std::size_t>(o.k_neighbours) + 1) return r;
     // One k-nearest-neighbour pass serves both filters: the isolated-point test
     // only needs the distance to the m-th neighbour (m = isolated_min_neighbours).
+    // Ties go by point index: with points in canonical order (canonical_order)
+    // the neighbours do not depend on the window the cloud was cut to.
     const std::size_t k = static_cast<std::size_t>(std::max(o.k_neighbours, o.isolated_min_neighbours)) + 1;  // self first
     const auto m = static_cast<std::size_t>(o.isolated_min_neighbours);
     std::vector<double> mean_dist(n, 0.0);
@@ -205,6 +231,9 @@ GroundResult classify_ground(const PointCloud& c, const std::vector<uint8_t>& ke
     for (std::size_t i = 0; i < n; ++i)
         if (kept(i)) minx = std::min(minx, c.x[i]), maxx = std::max(maxx, c.x[i]), miny = std::min(miny, c.y[i]), maxy = std::max(maxy, c.y[i]);
     if (!std::isfinite(minx)) return g;
+    // Cells anchored at multiples of the cell size: every window of a cloud
+    // uses the same cells, so its ground does not depend on where it starts.
+    minx = std::floor(minx / o.cell) * o.cell, miny = std::floor(miny / o.cell) * o.cell;
     const int w = static_cast<int>((maxx - minx) / o.cell) + 1, h = static_cast<int>((maxy - miny) / o.cell) + 1;
     if (static_cast<double>(w) * h > 4e8) throw Error("ground filter", "cloud extent too large for one SMRF grid; tile it first");
     std::vector<double> zmin(static_cast<std::size_t>(w) * h, INFINITY);

@@ -9,6 +9,12 @@
 
 namespace cityforge {
 
+/// Sorts the points by (x, y, z, then their other attributes): every later
+/// step then depends on the set of points, not on the order a file (or the
+/// tiles a run split it into) listed them. Points equal in every attribute
+/// are interchangeable. O(n log n).
+void canonical_order(PointCloud& cloud);
+
 struct OutlierFilterOptions {
     bool enabled = true;
     int k_neighbours = 8;            ///< statistical outlier removal: neighbours per point

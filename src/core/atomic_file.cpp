@@ -1,6 +1,10 @@
 #include "core/atomic_file.hpp"
 
 #include <fstream>
+#include <vector>
+#include <cerrno>
+#include <csignal>
+#include <regex>
 #include <unistd.h>
 
 #include "core/error.hpp"
@@ -24,8 +28,28 @@ std::string user_named(std::string message, const fs::path& tmp, const fs::path&
     return message;
 }
 
+namespace {
+// Files a driver writes beside its main file (Shapefile's .shx, .dbf, ...):
+// they belong to the temporary and move or go with it.
+const char* const kSidecars[] = {".shx", ".dbf", ".prj", ".cpg", ".qpj", ".sbn", ".sbx", ".qix"};
+fs::path sibling(const fs::path& p, const char* ext) {
+    fs::path s = p;
+    s.replace_filename(p.stem().string() + ext);
+    return s;
+}
+}  // namespace
+
 void commit_file(const fs::path& tmp, const fs::path& final_path) {
     std::error_code ec;
+    for (const char* ext : kSidecars) {
+        const fs::path from = sibling(tmp, ext);
+        if (!fs::exists(from, ec)) continue;
+        fs::rename(from, sibling(final_path, ext), ec);
+        if (ec) {
+            discard_file(tmp);
+            throw Error(final_path.string(), "cannot move finished output into place: " + ec.message());
+        }
+    }
     fs::rename(tmp, final_path, ec);
     if (ec) {
         discard_file(tmp);
@@ -36,6 +60,8 @@ void commit_file(const fs::path& tmp, const fs::path& final_path) {
 void discard_file(const fs::path& tmp) noexcept {
     std::error_code ec;
     fs::remove(tmp, ec);
+    for (const char* ext : kSidecars) fs::remove(sibling(tmp, ext), ec);
+    for (const char* suffix : {"-journal", "-wal", "-shm"}) fs::remove(fs::path(tmp.string() + suffix), ec);
 }
 
 void write_text_file(const fs::path& path, const std::string& content) {
@@ -67,6 +93,25 @@ void AtomicTextFile::commit() {
     }
     committed_ = true;
     commit_file(tmp_, final_);
+}
+
+std::size_t remove_stale_temporaries(const fs::path& dir) {
+    std::error_code ec;
+    if (!fs::is_directory(dir, ec)) return 0;
+    static const std::regex part(R"(.*\.part-([0-9]{1,9})(\..*|-journal|-wal|-shm)?)");
+    std::vector<fs::path> stale;
+    for (const auto& e : fs::directory_iterator(dir, ec)) {
+        std::smatch m;
+        const std::string name = e.path().filename().string();
+        if (!std::regex_match(name, m, part)) continue;
+        const long pid = std::stol(m[1].str());
+        if (pid <= 0 || pid == ::getpid()) continue;
+        if (::kill(static_cast<pid_t>(pid), 0) == 0 || errno != ESRCH) continue;  // alive (or not ours to judge)
+        stale.push_back(e.path());
+    }
+    std::size_t removed = 0;
+    for (const fs::path& p : stale) removed += fs::remove(p, ec) ? 1 : 0;
+    return removed;
 }
 
 void ensure_directory(const fs::path& dir) {

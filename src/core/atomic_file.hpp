@@ -15,14 +15,23 @@ std::filesystem::path temporary_path_for(const std::filesystem::path& final_path
 /// file the user gave, never "x.part-20659.gpkg".
 std::string user_named(std::string message, const std::filesystem::path& tmp, const std::filesystem::path& final_path);
 
-/// Renames `tmp` onto `final_path` (replacing it). Throws Error naming final_path.
+/// Renames `tmp` onto `final_path` (replacing it), with the sidecar files a
+/// driver wrote beside it (.shx, .dbf, .prj, ... of a Shapefile). Throws
+/// Error naming final_path.
 void commit_file(const std::filesystem::path& tmp, const std::filesystem::path& final_path);
 
-/// Removes `tmp` if present; never throws (used on the error path).
+/// Removes `tmp` and its sidecars if present; never throws (used on the error path).
 void discard_file(const std::filesystem::path& tmp) noexcept;
 
 /// Writes `content` to `path` atomically. Throws Error naming the path.
 void write_text_file(const std::filesystem::path& path, const std::string& content);
+
+/// Removes the temporaries of dead processes of this machine in `dir` (not
+/// recursive): files named like temporary_path_for's "NAME.part-PID.EXT" (and
+/// their sidecars) whose PID is not a running process. Returns how many went.
+/// Only for folders no other machine writes to (a PID names a process of this
+/// host only).
+std::size_t remove_stale_temporaries(const std::filesystem::path& dir);
 
 /// Creates `dir` (and parents) or throws Error naming it.
 void ensure_directory(const std::filesystem::path& dir);

@@ -20,6 +20,7 @@ void BuildingMaskOptions::validate() const {
     if (!(min_split_part_m2 >= 0.0)) throw Error("--min-split-part-m2", "must be >= 0");
     if (fill_passes < 0 || fill_passes > 50) throw Error("fill passes", "must be between 0 and 50");
     if (opening_radius_px < 0 || opening_radius_px > 10) throw Error("--opening-px", "must be between 0 and 10");
+    if (use_classes < -1 || use_classes > 1) throw Error("use_point_classes", "must be auto, yes or no");
 }
 
 
@@ -58,6 +59,17 @@ BuildingMask buildings_from_cells(const BuildingCells& cells, int w, int h, cons
     return mask;
 }
 
+bool point_classes_present(const Image<float>& building_share, const Image<float>& vegetation_share) {
+    std::size_t classified = 0, with_points = 0;
+    const std::size_t n = std::min(building_share.pixel_count(), vegetation_share.pixel_count());
+    for (std::size_t k = 0; k < n; ++k)
+        if (!std::isnan(building_share.data[k])) {
+            ++with_points;
+            classified += building_share.data[k] > 0.0f || vegetation_share.data[k] > 0.0f;
+        }
+    return with_points > 0 && classified * 10 > with_points;
+}
+
 BuildingCells building_cells(const Image<float>& ndsm, const Image<float>& dsm, const Image<float>& building_share,
                              const Image<float>& vegetation_share, const BuildingMaskOptions& o) {
     o.validate();
@@ -66,13 +78,7 @@ BuildingCells building_cells(const Image<float>& ndsm, const Image<float>& dsm, 
     if (dsm.pixel_count() != n || building_share.pixel_count() != n || vegetation_share.pixel_count() != n)
         throw Error("building detection", "rasters differ in size");
     BuildingCells out;
-    std::size_t classified = 0, with_points = 0;
-    for (std::size_t k = 0; k < n; ++k)
-        if (!std::isnan(building_share.data[k])) {
-            ++with_points;
-            classified += building_share.data[k] > 0.0f || vegetation_share.data[k] > 0.0f;
-        }
-    out.used_classes = with_points > 0 && classified * 10 > with_points;  // classes present in > 10 % of cells
+    out.used_classes = o.use_classes < 0 ? point_classes_present(building_share, vegetation_share) : o.use_classes == 1;
     // Cell states: 0 = decided not building, 1 = building, 2 = unknown (no
     // point, or only crown points over something high). Unknown cells are
     // decided by their neighbours below.
@@ -97,7 +103,7 @@ BuildingCells building_cells(const Image<float>& ndsm, const Image<float>& dsm, 
                 // Exact ties (a cell with as many building as other points, common
                 // at 1-2 points per cell) alternate in a checkerboard so that
                 // edge cells are neither all in nor all out: no outward bias.
-                if (b < o.min_building_share || (b == o.min_building_share && ((x + y) & 1))) continue;
+                if (b < o.min_building_share || (b == o.min_building_share && ((static_cast<long>(x) + y + o.grid_col0 + o.grid_row0) & 1))) continue;
             } else {
                 // Roughness: residual of the 3x3 DSM neighbourhood around its best plane,
                 // approximated by the mean absolute second difference over the
@@ -338,9 +344,18 @@ BuildingMask label_buildings(std::vector<uint8_t> mask, int w, int h, const Buil
         if (!mask[k] && !touches_border[label[k]] && sizes[label[k]] * cell_m2 < o.min_hole_m2) mask[k] = 1;
     if (o.opening_radius_px > 0) mask = morphology_square(morphology_square(mask, w, h, o.opening_radius_px, true), w, h, o.opening_radius_px, false);
     const uint32_t parts = label_components(mask, 1, w, h, label, sizes);
+    std::vector<uint8_t> at_border(parts + 1, 0);
+    for (int x = 0; x < w; ++x) {
+        if (o.keep_border_sides & 2) at_border[label[x]] = 1;
+        if (o.keep_border_sides & 8) at_border[label[static_cast<std::size_t>(h - 1) * w + x]] = 1;
+    }
+    for (int y = 0; y < h; ++y) {
+        if (o.keep_border_sides & 1) at_border[label[static_cast<std::size_t>(y) * w]] = 1;
+        if (o.keep_border_sides & 4) at_border[label[static_cast<std::size_t>(y) * w + w - 1]] = 1;
+    }
     std::vector<uint32_t> keep(parts + 1, 0);
     for (uint32_t p = 1; p <= parts; ++p)
-        if (sizes[p] * cell_m2 >= o.min_area_m2) keep[p] = ++out.count;
+        if (sizes[p] * cell_m2 >= o.min_area_m2 || at_border[p]) keep[p] = ++out.count;
     out.labels = Image<uint32_t>(w, h, 1, 0u);
     for (std::size_t k = 0; k < n; ++k) out.labels.data[k] = keep[label[k]];
     return out;

@@ -27,6 +27,21 @@ struct BuildingMaskOptions {
     /// (dormers, chimneys, roof superstructures), stay with their neighbour.
     double min_split_part_m2 = 15.0;
     int opening_radius_px = 0;          ///< morphological opening removing thin artefacts (0 = none; 1 shrinks outlines ~2 %)
+    /// Position of the rasters' first cell in the run's global grid (in cells
+    /// of these rasters): position-dependent choices (the checkerboard of
+    /// exact share ties) follow global cells, so a tile's window decides its
+    /// cells as the whole grid would.
+    int grid_col0 = 0, grid_row0 = 0;
+    /// Sides of the rasters (bits: 1 left, 2 top, 4 right, 8 bottom) where
+    /// components touching them are kept whatever their area: in a window of
+    /// a larger grid they are pieces of buildings that continue beyond it (a
+    /// tiled run does them again on a grown window). 0 = none.
+    int keep_border_sides = 0;
+    /// Whether point classes (building 6, vegetation 3-5) decide building
+    /// cells: -1 = when classes are present in > 10 % of these rasters' cells
+    /// (point_classes_present); 0 / 1 = fixed (a tiled run decides once for
+    /// all its windows).
+    int use_classes = -1;
     void validate() const;
 };
 
@@ -54,6 +69,10 @@ struct BuildingCells {
     Image<float> step_dsm;
     bool used_classes = false;
 };
+/// True when more than 10 % of the cells with points have building or
+/// vegetation points (NaN shares = no point).
+bool point_classes_present(const Image<float>& building_share, const Image<float>& vegetation_share);
+
 /// `ndsm`, `dsm`, `building_share`, `vegetation_share` on the same grid (NaN =
 /// no data); shares may be all-NaN for unclassified clouds.
 BuildingCells building_cells(const Image<float>& ndsm, const Image<float>& dsm, const Image<float>& building_share,

@@ -202,6 +202,15 @@ void write_polygon_features(const std::string& path, const CrsInfo& crs, const s
     const bool ok = write_layer(ds, options.layer, crs.empty() ? nullptr : &srs, fields, features, lco, options.driver == "GPKG");
     GDALClose(ds);
     if (!ok || CPLGetLastErrorType() >= CE_Failure) fail("writing features failed");
+    // GDAL 3.6's GDALClose reports no error, and drivers do not check every
+    // write: a full disk leaves a silently truncated file. Read it back.
+    {
+        std::unique_ptr<GDALDataset> back(GDALDataset::Open(tmp.c_str(), GDAL_OF_VECTOR | GDAL_OF_READONLY));
+        OGRLayer* l = back ? (back->GetLayerByName(options.layer.c_str()) ? back->GetLayerByName(options.layer.c_str()) : back->GetLayer(0)) : nullptr;
+        const bool complete = l && l->GetFeatureCount(TRUE) == static_cast<GIntBig>(features.size()) && CPLGetLastErrorType() < CE_Failure;
+        back.reset();
+        if (!complete) fail("write failed (disk full?): the file read back is incomplete");
+    }
     commit_file(tmp, path);
 }
 

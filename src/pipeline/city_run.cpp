@@ -68,6 +68,18 @@ std::string tile_name(int k) {
     return buf;
 }
 
+// The context every decision about a building looks at around it (pixels):
+// the ortho crop's margin, the heights' ground ring, the ground filter's
+// window when it runs, and slack for the cell decisions. A building whose
+// box grown by this stays inside a window (or reaches only the grid's edge)
+// comes out of that window as out of any larger one.
+int context_px(const RunOptions& o, double gsd_m) {
+    double m = o.extraction.segmentation.margin_px * gsd_m + o.buildings.heights.heights.ground_buffer_m + 5.0;
+    if (!o.buildings.heights.ground.trust_classification) m += o.buildings.heights.ground.window;
+    m = std::max(m, 20.0);
+    return static_cast<int>(std::ceil(m / gsd_m)) + 2 * std::max(1, o.extraction.cloud_cell_factor);
+}
+
 }  // namespace
 
 void RunOptions::validate() const {
@@ -106,6 +118,7 @@ json to_json(const RunOptions& o) {
               {"opening_px", m.opening_radius_px},
               {"mode", to_string(o.extraction.mode)},
               {"cloud_cell_px", o.extraction.cloud_cell_factor},
+              {"use_point_classes", o.extraction.mask.use_classes < 0 ? "auto" : o.extraction.mask.use_classes ? "yes" : "no"},
               {"split_step_m", m.split_step_m},
               {"min_split_part_m2", m.min_split_part_m2},
               {"fit", to_string(o.extraction.fit)},
@@ -144,7 +157,7 @@ RunOptions run_options_from_json(const json& j, const std::string& where, RunOpt
     if (j.contains("extraction")) {
         const json& x = j["extraction"];
         const std::string w = where + ": extraction";
-        check_keys(x, {"mode", "cloud_cell_px", "min_height_m", "min_area_m2", "min_hole_m2", "opening_px", "split_step_m", "min_split_part_m2", "fit", "fit_tolerance_pct", "simplify_m", "footprint_grid_m"}, w);
+        check_keys(x, {"mode", "cloud_cell_px", "use_point_classes", "min_height_m", "min_area_m2", "min_hole_m2", "opening_px", "split_step_m", "min_split_part_m2", "fit", "fit_tolerance_pct", "simplify_m", "footprint_grid_m"}, w);
         take(x, "min_height_m", o.extraction.mask.min_height_m, w), take(x, "min_area_m2", o.extraction.mask.min_area_m2, w);
         take(x, "min_hole_m2", o.extraction.mask.min_hole_m2, w), take(x, "opening_px", o.extraction.mask.opening_radius_px, w);
         take(x, "cloud_cell_px", o.extraction.cloud_cell_factor, w);
@@ -155,6 +168,12 @@ RunOptions run_options_from_json(const json& j, const std::string& where, RunOpt
             std::string mode;
             take(x, "mode", mode, w);
             o.extraction.mode = detection_mode_from_string(mode);
+        }
+        if (x.contains("use_point_classes")) {
+            std::string v;
+            take(x, "use_point_classes", v, w);
+            if (v != "auto" && v != "yes" && v != "no") throw Error(w + ".use_point_classes", "must be auto, yes or no");
+            o.extraction.mask.use_classes = v == "auto" ? -1 : v == "yes" ? 1 : 0;
         }
         if (x.contains("fit")) {
             std::string fit;
@@ -243,23 +262,37 @@ RunManifest plan_run(const RunOptions& in) {
         m.tiles.push_back({0, {0, 0, m.grid.width, m.grid.height}, {0, 0, m.grid.width, m.grid.height}});
         return m;
     }
-    // The outlier filter's limit, measured once on a sample fixed by the grid
-    // (its central 400 m square), so that every tile filters alike.
-    if (m.options.buildings.heights.outliers.enabled && !(m.options.buildings.heights.outliers.max_mean_distance > 0)) {
-        const CloudSample sample = sample_cloud(o.cloud, o.cloud_crs, crs_from_wkt(m.crs_wkt, "grid"), o.buildings.heights.outliers,
-                                                m.grid.transform.pixel_to_map({m.grid.width / 2.0, m.grid.height / 2.0}));
-        if (!(sample.outlier_limit_m > 0)) throw Error(o.cloud, "no points in the centre of the grid; is the cloud over the ortho?");
-        m.options.buildings.heights.outliers.max_mean_distance = sample.outlier_limit_m;
-        m.options.extraction.outliers.max_mean_distance = sample.outlier_limit_m;
-        if (m.options.extraction.cloud_cell_factor == 0)
-            m.options.extraction.cloud_cell_factor = cloud_cell_factor(sample.points_per_m2, std::abs(m.grid.transform.pixel_width) * crs_from_wkt(m.crs_wkt, "grid").linear_unit_m);
+    // What must be alike in every tile is measured once, on a sample fixed by
+    // the grid (its central 400 m square): the outlier filter's limit, the
+    // cloud cells' size, and whether point classes decide building cells.
+    auto& outliers = m.options.buildings.heights.outliers;
+    auto& ex = m.options.extraction;
+    const bool need_limit = outliers.enabled && !(outliers.max_mean_distance > 0);
+    const bool extract = o.footprints.empty();
+    if (need_limit || (extract && (ex.cloud_cell_factor == 0 || ex.mask.use_classes < 0))) {
+        const CrsInfo grid_crs = crs_from_wkt(m.crs_wkt, "grid");
+        PreparedCloud points;
+        const MapPoint centre = m.grid.transform.pixel_to_map({m.grid.width / 2.0, m.grid.height / 2.0});
+        const CloudSample sample = sample_cloud(o.cloud, o.cloud_crs, grid_crs, outliers, centre, &points);
+        if (need_limit) {
+            if (!(sample.outlier_limit_m > 0)) throw Error(o.cloud, "no points in the centre of the grid; is the cloud over the ortho?");
+            outliers.max_mean_distance = sample.outlier_limit_m;
+            ex.outliers.max_mean_distance = sample.outlier_limit_m;
+        }
+        if (extract && ex.cloud_cell_factor == 0) ex.cloud_cell_factor = cloud_cell_factor(sample.points_per_m2, gsd_m);
+        if (extract && ex.mask.use_classes < 0) {
+            // The sample on the run's cloud cells, decided as a window would.
+            const double cell = std::abs(m.grid.transform.pixel_width) * std::max(1, ex.cloud_cell_factor);
+            const double half = 200.0 / grid_crs.linear_unit_m;
+            const int n = std::max(1, static_cast<int>(std::ceil(2 * half / cell)));
+            const GridSpec g{GeoTransform{centre.x - half, cell, centre.y + half, -cell}, n, n};
+            const CloudRasters r = points.cloud.size() ? rasterize_cloud(points.cloud, points.keep, points.is_ground, g, grid_crs.linear_unit_m) : CloudRasters{};
+            ex.mask.use_classes = points.cloud.size() && point_classes_present(r.building_share, r.vegetation_share) ? 1 : 0;
+        }
     }
-    if (m.options.extraction.cloud_cell_factor == 0 && o.footprints.empty()) {
-        // Density from the same central sample (the outlier limit was given).
-        const CloudSample sample = sample_cloud(o.cloud, o.cloud_crs, crs_from_wkt(m.crs_wkt, "grid"), o.buildings.heights.outliers,
-                                                m.grid.transform.pixel_to_map({m.grid.width / 2.0, m.grid.height / 2.0}));
-        m.options.extraction.cloud_cell_factor = cloud_cell_factor(sample.points_per_m2, std::abs(m.grid.transform.pixel_width) * crs_from_wkt(m.crs_wkt, "grid").linear_unit_m);
-    }
+    // At least the context of one building (smaller overlaps would only make
+    // every building near a core's edge be done again on a grown window).
+    m.overlap_px = std::max(m.overlap_px, context_px(m.options, gsd_m));
     const int ts = o.tile_size_px;
     int k = 0;
     for (int r = 0; r < m.grid.height; r += ts)
@@ -383,6 +416,174 @@ void split_cloud(const RunManifest& m, const std::string& out_dir) {
     write_text_file(dir / "complete", "cloud split into " + std::to_string(windows.size()) + " tile windows\n");
 }
 
+Extent window_extent_of(const GeoTransform& gt, const PixelWindow& w) {
+    const MapPoint a = gt.pixel_to_map({double(w.col), double(w.row)});
+    const MapPoint b = gt.pixel_to_map({double(w.col + w.width), double(w.row + w.height)});
+    return {std::min(a.x, b.x), std::min(a.y, b.y), std::max(a.x, b.x), std::max(a.y, b.y)};
+}
+
+bool intersects(const PixelWindow& a, const PixelWindow& b) {
+    return a.col < b.col + b.width && b.col < a.col + a.width && a.row < b.row + b.height && b.row < a.row + a.height;
+}
+
+PixelWindow intersection(const PixelWindow& a, const PixelWindow& b) {
+    const int c0 = std::max(a.col, b.col), r0 = std::max(a.row, b.row);
+    const int c1 = std::min(a.col + a.width, b.col + b.width), r1 = std::min(a.row + a.height, b.row + b.height);
+    return {c0, r0, std::max(0, c1 - c0), std::max(0, r1 - r0)};
+}
+
+// Global pixel box (inclusive) of a building.
+struct PixelBox {
+    int c0 = INT_MAX, r0 = INT_MAX, c1 = INT_MIN, r1 = INT_MIN;
+    void add(int c, int r) { c0 = std::min(c0, c), r0 = std::min(r0, r), c1 = std::max(c1, c), r1 = std::max(r1, r); }
+    void add(const PixelBox& b) { c0 = std::min(c0, b.c0), r0 = std::min(r0, b.r0), c1 = std::max(c1, b.c1), r1 = std::max(r1, b.r1); }
+    bool empty() const { return c1 < c0; }
+};
+
+// The window of the grid holding `b` grown by `margin`, with edges at global
+// multiples of 32 pixels (clipped to the grid).
+PixelWindow window_around(const PixelBox& b, int margin, const GridSpec& grid) {
+    constexpr int align = 32;
+    auto down = [](int v) { return v >= 0 ? v / align * align : -((-v + align - 1) / align) * align; };
+    const int c0 = std::max(0, down(b.c0 - margin)), r0 = std::max(0, down(b.r0 - margin));
+    const int c1 = std::min(grid.width, down(b.c1 + 1 + margin + align - 1)), r1 = std::min(grid.height, down(b.r1 + 1 + margin + align - 1));
+    return {c0, r0, c1 - c0, r1 - r0};
+}
+
+// Is `b` grown by `margin` inside `w`, edges of the grid aside?
+bool fits(const PixelBox& b, int margin, const PixelWindow& w, const GridSpec& grid) {
+    return (w.col == 0 || b.c0 - margin >= w.col) && (w.row == 0 || b.r0 - margin >= w.row) &&
+           (w.col + w.width == grid.width || b.c1 + margin < w.col + w.width) && (w.row + w.height == grid.height || b.r1 + margin < w.row + w.height);
+}
+
+// The cloud of a window of the grid, cleaned and classified: from the tile
+// split files whose cores cover it (each point once), or from the source.
+PreparedCloud window_cloud(const RunManifest& m, const std::string& out_dir, const PixelWindow& w) {
+    const RunOptions& o = m.options;
+    const CrsInfo grid_crs = crs_from_wkt(m.crs_wkt, "manifest");
+    const GeoTransform& gt = m.grid.transform;
+    const bool split = fs::exists(fs::path(out_dir) / "cloud_tiles" / "complete");
+    if (!split) {
+        const Extent e = window_extent_of(gt, w);
+        return prepare_cloud(o.cloud, o.cloud_crs, grid_crs, o.buildings.heights.outliers, o.buildings.heights.ground, &e);
+    }
+    std::vector<CloudPart> parts;
+    for (const TileSpec& t : m.tiles) {
+        if (t.window.col == w.col && t.window.row == w.row && t.window.width == w.width && t.window.height == w.height) {
+            parts = {{tile_cloud_path(out_dir, t.index).string(), window_extent_of(gt, w)}};
+            break;
+        }
+        if (!intersects(t.core, w)) continue;
+        parts.push_back({tile_cloud_path(out_dir, t.index).string(), window_extent_of(gt, intersection(t.core, w))});
+    }
+    return prepare_cloud(parts, o.cloud_crs, grid_crs, o.buildings.heights.outliers, o.buildings.heights.ground);
+}
+
+// Buildings detected on one window of the grid (labels on the window's pixels).
+struct WindowBuildings {
+    PixelWindow window;
+    PreparedCloud pc;
+    BuildingMask mask;          ///< final buildings (after the ortho redraw)
+    Image<float> ndsm;
+    std::string mode;
+    std::vector<PixelBox> box;  ///< per label: its cells before and after the redraw (global pixels)
+    std::vector<int64_t> id;    ///< per label: 1 + global index of its first pixel (raster order)
+};
+
+WindowBuildings detect_on_window(const RunManifest& m, const PixelWindow& win, PreparedCloud pc, const std::string& where) {
+    const RunOptions& o = m.options;
+    const CrsInfo grid_crs = crs_from_wkt(m.crs_wkt, "manifest");
+    const double unit = grid_crs.linear_unit_m;
+    const GeoTransform& gt = m.grid.transform;
+    WindowBuildings d;
+    d.window = win;
+    const GridSpec wg{gt.window(win.col, win.row), win.width, win.height};
+    if (pc.cloud.size() == 0) throw Error(o.cloud, "no points in " + where);
+    BuildingMaskOptions mo = o.extraction.mask;
+    mo.gsd_m = std::abs(gt.pixel_width) * unit;
+    mo.min_height_m /= pc.crs.z_unit_m;
+    WindowCloudCells wc = cloud_cells_on_window(pc, wg, win.col, win.row, std::max(1, o.extraction.cloud_cell_factor), unit, mo);
+    mo.split_step_m /= pc.crs.z_unit_m;
+    // Pieces of larger buildings at the window's edges (not the grid's) stay, whatever their area.
+    mo.keep_border_sides = (win.col > 0 ? 1 : 0) | (win.row > 0 ? 2 : 0) | (win.col + win.width < m.grid.width ? 4 : 0) |
+                           (win.row + win.height < m.grid.height ? 8 : 0);
+    // With the run's ortho the buildings are redrawn along it, unless the
+    // config asks for the cloud alone.
+    const DetectionMode detection = o.extraction.mode == DetectionMode::cloud_only ? DetectionMode::cloud_only : DetectionMode::ortho_cloud;
+    d.mode = to_string(detection);
+    const BuildingCells cells = std::move(wc.cells);
+    d.mask = buildings_from_cells(cells, win.width, win.height, mo);
+    d.box.assign(d.mask.count + 1, PixelBox{});
+    for (int r = 0; r < win.height; ++r)
+        for (int c = 0; c < win.width; ++c)
+            if (const uint32_t l = d.mask.labels.data[static_cast<std::size_t>(r) * win.width + c]) d.box[l].add(win.col + c, win.row + r);
+
+    if (detection == DetectionMode::ortho_cloud) {
+        // Each building redrawn along the ortho from a crop around it alone.
+        RasterReader ortho(o.ortho);
+        const RasterInfo& oi = ortho.info();
+        const Image<float> colours = ortho.read<float>(win);
+        const std::vector<uint8_t> valid = data_mask(colours, oi);
+        SegmentClassifierOptions co = o.extraction.classifier;
+        co.gsd_m = oi.gsd.x_m;
+        const std::vector<uint8_t> vegetation = cells.used_classes ? std::vector<uint8_t>{} : vegetation_pixels(colours, co);
+        OrthoRefineOptions ro = o.extraction.segmentation;
+        ro.cloud_edges = o.extraction.cloud_cell_factor <= 1;
+        refine_buildings_with_ortho(d.mask, cells, colours, valid, wc.rasters.ndsm, 20.0 / pc.crs.z_unit_m, {}, vegetation, ro);
+    }
+    d.id.assign(d.mask.count + 1, 0);
+    for (int r = 0; r < win.height; ++r)
+        for (int c = 0; c < win.width; ++c) {
+            const uint32_t l = d.mask.labels.data[static_cast<std::size_t>(r) * win.width + c];
+            if (!l) continue;
+            const int gc = win.col + c, gr = win.row + r;
+            d.box[l].add(gc, gr);
+            if (!d.id[l]) d.id[l] = int64_t(gr) * m.grid.width + gc + 1;
+        }
+    d.ndsm = std::move(wc.rasters.ndsm);
+    d.pc = std::move(pc);
+    return d;
+}
+
+// Footprints (fits, global ids) of the chosen labels of a window.
+void add_footprints(const RunManifest& m, const WindowBuildings& d, const std::vector<uint32_t>& labels, PolygonLayer& footprints) {
+    const CrsInfo grid_crs = crs_from_wkt(m.crs_wkt, "manifest");
+    std::set<int64_t> keep;
+    for (uint32_t l : labels) keep.insert(d.id[l]);
+    const FootprintTable table = footprint_table(d.mask, d.ndsm, m.grid.transform, d.window.col, d.window.row, d.id, d.mode,
+                                                 grid_crs.linear_unit_m, d.pc.crs.z_unit_m, footprints.crs, m.options.extraction);
+    if (footprints.field_names.empty())
+        for (const FieldDefinition& f : table.fields) footprints.field_names.push_back(f.name), footprints.field_types.push_back(f.type);
+    for (const Feature& f : table.features) {
+        const int64_t id = std::get<int64_t>(f.values[0]);
+        if (!keep.count(id)) continue;
+        footprints.features.push_back(f);
+        footprints.fids.push_back(id);
+    }
+}
+
+// Heights and LOD2 of footprints on a prepared cloud, as buildings.
+std::vector<Building> buildings_of(const RunManifest& m, PolygonLayer footprints, PreparedCloud pc, const std::string& source, TileReport& rep) {
+    const RunOptions& o = m.options;
+    auto t0 = std::chrono::steady_clock::now();
+    HeightsRunOptions ho = o.buildings.heights;
+    ho.heights.keep_roof_points = true;
+    const std::size_t n = footprints.features.size();
+    if (!n) return {};
+    const HeightsStage st = compute_heights_stage(std::move(footprints), std::move(pc), ho);
+    rep.seconds["heights"] += since(t0);
+    t0 = std::chrono::steady_clock::now();
+    CrsInfo crs = st.table.crs;
+    if (!o.buildings.model.vertical_crs.empty() && !crs.vertical_epsg)
+        crs = combine_with_vertical(crs, crs_from_user_input(o.buildings.model.vertical_crs, "--vertical-crs"));
+    RoofsRunReport rr;
+    RoofsRunOptions ro = o.buildings;
+    if (o.footprints.empty()) ro.model.id_field = "id";
+    std::vector<Building> out = build_lod2_model(st, crs, ro, source, rr).buildings;
+    rep.seconds["roofs"] += since(t0);
+    return out;
+}
+
 // The buildings one tile owns, with their heights and LOD2, as building lines.
 std::vector<Building> tile_buildings(const RunManifest& m, const TileSpec& t, const std::string& out_dir, TileReport& rep,
                                      std::vector<std::string>& warnings) {
@@ -390,11 +591,11 @@ std::vector<Building> tile_buildings(const RunManifest& m, const TileSpec& t, co
     const CrsInfo grid_crs = crs_from_wkt(m.crs_wkt, "manifest");
     const double unit = grid_crs.linear_unit_m;
     const GeoTransform& gt = m.grid.transform;
-    const MapPoint a = gt.pixel_to_map({double(t.window.col), double(t.window.row)});
-    const MapPoint b = gt.pixel_to_map({double(t.window.col + t.window.width), double(t.window.row + t.window.height)});
-    const Extent window_extent{std::min(a.x, b.x), std::min(a.y, b.y), std::max(a.x, b.x), std::max(a.y, b.y)};
     const MapPoint ca = gt.pixel_to_map({double(t.core.col), double(t.core.row)});
     const MapPoint cb = gt.pixel_to_map({double(t.core.col + t.core.width), double(t.core.row + t.core.height)});
+    const double gsd_m = std::abs(gt.pixel_width) * unit;
+    const int margin = context_px(o, gsd_m);
+    const std::string tile_label = "tile " + std::to_string(t.index);
 
     auto t0 = std::chrono::steady_clock::now();
     if (o.cloud.empty()) {
@@ -413,21 +614,25 @@ std::vector<Building> tile_buildings(const RunManifest& m, const TileSpec& t, co
         warnings.push_back("no cloud: footprints from the ortho only (no heights, no LOD1/LOD2); ortho-only runs are not tiled");
         return std::move(model.buildings);
     }
-    const fs::path part = tile_cloud_path(out_dir, t.index);
-    const bool split = fs::exists(part.parent_path() / "complete");
-    PreparedCloud pc = prepare_cloud(split ? part.string() : o.cloud, o.cloud_crs, grid_crs, o.buildings.heights.outliers,
-                                     o.buildings.heights.ground, &window_extent);
+    PreparedCloud pc = window_cloud(m, out_dir, t.window);
     rep.seconds["cloud"] = since(t0);
-    PolygonLayer footprints;
-    footprints.crs = pc.crs.empty() ? grid_crs : pc.crs;
+    const auto in_core = [&](int64_t id) {
+        const int64_t gr = (id - 1) / m.grid.width, gc = (id - 1) % m.grid.width;
+        return gc >= t.core.col && gc < t.core.col + t.core.width && gr >= t.core.row && gr < t.core.row + t.core.height;
+    };
+    std::vector<Building> out;
     if (!o.footprints.empty()) {
         // Given footprints: those whose bounding-box centre lies in the core.
         t0 = std::chrono::steady_clock::now();
+        PolygonLayer footprints;
+        footprints.crs = pc.crs.empty() ? grid_crs : pc.crs;
+        const CrsInfo layer_crs = footprints.crs;
         PolygonLayer all = read_polygon_layer(o.footprints, o.buildings.heights.footprint_layer);
         if (!same_horizontal_crs(all.crs, grid_crs)) throw Error(o.footprints, "footprints are not in the grid's CRS");
         footprints.field_names = all.field_names, footprints.field_types = all.field_types;
         const double cx0 = std::min(ca.x, cb.x), cx1 = std::max(ca.x, cb.x), cy0 = std::min(ca.y, cb.y), cy1 = std::max(ca.y, cb.y);
         const bool last_col = t.core.col + t.core.width == m.grid.width, last_row = t.core.row + t.core.height == m.grid.height;
+        std::vector<std::pair<PixelWindow, std::size_t>> larger;  // footprints whose context leaves the window
         for (std::size_t i = 0; i < all.features.size(); ++i) {
             const Extent e = parts_extent(all.features[i].geometry);
             const double x = 0.5 * (e.min_x + e.max_x), y = 0.5 * (e.min_y + e.max_y);
@@ -435,112 +640,148 @@ std::vector<Building> tile_buildings(const RunManifest& m, const TileSpec& t, co
             const bool in_x = x >= cx0 && (x < cx1 || (last_col && x <= cx1));
             const bool in_y = y <= cy1 && (y > cy0 || (last_row && y >= cy0));
             if (!in_x || !in_y) continue;
+            const PixelPoint p0 = gt.map_to_pixel({e.min_x, e.max_y}), p1 = gt.map_to_pixel({e.max_x, e.min_y});
+            PixelBox b;
+            b.add(static_cast<int>(std::floor(std::min(p0.col, p1.col))), static_cast<int>(std::floor(std::min(p0.row, p1.row))));
+            b.add(static_cast<int>(std::floor(std::max(p0.col, p1.col))), static_cast<int>(std::floor(std::max(p0.row, p1.row))));
+            if (!fits(b, margin, t.window, m.grid)) {
+                // Its own window, grown to hold it and its context.
+                larger.push_back({window_around(b, margin, m.grid), i});
+                continue;
+            }
             footprints.features.push_back(all.features[i]);
             footprints.fids.push_back(all.fids[i]);
-            if (e.min_x < window_extent.min_x || e.max_x > window_extent.max_x || e.min_y < window_extent.min_y || e.max_y > window_extent.max_y)
-                warnings.push_back("building fid " + std::to_string(all.fids[i]) + " is larger than the tile overlap; its points may be cut");
         }
         rep.seconds["footprints"] = since(t0);
-    } else {
-        // Extraction on the window: rasters, buildings, then only the buildings whose first pixel is in the core.
-        t0 = std::chrono::steady_clock::now();
-        const GridSpec wg{gt.window(t.window.col, t.window.row), t.window.width, t.window.height};
-        if (pc.cloud.size() == 0) throw Error(o.cloud, "no points in tile " + std::to_string(t.index));
-        BuildingMaskOptions mo = o.extraction.mask;
-        mo.gsd_m = std::abs(gt.pixel_width) * unit;
-        mo.min_height_m /= pc.crs.z_unit_m;
-        WindowCloudCells wc = cloud_cells_on_window(pc, wg, t.window.col, t.window.row, std::max(1, o.extraction.cloud_cell_factor), unit, mo);
-        CloudRasters rasters = std::move(wc.rasters);
-        mo.split_step_m /= pc.crs.z_unit_m;
-        // With the run's ortho the buildings are redrawn along it, unless the
-        // config asks for the cloud alone.
-        const DetectionMode detection = o.extraction.mode == DetectionMode::cloud_only ? DetectionMode::cloud_only : DetectionMode::ortho_cloud;
-        const BuildingCells cells = std::move(wc.cells);
-        BuildingMask mask = buildings_from_cells(cells, t.window.width, t.window.height, mo);
-        if (detection == DetectionMode::ortho_cloud) {
-            // Each building redrawn along the ortho from a crop around it
-            // alone: the same buildings in any tiling.
-            RasterReader ortho(o.ortho);
-            const RasterInfo& oi = ortho.info();
-            const Image<float> colours = ortho.read<float>(PixelWindow{t.window.col, t.window.row, t.window.width, t.window.height});
-            const std::vector<uint8_t> valid = data_mask(colours, oi);
-            SegmentClassifierOptions co = o.extraction.classifier;
-            co.gsd_m = oi.gsd.x_m;
-            const std::vector<uint8_t> vegetation = cells.used_classes ? std::vector<uint8_t>{} : vegetation_pixels(colours, co);
-            OrthoRefineOptions ro = o.extraction.segmentation;
-            ro.cloud_edges = o.extraction.cloud_cell_factor <= 1;
-            refine_buildings_with_ortho(mask, cells, colours, valid, rasters.ndsm, 20.0 / pc.crs.z_unit_m, {}, vegetation, ro);
+        out = buildings_of(m, std::move(footprints), std::move(pc), tile_label, rep);
+        for (const auto& [w, i] : larger) {
+            PolygonLayer one;
+            one.crs = layer_crs, one.field_names = all.field_names, one.field_types = all.field_types;
+            one.features.push_back(all.features[i]);
+            one.fids.push_back(all.fids[i]);
+            std::vector<Building> b = buildings_of(m, std::move(one), window_cloud(m, out_dir, w), tile_label, rep);
+            ++rep.grown;
+            for (Building& x : b) out.push_back(std::move(x));
         }
-        rep.seconds["detection"] = since(t0);
-        if (o.keep_rasters) {
-            // The core of each raster: tiles mosaic without overlap.
-            const fs::path rdir = fs::path(out_dir) / "rasters";
-            ensure_directory(rdir);
-            const int dc = t.core.col - t.window.col, dr = t.core.row - t.window.row;
-            GeoTiffWriteOptions wo;
-            wo.nodata = -9999.0;
-            for (const auto& [name, img] : {std::pair<const char*, const Image<float>*>{"dsm", &rasters.dsm}, {"dtm", &rasters.dtm}, {"ndsm", &rasters.ndsm}}) {
-                Image<float> core(t.core.width, t.core.height, 1);
-                for (int r = 0; r < t.core.height; ++r)
-                    for (int c = 0; c < t.core.width; ++c) {
-                        const float v = img->at(0, c + dc, r + dr);
-                        core.at(0, c, r) = std::isnan(v) ? -9999.0f : v;
-                    }
-                wo.band_descriptions = {std::string(name) + " (z, vertical CRS units)"};
-                write_geotiff((rdir / (tile_name(t.index) + "_" + name + ".tif")).string(), core, gt.window(t.core.col, t.core.row), pc.crs.wkt, wo);
-            }
-        }
-        t0 = std::chrono::steady_clock::now();
-        const int w = t.window.width, h = t.window.height;
-        std::vector<int64_t> ids(mask.count + 1, 0);
-        std::vector<uint8_t> owned(mask.count + 1, 0), cut(mask.count + 1, 0);
-        for (int r = 0; r < h; ++r)
-            for (int c = 0; c < w; ++c) {
-                const uint32_t l = mask.labels.data[static_cast<std::size_t>(r) * w + c];
-                if (!l) continue;
-                if (r == 0 || c == 0 || r == h - 1 || c == w - 1) cut[l] = 1;
-                if (ids[l]) continue;
-                const int gc = t.window.col + c, gr = t.window.row + r;
-                ids[l] = int64_t(gr) * m.grid.width + gc + 1;
-                owned[l] = gc >= t.core.col && gc < t.core.col + t.core.width && gr >= t.core.row && gr < t.core.row + t.core.height;
-            }
-        FootprintsRunOptions fo = o.extraction;
-        const FootprintTable table = footprint_table(mask, rasters.ndsm, gt, t.window.col, t.window.row, ids, to_string(detection), unit,
-                                                     pc.crs.z_unit_m, footprints.crs, fo);
-        rasters = CloudRasters{};  // free the window's rasters before the heights
-        std::set<int64_t> keep;
-        for (uint32_t l = 1; l <= mask.count; ++l)
-            if (owned[l]) {
-                keep.insert(ids[l]);
-                // Touching the window's edge (not the grid's): larger than the overlap, cut.
-                if (cut[l]) warnings.push_back("building " + std::to_string(ids[l]) + " in tile " + std::to_string(t.index) +
-                                               " reaches the edge of the tile's overlap; raise --overlap-m");
-            }
-        for (const FieldDefinition& f : table.fields) footprints.field_names.push_back(f.name), footprints.field_types.push_back(f.type);
-        for (const Feature& f : table.features) {
-            const int64_t id = std::get<int64_t>(f.values[0]);
-            if (!keep.count(id)) continue;
-            footprints.features.push_back(f);
-            footprints.fids.push_back(id);
-        }
-        rep.seconds["footprints"] = since(t0);
+        std::sort(out.begin(), out.end(), [](const Building& a, const Building& b) { return a.id < b.id; });
+        rep.buildings = out.size();
+        return out;
     }
+    // Extraction on the window: rasters, buildings, then only the buildings
+    // whose first pixel is in the core. A building whose context leaves the
+    // window is done again on a window grown around it, until it fits.
     t0 = std::chrono::steady_clock::now();
-    HeightsRunOptions ho = o.buildings.heights;
-    ho.heights.keep_roof_points = true;
-    const std::size_t n = footprints.features.size();
-    const HeightsStage st = compute_heights_stage(std::move(footprints), std::move(pc), ho);
-    rep.seconds["heights"] = since(t0);
+    WindowBuildings d = detect_on_window(m, t.window, std::move(pc), tile_label);
+    if (o.keep_rasters) {
+        // The core of each raster: tiles mosaic without overlap.
+        const fs::path rdir = fs::path(out_dir) / "rasters";
+        ensure_directory(rdir);
+        const GridSpec wg{gt.window(t.window.col, t.window.row), t.window.width, t.window.height};
+        BuildingMaskOptions mo = o.extraction.mask;
+        mo.gsd_m = gsd_m, mo.min_height_m /= d.pc.crs.z_unit_m;
+        const CloudRasters rasters = cloud_cells_on_window(d.pc, wg, t.window.col, t.window.row, std::max(1, o.extraction.cloud_cell_factor), unit, mo).rasters;
+        const int dc = t.core.col - t.window.col, dr = t.core.row - t.window.row;
+        GeoTiffWriteOptions wo;
+        wo.nodata = -9999.0;
+        for (const auto& [name, img] : {std::pair<const char*, const Image<float>*>{"dsm", &rasters.dsm}, {"dtm", &rasters.dtm}, {"ndsm", &rasters.ndsm}}) {
+            Image<float> core(t.core.width, t.core.height, 1);
+            for (int r = 0; r < t.core.height; ++r)
+                for (int c = 0; c < t.core.width; ++c) {
+                    const float v = img->at(0, c + dc, r + dr);
+                    core.at(0, c, r) = std::isnan(v) ? -9999.0f : v;
+                }
+            wo.band_descriptions = {std::string(name) + " (z, vertical CRS units)"};
+            write_geotiff((rdir / (tile_name(t.index) + "_" + name + ".tif")).string(), core, gt.window(t.core.col, t.core.row), d.pc.crs.wkt, wo);
+        }
+    }
+    rep.seconds["detection"] = since(t0);
     t0 = std::chrono::steady_clock::now();
-    CrsInfo crs = st.table.crs;
-    if (!o.buildings.model.vertical_crs.empty() && !crs.vertical_epsg)
-        crs = combine_with_vertical(crs, crs_from_user_input(o.buildings.model.vertical_crs, "--vertical-crs"));
-    RoofsRunReport rr;
-    RoofsRunOptions ro = o.buildings;
-    if (o.footprints.empty()) ro.model.id_field = "id";
-    std::vector<Building> out;
-    if (n) out = build_lod2_model(st, crs, ro, "tile " + std::to_string(t.index), rr).buildings;
-    rep.seconds["roofs"] = since(t0);
+    // Labels with a pixel in the core: owned when their context fits (first
+    // pixel in the core), or redone when it does not.
+    std::vector<uint8_t> touches_core(d.mask.count + 1, 0);
+    for (int r = t.core.row; r < t.core.row + t.core.height; ++r)
+        for (int c = t.core.col; c < t.core.col + t.core.width; ++c)
+            if (const uint32_t l = d.mask.labels.data[static_cast<std::size_t>(r - t.window.row) * t.window.width + (c - t.window.col)]) touches_core[l] = 1;
+    std::vector<uint32_t> owned;
+    std::vector<std::vector<int64_t>> redo;  // global pixels of each building to do again
+    for (uint32_t l = 1; l <= d.mask.count; ++l) {
+        if (!touches_core[l]) continue;
+        if (fits(d.box[l], margin, t.window, m.grid)) {
+            if (in_core(d.id[l])) owned.push_back(l);
+            continue;
+        }
+        redo.emplace_back();
+    }
+    if (!redo.empty()) {
+        std::vector<std::vector<int64_t>*> slot(d.mask.count + 1, nullptr);
+        std::size_t j = 0;
+        for (uint32_t l = 1; l <= d.mask.count; ++l)
+            if (touches_core[l] && !fits(d.box[l], margin, t.window, m.grid)) slot[l] = &redo[j++];
+        for (int r = 0; r < t.window.height; ++r)
+            for (int c = 0; c < t.window.width; ++c)
+                if (const uint32_t l = d.mask.labels.data[static_cast<std::size_t>(r) * t.window.width + c]; l && slot[l])
+                    slot[l]->push_back(int64_t(t.window.row + r) * m.grid.width + t.window.col + c);
+    }
+    std::vector<PixelBox> redo_box;
+    for (uint32_t l = 1; l <= d.mask.count; ++l)
+        if (touches_core[l] && !fits(d.box[l], margin, t.window, m.grid)) redo_box.push_back(d.box[l]);
+    PolygonLayer footprints;
+    footprints.crs = d.pc.crs.empty() ? grid_crs : d.pc.crs;
+    add_footprints(m, d, owned, footprints);
+    std::set<int64_t> done;
+    for (uint32_t l : owned) done.insert(d.id[l]);
+    rep.seconds["footprints"] = since(t0);
+    out = buildings_of(m, std::move(footprints), std::move(d.pc), tile_label, rep);
+    d = WindowBuildings{};
+
+    for (std::size_t i = 0; i < redo.size(); ++i) {
+        t0 = std::chrono::steady_clock::now();
+        std::vector<int64_t> pixels = std::move(redo[i]);
+        PixelWindow w = window_around(redo_box[i], margin, m.grid);
+        WindowBuildings g;
+        uint32_t label = 0;
+        for (int iter = 0;; ++iter) {
+            g = detect_on_window(m, w, window_cloud(m, out_dir, w), tile_label + " (a building grown beyond it)");
+            // The building: the label holding most of the pixels it had.
+            std::map<uint32_t, std::size_t> overlap;
+            for (int64_t p : pixels) {
+                const int gr = static_cast<int>(p / m.grid.width), gc = static_cast<int>(p % m.grid.width);
+                if (gc < w.col || gr < w.row || gc >= w.col + w.width || gr >= w.row + w.height) continue;
+                if (const uint32_t l = g.mask.labels.data[static_cast<std::size_t>(gr - w.row) * w.width + (gc - w.col)]) ++overlap[l];
+            }
+            label = 0;
+            std::size_t best = 0;
+            for (const auto& [l, n] : overlap)
+                if (n > best) best = n, label = l;
+            if (!label || fits(g.box[label], margin, w, m.grid)) break;
+            PixelWindow grown = window_around(g.box[label], margin, m.grid);
+            const int c0 = std::min(w.col, grown.col), r0 = std::min(w.row, grown.row);
+            const int c1 = std::max(w.col + w.width, grown.col + grown.width), r1 = std::max(w.row + w.height, grown.row + grown.height);
+            grown = {c0, r0, c1 - c0, r1 - r0};
+            if (iter >= 8 || (grown.col == w.col && grown.row == w.row && grown.width == w.width && grown.height == w.height)) {
+                warnings.push_back("building " + std::to_string(g.id[label]) + " in " + tile_label + " did not fit a window grown " +
+                                   std::to_string(iter + 1) + " times; its result may depend on the tiling");
+                break;
+            }
+            pixels.clear();
+            for (int r = 0; r < w.height; ++r)
+                for (int c = 0; c < w.width; ++c)
+                    if (g.mask.labels.data[static_cast<std::size_t>(r) * w.width + c] == label) pixels.push_back(int64_t(w.row + r) * m.grid.width + w.col + c);
+            w = grown;
+        }
+        rep.seconds["detection"] += since(t0);
+        // Owned by the tile whose core holds its first pixel; once.
+        if (!label || !in_core(g.id[label]) || done.count(g.id[label])) continue;
+        done.insert(g.id[label]);
+        ++rep.grown;
+        PolygonLayer one;
+        one.crs = g.pc.crs.empty() ? grid_crs : g.pc.crs;
+        add_footprints(m, g, {label}, one);
+        for (Building& b : buildings_of(m, std::move(one), std::move(g.pc), tile_label, rep)) out.push_back(std::move(b));
+    }
+    // One order whatever the path a building took.
+    auto key = [](const std::string& id) { return std::pair<std::size_t, std::string>(id.size(), id); };
+    std::sort(out.begin(), out.end(), [&](const Building& a, const Building& b) { return key(a.id) < key(b.id); });
     rep.buildings = out.size();
     return out;
 }
@@ -574,7 +815,7 @@ TileReport run_tile(const RunManifest& m, int k, const std::string& out_dir, con
     }
     rep.seconds["total"] = since(t0);
     rep.peak_memory_mb = peak_memory_mb();
-    json j{{"index", k}, {"status", rep.status}, {"reason", rep.reason}, {"buildings", rep.buildings}, {"seconds", rep.seconds},
+    json j{{"index", k}, {"status", rep.status}, {"reason", rep.reason}, {"buildings", rep.buildings}, {"grown", rep.grown}, {"seconds", rep.seconds},
            {"peak_memory_mb", rep.peak_memory_mb}, {"warnings", warnings}};
     write_text_file(summary, j.dump(2) + "\n");
     progress(1.0, tile_name(k));
@@ -600,7 +841,7 @@ RunReport merge_tiles(const RunManifest& m, const std::string& out_dir, const Pr
         }
         TileReport tr;
         tr.index = t.index, tr.status = s.value("status", ""), tr.reason = s.value("reason", "");
-        tr.buildings = s.value("buildings", std::size_t(0)), tr.peak_memory_mb = s.value("peak_memory_mb", 0.0);
+        tr.buildings = s.value("buildings", std::size_t(0)), tr.grown = s.value("grown", std::size_t(0)), tr.peak_memory_mb = s.value("peak_memory_mb", 0.0);
         tr.seconds = s.value("seconds", std::map<std::string, double>{});
         for (const auto& [k, v] : tr.seconds) stage_seconds[k] += v;
         for (const auto& w : s.value("warnings", std::vector<std::string>{})) rep.warnings.push_back(w);
@@ -621,6 +862,11 @@ RunReport merge_tiles(const RunManifest& m, const std::string& out_dir, const Pr
             }
         }
     }
+    // Every tile failed: nothing to model, and empty city models would read as
+    // "no buildings here". The tiles' reports (DIR/tiles/) keep every reason.
+    if (!rep.tiles.empty() && std::all_of(rep.tiles.begin(), rep.tiles.end(), [](const TileReport& t) { return t.status == "failed"; }))
+        throw Error(out_dir, "every tile failed (" + std::to_string(rep.tiles.size()) + " of " + std::to_string(rep.tiles.size()) +
+                                 "; tile " + std::to_string(rep.tiles.front().index) + ": " + rep.tiles.front().reason + "); no city model written");
     progress(0.3, "tiles read");
     // One order whatever the tiling: by numeric id when ids are numbers, else as text.
     auto key = [](const std::string& id) {
@@ -680,7 +926,7 @@ RunReport merge_tiles(const RunManifest& m, const std::string& out_dir, const Pr
     j["grid"] = {{"width", m.grid.width}, {"height", m.grid.height}, {"geotransform", m.grid.transform.to_gdal()}};
     json tiles = json::array();
     for (const TileReport& t : rep.tiles)
-        tiles.push_back({{"index", t.index}, {"status", t.status}, {"reason", t.reason}, {"buildings", t.buildings}, {"seconds", t.seconds},
+        tiles.push_back({{"index", t.index}, {"status", t.status}, {"reason", t.reason}, {"buildings", t.buildings}, {"grown", t.grown}, {"seconds", t.seconds},
                          {"peak_memory_mb", t.peak_memory_mb}});
     j["tiles"] = tiles;
     j["stage_seconds"] = stage_seconds;
@@ -700,6 +946,13 @@ RunReport run_city(const RunManifest& m, const std::string& out_dir, const RunSh
     std::unique_ptr<tbb::global_control> limit;
     if (m.options.threads > 0) limit = std::make_unique<tbb::global_control>(tbb::global_control::max_allowed_parallelism, m.options.threads);
     ensure_directory(out_dir);
+    if (share.size == 1) {
+        // Temporaries of an interrupted run (killed while writing) are ours to
+        // remove; with several ranks another host may still be writing them.
+        std::size_t removed = 0;
+        for (const char* sub : {"", "tiles", "cloud_tiles", "rasters"}) removed += remove_stale_temporaries(fs::path(out_dir) / sub);
+        if (removed) log::info("removed " + std::to_string(removed) + " temporaries of an interrupted run in " + out_dir);
+    }
     // Resuming reuses finished tiles: only when they were made with the same plan.
     const fs::path stored = fs::path(out_dir) / "manifest.json";
     const std::string plan_path = stored.string();

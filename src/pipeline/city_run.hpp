@@ -69,6 +69,9 @@ struct TileReport {
     std::string status;   ///< "done", "skipped" (finished earlier), "failed"
     std::string reason;   ///< why a tile failed
     std::size_t buildings = 0;
+    /// Buildings whose context left the tile's window, done again on a
+    /// window grown around them (the result does not depend on the tiling).
+    std::size_t grown = 0;
     std::map<std::string, double> seconds;  ///< per stage
     double peak_memory_mb = 0.0;
 };

@@ -36,8 +36,10 @@ WindowCloudCells cloud_cells_on_window(const PreparedCloud& pc, const GridSpec& 
     if (factor < 1) throw Error("cloud cells", "cell factor must be >= 1");
     WindowCloudCells out;
     if (factor == 1) {
+        BuildingMaskOptions go = options;
+        go.grid_col0 = col0, go.grid_row0 = row0;
         out.rasters = rasterize_cloud(pc.cloud, pc.keep, pc.is_ground, window, unit_m);
-        out.cells = building_cells(out.rasters.ndsm, out.rasters.dsm, out.rasters.building_share, out.rasters.vegetation_share, options);
+        out.cells = building_cells(out.rasters.ndsm, out.rasters.dsm, out.rasters.building_share, out.rasters.vegetation_share, go);
         return out;
     }
     // Coarse cells anchored at global multiples of the factor.
@@ -51,6 +53,7 @@ WindowCloudCells cloud_cells_on_window(const PreparedCloud& pc, const GridSpec& 
     const CloudRasters cr = rasterize_cloud(pc.cloud, pc.keep, pc.is_ground, coarse, unit_m);
     BuildingMaskOptions co = options;
     co.gsd_m = options.gsd_m * factor;
+    co.grid_col0 = c0 / factor, co.grid_row0 = r0 / factor;
     const BuildingCells cc = building_cells(cr.ndsm, cr.dsm, cr.building_share, cr.vegetation_share, co);
     out.rasters.dsm = repeat(cr.dsm, w, h, dx, dy, factor);
     out.rasters.dtm = repeat(cr.dtm, w, h, dx, dy, factor);

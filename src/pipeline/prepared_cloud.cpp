@@ -12,6 +12,28 @@
 
 namespace cityforge {
 
+namespace {
+// Canonical point order, outliers, ground: the steps after reading.
+void clean_prepared(PreparedCloud& p, const OutlierFilterOptions& outliers, const GroundFilterOptions& ground) {
+    canonical_order(p.cloud);
+    const double unit = p.crs.linear_unit_m;
+    OutlierFilterOptions oo = outliers;
+    oo.isolated_radius /= unit;
+    oo.max_mean_distance /= unit;
+    const OutlierFilterResult cleaned = filter_outliers(p.cloud, oo);
+    p.keep = cleaned.keep;
+    p.removed_statistical = cleaned.removed_statistical;
+    p.removed_isolated = cleaned.removed_isolated;
+    p.outlier_limit_m = cleaned.limit * unit;
+    GroundFilterOptions go = ground;
+    go.cell /= unit, go.window /= unit, go.elevation_threshold /= p.source_crs.z_unit_m;
+    GroundResult g = classify_ground(p.cloud, p.keep, go);
+    p.is_ground = std::move(g.is_ground);
+    p.ground_points = g.ground_points;
+    p.ground_from_classification = g.from_classification;
+}
+}  // namespace
+
 PreparedCloud prepare_cloud(const std::string& cloud_path, const std::string& cloud_crs_override, const CrsInfo& target,
                             const OutlierFilterOptions& outliers, const GroundFilterOptions& ground, const Extent* crop) {
     outliers.validate();
@@ -42,33 +64,46 @@ PreparedCloud prepare_cloud(const std::string& cloud_path, const std::string& cl
         if (!crop) throw Error(cloud_path, "point cloud is empty");
         return p;  // a tile without points: nothing to clean or classify
     }
-    const double unit = p.crs.linear_unit_m;
-    OutlierFilterOptions oo = outliers;
-    oo.isolated_radius /= unit;
-    oo.max_mean_distance /= unit;
-    const OutlierFilterResult cleaned = filter_outliers(p.cloud, oo);
-    p.keep = cleaned.keep;
-    p.removed_statistical = cleaned.removed_statistical;
-    p.removed_isolated = cleaned.removed_isolated;
-    p.outlier_limit_m = cleaned.limit * unit;
-    GroundFilterOptions go = ground;
-    go.cell /= unit, go.window /= unit, go.elevation_threshold /= p.source_crs.z_unit_m;
-    GroundResult g = classify_ground(p.cloud, p.keep, go);
-    p.is_ground = std::move(g.is_ground);
-    p.ground_points = g.ground_points;
-    p.ground_from_classification = g.from_classification;
+    clean_prepared(p, outliers, ground);
+    return p;
+}
+
+PreparedCloud prepare_cloud(const std::vector<CloudPart>& parts, const std::string& cloud_crs_override, const CrsInfo& target,
+                            const OutlierFilterOptions& outliers, const GroundFilterOptions& ground) {
+    outliers.validate();
+    ground.validate();
+    if (parts.empty()) throw Error("cloud", "no parts to read");
+    PreparedCloud p;
+    const std::string& first = parts.front().path;
+    const std::string header_wkt = CloudReader(first).crs_wkt();
+    if (!cloud_crs_override.empty()) p.source_crs = crs_from_user_input(cloud_crs_override, "--cloud-crs");
+    else if (!header_wkt.empty()) p.source_crs = crs_from_wkt(header_wkt, first);
+    else throw Error(first, "point cloud has no CRS; give it with --cloud-crs (e.g. EPSG:7415)");
+    if (p.source_crs.geographic) throw Error(first, "point cloud is in a geographic CRS; a projected CRS is needed");
+    if (!target.empty() && !same_horizontal_crs(p.source_crs, target)) throw Error(first, "cloud parts must be in the target CRS");
+    p.crs = target.empty() ? p.source_crs : combine_with_vertical(target, p.source_crs);
+    for (const CloudPart& part : parts) {
+        const PointCloud c = read_point_cloud_in(part.path, part.crop.min_x, part.crop.min_y, part.crop.max_x, part.crop.max_y);
+        if (p.cloud.size() == 0) p.cloud.reserve(c.size(), c.has_color(), c.has_gps_time());
+        for (std::size_t i = 0; i < c.size(); ++i)
+            if (c.x[i] >= part.crop.min_x && c.x[i] < part.crop.max_x && c.y[i] >= part.crop.min_y && c.y[i] < part.crop.max_y) p.cloud.append(c, i);
+    }
+    if (p.cloud.size() == 0) return p;
+    clean_prepared(p, outliers, ground);
     return p;
 }
 
 CloudSample sample_cloud(const std::string& cloud_path, const std::string& cloud_crs_override, const CrsInfo& target,
-                         const OutlierFilterOptions& outliers, const MapPoint& centre) {
+                         const OutlierFilterOptions& outliers, const MapPoint& centre, PreparedCloud* points) {
     const double half = 200.0 / (target.empty() ? 1.0 : target.linear_unit_m);
     const Extent box{centre.x - half, centre.y - half, centre.x + half, centre.y + half};
     GroundFilterOptions trust;  // the sample needs no ground: take class 2 as it is, never run SMRF here
     trust.trust_classification = true;
-    const PreparedCloud sample = prepare_cloud(cloud_path, cloud_crs_override, target, outliers, trust, &box);
+    PreparedCloud sample = prepare_cloud(cloud_path, cloud_crs_override, target, outliers, trust, &box);
     if (!sample.cloud.size()) return {};
-    return {sample.outlier_limit_m, point_density_m2(sample)};
+    const CloudSample out{sample.outlier_limit_m, point_density_m2(sample)};
+    if (points) *points = sample;
+    return out;
 }
 
 Extent kept_extent(const PreparedCloud& pc) {

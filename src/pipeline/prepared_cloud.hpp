@@ -33,6 +33,20 @@ struct PreparedCloud {
 PreparedCloud prepare_cloud(const std::string& cloud_path, const std::string& cloud_crs_override, const CrsInfo& target,
                             const OutlierFilterOptions& outliers, const GroundFilterOptions& ground, const Extent* crop = nullptr);
 
+/// One file of a cloud split in parts (e.g. the tile windows of a run) and
+/// the extent (target CRS units, half-open: min <= x < max) taken from it.
+struct CloudPart {
+    std::string path;
+    Extent crop;
+};
+/// The same on the union of parts of one cloud (in the target CRS): the
+/// points of each part inside its crop. Crops that do not overlap give each
+/// point once. The points come in canonical order (cloud::canonical_order),
+/// as they do from every prepare_cloud: the result depends on the set of
+/// points, not on the files they came from.
+PreparedCloud prepare_cloud(const std::vector<CloudPart>& parts, const std::string& cloud_crs_override, const CrsInfo& target,
+                            const OutlierFilterOptions& outliers, const GroundFilterOptions& ground);
+
 /// What the 400 m square of the cloud centred on `centre` (target CRS)
 /// tells about the whole cloud, so that windows of one cloud all work alike:
 /// the outlier filter's mean-kNN-distance limit (metres) and the density of
@@ -42,8 +56,9 @@ struct CloudSample {
     double outlier_limit_m = 0.0;
     double points_per_m2 = 0.0;
 };
+/// `points`, when given, receives the sample's prepared cloud (ground from class 2).
 CloudSample sample_cloud(const std::string& cloud_path, const std::string& cloud_crs_override, const CrsInfo& target,
-                         const OutlierFilterOptions& outliers, const MapPoint& centre);
+                         const OutlierFilterOptions& outliers, const MapPoint& centre, PreparedCloud* points = nullptr);
 
 /// Bounding box of the kept points (in pc.crs); empty_extent() when none.
 Extent kept_extent(const PreparedCloud& pc);

@@ -252,10 +252,20 @@ void write_geotiff(const std::string& path, const Image<T>& image, const GeoTran
                           image.height, gdal_type<T>(), image.bands, nullptr, 0, 0, 0, nullptr) == CE_None;
     GDALClose(ds);
     ok = ok && CPLGetLastErrorType() < CE_Failure;
+    if (ok) {
+        // GDAL 3.6's GDALClose reports no error: read the file back (a full
+        // disk leaves a truncated file whose last blocks fail to read).
+        std::unique_ptr<GDALDataset> back(GDALDataset::Open(tmp.c_str(), GDAL_OF_RASTER | GDAL_OF_READONLY));
+        ok = back && back->GetRasterXSize() == image.width && back->GetRasterYSize() == image.height && back->GetRasterCount() == image.bands;
+        std::vector<T> row(static_cast<std::size_t>(image.width) * image.bands);
+        for (int y = 0; ok && y < image.height; ++y)
+            ok = back->RasterIO(GF_Read, 0, y, image.width, 1, row.data(), image.width, 1, gdal_type<T>(), image.bands, nullptr, 0, 0, 0, nullptr) == CE_None;
+        ok = ok && CPLGetLastErrorType() < CE_Failure;
+    }
     if (!ok) {
         const std::string why = user_named(capture.suffix(), tmp, path);
         discard_file(tmp);
-        throw Error(path, "writing GeoTIFF failed" + why);
+        throw Error(path, "writing GeoTIFF failed (disk full?)" + why);
     }
     commit_file(tmp, path);
 }
@@ -278,6 +288,14 @@ void build_vrt_mosaic(const std::string& path, const std::vector<std::string>& p
     GDALDatasetH vrt = GDALBuildVRT(tmp.string().c_str(), static_cast<int>(names.size()), nullptr, names.data(), nullptr, nullptr);
     if (!vrt) throw Error(path, "cannot build the VRT mosaic" + capture.suffix());
     GDALClose(vrt);
+    std::unique_ptr<GDALDataset> back(GDALDataset::Open(tmp.c_str(), GDAL_OF_RASTER | GDAL_OF_READONLY));
+    if (!back || CPLGetLastErrorType() >= CE_Failure) {
+        back.reset();
+        const std::string why = capture.suffix();
+        discard_file(tmp);
+        throw Error(path, "writing the VRT mosaic failed (disk full?)" + why);
+    }
+    back.reset();
     commit_file(tmp, path);
 }
 
