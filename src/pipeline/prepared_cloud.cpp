@@ -75,11 +75,7 @@ PreparedCloud prepare_cloud(const std::vector<CloudPart>& parts, const std::stri
     if (parts.empty()) throw Error("cloud", "no parts to read");
     PreparedCloud p;
     const std::string& first = parts.front().path;
-    const std::string header_wkt = CloudReader(first).crs_wkt();
-    if (!cloud_crs_override.empty()) p.source_crs = crs_from_user_input(cloud_crs_override, "--cloud-crs");
-    else if (!header_wkt.empty()) p.source_crs = crs_from_wkt(header_wkt, first);
-    else throw Error(first, "point cloud has no CRS; give it with --cloud-crs (e.g. EPSG:7415)");
-    if (p.source_crs.geographic) throw Error(first, "point cloud is in a geographic CRS; a projected CRS is needed");
+    p.source_crs = require_cloud_crs(first, cloud_crs_override);
     if (!target.empty() && !same_horizontal_crs(p.source_crs, target)) throw Error(first, "cloud parts must be in the target CRS");
     p.crs = target.empty() ? p.source_crs : combine_with_vertical(target, p.source_crs);
     for (const CloudPart& part : parts) {
