@@ -18,11 +18,30 @@ const char* const kRealFields[] = {"ground_z", "roof_z_min", "roof_z_50p", "roof
                                    "point_density_m2", "nodata_fraction", "ground_buffer_m"};
 }
 
+// The fields heights writes after the source attributes, in output order (one list
+// for the output table and for the fields an input may not bring along).
+static const std::vector<FieldDefinition>& heights_own_field_definitions() {
+    static const std::vector<FieldDefinition> defs = [] {
+        std::vector<FieldDefinition> v;
+        for (const char* n : kRealFields) v.push_back({n, FieldType::real});
+        v.push_back({"n_points_roof", FieldType::integer});
+        v.push_back({"n_points_ground", FieldType::integer});
+        v.push_back({"height_quality", FieldType::string});
+        v.push_back({"ground_method", FieldType::string});
+        for (const char* n : {"ground_rmse_m", "ground_slope_deg"}) v.push_back({n, FieldType::real});
+        v.push_back({"n_points_ground_outliers", FieldType::integer});
+        // 3DBAG's names for the same values (absolute z in the vertical datum; 3DBAG 2 prefixes them with b3_).
+        for (const char* n : {"h_maaiveld", "h_dak_min", "h_dak_50p", "h_dak_70p", "h_dak_max"}) v.push_back({n, FieldType::real});
+        v.push_back({"z_crs", FieldType::string});
+        return v;
+    }();
+    return defs;
+}
+
 const std::vector<std::string>& heights_output_fields() {
     static const std::vector<std::string> names = [] {
         std::vector<std::string> v{"source_fid"};
-        for (const char* n : kRealFields) v.push_back(n);
-        for (const char* n : {"n_points_roof", "n_points_ground", "height_quality", "z_crs"}) v.push_back(n);
+        for (const FieldDefinition& f : heights_own_field_definitions()) v.push_back(f.name);
         return v;
     }();
     return names;
@@ -87,16 +106,7 @@ HeightsStage compute_heights_stage(PolygonLayer footprints_in, PreparedCloud clo
     std::vector<FieldDefinition> fields;
     fields.push_back({"source_fid", FieldType::integer});
     for (std::size_t i = 0; i < footprints.field_names.size(); ++i) fields.push_back({footprints.field_names[i], footprints.field_types[i]});
-    for (const char* n : kRealFields) fields.push_back({n, FieldType::real});
-    fields.push_back({"n_points_roof", FieldType::integer});
-    fields.push_back({"n_points_ground", FieldType::integer});
-    fields.push_back({"height_quality", FieldType::string});
-    fields.push_back({"ground_method", FieldType::string});
-    for (const char* n : {"ground_rmse_m", "ground_slope_deg"}) fields.push_back({n, FieldType::real});
-    fields.push_back({"n_points_ground_outliers", FieldType::integer});
-    // 3DBAG's names for the same values (absolute z in the vertical datum; 3DBAG 2 prefixes them with b3_).
-    for (const char* n : {"h_maaiveld", "h_dak_min", "h_dak_50p", "h_dak_70p", "h_dak_max"}) fields.push_back({n, FieldType::real});
-    fields.push_back({"z_crs", FieldType::string});
+    for (const FieldDefinition& f : heights_own_field_definitions()) fields.push_back(f);
     for (const FieldDefinition& f : fields) t.field_names.push_back(f.name), t.field_types.push_back(f.type);
     const std::string z_crs = z_crs_label(cloud_crs);
     t.features.reserve(heights.size());
