@@ -30,7 +30,7 @@ template <typename T>
 void put(std::vector<char>& b, std::size_t pos, T v) {
     std::memcpy(b.data() + pos, &v, sizeof(T));
 }
-std::string user_id(const char* p) { return std::string(p, strnlen(p, 16)); }
+std::string user_id(const char* p) { return las_text(p, 16); }  // a VLR/EVLR user id
 
 std::string lower_ext(const std::string& p) {
     std::string e = fs::path(p).extension().string();

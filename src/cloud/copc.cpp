@@ -7,6 +7,7 @@
 #include <fstream>
 #include <set>
 
+#include "cloud/las.hpp"
 #include "core/error.hpp"
 
 namespace cityforge {
@@ -17,7 +18,7 @@ T get(const char* p) {
     std::memcpy(&v, p, sizeof(T));
     return v;
 }
-std::string user_id(const char* p) { return std::string(p, strnlen(p, 16)); }
+std::string user_id(const char* p) { return las_text(p, 16); }  // a VLR/EVLR user id
 }  // namespace
 
 std::string CopcNode::key() const {

@@ -24,13 +24,14 @@ void put(std::vector<char>& buf, std::size_t pos, T v) {
     std::memcpy(buf.data() + pos, &v, sizeof(T));
 }
 
-std::string trimmed(const char* p, std::size_t n) {
+}  // namespace
+
+std::string las_text(const char* p, std::size_t n) {
+    if (n == 0 || p == nullptr) return {};
     std::string s(p, strnlen(p, n));
     while (!s.empty() && (s.back() == ' ' || s.back() == '\0')) s.pop_back();
     return s;
 }
-
-}  // namespace
 
 void PointCloud::clear() {
     for (auto* v : {&x, &y, &z, &gps_time}) v->clear();
@@ -84,8 +85,8 @@ LasReader::LasReader(const std::string& path) : path_(path) {
     h.version_minor = static_cast<uint8_t>(hdr[25]);
     if (h.version_major != 1 || h.version_minor > 4)
         throw Error(path, "unsupported LAS version " + std::to_string(h.version_major) + "." + std::to_string(h.version_minor));
-    h.system_identifier = trimmed(hdr + 26, 32);
-    h.generating_software = trimmed(hdr + 58, 32);
+    h.system_identifier = las_text(hdr + 26, 32);
+    h.generating_software = las_text(hdr + 58, 32);
     h.crs.wkt_bit = (get<uint16_t>(hdr + 6) & 0x10) != 0;
     const auto header_size = get<uint16_t>(hdr + 94);
     h.offset_to_points = get<uint32_t>(hdr + 96);
@@ -129,7 +130,7 @@ LasReader::LasReader(const std::string& path) : path_(path) {
         in_.seekg(static_cast<std::streamoff>(pos));
         in_.read(vh, 54);
         if (!in_) throw Error(path, "truncated variable length record header");
-        const std::string user = trimmed(vh + 2, 16);
+        const std::string user = las_text(vh + 2, 16);
         const auto record_id = get<uint16_t>(vh + 18);
         const auto length = get<uint16_t>(vh + 20);
         if (pos + 54 + length > h.offset_to_points) throw Error(path, "variable length record runs past the point data");
@@ -137,7 +138,7 @@ LasReader::LasReader(const std::string& path) : path_(path) {
             std::vector<char> data(length);
             in_.read(data.data(), length);
             if (!in_) throw Error(path, "truncated variable length record");
-            if (record_id == 2112) (user == "liblas" ? h.crs.liblas_wkt : h.crs.wkt) = trimmed(data.data(), data.size());
+            if (record_id == 2112) (user == "liblas" ? h.crs.liblas_wkt : h.crs.wkt) = las_text(data.data(), data.size());
             else if (user == "LASF_Projection" && record_id == 34735) {
                 h.crs.geokey_directory.resize(length / 2);
                 std::memcpy(h.crs.geokey_directory.data(), data.data(), h.crs.geokey_directory.size() * 2);
@@ -165,14 +166,14 @@ LasReader::LasReader(const std::string& path) : path_(path) {
             in_.seekg(static_cast<std::streamoff>(epos));
             in_.read(eh, 60);
             if (!in_) break;
-            const std::string user = trimmed(eh + 2, 16);
+            const std::string user = las_text(eh + 2, 16);
             const auto record_id = get<uint16_t>(eh + 18);
             const auto length = get<uint64_t>(eh + 20);
             if (epos + 60 + length > file_size) throw Error(path, "extended variable length record runs past the end of the file");
             if (user == "LASF_Projection" && record_id == 2112 && length < (1u << 24)) {
                 std::vector<char> data(length);
                 in_.read(data.data(), static_cast<std::streamsize>(length));
-                h.crs.evlr_wkt = trimmed(data.data(), data.size());
+                h.crs.evlr_wkt = las_text(data.data(), data.size());
             }
             epos += 60 + length;
         }

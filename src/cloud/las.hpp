@@ -29,6 +29,11 @@ struct LasCrsRecords {
 };
 
 /// The public header block fields we use, plus what the VLRs told us.
+/// The text of a fixed-length LAS field of `n` bytes at `p` (system identifier,
+/// VLR user id, WKT record): up to the first NUL, trailing spaces and NULs
+/// dropped. `n` = 0 (an empty record) gives "" without reading `p`.
+std::string las_text(const char* p, std::size_t n);
+
 struct LasHeader {
     int version_major = 1;
     int version_minor = 4;

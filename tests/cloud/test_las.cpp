@@ -143,3 +143,13 @@ TEST_CASE("Corrupt LAS input gets a clear error naming the file", "[cloud][las][
     }
     CHECK_THROWS_WITH(read_las(dir / "none.las"), Catch::Contains("none.las: file not found"));
 }
+
+TEST_CASE("LAS text fields: up to the first NUL, padding dropped, an empty record read without touching its pointer", "[cloud][las][errors]") {
+    CHECK(las_text(nullptr, 0).empty());  // a zero-length WKT record (UBSan: strnlen on a null pointer before)
+    const std::vector<char> empty;
+    CHECK(las_text(empty.data(), empty.size()).empty());
+    const char user[16] = {'c', 'o', 'p', 'c', '\0', 'x', 'y', 'z', 0, 0, 0, 0, 0, 0, 0, 0};
+    CHECK(las_text(user, sizeof user) == "copc");
+    const char padded[8] = {'P', 'D', 'A', 'L', ' ', ' ', ' ', ' '};  // no NUL at all: the length bounds the read
+    CHECK(las_text(padded, sizeof padded) == "PDAL");
+}
