@@ -12,6 +12,7 @@
 #include "cloud/copc.hpp"
 #include "cloud/las.hpp"
 #include "core/atomic_file.hpp"
+#include "cloud/le_bytes.hpp"
 #include "core/error.hpp"
 #include "core/sha256.hpp"
 
@@ -20,16 +21,8 @@ namespace fs = std::filesystem;
 
 namespace {
 
-template <typename T>
-T get(const char* p) {
-    T v;
-    std::memcpy(&v, p, sizeof(T));
-    return v;
-}
-template <typename T>
-void put(std::vector<char>& b, std::size_t pos, T v) {
-    std::memcpy(b.data() + pos, &v, sizeof(T));
-}
+using bytes::get;
+using bytes::put;
 std::string user_id(const char* p) { return las_text(p, 16); }  // a VLR/EVLR user id
 
 std::string lower_ext(const std::string& p) {

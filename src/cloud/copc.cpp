@@ -8,16 +8,12 @@
 #include <set>
 
 #include "cloud/las.hpp"
+#include "cloud/le_bytes.hpp"
 #include "core/error.hpp"
 
 namespace cityforge {
 namespace {
-template <typename T>
-T get(const char* p) {
-    T v;
-    std::memcpy(&v, p, sizeof(T));
-    return v;
-}
+using bytes::get;
 std::string user_id(const char* p) { return las_text(p, 16); }  // a VLR/EVLR user id
 }  // namespace
 

@@ -8,21 +8,14 @@
 #include <vector>
 
 #include "core/atomic_file.hpp"
+#include "cloud/le_bytes.hpp"
 #include "core/error.hpp"
 
 namespace cityforge {
 namespace {
 
-template <typename T>
-T get(const char* p) {
-    T v;
-    std::memcpy(&v, p, sizeof(T));
-    return v;
-}
-template <typename T>
-void put(std::vector<char>& buf, std::size_t pos, T v) {
-    std::memcpy(buf.data() + pos, &v, sizeof(T));
-}
+using bytes::get;
+using bytes::put;
 
 }  // namespace
 

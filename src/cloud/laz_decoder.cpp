@@ -9,6 +9,7 @@
 #include <filesystem>
 #include <limits>
 
+#include "cloud/le_bytes.hpp"
 #include "core/error.hpp"
 
 // Our own implementation of the LASzip format (LASzip's public description and
@@ -23,16 +24,6 @@ struct Corrupt {
     const char* what;
 };
 
-template <typename T>
-T load(const uint8_t* p) {
-    T v;
-    std::memcpy(&v, p, sizeof(T));
-    return v;
-}
-template <typename T>
-void store(uint8_t* p, T v) {
-    std::memcpy(p, &v, sizeof(T));
-}
 
 // ------------------------------------------------------------ byte input
 // Bytes of one arithmetic-coded stream. Past its end it yields zeros and
@@ -95,9 +86,7 @@ public:
         // One allocation: distribution (symbols + 1, the last entry
         // kSymMaxCount as a sentinel), counts (symbols), table (size + 2).
         store_.assign(2 * static_cast<std::size_t>(symbols) + 1 + table_size_ + 2, 0);
-        distribution_ = store_.data();
-        count_ = distribution_ + symbols + 1;
-        table_ = count_ + symbols;
+        bind_store();
         for (uint32_t n = 0; n < symbols; ++n) count_[n] = 1;
         distribution_[symbols] = kSymMaxCount;
         total_count_ = 0;
@@ -107,33 +96,12 @@ public:
     }
     SymbolModel(const SymbolModel& o) { *this = o; }
     SymbolModel& operator=(const SymbolModel& o) {
-        if (this == &o) return *this;
-        symbols_ = o.symbols_;
-        last_symbol_ = o.last_symbol_;
-        table_size_ = o.table_size_;
-        table_shift_ = o.table_shift_;
-        total_count_ = o.total_count_;
-        update_cycle_ = o.update_cycle_;
-        until_update_ = o.until_update_;
-        store_ = o.store_;
-        distribution_ = store_.data();
-        count_ = distribution_ + symbols_ + 1;
-        table_ = count_ + symbols_;
+        if (this != &o) take_state(o, o.store_);
         return *this;
     }
     SymbolModel(SymbolModel&& o) noexcept { *this = std::move(o); }
     SymbolModel& operator=(SymbolModel&& o) noexcept {
-        symbols_ = o.symbols_;
-        last_symbol_ = o.last_symbol_;
-        table_size_ = o.table_size_;
-        table_shift_ = o.table_shift_;
-        total_count_ = o.total_count_;
-        update_cycle_ = o.update_cycle_;
-        until_update_ = o.until_update_;
-        store_ = std::move(o.store_);  // the buffer (and so the pointers) moves along
-        distribution_ = o.distribution_;
-        count_ = o.count_;
-        table_ = o.table_;
+        if (this != &o) take_state(o, std::move(o.store_));
         return *this;
     }
     void update() {
@@ -163,6 +131,25 @@ public:
     uint32_t* table_ = nullptr;
 
 private:
+    // The pointers into store_ (distribution, then counts, then the table).
+    void bind_store() {
+        distribution_ = store_.data();
+        count_ = distribution_ + symbols_ + 1;
+        table_ = count_ + symbols_;
+    }
+    // Copy or move: the scalars from `o`, the buffer given, the pointers rebound to it.
+    template <typename Store>
+    void take_state(const SymbolModel& o, Store&& store) {
+        symbols_ = o.symbols_;
+        last_symbol_ = o.last_symbol_;
+        table_size_ = o.table_size_;
+        table_shift_ = o.table_shift_;
+        total_count_ = o.total_count_;
+        update_cycle_ = o.update_cycle_;
+        until_update_ = o.until_update_;
+        store_ = std::forward<Store>(store);
+        bind_store();
+    }
     std::vector<uint32_t> store_;
 };
 
@@ -537,9 +524,9 @@ public:
             if (changed & 16) {
                 const auto v = static_cast<uint16_t>(ic_intensity_.decompress(dec, last_intensity_[m], m < 3 ? m : 3));
                 last_intensity_[m] = v;
-                store<uint16_t>(last_ + 12, v);
+                bytes::store<uint16_t>(last_ + 12, v);
             } else {
-                store<uint16_t>(last_ + 12, last_intensity_[m]);
+                bytes::store<uint16_t>(last_ + 12, last_intensity_[m]);
             }
             if (changed & 8) last_[15] = static_cast<uint8_t>(dec.decode_symbol(classification_[last_[15]].get(256)));
             if (changed & 4) {
@@ -548,24 +535,24 @@ public:
             }
             if (changed & 2) last_[17] = static_cast<uint8_t>(dec.decode_symbol(user_data_[last_[17]].get(256)));
             if (changed & 1)
-                store<uint16_t>(last_ + 18, static_cast<uint16_t>(ic_point_source_.decompress(dec, load<uint16_t>(last_ + 18))));
+                bytes::store<uint16_t>(last_ + 18, static_cast<uint16_t>(ic_point_source_.decompress(dec, bytes::get<uint16_t>(last_ + 18))));
         } else {
             r = last_[14] & 7;
             n = (last_[14] >> 3) & 7;
             m = kReturnMap[n][r];
             l = return_level(n, r, 7);
-            store<uint16_t>(last_ + 12, last_intensity_[m]);
+            bytes::store<uint16_t>(last_ + 12, last_intensity_[m]);
         }
         const int32_t dx = ic_dx_.decompress(dec, median_x_[m].get(), n == 1);
-        store<uint32_t>(last_, load<uint32_t>(last_) + static_cast<uint32_t>(dx));
+        bytes::store<uint32_t>(last_, bytes::get<uint32_t>(last_) + static_cast<uint32_t>(dx));
         median_x_[m].add(dx);
         uint32_t k = ic_dx_.k();
         const int32_t dy = ic_dy_.decompress(dec, median_y_[m].get(), (n == 1) + (k < 20 ? (k & ~1u) : 20));
-        store<uint32_t>(last_ + 4, load<uint32_t>(last_ + 4) + static_cast<uint32_t>(dy));
+        bytes::store<uint32_t>(last_ + 4, bytes::get<uint32_t>(last_ + 4) + static_cast<uint32_t>(dy));
         median_y_[m].add(dy);
         k = (ic_dx_.k() + ic_dy_.k()) / 2;
         const int32_t z = ic_z_.decompress(dec, last_height_[l], (n == 1) + (k < 18 ? (k & ~1u) : 18));
-        store<int32_t>(last_ + 8, z);
+        bytes::store<int32_t>(last_ + 8, z);
         last_height_[l] = z;
         std::memcpy(item, last_, 20);
     }
@@ -585,10 +572,10 @@ private:
 
 class GpsTime11V2 final : public ItemV2 {
 public:
-    explicit GpsTime11V2(const uint8_t* first) : state_(false) { state_.reset(load<uint64_t>(first)); }
+    explicit GpsTime11V2(const uint8_t* first) : state_(false) { state_.reset(bytes::get<uint64_t>(first)); }
     void read(ArithDecoder& dec, uint8_t* item) override {
         state_.read(dec);
-        store<uint64_t>(item, state_.time[state_.last]);
+        bytes::store<uint64_t>(item, state_.time[state_.last]);
     }
 
 private:
@@ -638,8 +625,8 @@ public:
     void read(ArithDecoder& dec, uint8_t* item) override {
         item[0] = static_cast<uint8_t>(dec.decode_symbol(packet_index_));
         uint8_t* cur = item + 1;
-        const uint64_t last_offset = load<uint64_t>(last_);
-        const uint32_t last_size = load<uint32_t>(last_ + 8);
+        const uint64_t last_offset = bytes::get<uint64_t>(last_);
+        const uint32_t last_size = bytes::get<uint32_t>(last_ + 8);
         sym_last_offset_diff_ = dec.decode_symbol(offset_diff_[sym_last_offset_diff_]);
         uint64_t offset;
         if (sym_last_offset_diff_ == 0) {
@@ -653,10 +640,10 @@ public:
             const uint64_t low = dec.read_int();
             offset = (static_cast<uint64_t>(dec.read_int()) << 32) | low;
         }
-        store<uint64_t>(cur, offset);
-        store<uint32_t>(cur + 8, static_cast<uint32_t>(ic_packet_size_.decompress(dec, load<int32_t>(last_ + 8))));
-        store<int32_t>(cur + 12, ic_return_point_.decompress(dec, load<int32_t>(last_ + 12)));
-        for (uint32_t c = 0; c < 3; ++c) store<int32_t>(cur + 16 + 4 * c, ic_xyz_.decompress(dec, load<int32_t>(last_ + 16 + 4 * c), c));
+        bytes::store<uint64_t>(cur, offset);
+        bytes::store<uint32_t>(cur + 8, static_cast<uint32_t>(ic_packet_size_.decompress(dec, bytes::get<int32_t>(last_ + 8))));
+        bytes::store<int32_t>(cur + 12, ic_return_point_.decompress(dec, bytes::get<int32_t>(last_ + 12)));
+        for (uint32_t c = 0; c < 3; ++c) bytes::store<int32_t>(cur + 16 + 4 * c, ic_xyz_.decompress(dec, bytes::get<int32_t>(last_ + 16 + 4 * c), c));
         std::memcpy(last_, cur, 28);
     }
 
@@ -728,26 +715,26 @@ struct Point14 {
 
     static Point14 unpack(const uint8_t* p) {
         Point14 q;
-        q.x = load<int32_t>(p), q.y = load<int32_t>(p + 4), q.z = load<int32_t>(p + 8);
-        q.intensity = load<uint16_t>(p + 12);
+        q.x = bytes::get<int32_t>(p), q.y = bytes::get<int32_t>(p + 4), q.z = bytes::get<int32_t>(p + 8);
+        q.intensity = bytes::get<uint16_t>(p + 12);
         q.return_number = p[14] & 15, q.number_of_returns = p[14] >> 4;
         q.class_flags = p[15] & 15, q.channel = (p[15] >> 4) & 3, q.scan_dir = (p[15] >> 6) & 1, q.edge = p[15] >> 7;
         q.classification = p[16], q.user_data = p[17];
-        q.scan_angle = load<int16_t>(p + 18);
-        q.point_source = load<uint16_t>(p + 20);
-        q.gps_time = load<uint64_t>(p + 22);
+        q.scan_angle = bytes::get<int16_t>(p + 18);
+        q.point_source = bytes::get<uint16_t>(p + 20);
+        q.gps_time = bytes::get<uint64_t>(p + 22);
         return q;
     }
     void pack(uint8_t* p) const {
-        store<int32_t>(p, x), store<int32_t>(p + 4, y), store<int32_t>(p + 8, z);
-        store<uint16_t>(p + 12, intensity);
+        bytes::store<int32_t>(p, x), bytes::store<int32_t>(p + 4, y), bytes::store<int32_t>(p + 8, z);
+        bytes::store<uint16_t>(p + 12, intensity);
         p[14] = static_cast<uint8_t>(return_number | (number_of_returns << 4));
         p[15] = static_cast<uint8_t>(class_flags | (channel << 4) | (scan_dir << 6) | (edge << 7));
         p[16] = static_cast<uint8_t>(classification);
         p[17] = static_cast<uint8_t>(user_data);
-        store<int16_t>(p + 18, scan_angle);
-        store<uint16_t>(p + 20, point_source);
-        store<uint64_t>(p + 22, gps_time);
+        bytes::store<int16_t>(p + 18, scan_angle);
+        bytes::store<uint16_t>(p + 20, point_source);
+        bytes::store<uint64_t>(p + 22, gps_time);
     }
 };
 
@@ -995,7 +982,7 @@ std::size_t decode_layered(const LazInfo& info, int rl, const uint8_t* data, std
     std::memcpy(out, data, rl);
     pos += rl;
     need(4, "truncated chunk (no point count)");
-    const uint32_t stored_count = load<uint32_t>(data + pos);
+    const uint32_t stored_count = bytes::get<uint32_t>(data + pos);
     pos += 4;
     if (stored_count != count) throw Corrupt{"chunk point count disagrees with the chunk table"};
     // Layer sizes, in item order.
@@ -1003,7 +990,7 @@ std::size_t decode_layered(const LazInfo& info, int rl, const uint8_t* data, std
     for (const LazItem& it : info.items) n_layers += it.type == 10 ? 9 : it.type == 11 ? 1 : it.type == 12 ? 2 : it.size;
     need(4 * n_layers, "truncated chunk (layer sizes)");
     std::vector<uint32_t> sizes(n_layers);
-    for (std::size_t i = 0; i < n_layers; ++i, pos += 4) sizes[i] = load<uint32_t>(data + pos);
+    for (std::size_t i = 0; i < n_layers; ++i, pos += 4) sizes[i] = bytes::get<uint32_t>(data + pos);
     std::vector<Layer> layers(n_layers);
     std::array<Layer, Point14V3::kLayers> point_layers;
     std::size_t li = 0;
@@ -1103,19 +1090,19 @@ LazInfo parse_laszip_vlr(const std::vector<char>& payload, const std::string& pa
     if (payload.size() < 34) throw Error(path, "LASzip VLR is too short (" + std::to_string(payload.size()) + " bytes)");
     const auto* p = reinterpret_cast<const uint8_t*>(payload.data());
     LazInfo info;
-    info.compressor = load<uint16_t>(p);
-    info.coder = load<uint16_t>(p + 2);
+    info.compressor = bytes::get<uint16_t>(p);
+    info.coder = bytes::get<uint16_t>(p + 2);
     info.version_major = p[4];
     info.version_minor = p[5];
-    info.version_revision = load<uint16_t>(p + 6);
-    info.options = load<uint32_t>(p + 8);
-    info.chunk_size = load<uint32_t>(p + 12);
-    const auto n_items = load<uint16_t>(p + 32);
+    info.version_revision = bytes::get<uint16_t>(p + 6);
+    info.options = bytes::get<uint32_t>(p + 8);
+    info.chunk_size = bytes::get<uint32_t>(p + 12);
+    const auto n_items = bytes::get<uint16_t>(p + 32);
     if (payload.size() < 34 + 6u * n_items)
         throw Error(path, "LASzip VLR lists " + std::to_string(n_items) + " items but holds only " + std::to_string(payload.size()) + " bytes");
     for (uint16_t i = 0; i < n_items; ++i) {
         const uint8_t* q = p + 34 + 6 * i;
-        info.items.push_back({load<uint16_t>(q), load<uint16_t>(q + 2), load<uint16_t>(q + 4)});
+        info.items.push_back({bytes::get<uint16_t>(q), bytes::get<uint16_t>(q + 2), bytes::get<uint16_t>(q + 4)});
     }
     return info;
 }
