@@ -32,12 +32,12 @@ r = json.load(open(sys.argv[1])); s = float(sys.argv[2]); wall = float(sys.argv[
 cpu = sum(float(v) for v in open(sys.argv[5]).read().split()[-2:])
 st = r["stage_seconds"]; n = r["counts"]["buildings"]
 stages = {"cloud": st.get("cloud", 0), "detect": st.get("detection", 0) + st.get("footprints", 0), "heights": st.get("heights", 0), "roofs": st.get("roofs", 0)}
-total = sum(st.values()) or 1.0
+total = sum(v for k, v in st.items() if k != "total") or 1.0
 cell = lambda v: f"{v:.1f} ({100 * v / total:.0f} %)"
 km2 = s * s / 1e6
 print(f"{s:<8.0f} {km2:<6.1f} {n:<9d} {len(r['tiles']):<6d} {wall:<8.1f} {cpu:<8.1f} {cpu / km2:<8.1f} {cell(stages['cloud']):<18s} "
       f"{cell(stages['detect']):<18s} {cell(stages['heights']):<18s} {cell(stages['roofs']):<18s} {r['peak_memory_mb']:<8.0f} {n / cpu:.1f}")
-others = {k: v for k, v in st.items() if k not in ("cloud", "detection", "footprints", "heights", "roofs")}
+others = {k: v for k, v in st.items() if k not in ("cloud", "detection", "footprints", "heights", "roofs", "total")}
 if others: print("         other stages: " + ", ".join(f"{k} {v:.1f} s ({100 * v / total:.0f} %)" for k, v in sorted(others.items())))
 PY
 done

@@ -6,6 +6,7 @@
 #include <numeric>
 #include <tuple>
 #include <tbb/parallel_for.h>
+#include <tbb/parallel_sort.h>
 
 #include "core/error.hpp"
 #include "core/grid_fill.hpp"
@@ -41,7 +42,26 @@ void canonical_order(PointCloud& c) {
     bool sorted = true;
     for (std::size_t i = 1; i < n && sorted; ++i) sorted = !(key(i) < key(i - 1));
     if (sorted) return;
-    std::sort(order.begin(), order.end(), [&](std::size_t a, std::size_t b) { return key(a) < key(b); });
+    // Sorted on a compact copy of (x, y) with the index, in parallel: the whole
+    // key (through the index) only breaks ties of x and y. Points equal in every
+    // attribute are interchangeable, so the result does not depend on the
+    // thread count. (An indirect sort on the full key missed the cache on
+    // every comparison: 28 % of a `heights` run.)
+    struct XY {
+        double x, y;
+        std::size_t i;
+    };
+    std::vector<XY> xy(n);
+    for (std::size_t i = 0; i < n; ++i) xy[i] = {c.x[i], c.y[i], i};
+    tbb::parallel_sort(xy.begin(), xy.end(), [&](const XY& a, const XY& b) {
+        if (a.x < b.x) return true;
+        if (b.x < a.x) return false;
+        if (a.y < b.y) return true;
+        if (b.y < a.y) return false;
+        return key(a.i) < key(b.i);
+    });
+    for (std::size_t i = 0; i < n; ++i) order[i] = xy[i].i;
+    std::vector<XY>().swap(xy);
     auto permute = [&](auto& v) {
         if (v.empty()) return;
         std::remove_reference_t<decltype(v)> out(n);
