@@ -339,3 +339,34 @@ TEST_CASE("A footprint audit without a match says n/a (null) for the means over 
     const std::string md = slurp(dir / "a/report.md");
     CHECK(md.find("| mean \\|area error\\| (%) | n/a |") != std::string::npos);
 }
+
+TEST_CASE("Rectangle and height audits without a comparable building say n/a (null), not 0", "[inputs][audit]") {
+    ScratchDir dir("inputs_audit_na");
+    const std::string ref = shared_data("delft_ahn3_bgt_west/bgt_pand_west_with_ref_heights.geojson");
+    const std::string schema = cityforge::test::source_dir() + "/schemas/audit_report.schema.json";
+    write_squares(dir / "far.geojson", {{90000.0, 447560.0}}, 4.0, R"({"height_m": 7.5})");
+    // Heights: the one prediction matches no reference footprint.
+    const auto h = run_cli("audit heights --pred " + (dir / "far.geojson") + " --ref " + ref + " --ref-field ref_height_m --out " + (dir / "h"));
+    INFO(h.err);
+    REQUIRE(h.exit_code == 0);
+    CHECK(h.out.find("MAE n/a m RMSE n/a m bias n/a m max n/a m over 0 buildings") != std::string::npos);
+    const json hj = json::parse(slurp(dir / "h/report.json"));
+    for (const char* k : {"mae_m", "rmse_m", "bias_m", "max_abs_m"}) CHECK(hj["totals"][k].is_null());
+    CHECK(hj["measures"].find("mae") == hj["measures"].end());
+    CHECK(cityforge::test::validate_json(schema, dir / "h/report.json").exit_code == 0);
+    CHECK(slurp(dir / "h/report.md").find("| MAE (m) | n/a |") != std::string::npos);
+    // A gate on a measure that is not defined fails (exit 4), it does not pass on a 0.
+    CHECK(run_cli("audit heights --pred " + (dir / "far.geojson") + " --ref " + ref + " --ref-field ref_height_m --fail-above mae=1 --out " +
+                  (dir / "h2")).exit_code == 4);
+    // Rectangles: fitted against original polygons that none of them matches.
+    const auto r = run_cli("audit rectangles --in " + (dir / "far.geojson") + " --original " + ref + " --out " + (dir / "r"));
+    INFO(r.err);
+    REQUIRE(r.exit_code == 0);
+    CHECK(r.out.find("mean |area error| n/a % max n/a % mean signed n/a % over 0 of 1 footprints") != std::string::npos);
+    const json rj = json::parse(slurp(dir / "r/report.json"));
+    for (const char* k : {"mean_abs_error_pct", "max_abs_error_pct", "mean_error_pct", "mean_abs_error_m2"}) CHECK(rj["totals"][k].is_null());
+    CHECK(cityforge::test::validate_json(schema, dir / "r/report.json").exit_code == 0);
+    const std::string md = slurp(dir / "r/report.md");
+    CHECK(md.find("| mean \\|area error\\| (%) | n/a |") != std::string::npos);
+    CHECK(md.find("| max \\|area error\\| (%) | n/a |") != std::string::npos);
+}
