@@ -353,6 +353,24 @@ RunManifest read_manifest(const std::string& path) {
 
 namespace {
 
+// Declared attribute types in a tile report: [[name, "integer" | "real" | "string"], ...].
+json attribute_types_json(const std::vector<std::pair<std::string, FieldType>>& types) {
+    json out = json::array();
+    for (const auto& [name, t] : types)
+        out.push_back({name, t == FieldType::integer ? "integer" : t == FieldType::real ? "real" : "string"});
+    return out;
+}
+std::vector<std::pair<std::string, FieldType>> attribute_types_from(const json& j, const std::string& where) {
+    std::vector<std::pair<std::string, FieldType>> out;
+    if (!j.is_array()) throw Error(where, "attribute_types must be an array");
+    for (const json& a : j) {
+        const std::string t = a.at(1).get<std::string>();
+        if (t != "integer" && t != "real" && t != "string") throw Error(where, "unknown attribute type '" + t + "'");
+        out.emplace_back(a.at(0).get<std::string>(), t == "integer" ? FieldType::integer : t == "real" ? FieldType::real : FieldType::string);
+    }
+    return out;
+}
+
 fs::path tile_cloud_path(const std::string& out_dir, int k) { return fs::path(out_dir) / "cloud_tiles" / (tile_name(k) + ".las"); }
 
 // One streaming pass over a LAS cloud writes each tile window's points (in
@@ -579,9 +597,10 @@ std::vector<Building> buildings_of(const RunManifest& m, PolygonLayer footprints
     RoofsRunReport rr;
     RoofsRunOptions ro = o.buildings;
     if (o.footprints.empty()) ro.model.id_field = "id";
-    std::vector<Building> out = build_lod2_model(st, crs, ro, source, rr).buildings;
+    CityModel model = build_lod2_model(st, crs, ro, source, rr);
+    if (rep.attribute_types.empty()) rep.attribute_types = model.attribute_types;
     rep.seconds["roofs"] += since(t0);
-    return out;
+    return std::move(model.buildings);
 }
 
 // The buildings one tile owns, with their heights and LOD2, as building lines.
@@ -611,6 +630,7 @@ std::vector<Building> tile_buildings(const RunManifest& m, const TileSpec& t, co
         CityModel model = build_city_model(layer, grid_crs, eo, o.ortho);
         rep.seconds["footprints"] = since(t0);
         rep.buildings = model.buildings.size();
+        rep.attribute_types = model.attribute_types;
         warnings.push_back("no cloud: footprints from the ortho only (no heights, no LOD1/LOD2); ortho-only runs are not tiled");
         return std::move(model.buildings);
     }
@@ -816,7 +836,7 @@ TileReport run_tile(const RunManifest& m, int k, const std::string& out_dir, con
     rep.seconds["total"] = since(t0);
     rep.peak_memory_mb = peak_memory_mb();
     json j{{"index", k}, {"status", rep.status}, {"reason", rep.reason}, {"buildings", rep.buildings}, {"grown", rep.grown}, {"seconds", rep.seconds},
-           {"peak_memory_mb", rep.peak_memory_mb}, {"warnings", warnings}};
+           {"peak_memory_mb", rep.peak_memory_mb}, {"warnings", warnings}, {"attribute_types", attribute_types_json(rep.attribute_types)}};
     write_text_file(summary, j.dump(2) + "\n");
     progress(1.0, tile_name(k));
     return rep;
@@ -843,6 +863,11 @@ RunReport merge_tiles(const RunManifest& m, const std::string& out_dir, const Pr
         tr.index = t.index, tr.status = s.value("status", ""), tr.reason = s.value("reason", "");
         tr.buildings = s.value("buildings", std::size_t(0)), tr.grown = s.value("grown", std::size_t(0)), tr.peak_memory_mb = s.value("peak_memory_mb", 0.0);
         tr.seconds = s.value("seconds", std::map<std::string, double>{});
+        try {
+            if (s.contains("attribute_types")) tr.attribute_types = attribute_types_from(s["attribute_types"], summary.string());
+        } catch (const json::exception& e) {
+            throw Error(summary.string(), std::string("invalid attribute_types: ") + e.what());
+        }
         for (const auto& [k, v] : tr.seconds) stage_seconds[k] += v;
         for (const auto& w : s.value("warnings", std::vector<std::string>{})) rep.warnings.push_back(w);
         if (tr.status == "failed") rep.warnings.push_back("tile " + std::to_string(t.index) + " failed: " + tr.reason);
@@ -884,6 +909,9 @@ RunReport merge_tiles(const RunManifest& m, const std::string& out_dir, const Pr
     CityModel model;
     model.crs = model_crs_of(crs);
     model.buildings = std::move(buildings);
+    // The tile lines hold values only: the declared types come from the tile reports.
+    for (const TileReport& t : rep.tiles)
+        if (model.attribute_types.empty()) model.attribute_types = t.attribute_types;
     for (Building& b : model.buildings) complete_building(b, model.crs, m.options.buildings.model.validity);
     if (m.options.keep_rasters && fs::exists(fs::path(out_dir) / "rasters")) {
         for (const char* name : {"dsm", "dtm", "ndsm"}) {

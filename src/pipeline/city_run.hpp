@@ -74,6 +74,9 @@ struct TileReport {
     std::size_t grown = 0;
     std::map<std::string, double> seconds;  ///< per stage
     double peak_memory_mb = 0.0;
+    /// Declared type of each building attribute (source layer and stages), so
+    /// that the merge keeps a field's type when all its values are null.
+    std::vector<std::pair<std::string, FieldType>> attribute_types;
 };
 
 /// Runs tile `k` into `out_dir`/tiles/ (tile_K.jsonl: one building per line,

@@ -370,3 +370,36 @@ TEST_CASE("Rectangle and height audits without a comparable building say n/a (nu
     CHECK(md.find("| mean \\|area error\\| (%) | n/a |") != std::string::npos);
     CHECK(md.find("| max \\|area error\\| (%) | n/a |") != std::string::npos);
 }
+
+// ---------------------------------------------------------------- run's tile merge
+
+namespace {
+// "name: Type" of every field of a layer, from ogrinfo -so.
+std::string ogr_schema(const std::string& path, const std::string& layer) {
+    const auto r = run_command("ogrinfo -ro -so " + path + " " + layer);
+    REQUIRE(r.exit_code == 0);
+    return r.out;
+}
+}  // namespace
+
+TEST_CASE("run's tile merge keeps the declared type of attributes whose values are all null", "[inputs][run]") {
+    ScratchDir dir("inputs_run_types");
+    // 12 Delft footprints in a GeoPackage with three empty fields (Real, Integer64, String).
+    const std::string fp = dir / "fp.gpkg";
+    REQUIRE(run_command("ogr2ogr -f GPKG -nln footprints -limit 12 " + fp + " " +
+                        shared_data("delft_ahn3_bgt_west/bgt_pand_west_with_ref_heights.geojson")).exit_code == 0);
+    for (const char* col : {"survey_z REAL", "floors INTEGER", "note TEXT"})
+        REQUIRE(run_command("ogrinfo -q " + fp + " -sql \"ALTER TABLE footprints ADD COLUMN " + col + "\"").exit_code == 0);
+    // Several tiles: the building lines of each are merged.
+    const auto r = run_cli("run --quiet --footprints " + fp + " --cloud " + shared_data("delft_ahn3_bgt_west/ahn3_delft_west.las") +
+                           " --cloud-crs EPSG:7415 --tile-size 100 --out " + (dir / "run"));
+    INFO(r.err);
+    REQUIRE(r.exit_code == 0);
+    REQUIRE(std::filesystem::exists(dir / "run/tiles/tile_00001.json"));
+    const std::string schema = ogr_schema(dir / "run/buildings.gpkg", "buildings");
+    CHECK(schema.find("survey_z: Real") != std::string::npos);
+    CHECK(schema.find("floors: Integer64") != std::string::npos);
+    CHECK(schema.find("note: String") != std::string::npos);
+    CHECK(schema.find("check_p90_roof_nap_m: Real") != std::string::npos);
+    CHECK(schema.find("Feature Count: 12") != std::string::npos);
+}
