@@ -403,3 +403,47 @@ TEST_CASE("run's tile merge keeps the declared type of attributes whose values a
     CHECK(schema.find("check_p90_roof_nap_m: Real") != std::string::npos);
     CHECK(schema.find("Feature Count: 12") != std::string::npos);
 }
+
+TEST_CASE("run takes a lon/lat ortho (Rio) and a Web Mercator ortho (Banepa) as footprints does - outputs name their CRS", "[inputs][geographic][run]") {
+    ScratchDir dir("inputs_run_geographic");
+    const std::string rio = shared_data("spacenet1_rio_rgb/3band_013022223130_Public_img50_rgb.tif");
+    // Same working grid and areas as `footprints` (one working-grid helper).
+    REQUIRE(run_cli("footprints --quiet --ortho " + rio + " --out " + (dir / "fp.gpkg")).exit_code == 0);
+    const auto r = run_cli("run --quiet --ortho " + rio + " --out " + (dir / "rio"));
+    INFO(r.err);
+    REQUIRE(r.exit_code == 0);
+    const json rep = json::parse(slurp(dir / "rio/run_report.json"));
+    CHECK(rep["inputs"]["ortho"]["crs"] == "EPSG:4326");
+    CHECK(rep["working_crs"] == "EPSG:32723");  // UTM 23S, the zone of the tile centre
+    CHECK(rep["crs"] == "EPSG:32723");          // a city model in degrees is refused: the working CRS
+    const auto [fp_area, fp_geodesic] = area_sums(dir / "fp.gpkg");
+    const auto [area, geodesic] = area_sums(dir / "rio/buildings.gpkg");
+    CHECK(area == Approx(fp_area).epsilon(1e-9));
+    CHECK(area == Approx(geodesic).epsilon(0.01));
+    CHECK(rep["counts"]["buildings"] == info_json(dir / "fp.gpkg")["layers"][0]["feature_count"]);
+    CHECK(info_json(dir / "rio/buildings.gpkg")["layers"][0]["crs"]["epsg"] == 32723);
+    CHECK(json::parse(slurp(dir / "rio/buildings.city.json"))["metadata"]["referenceSystem"] == "https://www.opengis.net/def/crs/EPSG/0/32723");
+    CHECK(slurp(dir / "rio/buildings_lod1.gml").find("srsName=\"urn:ogc:def:crs:EPSG::32723\"") != std::string::npos);
+    // No cloud, no solids: the 3D-only formats are skipped with a warning, not a failed run.
+    CHECK(rep["warnings"].dump().find("glTF and 3D Tiles not written") != std::string::npos);
+    CHECK_FALSE(std::filesystem::exists(dir / "rio/buildings.glb"));
+    // --out-crs: another projected CRS; areas stay ground values; a geographic one is refused before any tile runs.
+    REQUIRE(run_cli("run --quiet --ortho " + rio + " --out-crs EPSG:3857 --formats gpkg --out " + (dir / "rio_3857")).exit_code == 0);
+    CHECK(info_json(dir / "rio_3857/buildings.gpkg")["layers"][0]["crs"]["epsg"] == 3857);
+    CHECK(area_sums(dir / "rio_3857/buildings.gpkg").first == Approx(area).epsilon(1e-9));
+    const auto deg = run_cli("run --quiet --ortho " + rio + " --out-crs EPSG:4326 --out " + (dir / "rio_deg"));
+    CHECK(deg.exit_code == 1);
+    CHECK(deg.err.find("geographic") != std::string::npos);
+    CHECK_FALSE(std::filesystem::exists(dir / "rio_deg/manifest.json"));
+
+    // Web Mercator: the grid stays EPSG:3857, measures are ground metres (not x1.27).
+    const std::string banepa = shared_data("oam_catanduanes_banepa/banepa_z19_a_rgba.tif");
+    const auto b = run_cli("run --quiet --ortho " + banepa + " --formats gpkg,cityjson --out " + (dir / "banepa"));
+    INFO(b.err);
+    REQUIRE(b.exit_code == 0);
+    const json brep = json::parse(slurp(dir / "banepa/run_report.json"));
+    CHECK(brep["crs"] == "EPSG:3857");
+    const auto [b_area, b_geodesic] = area_sums(dir / "banepa/buildings.gpkg");
+    CHECK(b_area > 1000.0);
+    CHECK(b_area == Approx(b_geodesic).epsilon(0.01));
+}
