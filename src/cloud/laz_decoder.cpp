@@ -170,6 +170,9 @@ public:
         value_ |= in_->get() << 16;
         value_ |= in_->get() << 8;
         value_ |= in_->get();
+        // An encoder's first word is below the initial length; the decoder
+        // keeps value_ < length_ from here on, which bounds every table index.
+        if (value_ == kMaxLength) throw Corrupt{"arithmetic-coded stream starts with an impossible value"};
     }
     // Branch-free where the outcome is data-dependent (the coded bit, the
     // renormalisation); the same arithmetic as LASzip's decoder.
@@ -187,7 +190,8 @@ public:
         const uint32_t y0 = length_;
         length_ >>= kSymShift;
         const uint32_t dv = value_ / length_;
-        const uint32_t t = std::min(dv >> m.table_shift_, m.table_size_);
+        // value_ < length_ (see init) gives dv < 2^15 + 2^7, so t <= table_size_.
+        const uint32_t t = dv >> m.table_shift_;
         uint32_t sym = m.table_[t];
         const uint32_t n = m.table_[t + 1] + 1;
         if (n > sym + 2) [[unlikely]] {
@@ -205,11 +209,14 @@ public:
         if (--m.until_update_ == 0) m.update();
         return sym;
     }
-    uint32_t read_bits(uint32_t bits) {
-        if (bits > 19) {
+    [[gnu::always_inline]] uint32_t read_bits(uint32_t bits) {
+        if (bits > 19) [[unlikely]] {
             const uint32_t low = read_short();
-            return (read_bits(bits - 16) << 16) | low;
+            return (read_bits_19(bits - 16) << 16) | low;
         }
+        return read_bits_19(bits);
+    }
+    [[gnu::always_inline]] uint32_t read_bits_19(uint32_t bits) {
         const uint32_t sym = value_ / (length_ >>= bits);
         value_ -= length_ * sym;
         if (length_ < kMinLength) renorm();
@@ -278,10 +285,11 @@ public:
     }
     [[gnu::always_inline]] int32_t decompress(ArithDecoder& dec, int32_t pred, uint32_t context = 0) {
         uint32_t real = static_cast<uint32_t>(pred) + static_cast<uint32_t>(read_corrector(dec, k_models_[context]));
+        // Wrap into the corrector's range (a no-op for 32 bits, range 0), without branches.
         const int32_t sreal = static_cast<int32_t>(real);
-        if (sreal < 0) real += corr_range_;
-        else if (real >= corr_range_) real -= corr_range_;
-        return static_cast<int32_t>(real);
+        const uint32_t add = sreal < 0 ? corr_range_ : 0u;
+        const uint32_t sub = (sreal >= 0 && real >= corr_range_) ? corr_range_ : 0u;
+        return static_cast<int32_t>(real + add - sub);
     }
     uint32_t k() const { return k_; }
 
@@ -290,16 +298,13 @@ private:
         k_ = dec.decode_symbol(model);
         if (k_ == 0) return static_cast<int32_t>(dec.decode_bit(bit_));
         if (k_ >= 32) return corr_min_;
-        uint32_t c;
-        if (k_ <= bits_high_) {
-            c = dec.decode_symbol(corrector_[k_ - 1]);
-        } else {
+        uint32_t c = dec.decode_symbol(corrector_[k_ - 1]);
+        if (k_ > bits_high_) {
             const uint32_t k1 = k_ - bits_high_;
-            c = dec.decode_symbol(corrector_[k_ - 1]);
             c = (c << k1) | dec.read_bits(k1);
         }
-        if (c >= (1u << (k_ - 1))) c += 1;
-        else c -= (1u << k_) - 1;
+        // c >= 2^(k-1): c + 1; else c - (2^k - 1) (the negative half), without a branch.
+        c = c + 1u - (static_cast<uint32_t>(c < (1u << (k_ - 1))) << k_);
         return static_cast<int32_t>(c);
     }
     uint32_t bits_high_, corr_bits_, corr_range_;
