@@ -230,8 +230,16 @@ void run_tool(const std::vector<std::string>& args, const fs::path& log, const s
     int status = 0;
     while (waitpid(pid, &status, 0) < 0 && errno == EINTR) {
     }
-    if (!WIFEXITED(status) || WEXITSTATUS(status) != 0)
-        throw Error(step, "COLMAP failed (exit " + std::to_string(WIFEXITED(status) ? WEXITSTATUS(status) : -1) + "), see " + log.string());
+    if (!WIFEXITED(status) || WEXITSTATUS(status) != 0) {
+        // The work folder (and its log) is removed: quote the log's last line.
+        std::ifstream in(log);
+        std::string line, last;
+        while (std::getline(in, line))
+            if (line.find_first_not_of(" \t\r") != std::string::npos) last = line;
+        if (last.size() > 200) last = last.substr(0, 200) + "...";
+        throw Error(step, "COLMAP failed (exit " + std::to_string(WIFEXITED(status) ? WEXITSTATUS(status) : -1) + ")" +
+                              (last.empty() ? std::string() : ": " + last));
+    }
 }
 
 std::string utm_for(double lat, double lon) {
@@ -320,7 +328,11 @@ OrientRunResult run_orient(const OrientRunOptions& o, const Progress& progress) 
     // A calibrated camera stays fixed: nadir blocks over flat ground make the
     // focal length nearly unobservable in self-calibration.
     if (k) mapper.insert(mapper.end(), {"--Mapper.ba_refine_focal_length", "0", "--Mapper.ba_refine_extra_params", "0"});
-    run_tool(mapper, log, "mapping");
+    try {
+        run_tool(mapper, log, "mapping");
+    } catch (const Error&) {
+        throw Error(o.images_dir, "COLMAP could not orient the photos (no image pair to start from): the photos do not overlap or have no texture");
+    }
     progress(0.8, "mapping");
     // The largest reconstruction.
     fs::path best;
@@ -359,7 +371,7 @@ OrientRunResult run_orient(const OrientRunOptions& o, const Progress& progress) 
         used.push_back(c.image);
         gx.push_back(it->second.lon), gy.push_back(it->second.lat), gz.push_back(it->second.h);
     }
-    if (used.size() < 3) throw Error(o.images_dir, "fewer than 3 oriented photos have GPS positions: cannot georeference");
+    if (used.size() < 3) throw Error(o.images_dir, "fewer than 3 oriented photos have GPS positions: cannot georeference (do the photos overlap?)");
     transform_points(crs_from_user_input("EPSG:4326", "gps"), out_crs, gx, gy, gz, "GPS positions");
     const Eigen::Vector3d origin(std::floor(gx[0] / 1000) * 1000, std::floor(gy[0] / 1000) * 1000, 0.0);
     std::vector<Eigen::Vector3d> from, to;
