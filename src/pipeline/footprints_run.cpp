@@ -93,6 +93,7 @@ void FootprintsRunOptions::validate() const {
     segmentation.validate();
     if (!(simplify_m >= 0.0)) throw Error("--simplify-m", "must be >= 0");
     mask.validate();
+    seams.validate();
 }
 
 std::vector<std::vector<Polygon>> vectorize_window(const Image<uint32_t>& labels, const GeoTransform& grid, int col0, int row0) {
@@ -434,6 +435,9 @@ FootprintsReport run_footprints(const std::string& output_path, const Footprints
             OrthoRefineOptions ro = o.segmentation;
             ro.cloud_edges = rep.cloud_cell_factor == 1;
             refine_buildings_with_ortho(mask, cells, img.image, img.valid, ndsm, 20.0 / z_unit, segments, vegetation, ro);
+            RoofSeamOptions so = o.seams;
+            so.gsd_m = mo.gsd_m, so.ridge_rise_m /= z_unit, so.valley_depth_m /= z_unit;
+            rep.seam_splits = split_at_roof_seams(mask, img.image, img.valid, ndsm, so);
         }
     }
     rep.width = grid.width, rep.height = grid.height;

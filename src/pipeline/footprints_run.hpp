@@ -14,6 +14,7 @@
 #include "footprint/building_mask.hpp"
 #include "footprint/rectangle_fit.hpp"
 #include "footprint/regularize.hpp"
+#include "footprint/roof_seams.hpp"
 #include "footprint/segment_classifier.hpp"
 #include "pipeline/ortho_buildings.hpp"
 
@@ -76,6 +77,7 @@ struct FootprintsRunOptions {
     /// empty = the shipped default for the ortho's bands.
     std::string model;
     BuildingMaskOptions mask;      ///< detection thresholds (gsd_m is the raster cell)
+    RoofSeamOptions seams;         ///< ortho_cloud: terraces split at roof seams (gsd_m is the raster cell)
     double simplify_m = 0.25;      ///< Douglas–Peucker tolerance of the raw outline, metres
     FootprintFit fit = FootprintFit::recursive;  ///< geometry written
     RecursiveFitOptions recursive;     ///< tolerance etc. of the recursive fit (areas in m2)
@@ -123,6 +125,7 @@ struct FootprintsReport {
     std::string crs;               ///< CRS of the written footprints
     std::string working_crs;       ///< CRS the detection worked in (metres)
     std::size_t buildings = 0;
+    int seam_splits = 0;           ///< ortho_cloud: seams cut between touching roofs (terraces)
     bool used_classes = false;
     int width = 0, height = 0;
     double seconds = 0.0;
