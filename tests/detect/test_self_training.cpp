@@ -1,4 +1,5 @@
 #include <catch2/catch.hpp>
+#include <tbb/global_control.h>
 
 #include <algorithm>
 #include <cstdio>
@@ -12,6 +13,7 @@
 #include "detect/detector.hpp"
 #include "detect/self_training.hpp"
 #include "io/vector.hpp"
+#include "pipeline/footprints_run.hpp"
 #include "synth_fixture.hpp"
 #include "test_support.hpp"
 
@@ -19,7 +21,7 @@ using namespace cityforge;
 using cityforge::test::make_town;
 using cityforge::test::ScratchDir;
 
-TEST_CASE("Height coverage is the data pixels closed by a radius; borders are not eroded", "[detect]") {
+TEST_CASE("Height coverage is the data pixels closed by a radius - borders are not eroded", "[detect]") {
     const int w = 20, h = 10;
     std::vector<uint8_t> has(std::size_t(w) * h, 0);
     // Sparse points every 3rd pixel over the west half.
@@ -87,6 +89,22 @@ TEST_CASE("ortho_cloud with a cloud over part of the ortho: an image model self-
     CHECK(east.f1 >= 0.9);
     CHECK(wests.f1 >= 0.9);
 
+    // Same bytes for 1 and 2 threads (the scene model trains on one thread).
+    {
+        FootprintsRunOptions o;
+        o.ortho = t.ortho_path, o.cloud = west;
+        {
+            tbb::global_control one(tbb::global_control::max_allowed_parallelism, 1);
+            run_footprints(dir / "t1.geojson", o);
+        }
+        {
+            tbb::global_control two(tbb::global_control::max_allowed_parallelism, 2);
+            run_footprints(dir / "t2.geojson", o);
+        }
+        CHECK(test::slurp(dir / "t1.geojson") == test::slurp(dir / "t2.geojson"));
+        CHECK(test::slurp(dir / "t1.geojson") == test::slurp(out));
+    }
+
     // Off: the buildings outside the cloud are not found.
     const std::string off = dir / "off.geojson";
     REQUIRE(test::run_cli("footprints --quiet --self-training off --ortho " + t.ortho_path + " --cloud " + west + " --out " + off).exit_code == 0);
@@ -95,7 +113,7 @@ TEST_CASE("ortho_cloud with a cloud over part of the ortho: an image model self-
     CHECK(fo.features.size() + image_east.size() <= fp.features.size());
 }
 
-TEST_CASE("run config: extraction.detector and extraction.model are read, recorded and applied; unknown values refused", "[detect][run][cli]") {
+TEST_CASE("run config: extraction.detector and extraction.model are read, recorded and applied - unknown values refused", "[detect][run][cli]") {
     ScratchDir dir("detect_run_config");
     const SynthResult t = make_town(dir, 100, 43, 0.0);
     auto config = [&](const std::string& name, const std::string& extraction) {
@@ -123,7 +141,7 @@ TEST_CASE("run config: extraction.detector and extraction.model are read, record
     CHECK(run.err.find("none.cfdet") != std::string::npos);
 }
 
-TEST_CASE("train --cloud: heights as an nDSM band; the model records it, needs it (cloud or nDSM raster) and refuses an image without it",
+TEST_CASE("train --cloud: heights as an nDSM band - the model records it, needs it (cloud or nDSM raster) and refuses an image without it",
           "[detect][synth][cli]") {
     ScratchDir dir("detect_ndsm_band");
     const SynthResult a = make_town(dir, 200, 51, 3.0);
