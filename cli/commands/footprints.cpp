@@ -9,7 +9,7 @@ namespace cityforge::cli {
 
 void add_footprints_command(CLI::App& parent, const GlobalFlags& g, CommandList& out) {
     struct State {
-        std::string out, fit = "recursive", mode = "auto", regularize = "lines", detector = "auto";
+        std::string out, fit = "recursive", mode = "auto", regularize = "lines", detector = "auto", self_training = "on";
         FootprintsRunOptions options;
     };
     auto s = std::make_shared<State>();
@@ -33,7 +33,12 @@ void add_footprints_command(CLI::App& parent, const GlobalFlags& g, CommandList&
                     "auto = model, or rules with --segments")
         ->check(CLI::IsMember({"auto", "model", "rules"}))
         ->capture_default_str();
-    cmd->add_option("--model", o.model, "ortho_only: detector model from `cityforge train` (default: models/default_<bands>.cfdet)");
+    cmd->add_option("--model", o.model, "ortho_only: detector model from `cityforge train` (default: models/default_<bands>.cfdet); given, --mode auto applies it, with --ndsm/--cloud as its nDSM band when trained with one");
+    cmd->add_option("--self-training", s->self_training,
+                    "ortho_cloud: where the heights cover only part of the ortho, train an image model on the buildings under them "
+                    "and detect the others with it (field source = image_model)")
+        ->check(CLI::IsMember({"on", "off"}))
+        ->capture_default_str();
     cmd->add_option("--segments", o.segments, "Ortho modes: labels from `cityforge segment` (GeoTIFF, or its folder: the --segment-scale level)");
     cmd->add_option("--segment-scale", o.segmentation.segment_scale, "Ortho modes: merging scale of the segmentation")->capture_default_str();
     cmd->add_option("--refine-passes", o.segmentation.refine_passes, "Ortho modes: passes moving boundary pixels to the closest-colour segment")
@@ -71,6 +76,7 @@ void add_footprints_command(CLI::App& parent, const GlobalFlags& g, CommandList&
                        opt.fit = footprint_fit_from_string(s->fit);
                        opt.mode = detection_mode_from_string(s->mode);
                        opt.detector = ortho_detector_from_string(s->detector);
+                       opt.self_training.enabled = s->self_training == "on";
                        opt.regularize.method = s->regularize == "cgal" ? RegularizeMethod::cgal_contours : RegularizeMethod::lines;
                        refuse_existing_output(g, s->out);
                        const FootprintsReport r = run_footprints(s->out, opt, make_progress(g));
@@ -81,6 +87,9 @@ void add_footprints_command(CLI::App& parent, const GlobalFlags& g, CommandList&
                                         r.height_source.empty() ? "" : ", heights from ", r.height_source.c_str(),
                                         r.crs.c_str(), r.used_classes ? "used" : "absent", r.width, r.height, r.seconds,
                                         r.mean_abs_fit_area_error_pct, s->out.c_str());
+                       if (!g.quiet && !r.self_training.empty())
+                           std::fprintf(stderr, "cityforge: %zu from the heights, %zu from the image; %.0f %% of the ortho outside the heights; %s\n",
+                                        r.from_heights, r.from_image, r.uncovered_share * 100.0, r.self_training.c_str());
                        return 0;
                    }});
 }

@@ -30,12 +30,20 @@ void add_train_command(CLI::App& parent, const GlobalFlags& g, CommandList& out)
                     "Building labels: one for all images or one per image; any OGR polygon layer in any CRS, or a mask raster on the image's grid (> 0 = building)")
         ->required();
     cmd->add_option("--label-layer", o.label_layer, "Layer of the label files (default: the first)");
+    cmd->add_option("--ndsm", o.ndsms, "nDSM raster per ortho (heights above ground, aligned with it): one more band; the model then needs heights");
+    cmd->add_option("--cloud", o.clouds, "Point cloud per ortho (LAS, LAZ, COPC, PLY, XYZ), rasterised to an nDSM band on the ortho's grid");
+    cmd->add_option("--cloud-crs", o.cloud_crs, "CRS of the clouds, e.g. EPSG:7415");
     cmd->add_option("--nir-band", o.nir_band, "1-based band of near infrared in every image (NDVI features)");
     cmd->add_option("--out", s->out, "Model file to write (.cfdet)")->required();
     cmd->add_flag("--overwrite", s->overwrite, "Replace an existing model file");
     cmd->add_option("--folds", o.folds, "Spatial k-fold cross-validation (0 = none)")->capture_default_str();
     cmd->add_option("--fold-block-m", o.fold_block_m, "Fold blocks, metres a side (folds never share a block)")->capture_default_str();
     cmd->add_option("--thresholds", o.thresholds, "Candidate probability thresholds; the best pooled CV F1 is kept")->delimiter(',');
+    cmd->add_option("--split-levels", o.split_levels,
+                    "Candidate object split levels (0 = components of building segments; l = kept apart where context scale l's regions meet); "
+                    "the best pooled CV F1 is kept")
+        ->delimiter(',');
+    cmd->add_option("--split-level", d.object_split_level, "Object split level when there is no cross-validation")->capture_default_str();
     cmd->add_option("--threshold", d.threshold, "Probability threshold when there is no cross-validation")->capture_default_str();
     cmd->add_option("--scales", d.segmentation.scales, "Merging scales: classified segments first, then context levels")->delimiter(',');
     cmd->add_option("--h-minima", d.segmentation.watershed.h_minima, "Watershed dynamics threshold (normalised gradient units)")->capture_default_str();
@@ -70,7 +78,7 @@ void add_train_command(CLI::App& parent, const GlobalFlags& g, CommandList& out)
                                print_scores("segment pixels", r.pooled_segments);
                                std::fprintf(stderr, "\n");
                            }
-                           std::fprintf(stderr, "cityforge: threshold %.2f, fingerprint %s, %zu bytes in %.1f s -> %s\n", r.threshold, r.fingerprint.c_str(),
+                           std::fprintf(stderr, "cityforge: threshold %.2f, split level %d, fingerprint %s, %zu bytes in %.1f s -> %s\n", r.threshold, r.object_split_level, r.fingerprint.c_str(),
                                         r.model_bytes, r.seconds, s->out.c_str());
                        }
                        return 0;

@@ -41,11 +41,18 @@ void DetectorOptions::validate(int bands) const {
     booster.validate();
     if (!(min_label_share > 0.0 && min_label_share < 1.0)) throw Error("min_label_share", "must be in (0, 1)");
     if (!(threshold > 0.0 && threshold < 1.0)) throw Error("threshold", "must be in (0, 1)");
+    if (object_split_level < 0 || object_split_level >= int(segmentation.scales.size()))
+        throw Error("object_split_level", "must be 0 or a context scale (1.." + std::to_string(segmentation.scales.size() - 1) + ")");
     if (!(min_area_m2 >= 0.0)) throw Error("min_area_m2", "must be >= 0");
     if (!(min_hole_m2 >= 0.0)) throw Error("min_hole_m2", "must be >= 0");
 }
 
 std::string describe_bands(const BandLayout& l) {
+    if (l.ndsm_band >= 0) {
+        BandLayout image = l;
+        image.bands -= 1, image.ndsm_band = -1;
+        return (image.bands > 0 ? describe_bands(image) : std::string("no image band")) + "+nDSM";
+    }
     if (l.bands == 1) return "pan";
     if (l.bands == 3 && l.nir_band < 0) return "RGB";
     if (l.bands == 4 && l.nir_band == 3) return "RGB+NIR";
@@ -63,6 +70,7 @@ nlohmann::json to_json(const DetectorOptions& o) {
               {"colsample", b.colsample}, {"min_child_weight", b.min_child_weight}, {"lambda", b.lambda}, {"seed", b.seed}}},
             {"min_label_share", o.min_label_share},
             {"threshold", o.threshold},
+            {"object_split_level", o.object_split_level},
             {"min_area_m2", o.min_area_m2},
             {"min_hole_m2", o.min_hole_m2}};
 }
@@ -85,6 +93,7 @@ DetectorOptions detector_options_from_json(const nlohmann::json& j) {
     o.booster.lambda = b.at("lambda").get<double>();
     o.booster.seed = b.at("seed").get<uint64_t>();
     o.min_label_share = j.at("min_label_share").get<double>();
+    o.object_split_level = j.value("object_split_level", 0);
     o.threshold = j.at("threshold").get<double>();
     o.min_area_m2 = j.at("min_area_m2").get<double>();
     o.min_hole_m2 = j.at("min_hole_m2").get<double>();
@@ -92,7 +101,7 @@ DetectorOptions detector_options_from_json(const nlohmann::json& j) {
 }
 
 std::vector<uint8_t> serialize_model(const DetectorModel& m) {
-    const nlohmann::json header = {{"format", "cityforge-detector"},
+    nlohmann::json header = {{"format", "cityforge-detector"},
                                    {"format_version", 1},
                                    {"classifier", "xgboost gbtree (binary:logistic, hist)"},
                                    {"bands", describe_bands(m.layout)},
@@ -102,6 +111,7 @@ std::vector<uint8_t> serialize_model(const DetectorModel& m) {
                                    {"options", to_json(m.options)},
                                    {"fingerprint", m.fingerprint},
                                    {"training", m.training}};
+    if (m.layout.ndsm_band >= 0) header["ndsm_band"] = m.layout.ndsm_band;  // absent: no nDSM band (older models parse alike)
     const std::string text = header.dump(1);
     std::vector<uint8_t> out(kMagic, kMagic + kMagicLen);
     put_u64(out, text.size());
@@ -129,6 +139,7 @@ DetectorModel parse_model(const std::vector<uint8_t>& in, const std::string& sub
             throw Error(subject, "unsupported detector model format");
         m.layout.bands = header.at("band_count").get<int>();
         m.layout.nir_band = header.at("nir_band").get<int>();
+        m.layout.ndsm_band = header.value("ndsm_band", -1);
         m.features = header.at("features").get<std::vector<std::string>>();
         m.options = detector_options_from_json(header.at("options"));
         m.fingerprint = header.at("fingerprint").get<std::string>();
@@ -156,7 +167,12 @@ void write_model_file(const std::string& path, const DetectorModel& model) {
 }
 
 void check_bands(const DetectorModel& model, const BandLayout& l, const std::string& image) {
-    if (l.bands != model.layout.bands || l.nir_band != model.layout.nir_band)
+    if (model.layout.ndsm_band >= 0 && l.ndsm_band < 0)
+        throw Error(image, "has no nDSM band; the detector model was trained on " + describe_bands(model.layout) +
+                               ": give the heights (--ndsm N.tif or --cloud C with --mode ortho_only)");
+    if (model.layout.ndsm_band < 0 && l.ndsm_band >= 0)
+        throw Error(image, "was given heights, but the detector model was trained on " + describe_bands(model.layout) + " without an nDSM band");
+    if (l.bands != model.layout.bands || l.nir_band != model.layout.nir_band || l.ndsm_band != model.layout.ndsm_band)
         throw Error(image, "has " + describe_bands(l) + " (" + std::to_string(l.bands) + " band" + (l.bands == 1 ? "" : "s") +
                                " besides any alpha); the detector model was trained on " + describe_bands(model.layout) + " (" +
                                std::to_string(model.layout.bands) + " band" + (model.layout.bands == 1 ? "" : "s") + ")");
@@ -169,11 +185,26 @@ std::vector<float> segment_probabilities(const DetectorModel& model, const Featu
     return out;
 }
 
-std::vector<uint8_t> building_pixels(const SceneSegments& s, const std::vector<float>& probability, double threshold) {
+std::vector<uint8_t> building_pixels(const SceneSegments& s, const std::vector<float>& probability, double threshold, int split_level) {
     std::vector<uint8_t> b(s.labels.data.size(), 0);
     for (std::size_t i = 0; i < b.size(); ++i)
         if (const uint32_t a = s.labels.data[i]) b[i] = probability[a] >= threshold ? 1 : 0;
-    return b;
+    if (split_level <= 0) return b;
+    if (split_level > int(s.context.size())) throw Error("object_split_level", "exceeds the number of context scales");
+    // A pixel whose right or lower neighbour is building in another context
+    // region leaves the building mask: a cut between the two objects.
+    const std::vector<uint32_t>& parent = s.context[std::size_t(split_level - 1)];
+    const int w = s.labels.width, h = s.labels.height;
+    const uint32_t* L = s.labels.data.data();
+    std::vector<uint8_t> out = b;
+    for (int y = 0; y < h; ++y)
+        for (int x = 0; x < w; ++x) {
+            const std::size_t i = std::size_t(y) * w + x;
+            if (!b[i]) continue;
+            const uint32_t p = parent[L[i]];
+            if ((x + 1 < w && b[i + 1] && parent[L[i + 1]] != p) || (y + 1 < h && b[i + w] && parent[L[i + w]] != p)) out[i] = 0;
+        }
+    return out;
 }
 
 Detection detect_buildings(const DetectorModel& model, const Image<float>& normalised, const std::vector<uint8_t>& valid, double gsd_m,
@@ -183,7 +214,7 @@ Detection detect_buildings(const DetectorModel& model, const Image<float>& norma
     const FeatureMatrix f = segment_features(normalised, valid, d.segments, model.layout, gsd_m);
     progress(0.9, "features");
     d.probability = segment_probabilities(model, f, threads);
-    d.building = building_pixels(d.segments, d.probability, model.options.threshold);
+    d.building = building_pixels(d.segments, d.probability, model.options.threshold, model.options.object_split_level);
     progress(1.0, "classified");
     return d;
 }

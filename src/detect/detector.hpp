@@ -26,6 +26,12 @@ struct DetectorOptions {
     /// Segments whose probability is at least this are building (the
     /// training command picks it by cross-validation unless fixed).
     double threshold = 0.5;
+    /// How building segments become buildings: 0 = connected components of
+    /// their pixels; l >= 1 = building pixels in different regions of
+    /// context scale l are kept apart (cut along a one-pixel line), so
+    /// touching roofs the merging saw as different objects stay separate
+    /// (the training command picks it by cross-validation).
+    int object_split_level = 0;
     double min_area_m2 = 8.0;  ///< building components smaller than this are dropped
     double min_hole_m2 = 6.0;  ///< holes smaller than this are filled
     void validate(int bands) const;
@@ -63,8 +69,11 @@ void check_bands(const DetectorModel& model, const BandLayout& image_layout, con
 std::vector<float> segment_probabilities(const DetectorModel& model, const FeatureMatrix& features, int threads = 0);
 
 /// Building pixels (1) of the segments whose probability reaches the
-/// model's threshold (w x h of the labels).
-std::vector<uint8_t> building_pixels(const SceneSegments& segments, const std::vector<float>& probability, double threshold);
+/// model's threshold (w x h of the labels); with `split_level` >= 1 the
+/// pixels where two regions of context scale `split_level` meet are left
+/// out (see DetectorOptions::object_split_level).
+std::vector<uint8_t> building_pixels(const SceneSegments& segments, const std::vector<float>& probability, double threshold,
+                                     int split_level = 0);
 
 /// The whole detection on one image: segmentation with the model's options,
 /// features, probabilities and building pixels. `normalised` = bands scaled

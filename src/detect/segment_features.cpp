@@ -54,11 +54,13 @@ SceneSegments segment_scene(const Image<float>& normalised, const std::vector<ui
 std::vector<std::string> feature_names(const BandLayout& layout, int context_levels) {
     std::vector<std::string> f;
     for (int b = 0; b < layout.bands; ++b) {
-        f.push_back("band" + std::to_string(b + 1) + "_mean");
-        f.push_back("band" + std::to_string(b + 1) + "_std");
+        const std::string name = b == layout.ndsm_band ? "ndsm" : "band" + std::to_string(b + 1);
+        f.push_back(name + "_mean");
+        f.push_back(name + "_std");
     }
+    const int image_bands = layout.bands - (layout.ndsm_band >= 0 ? 1 : 0);  // colours and NIR
     for (const char* n : {"bright_mean", "bright_std", "bright_p10", "bright_p50", "bright_p90"}) f.emplace_back(n);
-    if (layout.bands >= 3)
+    if (image_bands >= 3)
         for (const char* n : {"chroma_r", "chroma_g", "chroma_b", "exg", "saturation"}) f.emplace_back(n);
     if (layout.nir_band >= 0) f.emplace_back("ndvi");
     for (const char* n : {"grad_mean", "grad_std", "edge_density", "coherence", "boundary_grad", "boundary_contrast", "lbp_flat",
@@ -69,7 +71,7 @@ std::vector<std::string> feature_names(const BandLayout& layout, int context_lev
     for (const char* n : {"nb_bright_diff_mean", "nb_bright_diff_min", "nb_bright_diff_max", "nb_std_diff", "dark_share", "dark_side_1",
                           "dark_side_2", "dark_side_3", "dark_side_4"})
         f.emplace_back(n);
-    if (layout.bands >= 3) f.emplace_back("nb_vegetation_share");
+    if (image_bands >= 3) f.emplace_back("nb_vegetation_share");
     for (int l = 0; l < context_levels; ++l) {
         const std::string p = "ctx" + std::to_string(l + 1) + "_";
         for (const char* n : {"log_area_m2", "share", "rectangularity", "compactness", "elongation", "bright_mean", "bright_std", "bright_diff"})
@@ -165,12 +167,13 @@ FeatureMatrix segment_features(const Image<float>& img, const std::vector<uint8_
     const Image<uint32_t>& labels = seg.labels;
     const uint32_t* L = labels.data.data();
     const int B = img.bands;
-    const int colour_bands = layout.nir_band >= 0 ? B - 1 : B;
+    const int image_bands = B - (layout.ndsm_band >= 0 ? 1 : 0);  // colours and NIR
+    const int colour_bands = layout.nir_band >= 0 ? image_bands - 1 : image_bands;
 
     // Brightness: mean of the colour bands (0..255).
     std::vector<float> bright(np, 0.0f);
     for (int b = 0, c = 0; b < B; ++b) {
-        if (b == layout.nir_band) continue;
+        if (b == layout.nir_band || b == layout.ndsm_band) continue;
         ++c;
         const float* v = img.band_data(b);
         for (std::size_t i = 0; i < np; ++i) bright[i] += v[i];
@@ -285,7 +288,7 @@ FeatureMatrix segment_features(const Image<float>& img, const std::vector<uint8_
             };
             put(pct(0.1)), put(pct(0.5)), put(pct(0.9));
         }
-        if (B >= 3) {
+        if (image_bands >= 3) {
             const double r = bmean[0][k], g = bmean[1][k], bl = bmean[2][k], s = r + g + bl + 1e-6;
             put(r / s), put(g / s), put(bl / s), put(exg[k]);
             const double mx = std::max({r, g, bl}), mn = std::min({r, g, bl});
@@ -318,7 +321,7 @@ FeatureMatrix segment_features(const Image<float>& img, const std::vector<uint8_
         std::sort(share.begin(), share.end(), std::greater<>());
         put(all > 0 ? dark / all : 0.0);
         for (double v : share) put(v);
-        if (B >= 3) put(ne > 0 ? nb_veg[k] / ne : 0.0);
+        if (image_bands >= 3) put(ne > 0 ? nb_veg[k] / ne : 0.0);
         for (std::size_t l = 0; l < levels; ++l) {
             const uint32_t p = seg.context[l][k];
             const Shapes& cs = cshape[l];

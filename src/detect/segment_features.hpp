@@ -46,11 +46,18 @@ SceneSegments segment_scene(const Image<float>& normalised, const std::vector<ui
                             const DetectorSegmentationOptions& options, const Progress& progress = {});
 
 /// Which bands the image holds: colour bands first (R, G, B when 3+), then
-/// optional near infrared; `nir_band` is its 0-based index or -1.
+/// optional near infrared; `nir_band` is its 0-based index or -1. An nDSM
+/// band (heights above ground, 0..20 m scaled to 0..255, add_ndsm_band)
+/// comes last; `ndsm_band` is its index or -1.
 struct BandLayout {
     int bands = 0;
     int nir_band = -1;
+    int ndsm_band = -1;
 };
+
+/// Heights above ground in metres (NaN = no data, counted as ground) ->
+/// 0..255 on a fixed scale of 0..`full_scale_m` (the same for every image).
+constexpr double kNdsmFullScaleM = 20.0;
 
 /// Feature names in column order for a layout and a number of context scales.
 std::vector<std::string> feature_names(const BandLayout& layout, int context_levels);

@@ -126,6 +126,8 @@ json to_json(const RunOptions& o) {
               {"fit", to_string(o.extraction.fit)},
               {"fit_tolerance_pct", o.extraction.recursive.tolerance_pct},
               {"simplify_m", o.extraction.simplify_m},
+              {"detector", to_string(o.extraction.detector)},
+              {"model", o.extraction.model},
               {"footprint_grid_m", o.footprint_grid_m}}},
             {"cleaning",
              {{"outlier_filter", o.buildings.heights.outliers.enabled},
@@ -161,13 +163,20 @@ RunOptions run_options_from_json(const json& j, const std::string& where, RunOpt
     if (j.contains("extraction")) {
         const json& x = j["extraction"];
         const std::string w = where + ": extraction";
-        check_keys(x, {"mode", "cloud_cell_px", "use_point_classes", "min_height_m", "min_area_m2", "min_hole_m2", "opening_px", "split_step_m", "min_split_part_m2", "fit", "fit_tolerance_pct", "simplify_m", "footprint_grid_m"}, w);
+        check_keys(x, {"mode", "cloud_cell_px", "use_point_classes", "min_height_m", "min_area_m2", "min_hole_m2", "opening_px", "split_step_m", "min_split_part_m2", "fit", "fit_tolerance_pct", "simplify_m", "footprint_grid_m", "detector", "model"}, w);
         take(x, "min_height_m", o.extraction.mask.min_height_m, w), take(x, "min_area_m2", o.extraction.mask.min_area_m2, w);
         take(x, "min_hole_m2", o.extraction.mask.min_hole_m2, w), take(x, "opening_px", o.extraction.mask.opening_radius_px, w);
         take(x, "cloud_cell_px", o.extraction.cloud_cell_factor, w);
         take(x, "split_step_m", o.extraction.mask.split_step_m, w), take(x, "min_split_part_m2", o.extraction.mask.min_split_part_m2, w);
         take(x, "fit_tolerance_pct", o.extraction.recursive.tolerance_pct, w), take(x, "simplify_m", o.extraction.simplify_m, w);
         take(x, "footprint_grid_m", o.footprint_grid_m, w);
+        take(x, "model", o.extraction.model, w);
+        if (x.contains("detector")) {
+            std::string d;
+            take(x, "detector", d, w);
+            if (d != "auto" && d != "model" && d != "rules") throw Error(w + ".detector", "must be auto, model or rules, not '" + d + "'");
+            o.extraction.detector = ortho_detector_from_string(d);
+        }
         if (x.contains("mode")) {
             std::string mode;
             take(x, "mode", mode, w);

@@ -113,15 +113,17 @@ std::vector<std::vector<Polygon>> vectorize_window(const Image<uint32_t>& labels
 
 FootprintTable footprint_table(const BuildingMask& mask, const Image<float>& ndsm, const GeoTransform& grid, int col0, int row0,
                                const std::vector<int64_t>& ids, const std::string& mode, double unit, double z_unit, const CrsInfo& crs,
-                               const FootprintsRunOptions& o) {
+                               const FootprintsRunOptions& o, const std::vector<std::string>& sources) {
     FootprintTable table;
+    const std::string mode_source = mode == "ortho_only" ? "image_model" : "cloud";
     const auto polygons = vectorize_window(mask.labels, grid, col0, row0);
     // Median nDSM per building, a first height cue for the output.
     std::vector<std::vector<double>> heights(mask.count + 1);
     for (std::size_t k = 0; k < mask.labels.data.size(); ++k)
         if (const uint32_t id = mask.labels.data[k]; id && !ndsm.data.empty() && !std::isnan(ndsm.data[k])) heights[id].push_back(ndsm.data[k]);
     table.fields = {
-        {"id", FieldType::integer},           {"mode", FieldType::string},         {"fit", FieldType::string},
+        {"id", FieldType::integer},           {"mode", FieldType::string},         {"source", FieldType::string},
+        {"fit", FieldType::string},
         {"status", FieldType::string},        {"reason", FieldType::string},       {"area_m2", FieldType::real},
         {"raw_area_m2", FieldType::real},     {"geodesic_area_m2", FieldType::real}, {"perimeter_m", FieldType::real},
         {"orientation_deg", FieldType::real}, {"fit_area_error_pct", FieldType::real}, {"fit_iou", FieldType::real},
@@ -170,7 +172,8 @@ FootprintTable footprint_table(const BuildingMask& mask, const Image<float>& nds
         std::vector<double>& hv = heights[id];
         const std::optional<double> h50 = percentile(hv, 50.0);
         f.geometry = {out};
-        f.values = {ids.empty() ? int64_t(features.size() + 1) : ids[id], mode, to_string(o.fit), status, reason,
+        const std::string& source = id < sources.size() && !sources[id].empty() ? sources[id] : mode_source;
+        f.values = {ids.empty() ? int64_t(features.size() + 1) : ids[id], mode, source, to_string(o.fit), status, reason,
                     polygon_area(out) * unit * unit, polygon_area(raw) * unit * unit,
                     crs.empty() ? AttributeValue() : AttributeValue(geodesic_area_m2(rings, crs)),
                     polygon_perimeter(out) * unit, orientation, err, iou, int64_t(vertices),
@@ -200,36 +203,6 @@ void gaps_to_nan(Image<float>& heights, const RasterInfo& info, int band) {
     const std::vector<uint8_t> valid = data_mask(heights, info, {band});
     for (std::size_t i = 0; i < valid.size(); ++i)
         if (!valid[i]) heights.data[i] = NAN;
-}
-
-// An nDSM raster on `grid` (when `grid` has cells: same horizontal CRS,
-// pixel edges aligned with it) or on its own grid (grid and crs are set);
-// nodata becomes NaN.
-Image<float> read_ndsm_raster(const std::string& path, GridSpec& grid, CrsInfo& crs) {
-    RasterReader reader(path);
-    const RasterInfo& info = reader.info();
-    Image<float> h;
-    if (grid.width == 0) {
-        grid = {info.transform, info.width, info.height};
-        crs = info.crs;
-        h = reader.read_all<float>({1});
-    } else {
-        if (!same_horizontal_crs(info.crs, crs)) throw Error(path, "the nDSM is in " + info.crs.label() + ", the ortho in " + crs.label());
-        const GeoTransform& g = grid.transform;
-        const GeoTransform& t = info.transform;
-        const double c0 = (g.origin_x - t.origin_x) / t.pixel_width, r0 = (g.origin_y - t.origin_y) / t.pixel_height;
-        const double cw = grid.width * g.pixel_width / t.pixel_width, rh = grid.height * g.pixel_height / t.pixel_height;
-        auto whole = [](double v) { return std::abs(v - std::round(v)) < 1e-3; };
-        if (!whole(c0) || !whole(r0) || !whole(cw) || !whole(rh))
-            throw Error(path, "the nDSM's pixels are not aligned with the ortho's; warp it onto the ortho's grid first (gdalwarp -te/-tr/-tap)");
-        const PixelWindow win{static_cast<int>(std::lround(c0)), static_cast<int>(std::lround(r0)), static_cast<int>(std::lround(cw)),
-                              static_cast<int>(std::lround(rh))};
-        if (win.col < 0 || win.row < 0 || win.col + win.width > info.width || win.row + win.height > info.height)
-            throw Error(path, "the nDSM does not cover the whole ortho");
-        h = reader.read_resampled<float>(win, grid.width, grid.height, {1}, win.width > grid.width ? "average" : "bilinear");
-    }
-    gaps_to_nan(h, info, 1);
-    return h;
 }
 
 // The label raster of --segments: a file, or the level of `scale` (or the
@@ -268,7 +241,72 @@ Image<uint32_t> read_segments(const std::string& path, const GridSpec& grid, uin
     return labels;
 }
 
+// ortho_cloud: the buildings outside the heights' coverage, found by an
+// image model trained on the buildings under them, appended to `mask`
+// (labels count+1..) with source "image_model".
+void add_self_trained_buildings(BuildingMask& mask, std::vector<std::string>& sources, const OrthoImage& img, const RasterInfo& info,
+                                const Image<float>& ndsm, const FootprintsRunOptions& o, const BuildingMaskOptions& mo, FootprintsReport& rep,
+                                const Progress& progress) {
+    const int w = mask.labels.width, h = mask.labels.height;
+    const std::size_t n = std::size_t(w) * std::size_t(h);
+    std::vector<int> source_bands;  // the colours: every band but the nDSM band
+    for (int b = 1; b <= info.band_count(); ++b)
+        if (b != o.ndsm_band) source_bands.push_back(b);
+    const DetectionImage di = detection_image_from(img.image, source_bands, img.valid, info, o.nir_band, o.ortho);
+    std::vector<uint8_t> has(n), cloud_building(n);
+    for (std::size_t i = 0; i < n; ++i) has[i] = std::isnan(ndsm.data[i]) ? 0 : 1, cloud_building[i] = mask.labels.data[i] ? 1 : 0;
+    const int radius = static_cast<int>(std::lround(o.self_training.coverage_closing_m / di.gsd_m));
+    const std::vector<uint8_t> covered = detect::coverage_mask(has, w, h, radius);
+    const detect::SelfTrainingResult r =
+        detect::self_train_and_detect(di.normalised, di.valid, di.layout, di.gsd_m, covered, cloud_building, o.self_training, progress);
+    rep.uncovered_share = r.uncovered_share;
+    if (!r.trained) {
+        rep.self_training = "not trained: " + r.reason;
+        if (o.self_training.enabled && r.uncovered_share >= o.self_training.min_uncovered_share)
+            log::warning(o.ortho + ": " + std::to_string(int(std::lround(r.uncovered_share * 100.0))) +
+                         " % of the ortho lies outside the heights, but no image model was trained for it: " + r.reason);
+        return;
+    }
+    const BuildingMask extra = label_buildings(r.building, w, h, mo);
+    for (std::size_t i = 0; i < n; ++i)
+        if (const uint32_t e = extra.labels.data[i]; e && !mask.labels.data[i]) mask.labels.data[i] = mask.count + e;
+    mask.count += extra.count;
+    sources.resize(mask.count + 1, "image_model");
+    rep.self_training = "image model trained on " + std::to_string(r.training_segments) + " segments under the heights (" +
+                        std::to_string(r.building_examples) + " building), " + std::to_string(extra.count) + " buildings found outside them";
+}
+
 }  // namespace
+
+// (declared in footprints_run.hpp) An nDSM raster on `grid` (when `grid` has cells: same horizontal CRS,
+// pixel edges aligned with it) or on its own grid (grid and crs are set);
+// nodata becomes NaN.
+Image<float> read_ndsm_raster(const std::string& path, GridSpec& grid, CrsInfo& crs) {
+    RasterReader reader(path);
+    const RasterInfo& info = reader.info();
+    Image<float> h;
+    if (grid.width == 0) {
+        grid = {info.transform, info.width, info.height};
+        crs = info.crs;
+        h = reader.read_all<float>({1});
+    } else {
+        if (!same_horizontal_crs(info.crs, crs)) throw Error(path, "the nDSM is in " + info.crs.label() + ", the ortho in " + crs.label());
+        const GeoTransform& g = grid.transform;
+        const GeoTransform& t = info.transform;
+        const double c0 = (g.origin_x - t.origin_x) / t.pixel_width, r0 = (g.origin_y - t.origin_y) / t.pixel_height;
+        const double cw = grid.width * g.pixel_width / t.pixel_width, rh = grid.height * g.pixel_height / t.pixel_height;
+        auto whole = [](double v) { return std::abs(v - std::round(v)) < 1e-3; };
+        if (!whole(c0) || !whole(r0) || !whole(cw) || !whole(rh))
+            throw Error(path, "the nDSM's pixels are not aligned with the ortho's; warp it onto the ortho's grid first (gdalwarp -te/-tr/-tap)");
+        const PixelWindow win{static_cast<int>(std::lround(c0)), static_cast<int>(std::lround(r0)), static_cast<int>(std::lround(cw)),
+                              static_cast<int>(std::lround(rh))};
+        if (win.col < 0 || win.row < 0 || win.col + win.width > info.width || win.row + win.height > info.height)
+            throw Error(path, "the nDSM does not cover the whole ortho");
+        h = reader.read_resampled<float>(win, grid.width, grid.height, {1}, win.width > grid.width ? "average" : "bilinear");
+    }
+    gaps_to_nan(h, info, 1);
+    return h;
+}
 
 FootprintsReport run_footprints(const std::string& output_path, const FootprintsRunOptions& o, const Progress& progress) {
     const auto t0 = std::chrono::steady_clock::now();
@@ -278,7 +316,11 @@ FootprintsReport run_footprints(const std::string& output_path, const Footprints
     const bool heights = !o.cloud.empty() || !o.ndsm.empty() || o.ndsm_band > 0;
     DetectionMode mode = o.mode;
     if (mode == DetectionMode::automatic)
-        mode = heights && !o.ortho.empty() ? DetectionMode::ortho_cloud : heights ? DetectionMode::cloud_only : DetectionMode::ortho_only;
+        // A model given with heights is applied (with them as its nDSM band when trained so).
+        mode = !o.model.empty() && !o.ortho.empty()   ? DetectionMode::ortho_only
+               : heights && !o.ortho.empty()          ? DetectionMode::ortho_cloud
+               : heights                              ? DetectionMode::cloud_only
+                                                      : DetectionMode::ortho_only;
     rep.mode = to_string(mode);
     GridSpec grid;
     CrsInfo crs;
@@ -398,9 +440,14 @@ FootprintsReport run_footprints(const std::string& output_path, const Footprints
     co.nir_band = o.nir_band > 0 ? o.nir_band - 1 - (o.ndsm_band > 0 && o.ndsm_band < o.nir_band ? 1 : 0) : -1;
     if (mode == DetectionMode::ortho_only && o.detector != OrthoDetector::rules && o.segments.empty()) {
         // Learned detection (src/detect): segments and outlines from the model's own segmentation.
-        const DetectionImage di = read_detection_image(o.ortho, o.nir_band);
+        DetectionImage di = read_detection_image(o.ortho, o.nir_band);
         const std::string path = o.model.empty() ? default_model_path(di.layout) : o.model;
         const detect::DetectorModel model = detect::read_model_file(path);
+        if (model.layout.ndsm_band >= 0 && (!o.ndsm.empty() || !o.cloud.empty())) {
+            // A model trained with heights gets them as its last band.
+            rep.height_source = !o.cloud.empty() ? "point cloud" : "nDSM raster";
+            add_ndsm_band(di, heights_on_image_grid(di, o.ndsm, o.cloud, o.cloud_crs));
+        }
         rep.detector = "model " + path;
         mask = detect_building_mask(model, di, 0, progress.sub(0.1, 0.55));
     } else if (mode == DetectionMode::ortho_only) {
@@ -440,10 +487,20 @@ FootprintsReport run_footprints(const std::string& output_path, const Footprints
             rep.seam_splits = split_at_roof_seams(mask, img.image, img.valid, ndsm, so);
         }
     }
+    // What found each building (the `source` field).
+    const std::string first_source = mode == DetectionMode::ortho_only ? (rep.detector == "rules" ? "image_rules" : "image_model")
+                                     : rep.height_source == "point cloud"  ? "cloud"
+                                                                           : "ndsm";
+    std::vector<std::string> sources(mask.count + 1, first_source);
+    if (mode == DetectionMode::ortho_cloud) add_self_trained_buildings(mask, sources, img, ortho->info(), ndsm, o, mo, rep, progress.sub(0.5, 0.6));
     rep.width = grid.width, rep.height = grid.height;
     progress(0.6, "detection");
-    FootprintTable table = footprint_table(mask, ndsm, grid.transform, 0, 0, {}, rep.mode, unit, z_unit, crs, o);
+    FootprintTable table = footprint_table(mask, ndsm, grid.transform, 0, 0, {}, rep.mode, unit, z_unit, crs, o, sources);
     rep.buildings = table.features.size();
+    for (const Feature& f : table.features) {
+        const std::string& src = std::get<std::string>(f.values[2]);
+        (src == "cloud" || src == "ndsm" ? rep.from_heights : rep.from_image) += 1;
+    }
     if (table.features.empty()) {
         // Nothing found is not a result: no empty file, a non-zero exit.
         const std::string input = !o.ortho.empty() ? o.ortho : !o.cloud.empty() ? o.cloud : o.ndsm;

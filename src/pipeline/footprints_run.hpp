@@ -7,8 +7,10 @@
 #include <string>
 
 #include "cloud/cloud_filters.hpp"
+#include "cloud/cloud_rasters.hpp"
 #include "core/image.hpp"
 #include "crs/crs.hpp"
+#include "detect/self_training.hpp"
 #include "io/vector.hpp"
 #include "core/progress.hpp"
 #include "footprint/building_mask.hpp"
@@ -76,6 +78,10 @@ struct FootprintsRunOptions {
     /// ortho-only, --detector model: the model file (`cityforge train`);
     /// empty = the shipped default for the ortho's bands.
     std::string model;
+    /// ortho_cloud: where the heights cover only part of the ortho, an image
+    /// model trained on the buildings found under the heights detects the
+    /// buildings outside them (src/detect/self_training.hpp).
+    detect::SelfTrainingOptions self_training;
     BuildingMaskOptions mask;      ///< detection thresholds (gsd_m is the raster cell)
     RoofSeamOptions seams;         ///< ortho_cloud: terraces split at roof seams (gsd_m is the raster cell)
     double simplify_m = 0.25;      ///< Douglas–Peucker tolerance of the raw outline, metres
@@ -109,10 +115,19 @@ struct FootprintTable {
     double mean_abs_fit_area_error_pct = 0.0;
 };
 /// `ids[label]` names each building (empty: 1, 2, ... in label order);
-/// `ndsm` may be empty (no height cue).
+/// `ndsm` may be empty (no height cue). `sources[label]` = what found the
+/// building (the `source` field: "cloud", "ndsm", "image_model",
+/// "image_rules"); missing or empty: "image_model" in ortho_only mode,
+/// otherwise "cloud".
 FootprintTable footprint_table(const BuildingMask& mask, const Image<float>& ndsm, const GeoTransform& grid, int col0, int row0,
                                const std::vector<int64_t>& ids, const std::string& mode, double unit, double z_unit, const CrsInfo& crs,
-                               const FootprintsRunOptions& options);
+                               const FootprintsRunOptions& options, const std::vector<std::string>& sources = {});
+
+/// An nDSM raster (heights above ground, vertical CRS units; nodata = NaN)
+/// on `grid` when `grid` has cells (same horizontal CRS as `crs`, pixel
+/// edges aligned, covering it; resampled to its cells), else on its own grid
+/// (then `grid` and `crs` are set). Throws Error naming the file otherwise.
+Image<float> read_ndsm_raster(const std::string& path, GridSpec& grid, CrsInfo& crs);
 
 struct FootprintsReport {
     std::string mode;              ///< "ortho_cloud", "ortho_only" or "cloud_only"
@@ -130,10 +145,15 @@ struct FootprintsReport {
     int width = 0, height = 0;
     double seconds = 0.0;
     double mean_abs_fit_area_error_pct = 0.0;
+    std::size_t from_heights = 0;  ///< buildings with source "cloud" or "ndsm"
+    std::size_t from_image = 0;    ///< buildings with source "image_model" or "image_rules"
+    /// ortho_cloud: what the self-training did ("" in other modes).
+    std::string self_training;
+    double uncovered_share = 0.0;  ///< ortho_cloud: share of the ortho's valid pixels outside the heights' coverage
 };
 
 /// Writes the footprints (.gpkg layer "buildings", .geojson, ...) with
-/// id, mode, fit, area_m2, raw_area_m2, geodesic_area_m2, perimeter_m,
+/// id, mode, source, fit, area_m2, raw_area_m2, geodesic_area_m2, perimeter_m,
 /// orientation_deg, fit_area_error_pct, fit_iou, n_vertices, height_p50_m.
 FootprintsReport run_footprints(const std::string& output_path, const FootprintsRunOptions& options,
                                 const Progress& progress = {});

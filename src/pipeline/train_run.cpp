@@ -11,7 +11,9 @@
 #include "detect/label_raster.hpp"
 #include "footprint/vectorize.hpp"
 #include "io/vector.hpp"
+#include "pipeline/cloud_cells.hpp"
 #include "pipeline/footprints_run.hpp"
+#include "pipeline/prepared_cloud.hpp"
 #include "raster/raster.hpp"
 
 #ifndef CITYFORGE_MODELS_DIR
@@ -22,36 +24,40 @@ namespace cityforge {
 
 namespace fs = std::filesystem;
 
-DetectionImage read_detection_image(const std::string& path, int nir_band) {
-    RasterReader reader(path);
-    const RasterInfo& info = reader.info();
+DetectionImage detection_image_from(const Image<float>& image, const std::vector<int>& source_bands, const std::vector<uint8_t>& valid,
+                                    const RasterInfo& info, int nir_band, const std::string& path) {
+    if (int(source_bands.size()) != image.bands) throw Error(path, "band list does not match the image read");
     DetectionImage d;
     d.path = path;
     d.grid = {info.transform, info.width, info.height};
     d.crs = info.crs;
-    std::vector<int> bands;
-    for (int b = 1; b <= info.band_count(); ++b) {
-        if (info.band_count() > 1 && info.bands[b - 1].color_interpretation == "Alpha" && d.alpha_band == 0) {
+    std::vector<int> colours;  // positions in `image`
+    for (std::size_t k = 0; k < source_bands.size(); ++k) {
+        const int b = source_bands[k];
+        if (source_bands.size() > 1 && info.bands[b - 1].color_interpretation == "Alpha" && d.alpha_band == 0) {
             d.alpha_band = b;
             continue;
         }
-        bands.push_back(b);
+        colours.push_back(int(k));
     }
     if (nir_band > info.band_count()) throw Error(path, "has " + std::to_string(info.band_count()) + " bands; --nir-band " + std::to_string(nir_band) + " does not exist");
     if (nir_band > 0 && nir_band == d.alpha_band) throw Error(path, "band " + std::to_string(nir_band) + " is an alpha band, not near infrared");
-    d.layout.bands = static_cast<int>(bands.size());
-    for (std::size_t k = 0; k < bands.size(); ++k)
-        if (bands[k] == nir_band) d.layout.nir_band = static_cast<int>(k);
-    d.normalised = reader.read_all<float>(bands);
-    d.valid = data_mask(d.normalised, info, bands);
+    d.layout.bands = static_cast<int>(colours.size());
+    for (std::size_t k = 0; k < colours.size(); ++k)
+        if (source_bands[colours[k]] == nir_band) d.layout.nir_band = static_cast<int>(k);
+    d.normalised = Image<float>(image.width, image.height, d.layout.bands, 0.0f);
+    for (std::size_t k = 0; k < colours.size(); ++k)
+        std::copy(image.band_data(colours[k]), image.band_data(colours[k]) + image.pixel_count(), d.normalised.band_data(int(k)));
+    d.valid = valid;
     if (d.alpha_band) {
-        const Image<float> alpha = reader.read_all<float>({d.alpha_band});
+        const int a = int(std::find(source_bands.begin(), source_bands.end(), d.alpha_band) - source_bands.begin());
+        const float* alpha = image.band_data(a);
         for (std::size_t i = 0; i < d.valid.size(); ++i)
-            if (!(alpha.data[i] > 0.0f)) d.valid[i] = 0;
+            if (!(alpha[i] > 0.0f)) d.valid[i] = 0;
     }
-    std::size_t valid = 0;
-    for (const uint8_t v : d.valid) valid += v;
-    if (valid == 0) throw Error(path, "has no valid pixel (all nodata or transparent)");
+    std::size_t n_valid = 0;
+    for (const uint8_t v : d.valid) n_valid += v;
+    if (n_valid == 0) throw Error(path, "has no valid pixel (all nodata or transparent)");
     normalize_bands(d.normalised, d.valid);
     // True ground size of the centre pixel for any CRS (Web Mercator's grid
     // metres are not ground metres away from the equator).
@@ -67,6 +73,67 @@ DetectionImage read_detection_image(const std::string& path, int nir_band) {
     return d;
 }
 
+DetectionImage read_detection_image(const std::string& path, int nir_band) {
+    RasterReader reader(path);
+    const RasterInfo& info = reader.info();
+    std::vector<int> all;
+    for (int b = 1; b <= info.band_count(); ++b) all.push_back(b);
+    // The colour bands' nodata marks invalid pixels (an alpha band is a mask, not data).
+    std::vector<int> colours;
+    for (int b = 1; b <= info.band_count(); ++b)
+        if (!(info.band_count() > 1 && info.bands[b - 1].color_interpretation == "Alpha")) colours.push_back(b);
+    if (colours.empty()) colours = all;
+    Image<float> image = reader.read_all<float>(all);
+    Image<float> colour_image(image.width, image.height, int(colours.size()), 0.0f);
+    for (std::size_t k = 0; k < colours.size(); ++k)
+        std::copy(image.band_data(colours[k] - 1), image.band_data(colours[k] - 1) + image.pixel_count(), colour_image.band_data(int(k)));
+    const std::vector<uint8_t> valid = data_mask(colour_image, info, colours);
+    return detection_image_from(image, all, valid, info, nir_band, path);
+}
+
+Image<float> heights_on_image_grid(const DetectionImage& image, const std::string& ndsm_path, const std::string& cloud_path,
+                                   const std::string& cloud_crs) {
+    if (!ndsm_path.empty()) {
+        GridSpec grid = image.grid;
+        CrsInfo crs = image.crs;
+        Image<float> h = read_ndsm_raster(ndsm_path, grid, crs);
+        RasterReader probe(ndsm_path);
+        const double z = probe.info().crs.z_unit_m > 0.0 ? probe.info().crs.z_unit_m : 1.0;
+        for (float& v : h.data) v = static_cast<float>(v * z);
+        return h;
+    }
+    const PreparedCloud pc = prepare_cloud(cloud_path, cloud_crs, image.crs, OutlierFilterOptions{}, GroundFilterOptions{});
+    const double unit = image.crs.linear_unit_m;
+    if (!(unit > 0.0)) throw Error(image.path, "a cloud on an image in a geographic CRS: warp the image to a projected CRS first (gdalwarp -t_srs)");
+    const GeoTransform& t = image.grid.transform;
+    const MapPoint a = t.pixel_to_map({0.0, 0.0}), b = t.pixel_to_map({double(image.grid.width), double(image.grid.height)});
+    require_cloud_overlap(pc, cloud_path, Extent{std::min(a.x, b.x), std::min(a.y, b.y), std::max(a.x, b.x), std::max(a.y, b.y)}, image.path);
+    BuildingMaskOptions mo;
+    mo.gsd_m = std::abs(t.pixel_width) * unit;
+    mo.min_height_m /= pc.crs.z_unit_m;
+    const int factor = cloud_cell_factor(point_density_m2(pc), mo.gsd_m);
+    Image<float> h = cloud_cells_on_window(pc, image.grid, 0, 0, factor, unit, mo).rasters.ndsm;
+    for (float& v : h.data) v = static_cast<float>(v * pc.crs.z_unit_m);
+    return h;
+}
+
+void add_ndsm_band(DetectionImage& image, const Image<float>& heights_m) {
+    if (heights_m.width != image.normalised.width || heights_m.height != image.normalised.height)
+        throw Error(image.path, "the heights are not on the image's grid");
+    if (image.layout.ndsm_band >= 0) throw Error(image.path, "already has an nDSM band");
+    const int b = image.normalised.bands;
+    Image<float> out(image.normalised.width, image.normalised.height, b + 1, 0.0f);
+    std::copy(image.normalised.data.begin(), image.normalised.data.end(), out.data.begin());
+    float* h = out.band_data(b);
+    for (std::size_t i = 0; i < heights_m.data.size(); ++i) {
+        const float v = heights_m.data[i];
+        h[i] = std::isnan(v) ? 0.0f : static_cast<float>(std::clamp(double(v), 0.0, detect::kNdsmFullScaleM) / detect::kNdsmFullScaleM * 255.0);
+    }
+    image.normalised = std::move(out);
+    image.layout.ndsm_band = b;
+    image.layout.bands = b + 1;
+}
+
 namespace {
 
 BuildingMask mask_from_probabilities(const detect::SceneSegments& segments, const std::vector<float>& probability, double threshold,
@@ -75,7 +142,8 @@ BuildingMask mask_from_probabilities(const detect::SceneSegments& segments, cons
     mo.gsd_m = gsd_m;
     mo.min_area_m2 = o.min_area_m2;
     mo.min_hole_m2 = o.min_hole_m2;
-    return label_buildings(detect::building_pixels(segments, probability, threshold), segments.labels.width, segments.labels.height, mo);
+    return label_buildings(detect::building_pixels(segments, probability, threshold, o.object_split_level), segments.labels.width,
+                           segments.labels.height, mo);
 }
 
 // Labelled data of one training image, in its pixel space.
@@ -196,8 +264,15 @@ void TrainOptions::validate() const {
         throw Error("--labels", "give one label file for all images or one per image (" + std::to_string(orthos.size()) + "), not " +
                                     std::to_string(labels.size()));
     if (nir_band < 0) throw Error("--nir-band", "must be >= 1");
+    if (!ndsms.empty() && !clouds.empty()) throw Error("--ndsm", "give the heights as nDSM rasters (--ndsm) or clouds (--cloud), not both");
+    if (!ndsms.empty() && ndsms.size() != orthos.size())
+        throw Error("--ndsm", "give one nDSM per ortho (" + std::to_string(orthos.size()) + "), not " + std::to_string(ndsms.size()));
+    if (!clouds.empty() && clouds.size() != orthos.size())
+        throw Error("--cloud", "give one cloud per ortho (" + std::to_string(orthos.size()) + "), not " + std::to_string(clouds.size()));
     if (folds == 1 || folds < 0 || folds > 20) throw Error("--folds", "must be 0 (no cross-validation) or 2..20");
     if (!(fold_block_m > 0.0)) throw Error("--fold-block-m", "must be > 0");
+    for (const int l : split_levels)
+        if (l < 0 || l > 16) throw Error("--split-levels", "each split level must be between 0 and 16");
     for (const double t : thresholds)
         if (!(t > 0.0 && t < 1.0)) throw Error("--thresholds", "each threshold must be in (0, 1)");
 }
@@ -220,6 +295,11 @@ TrainReport run_train(const std::string& out_path, const TrainOptions& o, bool o
     for (std::size_t i = 0; i < o.orthos.size(); ++i) {
         LabelledImage& li = data[i];
         li.image = read_detection_image(o.orthos[i], o.nir_band);
+        if (!o.ndsms.empty() || !o.clouds.empty()) {
+            const Image<float> h = heights_on_image_grid(li.image, o.ndsms.empty() ? "" : o.ndsms[i], o.clouds.empty() ? "" : o.clouds[i], o.cloud_crs);
+            add_ndsm_band(li.image, h);
+            fp = detect::fnv1a64(h.data.data(), h.data.size() * sizeof(float), fp);
+        }
         if (i > 0 && (li.image.layout.bands != data[0].image.layout.bands || li.image.layout.nir_band != data[0].image.layout.nir_band))
             throw Error(o.orthos[i], "has " + detect::describe_bands(li.image.layout) + ", " + o.orthos[0] + " has " +
                                          detect::describe_bands(data[0].image.layout) + ": one model is trained on one band set");
@@ -302,11 +382,12 @@ TrainReport run_train(const std::string& out_path, const TrainOptions& o, bool o
         });
         progress(0.8, "cross-validation");
         // Object scores of every threshold; the best pooled F1 is kept.
-        auto evaluate = [&](double threshold, std::vector<FoldReport>* per_fold, std::vector<DetectionScores>* per_image) {
+        auto evaluate = [&](const detect::DetectorOptions& opts, std::vector<FoldReport>* per_fold, std::vector<DetectionScores>* per_image) {
+            const double threshold = opts.threshold;
             DetectionScores pooled;
             for (std::size_t i = 0; i < data.size(); ++i) {
                 const LabelledImage& li = data[i];
-                const BuildingMask mask = mask_from_probabilities(li.segments, cv[i], threshold, li.image.gsd_m, o.detector);
+                const BuildingMask mask = mask_from_probabilities(li.segments, cv[i], threshold, li.image.gsd_m, opts);
                 const auto pred = predicted_footprints(mask, li.image.gsd_m);
                 DetectionScores img;
                 for (int f = 0; f < o.folds; ++f) {
@@ -340,13 +421,22 @@ TrainReport run_train(const std::string& out_path, const TrainOptions& o, bool o
             pooled.finish();
             return pooled;
         };
+        // Every (split level, threshold) pair; the best pooled object F1 wins
+        // (ties: the earlier, i.e. no split and the lower threshold).
         double best_f1 = -1.0;
-        for (const double t : o.thresholds) {
-            const DetectionScores s = evaluate(t, nullptr, nullptr);
-            if (s.f1 > best_f1 + 1e-12) best_f1 = s.f1, chosen.threshold = t;
+        std::vector<int> levels = o.split_levels;
+        if (levels.empty()) levels = {o.detector.object_split_level};
+        for (const int level : levels) {
+            if (level >= int(o.detector.segmentation.scales.size())) continue;
+            for (const double t : o.thresholds) {
+                detect::DetectorOptions cand = o.detector;
+                cand.threshold = t, cand.object_split_level = level;
+                const DetectionScores s = evaluate(cand, nullptr, nullptr);
+                if (s.f1 > best_f1 + 1e-12) best_f1 = s.f1, chosen.threshold = t, chosen.object_split_level = level;
+            }
         }
         std::vector<DetectionScores> per_image;
-        rep.pooled_objects = evaluate(chosen.threshold, &rep.folds, &per_image);
+        rep.pooled_objects = evaluate(chosen, &rep.folds, &per_image);
         for (FoldReport& f : rep.folds) {
             f.objects.finish();
             f.segments.finish();
@@ -356,6 +446,7 @@ TrainReport run_train(const std::string& out_path, const TrainOptions& o, bool o
         for (std::size_t i = 0; i < data.size(); ++i) rep.per_image.emplace_back(o.orthos[i], per_image[i]);
     }
     rep.threshold = chosen.threshold;
+    rep.object_split_level = chosen.object_split_level;
 
     // The model: every segment.
     std::vector<float> X, y, wt;
@@ -370,12 +461,15 @@ TrainReport run_train(const std::string& out_path, const TrainOptions& o, bool o
     model.fingerprint = detect::hex64(fp);
     rep.fingerprint = model.fingerprint;
     nlohmann::json sources = nlohmann::json::array();
-    for (std::size_t i = 0; i < data.size(); ++i)
+    for (std::size_t i = 0; i < data.size(); ++i) {
         sources.push_back({{"ortho", fs::path(o.orthos[i]).filename().string()},
                            {"labels", fs::path(o.labels.size() == 1 ? o.labels[0] : o.labels[i]).filename().string()},
                            {"gsd_m", std::round(data[i].image.gsd_m * 1e4) / 1e4},
                            {"segments", data[i].segments.count},
                            {"reference_buildings", data[i].reference.size()}});
+        if (!o.ndsms.empty() || !o.clouds.empty())
+            sources.back()["heights"] = fs::path(o.ndsms.empty() ? o.clouds[i] : o.ndsms[i]).filename().string();
+    }
     auto scores_json = [](const DetectionScores& s) {
         auto r3 = [](double v) { return std::round(v * 1000.0) / 1000.0; };
         return nlohmann::json{{"tp", s.tp}, {"predicted", s.predicted}, {"reference", s.reference},
@@ -388,7 +482,7 @@ TrainReport run_train(const std::string& out_path, const TrainOptions& o, bool o
             folds.push_back({{"fold", f.fold}, {"objects_iou_0.5", scores_json(f.objects)}, {"segment_pixels", scores_json(f.segments)}});
         nlohmann::json images = nlohmann::json::array();
         for (const auto& [name, s] : rep.per_image) images.push_back({{"ortho", fs::path(name).filename().string()}, {"objects_iou_0.5", scores_json(s)}});
-        cvj = {{"folds", o.folds}, {"fold_block_m", o.fold_block_m}, {"threshold", chosen.threshold}, {"per_fold", folds}, {"per_image", images},
+        cvj = {{"folds", o.folds}, {"fold_block_m", o.fold_block_m}, {"threshold", chosen.threshold}, {"object_split_level", chosen.object_split_level}, {"per_fold", folds}, {"per_image", images},
                {"pooled_objects_iou_0.5", scores_json(rep.pooled_objects)}, {"pooled_segment_pixels", scores_json(rep.pooled_segments)}};
     }
     model.training = {{"sources", sources}, {"segments", rep.segments}, {"building_segments", rep.building_segments},

@@ -12,6 +12,7 @@
 #include "crs/crs.hpp"
 #include "detect/detector.hpp"
 #include "footprint/building_mask.hpp"
+#include "raster/raster.hpp"
 
 namespace cityforge {
 
@@ -29,6 +30,20 @@ struct DetectionImage {
 };
 /// `nir_band` = 1-based band of near infrared (0 = none).
 DetectionImage read_detection_image(const std::string& path, int nir_band = 0);
+/// The same from bands already read: band k of `image` holds the 1-based
+/// band `source_bands[k]` of the raster `info` describes (as read, e.g.
+/// warped onto a working CRS); `valid` = the colour bands' data mask.
+DetectionImage detection_image_from(const Image<float>& image, const std::vector<int>& source_bands, const std::vector<uint8_t>& valid,
+                                    const RasterInfo& info, int nir_band, const std::string& path);
+
+/// Heights above ground on the detection image's grid, metres (NaN = no
+/// data): an nDSM raster aligned with the image (`ndsm_path`) or a point
+/// cloud rasterised on it (`cloud_path`, its CRS overridden by `cloud_crs`).
+Image<float> heights_on_image_grid(const DetectionImage& image, const std::string& ndsm_path, const std::string& cloud_path,
+                                   const std::string& cloud_crs = {});
+/// Appends the heights as the image's last band, 0..kNdsmFullScaleM metres
+/// -> 0..255 (NaN = 0), and records it in the layout (ndsm_band).
+void add_ndsm_band(DetectionImage& image, const Image<float>& heights_m);
 
 /// Building pixels and components from a model on one image (used by
 /// `footprints --detector model` and by the cross-validation).
@@ -45,6 +60,10 @@ struct TrainOptions {
     /// (reprojected to each image), or a mask raster on the ortho's grid (> 0 = building).
     std::vector<std::string> labels;
     std::string label_layer;          ///< empty = first layer
+    /// Heights as one more band (the model then needs them when applied):
+    /// nDSM rasters aligned with the orthos, or point clouds; one per ortho.
+    std::vector<std::string> ndsms, clouds;
+    std::string cloud_crs;            ///< overrides the clouds' CRS
     int nir_band = 0;                 ///< 1-based NIR band of every ortho (0 = none)
     detect::DetectorOptions detector;
     int folds = 5;                    ///< spatial k-fold cross-validation (0 = none)
@@ -52,6 +71,10 @@ struct TrainOptions {
     /// Candidate thresholds; the one with the best pooled object F1 in the
     /// cross-validation goes into the model (empty or no CV: detector.threshold).
     std::vector<double> thresholds{0.3, 0.35, 0.4, 0.45, 0.5, 0.55, 0.6, 0.65, 0.7, 0.75, 0.8, 0.85};
+    /// Candidate DetectorOptions::object_split_level values, chosen with the
+    /// threshold by the cross-validation (levels beyond the context scales
+    /// are skipped; empty or no CV: detector.object_split_level).
+    std::vector<int> split_levels{0, 1, 2};
     void validate() const;
 };
 
@@ -76,6 +99,7 @@ struct TrainReport {
     DetectionScores pooled_objects, pooled_segments;
     std::vector<std::pair<std::string, DetectionScores>> per_image;  ///< pooled object scores per ortho
     double threshold = 0.5;
+    int object_split_level = 0;
     std::string fingerprint;
     std::size_t model_bytes = 0;
     double seconds = 0.0;
