@@ -98,27 +98,46 @@ struct PartShape {
 };
 
 // The closed solid of a set of edge-connected roof faces: walls along the
-// outline (edges no other roof face of the set has) down to `ground`, and a
-// ground face. Fails (nullopt, `why`) on a step between faces of the set or an
-// outline that touches itself.
+// outline (edges no other roof face of the set has) down to `ground`, step
+// walls where two faces of the set share an edge at different heights, and a
+// ground face. Every wall's vertical edges are split at the heights other faces
+// meet there, so that each vertical segment has exactly two faces. Fails
+// (nullopt, `why`) on roofs that cross along a shared edge or an outline that
+// touches itself.
 std::optional<PartShape> part_shape(const std::vector<const Face*>& roofs, double ground, const Snap& s, std::string& why) {
     std::map<std::pair<Key2, Key2>, std::pair<Point3, Point3>> edges;  // directed plan edge -> its 3-D ends
+    std::map<Key2, std::vector<double>> heights;                        // plan vertex -> the heights faces meet at
     for (const Face* f : roofs) {
         bool dup = false;
         for_each_edge(*f, [&](const Point3& p, const Point3& q) {
+            heights[s.k2(p)].push_back(p.z);
             if (s.k2(p) != s.k2(q)) dup = !edges.emplace(std::make_pair(s.k2(p), s.k2(q)), std::make_pair(p, q)).second || dup;
         });
         if (dup) return why = "roof faces overlap in plan", std::nullopt;
     }
+    auto zkey = [&](double z) { return std::llround(z / s.q); };
     std::map<Key2, std::pair<Point3, Point3>> next;  // outline: start -> edge
+    struct Step {
+        Point3 a, b;        // top ends (the higher face's), a -> b with the lower face on the right
+        double za, zb;      // bottom heights (the lower face's) at a and b
+    };
+    std::vector<Step> steps;
     for (const auto& [k, e] : edges) {
         const auto rev = edges.find({k.second, k.first});
-        if (rev != edges.end()) {
-            if (s.k3(rev->second.first) != s.k3(e.second) || s.k3(rev->second.second) != s.k3(e.first))
-                return why = "a height step inside a roof part", std::nullopt;
+        if (rev == edges.end()) {
+            heights[k.first].push_back(ground);
+            if (!next.emplace(k.first, e).second) return why = "the roof part's outline touches itself", std::nullopt;
             continue;
         }
-        if (!next.emplace(k.first, e).second) return why = "the roof part's outline touches itself", std::nullopt;
+        const double la = e.first.z, lb = e.second.z, ra = rev->second.second.z, rb = rev->second.first.z;
+        const int64_t dla = zkey(la) - zkey(ra), dlb = zkey(lb) - zkey(rb);
+        if (dla == 0 && dlb == 0) continue;                                   // a ridge, hip, valley or flat join
+        if ((dla < 0 && dlb > 0) || (dla > 0 && dlb < 0)) return why = "two roof faces cross along their shared edge", std::nullopt;
+        if (dla >= 0 && dlb >= 0) steps.push_back({e.first, e.second, ra, rb});  // this side is the higher: its wall
+    }
+    for (auto& [k, v] : heights) {
+        std::sort(v.begin(), v.end());
+        v.erase(std::unique(v.begin(), v.end(), [&](double x, double y) { return zkey(x) == zkey(y); }), v.end());
     }
     std::vector<Ring3> outers, holes;
     std::map<Key2, bool> used;
@@ -139,20 +158,29 @@ std::optional<PartShape> part_shape(const std::vector<const Face*>& roofs, doubl
     if (outers.size() != 1) return why = "the roof part has " + std::to_string(outers.size()) + " outlines", std::nullopt;
     PartShape out;
     for (const Face* f : roofs) out.solid.faces.push_back(*f);
-    auto walls = [&](const Ring3& r) {
-        for (std::size_t i = 0; i < r.size(); ++i) {
-            const Point3& p = r[i];
-            const Point3& q = r[(i + 1) % r.size()];
-            Face w;
-            w.type = SurfaceType::wall;
-            w.outer = {{p.x, p.y, ground}, {q.x, q.y, ground}};
-            if (q.z > ground) w.outer.push_back(q);
-            if (p.z > ground) w.outer.push_back(p);
-            if (w.outer.size() >= 3) out.solid.faces.push_back(std::move(w));
-        }
+    // A vertical wall below the edge p -> q (outside on its right), from za / zb up to p.z / q.z.
+    auto wall = [&](const Point3& p, const Point3& q, double za, double zb) {
+        Face w;
+        w.type = SurfaceType::wall;
+        auto push = [&](double x, double y, double z) {
+            if (w.outer.empty() || zkey(w.outer.back().z) != zkey(z) || s.k2(w.outer.back()) != s.k2(Point3{x, y, z})) w.outer.push_back({x, y, z});
+        };
+        push(p.x, p.y, za), push(q.x, q.y, zb);
+        for (double h : heights[s.k2(q)])
+            if (zkey(h) > zkey(zb) && zkey(h) < zkey(q.z)) push(q.x, q.y, h);
+        push(q.x, q.y, q.z), push(p.x, p.y, p.z);
+        const std::vector<double>& hp = heights[s.k2(p)];
+        for (auto it = hp.rbegin(); it != hp.rend(); ++it)
+            if (zkey(*it) < zkey(p.z) && zkey(*it) > zkey(za)) push(p.x, p.y, *it);
+        if (w.outer.size() > 1 && zkey(w.outer.back().z) == zkey(w.outer.front().z) && s.k2(w.outer.back()) == s.k2(w.outer.front())) w.outer.pop_back();
+        if (w.outer.size() >= 3) out.solid.faces.push_back(std::move(w));
     };
-    walls(outers[0]);
-    for (const Ring3& h : holes) walls(h);
+    auto outline_walls = [&](const Ring3& r) {
+        for (std::size_t i = 0; i < r.size(); ++i) wall(r[i], r[(i + 1) % r.size()], ground, ground);
+    };
+    outline_walls(outers[0]);
+    for (const Ring3& h : holes) outline_walls(h);
+    for (const Step& st : steps) wall(st.a, st.b, st.za, st.zb);
     Face g;
     g.type = SurfaceType::ground;
     g.outer = reversed_at(outers[0], ground);

@@ -27,16 +27,17 @@ struct RoofPart {
 
 struct RoofPartsResult {
     std::vector<RoofPart> parts;  ///< in solid order, then by first roof face; empty without a solid with roof faces
-    /// Solids that could not be split at their steps (a step inside a part, or an
-    /// outline that touches itself at a vertex): each stays one part. Empty = all split.
+    /// Solids that could not be split at their steps (two roof faces of a part crossing
+    /// along a shared edge, an outline that touches itself at a vertex, or a part's solid
+    /// found invalid): each stays one part, with the reason. Empty = all split.
     std::vector<std::string> unsplit;
 };
 
 /// Splits every LOD2 solid of a building into its roof parts: roof faces are
 /// joined when they share an edge at the same heights (a ridge, a hip, a valley
 /// or a flat join), not across a step wall. Each part gets its own walls down to
-/// the ground and its own ground face, so that parts touch along their step walls
-/// and do not overlap. A solid with one roof part keeps its solid as LOD2.2.
+/// the ground (and step walls where a step fades out inside the part) and its own
+/// ground face, so that parts touch along their step walls and do not overlap. A solid with one roof part keeps its solid as LOD2.2.
 /// Each part's solids are validated with `validity`.
 RoofPartsResult roof_parts(const std::vector<Solid>& lod2, const SolidValidityOptions& validity = {});
 

@@ -134,6 +134,6 @@ TEST_CASE("roofs on Delft AHN3 - every solid valid - roof types found (regressio
         CHECK(ours_ok[lod] == solids[lod]);
     }
     CHECK(with22 == 135);
-    CHECK(split >= 35);  // 43 of 135 when written (37 stay whole: a step that fades out inside a roof part)
+    CHECK(split >= 40);  // 44 of 135 when written (42 stay whole: a part's solid not closed, see lod22_unsplit)
     CHECK(volume_kept == with22);
 }
