@@ -28,7 +28,7 @@ RunShare mpi_share() {
 
 // The inputs `run` and `plan` share; given options override the config file.
 struct RunInputs {
-    std::string ortho, cloud, cloud_crs, footprints, config, formats, lods, vertical_crs, id_field, fit, db, working_crs, out_crs;
+    std::string ortho, cloud, cloud_crs, footprints, config, formats, lods, vertical_crs, id_field, fit, db, working_crs, out_crs, texture_ortho;
     int tile_size = 0, threads = -1;
     double overlap_m = -1;
 };
@@ -49,6 +49,7 @@ void add_run_inputs(CLI::App* cmd, RunInputs& r) {
     cmd->add_option("--db", r.db, "Also write the building table to PostGIS: \"PG:dbname=... [tables=NAME]\" (table replaced)");
     cmd->add_option("--vertical-crs", r.vertical_crs, "Vertical CRS when the cloud names none, e.g. EPSG:5709");
     cmd->add_option("--id-field", r.id_field, "Building id attribute of given footprints");
+    cmd->add_option("--texture-ortho", r.texture_ortho, "Texture the LOD2 roofs with this ortho's pixels (CityJSON, buildings.glb), e.g. the --ortho");
     cmd->add_option("--fit", r.fit, "Footprint geometry: recursive, regularised, rectangle or raw");
 }
 
@@ -70,6 +71,7 @@ RunManifest plan_from(const RunInputs& rc) {
     if (!rc.vertical_crs.empty()) ro.buildings.model.vertical_crs = rc.vertical_crs;
     if (!rc.id_field.empty()) ro.buildings.model.id_field = rc.id_field;
     if (!rc.db.empty()) ro.buildings.model.database = rc.db;
+    if (!rc.texture_ortho.empty()) ro.buildings.model.texture_ortho = rc.texture_ortho;
     if (!rc.fit.empty()) ro.extraction.fit = footprint_fit_from_string(rc.fit);
     return plan_run(ro);
 }

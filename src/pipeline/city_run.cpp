@@ -145,7 +145,8 @@ json to_json(const RunOptions& o) {
               {"lod2_min_points", l.min_points},
               {"max_median_residual_m", l.max_median_residual_m}}},
             {"export",
-             {{"formats", e.formats}, {"lods", e.lods}, {"geojson_crs", e.geojson_crs}, {"vertical_crs", e.vertical_crs}, {"id_field", e.id_field}}}};
+             {{"formats", e.formats}, {"lods", e.lods}, {"geojson_crs", e.geojson_crs}, {"vertical_crs", e.vertical_crs}, {"id_field", e.id_field},
+              {"texture_ortho", e.texture_ortho}}}};
 }
 
 RunOptions run_options_from_json(const json& j, const std::string& where, RunOptions o) {
@@ -221,7 +222,8 @@ RunOptions run_options_from_json(const json& j, const std::string& where, RunOpt
         const json& x = j["export"];
         const std::string w = where + ": export";
         auto& e = o.buildings.model;
-        check_keys(x, {"formats", "lods", "geojson_crs", "vertical_crs", "id_field"}, w);
+        check_keys(x, {"formats", "lods", "geojson_crs", "vertical_crs", "id_field", "texture_ortho"}, w);
+        take(x, "texture_ortho", e.texture_ortho, w);
         take(x, "formats", e.formats, w), take(x, "lods", e.lods, w), take(x, "geojson_crs", e.geojson_crs, w);
         take(x, "vertical_crs", e.vertical_crs, w), take(x, "id_field", e.id_field, w);
     }
