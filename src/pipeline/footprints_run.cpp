@@ -4,9 +4,11 @@
 #include <cmath>
 #include <filesystem>
 #include <memory>
+#include <new>
 
 #include "cloud/cloud_rasters.hpp"
 #include "core/error.hpp"
+#include "core/memory.hpp"
 #include "core/log.hpp"
 #include "footprint/rectangle_fit.hpp"
 #include "footprint/vectorize.hpp"
@@ -263,9 +265,21 @@ Image<uint32_t> read_segments(const std::string& path, const GridSpec& grid, uin
     return labels;
 }
 
+FootprintsReport run_footprints_unguarded(const std::string& output_path, const FootprintsRunOptions& o, const Progress& progress);
+
 }  // namespace
 
 FootprintsReport run_footprints(const std::string& output_path, const FootprintsRunOptions& o, const Progress& progress) {
+    try {
+        return run_footprints_unguarded(output_path, o, progress);
+    } catch (const std::bad_alloc&) {  // named: a bare "out of memory" does not say which input was too large
+        const std::string input = !o.ortho.empty() ? o.ortho : !o.cloud.empty() ? o.cloud : o.ndsm;
+        throw OutOfMemory(input, "footprint extraction over it does not fit in memory: tile it (cityforge run --tile-size 2048) or crop it");
+    }
+}
+
+namespace {
+FootprintsReport run_footprints_unguarded(const std::string& output_path, const FootprintsRunOptions& o, const Progress& progress) {
     const auto t0 = std::chrono::steady_clock::now();
     o.validate();
     const std::string driver = vector_driver_for(output_path);
@@ -328,7 +342,7 @@ FootprintsReport run_footprints(const std::string& output_path, const Footprints
             crs = pc.crs;
             if (input_crs.empty()) input_crs = pc.source_crs;
             unit = ortho ? ortho->info().metres_per_unit : pc.crs.linear_unit_m, z_unit = pc.crs.z_unit_m;
-            if (!ortho) grid = grid_over_cloud(pc.cloud, o.mask.gsd_m / unit);
+            if (!ortho) grid = grid_over_cloud(pc.cloud, o.mask.gsd_m / unit, o.cloud);
             if (ortho) require_cloud_overlap(pc, o.cloud, ortho->info().extent, o.ortho);
             progress(0.3, "cloud");
             mo.gsd_m = std::abs(grid.transform.pixel_width) * unit;
@@ -428,5 +442,6 @@ FootprintsReport run_footprints(const std::string& output_path, const Footprints
     progress(1.0, "written");
     return rep;
 }
+}  // namespace
 
 }  // namespace cityforge

@@ -31,6 +31,11 @@ RasterizeReport rasterize_run(const std::string& cloud_path, const std::string& 
         const RasterInfo info = read_raster_info(o.grid_raster);
         grid = {info.transform, info.width, info.height};
         target = info.crs;
+        // Cells, outlier distances and the ground filter's window are metres
+        // (a geographic grid once failed with "outlier_limit_m: must be >= 0").
+        if (target.geographic)
+            throw Error(o.grid_raster, "the grid raster is in a geographic CRS (" + target.label() +
+                                           "); rasterizing needs a projected CRS in metres: reproject it, e.g. gdalwarp -t_srs EPSG:<UTM zone>");
     }
     CloudRasters r;
     CrsInfo out_crs;
@@ -71,7 +76,7 @@ RasterizeReport rasterize_run(const std::string& cloud_path, const std::string& 
     } else {
         const PreparedCloud pc = prepare_cloud(cloud_path, o.cloud_crs, target, o.outliers, o.ground);
         progress(0.5, "cloud");
-        if (o.grid_raster.empty()) grid = grid_over_cloud(pc.cloud, o.gsd_m / pc.crs.linear_unit_m);
+        if (o.grid_raster.empty()) grid = grid_over_cloud(pc.cloud, o.gsd_m / pc.crs.linear_unit_m, cloud_path);
         r = rasterize_cloud(pc.cloud, pc.keep, pc.is_ground, grid, pc.crs.linear_unit_m);
         out_crs = pc.crs;
         rep.points = pc.cloud.size(), rep.ground_points = pc.ground_points, rep.ground_from_classification = pc.ground_from_classification;
