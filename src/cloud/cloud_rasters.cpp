@@ -11,21 +11,34 @@ namespace cityforge {
 
 GridSpec grid_over_cloud(const PointCloud& c, double cell, const std::string& subject) {
     if (c.size() == 0) throw Error(subject, "cloud is empty");
-    if (!(cell > 0)) throw Error(subject, "cell size must be > 0");
     double minx = INFINITY, miny = INFINITY, maxx = -INFINITY, maxy = -INFINITY;
     for (std::size_t i = 0; i < c.size(); ++i) {
         minx = std::min(minx, c.x[i]), maxx = std::max(maxx, c.x[i]);
         miny = std::min(miny, c.y[i]), maxy = std::max(maxy, c.y[i]);
     }
+    return grid_over_extent({minx, miny, maxx, maxy}, cell, c.size(), subject);
+}
+
+GridSpec grid_over_extent(const Extent& e, double cell, std::size_t points, const std::string& subject) {
+    if (!(cell > 0)) throw Error(subject, "cell size must be > 0");
+    if (!(e.min_x <= e.max_x && e.min_y <= e.max_y)) throw Error(subject, "cloud is empty");
+    const double minx = e.min_x, miny = e.min_y, maxx = e.max_x, maxy = e.max_y;
     const double x0 = std::floor(minx / cell) * cell, y1 = std::ceil(maxy / cell) * cell;
-    const GridSize size = checked_grid_size(x0, miny, maxx, y1, cell, c.size(), subject);
+    const GridSize size = checked_grid_size(x0, miny, maxx, y1, cell, points, subject);
     return GridSpec{{x0, cell, y1, -cell}, size.width, size.height};
 }
 
 CloudRasters rasterize_cloud(const PointCloud& c, const std::vector<uint8_t>& keep, const std::vector<uint8_t>& is_ground,
                              const GridSpec& g, double unit_m) {
-    if (g.width <= 0 || g.height <= 0) throw Error("rasterize", "grid has no cells");
+    return rasterize_cloud(c, keep, is_ground, g, 0, 0, g.width, g.height, unit_m);
+}
+
+CloudRasters rasterize_cloud(const PointCloud& c, const std::vector<uint8_t>& keep, const std::vector<uint8_t>& is_ground,
+                             const GridSpec& full, int col0, int row0, int width, int height, double unit_m) {
+    if (width <= 0 || height <= 0) throw Error("rasterize", "grid has no cells");
     if (is_ground.size() != c.size()) throw Error("rasterize", "ground mask size differs from the cloud");
+    // The window's cells, with points placed through the full grid's transform.
+    const GridSpec g{full.transform.window(col0, row0), width, height};
     const std::size_t n = static_cast<std::size_t>(g.width) * g.height;
     CloudRasters r;
     r.dsm = Image<float>(g.width, g.height, 1, NAN);
@@ -34,8 +47,8 @@ CloudRasters rasterize_cloud(const PointCloud& c, const std::vector<uint8_t>& ke
     std::vector<uint32_t> ground_n(n, 0), above_n(n, 0), building_n(n, 0), vegetation_n(n, 0);
     for (std::size_t i = 0; i < c.size(); ++i) {
         if (!keep.empty() && !keep[i]) continue;
-        const PixelPoint p = g.transform.map_to_pixel({c.x[i], c.y[i]});
-        const auto col = static_cast<int>(std::floor(p.col)), row = static_cast<int>(std::floor(p.row));
+        const PixelPoint p = full.transform.map_to_pixel({c.x[i], c.y[i]});
+        const auto col = static_cast<int>(std::floor(p.col)) - col0, row = static_cast<int>(std::floor(p.row)) - row0;
         if (col < 0 || row < 0 || col >= g.width || row >= g.height) continue;
         const std::size_t k = static_cast<std::size_t>(row) * g.width + col;
         const auto z = static_cast<float>(c.z[i]);

@@ -24,7 +24,7 @@ GridSize checked_grid_size(double min_x, double min_y, double max_x, double max_
     char b[320];
     const double w = std::floor(ex / cell) + 1.0, h = std::floor(ey / cell) + 1.0;
     const double cells = w * h;
-    const double density_cap = kGridFreeCells + kGridCellsPerPoint * static_cast<double>(points);
+    const double density_cap = points == 0 ? max_cells : kGridFreeCells + kGridCellsPerPoint * static_cast<double>(points);  // 0: unknown
     if (w > 2.0e9 || h > 2.0e9 || cells > max_cells || cells > density_cap) {
         std::snprintf(b, sizeof b,
                       "grid too large: a data extent of %.6g x %.6g units at cells of %.6g needs %.4g cells for %zu points "

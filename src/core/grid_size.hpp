@@ -25,7 +25,8 @@ inline constexpr double kGridFreeCells = 4.0e6;
 /// of `cell` units: floor(extent / cell) + 1 a side. Throws Error(subject, ...)
 /// with the extent, the cell count and the likely cause when the extent is
 /// not finite, or the grid would have more than `max_cells` cells or more than
-/// kGridFreeCells + kGridCellsPerPoint x `points` cells.
+/// kGridFreeCells + kGridCellsPerPoint x `points` cells (`points` = 0: not
+/// known, only `max_cells` applies).
 /// Throws Error(subject, ...) naming the extent unless max - min is finite and
 /// >= 0 on both axes (the first check of checked_grid_size).
 void require_finite_extent(double min_x, double min_y, double max_x, double max_y, const std::string& subject);
