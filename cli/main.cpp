@@ -11,6 +11,7 @@
 #include "commands/commands.hpp"
 #include "core/error.hpp"
 #include "core/log.hpp"
+#include "core/memory.hpp"
 #include "core/version.hpp"
 
 namespace cf = cityforge;
@@ -73,6 +74,9 @@ int main(int argc, char** argv) {
                 }
                 return rc;
             }
+    } catch (const cf::OutOfMemory& e) {  // names the file and the size
+        std::fprintf(stderr, "cityforge: error: %s\n", e.what());
+        return 3;
     } catch (const cf::Error& e) {
         std::fprintf(stderr, "cityforge: error: %s\n", e.what());
         return 1;

@@ -4,7 +4,7 @@
 set -euo pipefail
 
 PACKAGES=(
-  build-essential cmake pkg-config ninja-build
+  build-essential cmake pkg-config ninja-build ccache
   libgdal-dev gdal-bin libproj-dev proj-bin
   libgeographiclib-dev
   libcgal-dev libeigen3-dev libboost-dev

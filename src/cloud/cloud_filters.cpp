@@ -10,6 +10,7 @@
 
 #include "core/error.hpp"
 #include "core/grid_fill.hpp"
+#include "core/grid_size.hpp"
 #include "core/morphology.hpp"
 
 namespace cityforge {
@@ -92,8 +93,11 @@ void grid_knn(const PointCloud& c, std::size_t k, Visit&& visit) {
         minx = std::min(minx, c.x[i]), maxx = std::max(maxx, c.x[i]), miny = std::min(miny, c.y[i]), maxy = std::max(maxy, c.y[i]);
     // About 0.3 k points per cell on average (the 3 x 3 block holds ~2.7 k;
     // 0.5 k and 0.2 k measured 10-15 % slower on an 8 pts/m² town).
+    if (n == 0) return;
+    require_finite_extent(minx, miny, maxx, maxy, "outlier filter");  // the grid itself is capped below
     const double area = std::max((maxx - minx) * (maxy - miny), 1e-12);
-    double cell = std::sqrt(area * std::max(1.0, 0.3 * double(k)) / double(n));
+    const double per_point = std::max(1.0, 0.3 * double(k)) / double(n);
+    double cell = std::isfinite(area) ? std::sqrt(area * per_point) : std::sqrt(maxx - minx) * std::sqrt(maxy - miny) * std::sqrt(per_point);
     if (!(cell > 0.0) || !std::isfinite(cell)) cell = 1.0;
     const auto nx = static_cast<int>(std::min(65535.0, std::floor((maxx - minx) / cell) + 1));
     const auto ny = static_cast<int>(std::min(65535.0, std::floor((maxy - miny) / cell) + 1));
@@ -250,12 +254,12 @@ GroundResult classify_ground(const PointCloud& c, const std::vector<uint8_t>& ke
     double minx = INFINITY, miny = INFINITY, maxx = -INFINITY, maxy = -INFINITY;
     for (std::size_t i = 0; i < n; ++i)
         if (kept(i)) minx = std::min(minx, c.x[i]), maxx = std::max(maxx, c.x[i]), miny = std::min(miny, c.y[i]), maxy = std::max(maxy, c.y[i]);
-    if (!std::isfinite(minx)) return g;
+    if (minx == INFINITY) return g;  // no kept point
     // Cells anchored at multiples of the cell size: every window of a cloud
     // uses the same cells, so its ground does not depend on where it starts.
     minx = std::floor(minx / o.cell) * o.cell, miny = std::floor(miny / o.cell) * o.cell;
-    const int w = static_cast<int>((maxx - minx) / o.cell) + 1, h = static_cast<int>((maxy - miny) / o.cell) + 1;
-    if (static_cast<double>(w) * h > 4e8) throw Error("ground filter", "cloud extent too large for one SMRF grid; tile it first");
+    const GridSize size = checked_grid_size(minx, miny, maxx, maxy, o.cell, n, "ground filter", 4e8);
+    const int w = size.width, h = size.height;
     std::vector<double> zmin(static_cast<std::size_t>(w) * h, INFINITY);
     auto cell_of = [&](std::size_t i) {
         const int cx = std::min(w - 1, static_cast<int>((c.x[i] - minx) / o.cell));

@@ -5,28 +5,27 @@
 
 #include "core/error.hpp"
 #include "core/grid_fill.hpp"
+#include "core/grid_size.hpp"
 
 namespace cityforge {
 
-GridSpec grid_over_cloud(const PointCloud& c, double cell) {
-    if (c.size() == 0) throw Error("rasterize", "cloud is empty");
+GridSpec grid_over_cloud(const PointCloud& c, double cell, const std::string& subject) {
+    if (c.size() == 0) throw Error(subject, "cloud is empty");
     double minx = INFINITY, miny = INFINITY, maxx = -INFINITY, maxy = -INFINITY;
     for (std::size_t i = 0; i < c.size(); ++i) {
         minx = std::min(minx, c.x[i]), maxx = std::max(maxx, c.x[i]);
         miny = std::min(miny, c.y[i]), maxy = std::max(maxy, c.y[i]);
     }
-    return grid_over_extent({minx, miny, maxx, maxy}, cell);
+    return grid_over_extent({minx, miny, maxx, maxy}, cell, c.size(), subject);
 }
 
-GridSpec grid_over_extent(const Extent& e, double cell) {
-    if (!(cell > 0)) throw Error("rasterize", "cell size must be > 0");
-    if (!(e.min_x <= e.max_x && e.min_y <= e.max_y)) throw Error("rasterize", "cloud is empty");
+GridSpec grid_over_extent(const Extent& e, double cell, std::size_t points, const std::string& subject) {
+    if (!(cell > 0)) throw Error(subject, "cell size must be > 0");
+    if (!(e.min_x <= e.max_x && e.min_y <= e.max_y)) throw Error(subject, "cloud is empty");
     const double minx = e.min_x, miny = e.min_y, maxx = e.max_x, maxy = e.max_y;
     const double x0 = std::floor(minx / cell) * cell, y1 = std::ceil(maxy / cell) * cell;
-    GridSpec g{{x0, cell, y1, -cell}, static_cast<int>(std::floor((maxx - x0) / cell)) + 1,
-               static_cast<int>(std::floor((y1 - miny) / cell)) + 1};
-    if (static_cast<double>(g.width) * g.height > 2e9) throw Error("rasterize", "grid too large; choose a coarser cell size");
-    return g;
+    const GridSize size = checked_grid_size(x0, miny, maxx, y1, cell, points, subject);
+    return GridSpec{{x0, cell, y1, -cell}, size.width, size.height};
 }
 
 CloudRasters rasterize_cloud(const PointCloud& c, const std::vector<uint8_t>& keep, const std::vector<uint8_t>& is_ground,

@@ -2,6 +2,7 @@
 // DSM / DTM / nDSM / point density rasters from a cleaned, ground-classified
 // cloud, on a given north-up grid in the cloud's CRS. No GDAL.
 #include <cstdint>
+#include <string>
 #include <vector>
 
 #include "cloud/point_cloud.hpp"
@@ -35,10 +36,13 @@ struct CloudRasters {
 
 /// A grid of square `cell` (CRS units) covering the cloud, its origin snapped
 /// to multiples of the cell so that grids of neighbouring tiles align.
-GridSpec grid_over_cloud(const PointCloud& cloud, double cell);
+/// Errors (an empty cloud, a grid too large for its points: checked_grid_size)
+/// name `subject`, usually the cloud's path.
+GridSpec grid_over_cloud(const PointCloud& cloud, double cell, const std::string& subject = "rasterize");
 /// The same grid over the points' bounding box `extent` (e.g. measured while
-/// streaming a cloud too large to hold).
-GridSpec grid_over_extent(const Extent& extent, double cell);
+/// streaming a cloud too large to hold); `points` = how many it holds (0 =
+/// unknown: only the absolute cap of checked_grid_size applies).
+GridSpec grid_over_extent(const Extent& extent, double cell, std::size_t points = 0, const std::string& subject = "rasterize");
 
 /// Rasterises `cloud` (points with keep[i] == 0 skipped; keep may be empty)
 /// on `grid`. `unit_m` = metres per horizontal CRS unit (for the density).

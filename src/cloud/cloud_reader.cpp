@@ -4,6 +4,7 @@
 #include <array>
 #include <bit>
 #include <charconv>
+#include <cmath>
 #include <cstring>
 #include <filesystem>
 #include <fstream>
@@ -14,6 +15,7 @@
 #include "cloud/copc.hpp"
 #include "cloud/las.hpp"
 #include "core/error.hpp"
+#include "core/log.hpp"
 
 namespace cityforge {
 
@@ -84,7 +86,7 @@ public:
         std::string line;
         std::getline(in_, line);
         if (line.rfind("ply", 0) != 0) throw Error(path, "not a PLY file");
-        bool in_vertex = false, seen_vertex = false, other_before_vertex = false;
+        bool in_vertex = false, seen_vertex = false, other_before_vertex = false, other_after_vertex = false;
         while (std::getline(in_, line)) {
             if (!line.empty() && line.back() == '\r') line.pop_back();
             std::istringstream ls(line);
@@ -107,6 +109,8 @@ public:
                     count_ = count;
                 } else if (!seen_vertex && count > 0) {
                     other_before_vertex = true;
+                } else if (count > 0) {
+                    other_after_vertex = true;
                 }
             } else if (word == "property" && in_vertex) {
                 std::string type, name;
@@ -146,8 +150,17 @@ public:
         if (!ascii_) {
             const auto start = static_cast<uint64_t>(in_.tellg());
             const auto size = static_cast<uint64_t>(std::filesystem::file_size(path));
-            if (start + count_ * record_ > size)
-                throw Error(path, "PLY header announces " + std::to_string(count_) + " vertices but the file is too short (truncated)");
+            const uint64_t room = size - std::min(size, start);
+            // As quotients: count x record can wrap 2^64.
+            if (count_ > room / record_)
+                throw Error(path, "PLY header announces " + std::to_string(count_) + " vertices of " + std::to_string(record_) +
+                                      " bytes but the file holds only " + std::to_string(room / record_) + " (truncated, or property types that do not match the data)");
+            // With nothing after the vertices, their data must end the file: a
+            // file declaring float and holding doubles is twice as long.
+            if (!other_after_vertex && room - count_ * record_ >= record_)
+                throw Error(path, "PLY vertex data takes " + std::to_string(count_ * record_) + " bytes by its header (" + std::to_string(count_) +
+                                      " x " + std::to_string(record_) + ") but the file holds " + std::to_string(room) +
+                                      " after the header: the declared property types do not match the data");
         }
         announced = count_;
     }
@@ -352,6 +365,7 @@ private:
 
 CloudReader::CloudReader(const std::string& path) : path_(path) {
     if (!std::filesystem::exists(path)) throw Error(path, "file not found");
+    if (std::filesystem::is_directory(path)) throw Error(path, "is a directory, not a point cloud file");
     const std::string ext = lower(std::filesystem::path(path).extension().string());
     char magic[4] = {};
     {
@@ -373,6 +387,28 @@ CloudReader::CloudReader(const std::string& path) : path_(path) {
         impl_ = std::make_unique<XyzFormatReader>(path);
     } else {
         throw Error(path, "unknown point cloud format (expected LAS, PLY or XYZ/CSV text)");
+    }
+}
+
+std::size_t CloudReader::read_chunk(PointCloud& out, std::size_t max_points) {
+    while (true) {
+        const std::size_t base = out.size();
+        const std::size_t n = impl_->read_chunk(out, max_points);
+        if (n == 0) {
+            if (!end_reported_ && dropped_non_finite_ > 0) {
+                end_reported_ = true;
+                const std::string what = std::to_string(dropped_non_finite_) + " of " + std::to_string(seen_) +
+                                         " points have a NaN or infinite coordinate";
+                if (dropped_non_finite_ == seen_) throw Error(path_, "all " + what);
+                log::warning(path_ + ": " + what + " and were dropped");
+            }
+            return 0;
+        }
+        seen_ += n;
+        const std::size_t dropped = out.remove_from(
+            base, [&](std::size_t i) { return !std::isfinite(out.x[i]) || !std::isfinite(out.y[i]) || !std::isfinite(out.z[i]); });
+        dropped_non_finite_ += dropped;
+        if (dropped < n) return n - dropped;  // else: read on, 0 means the end
     }
 }
 

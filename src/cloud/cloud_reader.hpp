@@ -41,7 +41,15 @@ public:
     const LasCrsRecords& crs_records() const { return crs_records_; }
     /// Point count announced by the header (LAS, PLY); 0 when unknown (XYZ).
     uint64_t announced_points() const { return announced_; }
-    std::size_t read_chunk(PointCloud& out, std::size_t max_points) { return impl_->read_chunk(out, max_points); }
+    /// Appends up to `max_points` points to `out`; returns how many (0 = end).
+    /// Points with a NaN or infinite x, y or z (PLY and XYZ may hold them, e.g.
+    /// PCL's organized clouds) are dropped, and so are LAS points outside the
+    /// header's bounds (LasReader::dropped_outside_bounds). At the end one
+    /// warning names the file and the count of each; if no point is left,
+    /// this throws Error naming the file.
+    std::size_t read_chunk(PointCloud& out, std::size_t max_points);
+    /// Points dropped so far for a NaN or infinite coordinate.
+    uint64_t dropped_non_finite() const { return dropped_non_finite_; }
     /// True for a COPC file (LAZ with the COPC info VLR and hierarchy).
     bool copc() const { return copc_; }
     /// A hint before the first read: the caller keeps only points with
@@ -56,6 +64,8 @@ private:
     LasCrsRecords crs_records_;
     uint64_t announced_ = 0;
     bool copc_ = false;
+    bool end_reported_ = false;
+    uint64_t dropped_non_finite_ = 0, seen_ = 0;
     std::unique_ptr<CloudFormatReader> impl_;
 };
 

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
 #include <cstring>
 #include <filesystem>
 #include <limits>
@@ -11,12 +12,19 @@
 #include "core/atomic_file.hpp"
 #include "cloud/le_bytes.hpp"
 #include "core/error.hpp"
+#include "core/log.hpp"
 
 namespace cityforge {
 namespace {
 
 using bytes::get;
 using bytes::put;
+
+std::string format_double(double v) {
+    char b[32];
+    std::snprintf(b, sizeof b, "%.6g", v);
+    return b;
+}
 
 }  // namespace
 
@@ -66,6 +74,7 @@ bool LasHeader::has_gps_time() const { return point_format != 0 && point_format 
 LasReader::LasReader(const std::string& path) : path_(path) {
     namespace fs = std::filesystem;
     if (!fs::exists(path)) throw Error(path, "file not found");
+    if (fs::is_directory(path)) throw Error(path, "is a directory, not a point cloud file");
     in_.open(path, std::ios::binary);
     if (!in_) throw Error(path, "cannot open for reading");
     const auto file_size = static_cast<uint64_t>(fs::file_size(path));
@@ -100,10 +109,14 @@ LasReader::LasReader(const std::string& path) : path_(path) {
         h.max[i] = get<double>(hdr + 179 + 16 * i);
         h.min[i] = get<double>(hdr + 187 + 16 * i);
     }
+    // Scales outside [1e-12, 1e4] and offsets beyond 1e12 are no real survey's
+    // (0.01 m, 1e-7 degree, 1 m are); they would turn every record into a
+    // coordinate nothing downstream can grid.
     for (double s : h.scale)
-        if (!(s > 0.0) || !std::isfinite(s)) throw Error(path, "invalid coordinate scale factor in the LAS header");
+        if (!(s >= 1e-12 && s <= 1e4))
+            throw Error(path, "coordinate scale factor " + format_double(s) + " in the LAS header is outside [1e-12, 1e4] (corrupt header)");
     for (double o : h.offset)
-        if (!std::isfinite(o)) throw Error(path, "invalid coordinate offset in the LAS header");
+        if (!(std::abs(o) <= 1e12)) throw Error(path, "coordinate offset " + format_double(o) + " in the LAS header is not a finite value within 1e12 (corrupt header)");
     if (h.version_minor >= 4 && header_size >= 375 && got >= 375) {
         const auto count64 = get<uint64_t>(hdr + 247);
         if (count64 != 0 || h.point_count == 0) h.point_count = count64;
@@ -155,7 +168,10 @@ LasReader::LasReader(const std::string& path) : path_(path) {
     if (h.version_minor >= 4 && header_size >= 375) {
         uint64_t epos = get<uint64_t>(hdr + 235);
         const auto n_evlr = get<uint32_t>(hdr + 243);
-        for (uint32_t i = 0; i < n_evlr && epos + 60 <= file_size; ++i) {
+        // Every bound is checked as a difference so that no length wraps the
+        // position (a length near 2^64 once looped forever); each record moves
+        // the position forward by at least 60 bytes, so the loop ends.
+        for (uint32_t i = 0; i < n_evlr && epos <= file_size && file_size - epos >= 60; ++i) {
             char eh[60];
             in_.seekg(static_cast<std::streamoff>(epos));
             in_.read(eh, 60);
@@ -163,7 +179,7 @@ LasReader::LasReader(const std::string& path) : path_(path) {
             const std::string user = las_text(eh + 2, 16);
             const auto record_id = get<uint16_t>(eh + 18);
             const auto length = get<uint64_t>(eh + 20);
-            if (epos + 60 + length > file_size) throw Error(path, "extended variable length record runs past the end of the file");
+            if (length > file_size - epos - 60) throw Error(path, "extended variable length record " + std::to_string(i) + " (" + std::to_string(length) + " bytes at " + std::to_string(epos) + ") runs past the end of the file");
             if (user == "LASF_Projection" && record_id == 2112 && length < (1u << 24)) {
                 std::vector<char> data(length);
                 in_.read(data.data(), static_cast<std::streamsize>(length));
@@ -172,6 +188,16 @@ LasReader::LasReader(const std::string& path) : path_(path) {
             epos += 60 + length;
         }
     }
+    // The header's bounds screen the records (see read_chunk) when they are
+    // usable: finite, ordered and not left all zero by the writer.
+    bool bounds_set = false, bounds_ok = true;
+    for (int k = 0; k < 3; ++k) {
+        bounds_ok = bounds_ok && std::isfinite(h.min[k]) && std::isfinite(h.max[k]) && h.min[k] <= h.max[k];
+        bounds_set = bounds_set || h.min[k] != 0.0 || h.max[k] != 0.0;
+    }
+    screen_bounds_ = bounds_ok && bounds_set;
+    for (int k = 0; k < 3; ++k)  // one quantum: writers may bound the unrounded coordinates
+        bounds_tolerance_[k] = h.scale[k] + 1e-9 * std::max(std::abs(h.min[k]), std::abs(h.max[k]));
     total_ = h.point_count;
     if (compressed) {
         if (!h.laz) throw Error(path, "LAZ-compressed points (point format byte " + std::to_string(raw_format) + ") but no LASzip VLR (laszip encoded/22204)");
@@ -179,8 +205,8 @@ LasReader::LasReader(const std::string& path) : path_(path) {
         laz_ = std::make_unique<LazPointSource>(path, *h.laz, h.offset_to_points, h.point_count, h.point_record_length);
         return;
     }
-    const uint64_t needed = h.offset_to_points + h.point_count * static_cast<uint64_t>(h.point_record_length);
-    if (needed > file_size)
+    // Compared as a quotient: point_count x record length can wrap 2^64.
+    if (h.point_count > (file_size - h.offset_to_points) / static_cast<uint64_t>(h.point_record_length))
         throw Error(path, "header says " + std::to_string(h.point_count) + " points but the file holds only " +
                               std::to_string((file_size - h.offset_to_points) / h.point_record_length) + " (truncated or corrupt)");
     in_.seekg(h.offset_to_points);
@@ -208,6 +234,35 @@ void LasReader::select_laz_chunks(const std::vector<bool>& keep) {
 }
 
 std::size_t LasReader::read_chunk(PointCloud& out, std::size_t max_points) {
+    const LasHeader& h = header_;
+    while (true) {
+        const std::size_t base = out.size();
+        const std::size_t n = read_chunk_unscreened(out, max_points);
+        if (n == 0) {
+            if (!end_reported_ && dropped_outside_ > 0) {
+                end_reported_ = true;
+                const std::string what = std::to_string(dropped_outside_) + " of " + std::to_string(screened_) +
+                                         " points lie outside the header's bounds";
+                if (dropped_outside_ == screened_)
+                    throw Error(path_, "all " + what + " (corrupt header or point records)");
+                log::warning(path_ + ": " + what + " and were dropped (corrupt records?)");
+            }
+            return 0;
+        }
+        screened_ += n;
+        if (!screen_bounds_) return n;
+        const std::size_t dropped = out.remove_from(base, [&](std::size_t i) {
+            const double v[3] = {out.x[i], out.y[i], out.z[i]};
+            for (int k = 0; k < 3; ++k)
+                if (v[k] < h.min[k] - bounds_tolerance_[k] || v[k] > h.max[k] + bounds_tolerance_[k]) return true;
+            return false;
+        });
+        dropped_outside_ += dropped;
+        if (dropped < n) return n - dropped;  // else: read on, 0 means the end
+    }
+}
+
+std::size_t LasReader::read_chunk_unscreened(PointCloud& out, std::size_t max_points) {
     if (laz_ && read_ == 0) laz_->set_point_fields_only(true);  // LAZ: skip layers a PointCloud does not hold
     std::vector<char>& buf = buffer_;  // reused between chunks: no page faults per chunk
     const std::size_t n = read_records(buf, max_points);
@@ -259,7 +314,9 @@ PointCloud read_las(const std::string& path, LasHeader* header) {
     LasReader reader(path);
     if (header) *header = reader.header();
     PointCloud cloud;
-    cloud.reserve(static_cast<std::size_t>(reader.header().point_count), reader.header().has_color(), reader.header().has_gps_time());
+    // The announced count only as a hint (a LAZ header may claim any count).
+    cloud.reserve(static_cast<std::size_t>(std::min<uint64_t>(reader.header().point_count, 1u << 24)), reader.header().has_color(),
+                  reader.header().has_gps_time());
     while (reader.read_chunk(cloud, 1u << 20) > 0) {
     }
     return cloud;

@@ -83,8 +83,15 @@ public:
     LazPointSource* laz_source() { return laz_.get(); }
     /// LAZ only, before the first read: decode only the chunks with keep[i].
     void select_laz_chunks(const std::vector<bool>& keep);
+    /// Points read_chunk dropped so far because they lie outside the header's
+    /// bounds (by more than one scale quantum): records a corrupt VLR shifted,
+    /// or garbage. Screened only when the header bounds are usable (finite,
+    /// min <= max, not all zero). At the end of the file a warning names the
+    /// file and the count; if every point was outside, read_chunk throws.
+    uint64_t dropped_outside_bounds() const { return dropped_outside_; }
 
 private:
+    std::size_t read_chunk_unscreened(PointCloud& out, std::size_t max_points);
     std::string path_;
     std::ifstream in_;
     LasHeader header_;
@@ -92,6 +99,9 @@ private:
     uint64_t total_ = 0;  ///< points this reader hands out (all, or the selected chunks')
     std::vector<char> buffer_;
     std::unique_ptr<LazPointSource> laz_;
+    bool screen_bounds_ = false, end_reported_ = false;
+    std::array<double, 3> bounds_tolerance_{};
+    uint64_t dropped_outside_ = 0, screened_ = 0;
 };
 
 /// Reads the whole file into memory (explicit: callers that know it fits).

@@ -1247,7 +1247,11 @@ LazPointSource::LazPointSource(const std::string& path, const LazInfo& info, uin
         if (info.variable_chunks())
             throw Error(path, "LAZ chunk table is missing or its offset " + std::to_string(table_pos) +
                                   " lies outside the file (variable-size chunks cannot be read without it)");
-        // Fixed chunks without a table: read them one after the other.
+        // Fixed chunks without a table: read them one after the other. Each
+        // chunk takes at least one byte, so a count the file cannot hold is
+        // refused before the list is built.
+        if (expected_fixed > file_size_ - chunks_start)
+            throw Error(path, "header says " + std::to_string(point_count) + " points, more LAZ chunks than the file has bytes (corrupt header)");
         for (uint64_t c = 0; c < expected_fixed; ++c) {
             const uint64_t first = c * info.chunk_size;
             chunks_.push_back({0, 0, first, std::min<uint64_t>(info.chunk_size, point_count - first)});

@@ -35,6 +35,31 @@ struct PointCloud {
     /// Appends point `i` of `src` with all its attributes (colour and GPS time
     /// when `src` has them; mixing clouds with and without them is the caller's error).
     void append(const PointCloud& src, std::size_t i);
+    /// Removes the points i >= `first` for which `drop(i)` is true (indices
+    /// as before the call), keeping the order of the others and all their
+    /// attributes; returns how many were removed.
+    template <class Drop>
+    std::size_t remove_from(std::size_t first, Drop&& drop) {
+        const std::size_t n = size();
+        std::size_t w = first;
+        auto move_all = [&](std::size_t to, std::size_t from) {
+            x[to] = x[from], y[to] = y[from], z[to] = z[from], intensity[to] = intensity[from];
+            classification[to] = classification[from], return_number[to] = return_number[from];
+            number_of_returns[to] = number_of_returns[from];
+            if (!gps_time.empty()) gps_time[to] = gps_time[from];
+            if (!red.empty()) red[to] = red[from], green[to] = green[from], blue[to] = blue[from];
+        };
+        for (std::size_t i = first; i < n; ++i)
+            if (!drop(i)) {
+                if (w != i) move_all(w, i);
+                ++w;
+            }
+        for (auto* v : {&x, &y, &z}) v->resize(w);
+        intensity.resize(w), classification.resize(w), return_number.resize(w), number_of_returns.resize(w);
+        if (!gps_time.empty()) gps_time.resize(w);
+        if (!red.empty()) red.resize(w), green.resize(w), blue.resize(w);
+        return n - w;
+    }
 };
 
 }  // namespace cityforge

@@ -7,6 +7,7 @@
 #include <tbb/parallel_for.h>
 
 #include "core/error.hpp"
+#include "core/grid_size.hpp"
 
 namespace cityforge {
 
@@ -51,10 +52,10 @@ public:
             minx_ = std::min(minx_, c.x[i]), maxx = std::max(maxx, c.x[i]);
             miny_ = std::min(miny_, c.y[i]), maxy = std::max(maxy, c.y[i]);
         }
-        if (!std::isfinite(minx_)) return;
-        w_ = static_cast<int>((maxx - minx_) / cell_) + 1;
-        h_ = static_cast<int>((maxy - miny_) / cell_) + 1;
-        start_.assign(static_cast<std::size_t>(w_) * h_ + 1, 0);
+        if (minx_ == INFINITY) return;  // no kept point
+        const GridSize size = checked_grid_size(minx_, miny_, maxx, maxy, cell_, c.size(), "heights point index");
+        w_ = size.width, h_ = size.height;
+        start_.assign(size.cells() + 1, 0);
         for (std::size_t i = 0; i < c.size(); ++i)
             if (keep.empty() || keep[i]) ++start_[cell_of(c.x[i], c.y[i]) + 1];
         for (std::size_t k = 1; k < start_.size(); ++k) start_[k] += start_[k - 1];
@@ -66,10 +67,14 @@ public:
     template <typename F>
     void for_each_in(const Extent& e, F&& f) const {
         if (w_ == 0) return;
-        const int x0 = std::max(0, static_cast<int>(std::floor((e.min_x - minx_) / cell_)));
-        const int x1 = std::min(w_ - 1, static_cast<int>(std::floor((e.max_x - minx_) / cell_)));
-        const int y0 = std::max(0, static_cast<int>(std::floor((e.min_y - miny_) / cell_)));
-        const int y1 = std::min(h_ - 1, static_cast<int>(std::floor((e.max_y - miny_) / cell_)));
+        if (!(e.min_x <= e.max_x) || !(e.min_y <= e.max_y)) return;  // NaN extent
+        // Clamped in double before the cast: a footprint far from the cloud
+        // (1e300) must not overflow an int.
+        auto clamp_cell = [](double v, int hi) { return static_cast<int>(std::clamp(std::floor(v), -1.0, static_cast<double>(hi))); };
+        const int x0 = std::max(0, clamp_cell((e.min_x - minx_) / cell_, w_));
+        const int x1 = std::min(w_ - 1, clamp_cell((e.max_x - minx_) / cell_, w_));
+        const int y0 = std::max(0, clamp_cell((e.min_y - miny_) / cell_, h_));
+        const int y1 = std::min(h_ - 1, clamp_cell((e.max_y - miny_) / cell_, h_));
         for (int y = y0; y <= y1; ++y)
             for (int x = x0; x <= x1; ++x) {
                 const std::size_t k = static_cast<std::size_t>(y) * w_ + x;
@@ -243,6 +248,14 @@ std::vector<BuildingHeight> compute_building_heights(const PointCloud& c, const 
     tbb::parallel_for(std::size_t(0), footprints.size(), [&](std::size_t f) {
         const std::vector<Polygon>& parts = footprints[f];
         BuildingHeight& b = out[f];
+        {
+            const Extent fe = parts_extent(parts);
+            if (!((fe.max_x - fe.min_x) * o.unit_m <= kMaxFootprintSide_m && (fe.max_y - fe.min_y) * o.unit_m <= kMaxFootprintSide_m)) {
+                b.height_quality = "footprint_too_large";  // its coverage grid alone would not fit in memory
+                ++done;
+                return;
+            }
+        }
         const double area_m2 = parts_area(parts) * o.unit_m * o.unit_m;
         // Candidates: points in the bounding box grown by the widest ground ring.
         std::vector<double> roof, ground_dist, ground_z;

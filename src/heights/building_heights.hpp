@@ -28,6 +28,10 @@ std::string to_string(GroundMethod m);
 /// "plane" or "percentile"; throws Error naming `option` otherwise.
 GroundMethod ground_method_from_string(const std::string& s, const std::string& option = "--ground-method");
 
+/// The largest footprint side (metres) heights are computed for: the largest
+/// buildings are under 2 km long; 20 km leaves room for site outlines.
+inline constexpr double kMaxFootprintSide_m = 20000.0;
+
 struct HeightOptions {
     double ground_buffer_m = 3.0;          ///< ring around the footprint searched for ground points
     GroundMethod ground_method = GroundMethod::plane;  ///< see GroundMethod
@@ -68,7 +72,9 @@ struct BuildingHeight {
     double point_density_m2 = 0.0;   ///< roof points per square metre of footprint
     double nodata_fraction = 1.0;    ///< share of coverage cells inside the footprint without roof points
     /// "good", "ground_buffer_widened", "few_ground_points", "no_ground",
-    /// "few_roof_points", "no_roof_points", "sparse" (< 1 roof point per m2).
+    /// "few_roof_points", "no_roof_points", "sparse" (< 1 roof point per m2),
+    /// "footprint_too_large" (a side beyond kMaxFootprintSide_m: no building,
+    /// corrupt coordinates or a wrong CRS; nothing is computed for it).
     std::string height_quality;
     std::vector<uint32_t> roof_points;  ///< indices of the roof points in the cloud (only with keep_roof_points)
 };

@@ -88,7 +88,9 @@ DatasetInfo inspect_dataset(const std::string& path, const InspectOptions& optio
     try {
         info.vector = read_vector_info(path);
     } catch (const Error&) {
-        throw Error(path, "not a raster, LAS point cloud or vector file that cityforge can read");
+        // A folder may be a vector dataset (a Shapefile folder, a .gdb); any other is named as one.
+        throw Error(path, std::filesystem::is_directory(path) ? "is a directory, not a raster, point cloud or vector dataset cityforge can read"
+                                                              : "not a raster, LAS point cloud or vector file that cityforge can read");
     }
     if (info.vector->layers.empty()) throw Error(path, "vector dataset has no layers");
     return info;

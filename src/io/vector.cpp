@@ -1,5 +1,6 @@
 #include "io/vector.hpp"
 
+#include <cstdio>
 #include <cstdlib>
 #include <ctime>
 
@@ -266,6 +267,21 @@ PolygonLayer read_polygon_layer(const std::string& path, const std::string& laye
         else if (type == wkbMultiPolygon)
             for (const OGRPolygon* p : *g->toMultiPolygon()) feature.geometry.push_back(from_ogr(p));
         else throw Error(where, std::string("is a ") + OGRGeometryTypeToName(g->getGeometryType()) + ", not a polygon");
+        // No CRS puts a place on Earth beyond 1e9 of its units (4e7 m, 1.3e8 ft,
+        // 360 degrees): such coordinates are corrupt, and would overflow every
+        // grid laid over the footprint (1e300 once ended in a crash).
+        auto check_ring = [&](const Ring& ring) {
+            for (const MapPoint& q : ring)
+                if (!(std::abs(q.x) <= 1e9 && std::abs(q.y) <= 1e9)) {
+                    char b[96];
+                    std::snprintf(b, sizeof b, "(%.6g, %.6g)", q.x, q.y);
+                    throw Error(where, std::string("has a coordinate ") + b + " beyond +-1e9 CRS units: corrupt coordinates?");
+                }
+        };
+        for (const Polygon& p : feature.geometry) {
+            check_ring(p.outer);
+            for (const Ring& h : p.holes) check_ring(h);
+        }
         if (!g->IsValid()) throw Error(where, "is an invalid polygon (self-intersection or bad ring); repair it first, e.g. ogr2ogr -makevalid");
         for (Polygon& p : feature.geometry) orient_polygon(p);
         for (int i = 0; i < defn->GetFieldCount(); ++i) {

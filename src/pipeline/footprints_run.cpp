@@ -4,9 +4,11 @@
 #include <cmath>
 #include <filesystem>
 #include <memory>
+#include <new>
 
 #include "cloud/cloud_rasters.hpp"
 #include "core/error.hpp"
+#include "core/memory.hpp"
 #include "core/log.hpp"
 #include "footprint/rectangle_fit.hpp"
 #include "footprint/vectorize.hpp"
@@ -276,6 +278,8 @@ void add_self_trained_buildings(BuildingMask& mask, std::vector<std::string>& so
                         std::to_string(r.building_examples) + " building), " + std::to_string(extra.count) + " buildings found outside them";
 }
 
+FootprintsReport run_footprints_unguarded(const std::string& output_path, const FootprintsRunOptions& o, const Progress& progress);
+
 }  // namespace
 
 // (declared in footprints_run.hpp) An nDSM raster on `grid` (when `grid` has cells: same horizontal CRS,
@@ -309,6 +313,16 @@ Image<float> read_ndsm_raster(const std::string& path, GridSpec& grid, CrsInfo& 
 }
 
 FootprintsReport run_footprints(const std::string& output_path, const FootprintsRunOptions& o, const Progress& progress) {
+    try {
+        return run_footprints_unguarded(output_path, o, progress);
+    } catch (const std::bad_alloc&) {  // named: a bare "out of memory" does not say which input was too large
+        const std::string input = !o.ortho.empty() ? o.ortho : !o.cloud.empty() ? o.cloud : o.ndsm;
+        throw OutOfMemory(input, "footprint extraction over it does not fit in memory: tile it (cityforge run --tile-size 2048) or crop it");
+    }
+}
+
+namespace {
+FootprintsReport run_footprints_unguarded(const std::string& output_path, const FootprintsRunOptions& o, const Progress& progress) {
     const auto t0 = std::chrono::steady_clock::now();
     o.validate();
     const std::string driver = vector_driver_for(output_path);
@@ -377,7 +391,7 @@ FootprintsReport run_footprints(const std::string& output_path, const Footprints
             const bool windows = o.max_points_in_memory > 0 && CloudReader(o.cloud).announced_points() > o.max_points_in_memory;
             if (!ortho) {
                 unit = require_cloud_crs(o.cloud, o.cloud_crs).linear_unit_m;
-                grid = grid_over_extent(cloud_point_bounds(o.cloud), o.mask.gsd_m / unit);
+                grid = grid_over_extent(cloud_point_bounds(o.cloud), o.mask.gsd_m / unit, 0, o.cloud);
             }
             const CloudPlan plan = plan_cloud(o.cloud, o.cloud_crs, target, o.outliers,
                                               grid.transform.pixel_to_map({grid.width / 2.0, grid.height / 2.0}));
@@ -521,5 +535,6 @@ FootprintsReport run_footprints(const std::string& output_path, const Footprints
     progress(1.0, "written");
     return rep;
 }
+}  // namespace
 
 }  // namespace cityforge

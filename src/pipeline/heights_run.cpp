@@ -1,6 +1,7 @@
 #include "pipeline/heights_run.hpp"
 
 #include <chrono>
+#include <new>
 
 #include "pipeline/cloud_windows.hpp"
 #include "pipeline/prepared_cloud.hpp"
@@ -8,6 +9,7 @@
 #include <cmath>
 #include <map>
 #include "core/error.hpp"
+#include "core/memory.hpp"
 #include "core/log.hpp"
 #include "crs/crs.hpp"
 #include "io/vector.hpp"
@@ -213,8 +215,23 @@ HeightsStage tiled_heights_stage(PolygonLayer footprints, const std::string& foo
 
 }  // namespace
 
+namespace {
+HeightsRunReport run_heights_unguarded(const std::string& footprints_path, const std::string& cloud_path,
+                                       const std::string& output_path, const HeightsRunOptions& o, const Progress& progress);
+}  // namespace
+
 HeightsRunReport run_heights(const std::string& footprints_path, const std::string& cloud_path,
                              const std::string& output_path, const HeightsRunOptions& o, const Progress& progress) {
+    try {
+        return run_heights_unguarded(footprints_path, cloud_path, output_path, o, progress);
+    } catch (const std::bad_alloc&) {  // named: a bare "out of memory" does not say which input was too large
+        throw OutOfMemory(cloud_path, "the cloud does not fit in memory: read it window by window (--max-points-in-memory, --tile-m)");
+    }
+}
+
+namespace {
+HeightsRunReport run_heights_unguarded(const std::string& footprints_path, const std::string& cloud_path,
+                                       const std::string& output_path, const HeightsRunOptions& o, const Progress& progress) {
     const auto t0 = std::chrono::steady_clock::now();
     const std::string driver = vector_driver_for(output_path);
     o.heights.validate();
@@ -241,5 +258,6 @@ HeightsRunReport run_heights(const std::string& footprints_path, const std::stri
     rep.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
     return rep;
 }
+}  // namespace
 
 }  // namespace cityforge

@@ -1,5 +1,7 @@
 #include "pipeline/prepared_cloud.hpp"
 
+#include <algorithm>
+#include <cmath>
 #include <cstdio>
 #include <filesystem>
 
@@ -7,6 +9,7 @@
 
 #include "cloud/cloud_reader.hpp"
 #include "core/error.hpp"
+#include "core/grid_size.hpp"
 #include "core/log.hpp"
 #include "io/cloud_crs.hpp"
 
@@ -31,6 +34,26 @@ void clean_prepared(PreparedCloud& p, const OutlierFilterOptions& outliers, cons
     p.is_ground = std::move(g.is_ground);
     p.ground_points = g.ground_points;
     p.ground_from_classification = g.from_classification;
+    // The extent of what is kept must suit a grid of 2 m cells (the heights
+    // index; a class-2 ground skips the SMRF grid): far, scattered points are
+    // refused here, where the file is known, not deep in a later stage.
+    double minx = INFINITY, miny = INFINITY, maxx = -INFINITY, maxy = -INFINITY;
+    std::size_t kept = 0;
+    for (std::size_t i = 0; i < p.cloud.size(); ++i)
+        if (p.keep.empty() || p.keep[i])
+            ++kept, minx = std::min(minx, p.cloud.x[i]), maxx = std::max(maxx, p.cloud.x[i]), miny = std::min(miny, p.cloud.y[i]),
+                    maxy = std::max(maxy, p.cloud.y[i]);
+    if (kept > 0) checked_grid_size(minx, miny, maxx, maxy, 2.0 / unit, kept, "cloud extent");
+}
+// The same, with a failure (a grid too large for scattered points) naming the file.
+void clean_prepared(PreparedCloud& p, const OutlierFilterOptions& outliers, const GroundFilterOptions& ground, const std::string& name) {
+    if (!(p.crs.linear_unit_m > 0))
+        throw Error(name, "the cloud's working CRS (" + p.crs.label() + ") is not projected: the outlier and ground filters need metres");
+    try {
+        clean_prepared(p, outliers, ground);
+    } catch (const Error& e) {
+        throw Error(name, e.what());
+    }
 }
 }  // namespace
 
@@ -64,7 +87,7 @@ PreparedCloud prepare_cloud(const std::string& cloud_path, const std::string& cl
         if (!crop) throw Error(cloud_path, "point cloud is empty");
         return p;  // a tile without points: nothing to clean or classify
     }
-    clean_prepared(p, outliers, ground);
+    clean_prepared(p, outliers, ground, cloud_path);
     return p;
 }
 
@@ -85,7 +108,7 @@ PreparedCloud prepare_cloud(const std::vector<CloudPart>& parts, const std::stri
             if (c.x[i] >= part.crop.min_x && c.x[i] < part.crop.max_x && c.y[i] >= part.crop.min_y && c.y[i] < part.crop.max_y) p.cloud.append(c, i);
     }
     if (p.cloud.size() == 0) return p;
-    clean_prepared(p, outliers, ground);
+    clean_prepared(p, outliers, ground, parts.size() == 1 ? first : first + " (and " + std::to_string(parts.size() - 1) + " more parts)");
     return p;
 }
 

@@ -33,6 +33,11 @@ RasterizeReport rasterize_run(const std::string& cloud_path, const std::string& 
         const RasterInfo info = read_raster_info(o.grid_raster);
         grid = {info.transform, info.width, info.height};
         target = info.crs;
+        // Cells, outlier distances and the ground filter's window are metres
+        // (a geographic grid once failed with "outlier_limit_m: must be >= 0").
+        if (target.geographic)
+            throw Error(o.grid_raster, "the grid raster is in a geographic CRS (" + target.label() +
+                                           "); rasterizing needs a projected CRS in metres: reproject it, e.g. gdalwarp -t_srs EPSG:<UTM zone>");
     }
     CloudRasters r;
     CrsInfo out_crs;
@@ -43,7 +48,7 @@ RasterizeReport rasterize_run(const std::string& cloud_path, const std::string& 
     // and the density measured on the central 400 m.
     const CrsInfo source = require_cloud_crs(cloud_path, o.cloud_crs);
     const double unit = (target.empty() ? source : target).linear_unit_m;
-    if (o.grid_raster.empty()) grid = grid_over_extent(cloud_point_bounds(cloud_path), o.gsd_m / unit);
+    if (o.grid_raster.empty()) grid = grid_over_extent(cloud_point_bounds(cloud_path), o.gsd_m / unit, 0, cloud_path);
     const GeoTransform& gt = grid.transform;
     const CloudPlan plan = plan_cloud(cloud_path, o.cloud_crs, target, o.outliers, gt.pixel_to_map({grid.width / 2.0, grid.height / 2.0}));
     if (windows) {

@@ -9,6 +9,7 @@
 
 #include "core/atomic_file.hpp"
 #include "core/error.hpp"
+#include "core/memory.hpp"
 #include "crs/gdal_util.hpp"
 
 namespace cityforge {
@@ -183,7 +184,20 @@ Image<T> RasterReader::read_resampled(const PixelWindow& w, int out_width, int o
     else if (resampling == "cubic") extra.eResampleAlg = GRIORA_Cubic;
     else if (resampling == "average") extra.eResampleAlg = GRIORA_Average;
     else throw Error("resampling", "unknown method '" + resampling + "'");
-    Image<T> image(out_width, out_height, static_cast<int>(bands.size()));
+    // A read larger than the memory there is (a 65,000 x 65,000 ortho) is
+    // refused before it is tried, naming the raster and the sizes.
+    const double bytes = static_cast<double>(out_width) * out_height * static_cast<double>(bands.size()) * sizeof(T);
+    const double usable = usable_memory_bytes();
+    const std::string what = std::to_string(out_width) + " x " + std::to_string(out_height) + " pixels x " + std::to_string(bands.size()) +
+                             " band(s) need " + format_bytes(bytes);
+    const std::string advice = ": tile it (run --tile-size) or crop it (gdal_translate -srcwin)";
+    if (usable > 0 && bytes > usable) throw OutOfMemory(info_.path, what + ", more than the " + format_bytes(usable) + " this process may use" + advice);
+    Image<T> image;
+    try {
+        image = Image<T>(out_width, out_height, static_cast<int>(bands.size()));
+    } catch (const std::bad_alloc&) {
+        throw OutOfMemory(info_.path, what + advice);
+    }
     GdalErrorCapture capture;
     const CPLErr err = impl_->ds->RasterIO(GF_Read, w.col, w.row, w.width, w.height, image.data.data(), out_width,
                                            out_height, gdal_type<T>(), static_cast<int>(bands.size()), bands.data(), 0,
