@@ -1031,8 +1031,10 @@ private:
     std::array<std::unique_ptr<Ctx>, 4> contexts_;
 };
 
+// layers: 0 every layer, 1 the PointCloud fields, 2 the XY layer only.
 std::size_t decode_layered(const LazInfo& info, int rl, const uint8_t* data, std::size_t size, uint64_t count, char* out_chars,
-                           bool point_fields_only) {
+                           int layers_wanted) {
+    const bool point_fields_only = layers_wanted == 1, xy_only = layers_wanted == 2;
     if (count == 0) return 0;
     auto* out = reinterpret_cast<uint8_t*>(out_chars);
     std::size_t pos = 0;
@@ -1065,8 +1067,9 @@ std::size_t decode_layered(const LazInfo& info, int rl, const uint8_t* data, std
             // and extra bytes are not needed for a PointCloud; their layers are
             // independent of the others and are skipped (fields keep the chunk's
             // first value).
-            const bool skip = point_fields_only && ((it.type == 10 && (j == 3 || j == 5 || j == 6 || j == 7)) ||
-                                                    (it.type == 12 && j == 1) || it.type == 14);
+            const bool skip = (point_fields_only && ((it.type == 10 && (j == 3 || j == 5 || j == 6 || j == 7)) ||
+                                                     (it.type == 12 && j == 1) || it.type == 14)) ||
+                              (xy_only && (it.type != 10 || j != 0));
             layer.open(data + pos, skip ? 0 : sizes[li]);
             pos += sizes[li];
         }
@@ -1096,6 +1099,12 @@ std::size_t decode_layered(const LazInfo& info, int rl, const uint8_t* data, std
             slots.push_back({2, bytes.size() - 1, off});
         }
         off += it.size;
+    }
+    if (xy_only) {
+        // The XY layer depends on no other layer: x and y (and the returns,
+        // the scanner channel) are exact, every other field is stale.
+        for (uint64_t i = 1; i < count; ++i) point.read(out + i * rl);
+        return pos;
     }
     for (uint64_t i = 1; i < count; ++i) {
         uint8_t* rec = out + i * rl;
@@ -1212,8 +1221,20 @@ void check_laz_supported(const LazInfo& info, int point_format, int record_lengt
 std::size_t decode_laz_chunk(const LazInfo& info, int record_length, const uint8_t* data, std::size_t size, uint64_t count,
                              char* out, const std::string& path, std::size_t chunk_index, bool point_fields_only) {
     try {
-        if (info.compressor == 3) return decode_layered(info, record_length, data, size, count, out, point_fields_only);
+        if (info.compressor == 3) return decode_layered(info, record_length, data, size, count, out, point_fields_only ? 1 : 0);
         return decode_pointwise(info, record_length, data, size, count, out);
+    } catch (const Corrupt& c) {
+        throw Error(path, "chunk " + std::to_string(chunk_index) + ": " + c.what);
+    } catch (const std::bad_alloc&) {
+        throw Error(path, "chunk " + std::to_string(chunk_index) + ": out of memory while decoding");
+    }
+}
+
+std::size_t decode_laz_chunk_xy(const LazInfo& info, int record_length, const uint8_t* data, std::size_t size, uint64_t count,
+                                char* out, const std::string& path, std::size_t chunk_index) {
+    if (info.compressor != 3) throw Error(path, "chunk " + std::to_string(chunk_index) + ": only layered LAZ chunks have an XY layer");
+    try {
+        return decode_layered(info, record_length, data, size, count, out, 2);
     } catch (const Corrupt& c) {
         throw Error(path, "chunk " + std::to_string(chunk_index) + ": " + c.what);
     } catch (const std::bad_alloc&) {
@@ -1365,6 +1386,48 @@ void LazPointSource::fill() {
                          point_fields_only_);
     });
     next_ = end;
+}
+
+std::vector<bool> LazPointSource::chunks_meeting_box(const LazXYBox& box) {
+    if (info_.compressor != 3 || !has_table_) return {};
+    std::vector<bool> keep(chunks_.size(), false);
+    const std::size_t rl = static_cast<std::size_t>(record_length_);
+    // Batches bound the memory (compressed bytes and one XY scratch buffer per chunk).
+    std::size_t i = 0;
+    std::vector<std::vector<uint8_t>> raw;
+    while (i < order_.size()) {
+        std::size_t end = i;
+        uint64_t bytes = 0;
+        while (end < order_.size() && (end == i || bytes + chunks_[order_[end]].bytes <= (64ull << 20)) && end - i < 64) {
+            bytes += chunks_[order_[end]].bytes;
+            ++end;
+        }
+        raw.resize(std::max(raw.size(), end - i));
+        for (std::size_t k = i; k < end; ++k) read_raw(order_[k], raw[k - i]);
+        std::vector<char> hit(end - i, 0);
+        tbb::parallel_for(tbb::blocked_range<std::size_t>(i, end, 1), [&](const tbb::blocked_range<std::size_t>& r) {
+            std::vector<char> scratch;
+            for (std::size_t k = r.begin(); k < r.end(); ++k) {
+                const std::size_t ci = order_[k];
+                const LazChunk& c = chunks_[ci];
+                scratch.resize(static_cast<std::size_t>(c.point_count) * rl);
+                decode_laz_chunk_xy(info_, record_length_, raw[k - i].data(), raw[k - i].size(), c.point_count, scratch.data(), path_, ci);
+                for (uint64_t p = 0; p < c.point_count; ++p) {
+                    const char* rec = scratch.data() + p * rl;
+                    // The same arithmetic as the readers' coordinates.
+                    const double x = bytes::get<int32_t>(rec) * box.scale_x + box.offset_x;
+                    const double y = bytes::get<int32_t>(rec + 4) * box.scale_y + box.offset_y;
+                    if (x >= box.min_x && x <= box.max_x && y >= box.min_y && y <= box.max_y) {
+                        hit[k - i] = 1;
+                        break;
+                    }
+                }
+            }
+        });
+        for (std::size_t k = i; k < end; ++k) keep[order_[k]] = hit[k - i] != 0;
+        i = end;
+    }
+    return keep;
 }
 
 std::size_t LazPointSource::decode_direct(char* out, std::size_t max_points) {
