@@ -647,6 +647,152 @@ private:
     std::vector<SymbolModel> models_;
 };
 
+// ------------------------------------------------------------ pointwise v1
+// Item version 1 (LASzip 1.x, compressor 1 and early compressor 2 files):
+// simpler predictors than version 2 over the same arithmetic coder and
+// integer correctors.
+
+// POINT10 v1: x and y predicted by the median of the last three differences,
+// z by the last z; the other fields only when the "changed" symbol says so.
+class Point10V1 final : public ItemV2 {
+public:
+    explicit Point10V1(const uint8_t* first) { std::memcpy(last_, first, 20); }
+    void read(ArithDecoder& dec, uint8_t* item) override {
+        const int32_t median_x = median3(last_x_diff_), median_y = median3(last_y_diff_);
+        const int32_t x_diff = ic_dx_.decompress(dec, median_x);
+        bytes::store<uint32_t>(last_, bytes::get<uint32_t>(last_) + static_cast<uint32_t>(x_diff));
+        uint32_t k = ic_dx_.k();
+        const int32_t y_diff = ic_dy_.decompress(dec, median_y, std::min<uint32_t>(k, 19));
+        bytes::store<uint32_t>(last_ + 4, bytes::get<uint32_t>(last_ + 4) + static_cast<uint32_t>(y_diff));
+        k = (k + ic_dy_.k()) / 2;
+        bytes::store<int32_t>(last_ + 8, ic_z_.decompress(dec, bytes::get<int32_t>(last_ + 8), std::min<uint32_t>(k, 19)));
+        if (const uint32_t changed = dec.decode_symbol(changed_values_)) {
+            if (changed & 32)
+                bytes::store<uint16_t>(last_ + 12, static_cast<uint16_t>(ic_intensity_.decompress(dec, bytes::get<uint16_t>(last_ + 12))));
+            if (changed & 16) last_[14] = static_cast<uint8_t>(dec.decode_symbol(bit_byte_[last_[14]].get(256)));
+            if (changed & 8) last_[15] = static_cast<uint8_t>(dec.decode_symbol(classification_[last_[15]].get(256)));
+            if (changed & 4) last_[16] = static_cast<uint8_t>(ic_scan_angle_.decompress(dec, last_[16], k < 3 ? 1 : 0));
+            if (changed & 2) last_[17] = static_cast<uint8_t>(dec.decode_symbol(user_data_[last_[17]].get(256)));
+            if (changed & 1)
+                bytes::store<uint16_t>(last_ + 18, static_cast<uint16_t>(ic_point_source_.decompress(dec, bytes::get<uint16_t>(last_ + 18))));
+        }
+        last_x_diff_[incr_] = x_diff;
+        last_y_diff_[incr_] = y_diff;
+        incr_ = incr_ == 2 ? 0 : incr_ + 1;
+        std::memcpy(item, last_, 20);
+    }
+
+private:
+    static int32_t median3(const std::array<int32_t, 3>& d) {
+        if (d[0] < d[1]) return d[1] < d[2] ? d[1] : (d[0] < d[2] ? d[2] : d[0]);
+        return d[0] < d[2] ? d[0] : (d[1] < d[2] ? d[2] : d[1]);
+    }
+    uint8_t last_[20];
+    std::array<int32_t, 3> last_x_diff_{}, last_y_diff_{};
+    uint32_t incr_ = 0;
+    IntegerDecompressor ic_dx_{32, 1}, ic_dy_{32, 20}, ic_z_{32, 20};
+    IntegerDecompressor ic_intensity_{16, 1}, ic_scan_angle_{8, 2}, ic_point_source_{16, 1};
+    SymbolModel changed_values_{64};
+    std::array<LazyModel, 256> bit_byte_, classification_, user_data_;
+};
+
+// GPSTIME11 v1: one sequence; the difference to the last time as a multiple
+// of the last 32-bit difference, a new difference, a raw 64-bit time, or "same".
+class GpsTime11V1 final : public ItemV2 {
+public:
+    explicit GpsTime11V1(const uint8_t* first) : time_(bytes::get<uint64_t>(first)) {}
+    void read(ArithDecoder& dec, uint8_t* item) override {
+        constexpr uint32_t kMulti = 512;
+        if (diff_ == 0) {
+            const uint32_t m = dec.decode_symbol(zero_diff_);
+            if (m == 1) {
+                diff_ = ic_.decompress(dec, 0, 0);
+                time_ += static_cast<uint64_t>(static_cast<int64_t>(diff_));
+            } else if (m == 2) {
+                time_ = read_int64(dec);
+            }
+        } else {
+            const uint32_t m = dec.decode_symbol(multi_);
+            if (m < kMulti - 2) {
+                int32_t d;
+                const uint32_t ld = static_cast<uint32_t>(diff_);
+                if (m == 1) {
+                    d = ic_.decompress(dec, diff_, 1);
+                    diff_ = d;
+                    extreme_ = 0;
+                } else if (m == 0) {
+                    d = ic_.decompress(dec, diff_ / 4, 2);
+                    if (++extreme_ > 3) {
+                        diff_ = d;
+                        extreme_ = 0;
+                    }
+                } else {
+                    d = ic_.decompress(dec, static_cast<int32_t>(m * ld), m < 10 ? 3 : (m < 50 ? 4 : 5));
+                    if (m == kMulti - 3 && ++extreme_ > 3) {
+                        diff_ = d;
+                        extreme_ = 0;
+                    }
+                }
+                time_ += static_cast<uint64_t>(static_cast<int64_t>(d));
+            } else if (m < kMulti - 1) {
+                time_ = read_int64(dec);
+            }
+        }
+        bytes::store<uint64_t>(item, time_);
+    }
+
+private:
+    static uint64_t read_int64(ArithDecoder& dec) {
+        const uint64_t low = dec.read_int();
+        return (static_cast<uint64_t>(dec.read_int()) << 32) | low;
+    }
+    uint64_t time_;
+    int32_t diff_ = 0;
+    uint32_t extreme_ = 0;
+    SymbolModel multi_{512}, zero_diff_{3};
+    IntegerDecompressor ic_{32, 6};
+};
+
+// RGB12 v1: which of the six colour bytes changed, then each changed byte
+// as an 8-bit correction of the last one (contexts 0..5).
+class Rgb12V1 final : public ItemV2 {
+public:
+    explicit Rgb12V1(const uint8_t* first) { std::memcpy(last_, first, 6); }
+    void read(ArithDecoder& dec, uint8_t* item) override {
+        const uint32_t sym = dec.decode_symbol(byte_used_);
+        uint16_t out[3];
+        for (uint32_t c = 0; c < 3; ++c) {
+            const uint32_t lo = (sym >> (2 * c)) & 1 ? static_cast<uint32_t>(ic_.decompress(dec, last_[c] & 0xFF, 2 * c)) : (last_[c] & 0xFFu);
+            const uint32_t hi = (sym >> (2 * c + 1)) & 1 ? static_cast<uint32_t>(ic_.decompress(dec, last_[c] >> 8, 2 * c + 1)) << 8
+                                                         : (last_[c] & 0xFF00u);
+            out[c] = static_cast<uint16_t>(lo | hi);
+        }
+        std::memcpy(last_, out, 6);
+        std::memcpy(item, out, 6);
+    }
+
+private:
+    uint16_t last_[3];
+    SymbolModel byte_used_{64};
+    IntegerDecompressor ic_{8, 6};
+};
+
+// BYTE v1 (extra bytes): each byte an 8-bit correction of the last, context = its index.
+class ByteV1 final : public ItemV2 {
+public:
+    ByteV1(const uint8_t* first, std::size_t n) : last_(first, first + n), ic_(8, static_cast<uint32_t>(n)) {}
+    void read(ArithDecoder& dec, uint8_t* item) override {
+        for (std::size_t i = 0; i < last_.size(); ++i) {
+            last_[i] = static_cast<uint8_t>(ic_.decompress(dec, last_[i], static_cast<uint32_t>(i)));
+            item[i] = last_[i];
+        }
+    }
+
+private:
+    std::vector<uint8_t> last_;
+    IntegerDecompressor ic_;
+};
+
 // WAVEPACKET13 v1 (point formats 4 and 5, 29 bytes): the descriptor index
 // (a byte), then the 64-bit offset to the waveform data, coded as "same",
 // "previous offset + previous packet size", "previous + a 32-bit difference"
@@ -713,12 +859,13 @@ std::size_t decode_pointwise(const LazInfo& info, int rl, const uint8_t* data, s
     std::size_t off = 0;
     for (const LazItem& it : info.items) {
         const uint8_t* first = out + off;
+        const bool v1 = it.version == 1;
         switch (it.type) {
-            case 6: items.push_back(std::make_unique<Point10V2>(first)); break;
-            case 7: items.push_back(std::make_unique<GpsTime11V2>(first)); break;
-            case 8: items.push_back(std::make_unique<Rgb12V2>(first)); break;
+            case 6: items.push_back(v1 ? std::unique_ptr<ItemV2>(std::make_unique<Point10V1>(first)) : std::make_unique<Point10V2>(first)); break;
+            case 7: items.push_back(v1 ? std::unique_ptr<ItemV2>(std::make_unique<GpsTime11V1>(first)) : std::make_unique<GpsTime11V2>(first)); break;
+            case 8: items.push_back(v1 ? std::unique_ptr<ItemV2>(std::make_unique<Rgb12V1>(first)) : std::make_unique<Rgb12V2>(first)); break;
             case 9: items.push_back(std::make_unique<WavePacket13V1>(first)); break;
-            default: items.push_back(std::make_unique<ByteV2>(first, it.size)); break;
+            default: items.push_back(v1 ? std::unique_ptr<ItemV2>(std::make_unique<ByteV1>(first, it.size)) : std::make_unique<ByteV2>(first, it.size)); break;
         }
         offsets.push_back(off);
         off += it.size;
@@ -729,7 +876,9 @@ std::size_t decode_pointwise(const LazInfo& info, int rl, const uint8_t* data, s
     // The layouts of point formats 0-3 without extra bytes (nearly all
     // pointwise files) get a loop with the item calls resolved at compile
     // time; anything else goes through the item list.
-    const auto type = [&](std::size_t k) { return k < info.items.size() ? info.items[k].type : 0xFFFF; };
+    const auto type = [&](std::size_t k) {
+        return k < info.items.size() && info.items[k].version == 2 ? info.items[k].type : 0xFFFF;  // the fused loops are v2 only
+    };
     const std::size_t n_items = info.items.size();
     if (n_items == 1 && type(0) == 6)
         decode_fused<false, false>(dec, items, out, rl, count);
@@ -1184,21 +1333,21 @@ void check_laz_supported(const LazInfo& info, int point_format, int record_lengt
         return s;
     };
     if (info.coder != 0) throw Error(path, "LAZ coder " + std::to_string(info.coder) + " is unknown (only 0 = arithmetic exists)");
-    if (info.compressor == 1)
-        throw Error(path, "LAZ compressor 1 (pointwise, not chunked, LASzip 1.x items " + items() +
-                              ") is not supported; re-compress with a current LASzip/laz-perf or convert to LAS");
-    if (info.compressor != 2 && info.compressor != 3)
-        throw Error(path, "LAZ compressor " + info.compressor_name() + " is not supported (only 2 = pointwise chunked and 3 = layered chunked)");
-    if (info.chunk_size == 0) throw Error(path, "LAZ chunk size 0 is invalid");
+    if (info.compressor < 1 || info.compressor > 3)
+        throw Error(path, "LAZ compressor " + info.compressor_name() +
+                              " is not supported (only 1 = pointwise, 2 = pointwise chunked and 3 = layered chunked)");
+    if (info.chunk_size == 0 && info.compressor != 1) throw Error(path, "LAZ chunk size 0 is invalid");
     if (info.items.empty()) throw Error(path, "LASzip VLR lists no items");
     int total = 0;
     for (std::size_t i = 0; i < info.items.size(); ++i) {
         const LazItem& it = info.items[i];
         total += it.size;
         bool ok;
-        if (info.compressor == 2) {
-            ok = (it.version == 2 && ((it.type == 6 && it.size == 20 && i == 0) || (it.type == 7 && it.size == 8) ||
-                                      (it.type == 8 && it.size == 6) || (it.type == 0 && it.size > 0))) ||
+        if (info.compressor <= 2) {
+            // Item versions 1 (LASzip 1.x) and 2; WAVEPACKET13 has only version 1.
+            ok = ((it.version == 1 || it.version == 2) &&
+                  ((it.type == 6 && it.size == 20 && i == 0) || (it.type == 7 && it.size == 8) || (it.type == 8 && it.size == 6) ||
+                   (it.type == 0 && it.size > 0))) ||
                  (it.version == 1 && it.type == 9 && it.size == 29);
         } else {
             ok = (it.version == 3 || it.version == 4) && it.version == info.items[0].version &&
@@ -1213,7 +1362,7 @@ void check_laz_supported(const LazInfo& info, int point_format, int record_lengt
         throw Error(path, "LAZ items " + items() + " cover " + std::to_string(total) + " bytes but the point record is " +
                               std::to_string(record_length));
     const bool legacy = point_format <= 5;
-    if ((info.compressor == 2) != legacy || point_format > 8)
+    if ((info.compressor <= 2) != legacy || point_format > 8)
         throw Error(path, "LAZ compressor " + info.compressor_name() + " with point format " + std::to_string(point_format) +
                               " is not supported");
 }
@@ -1250,8 +1399,19 @@ LazPointSource::LazPointSource(const std::string& path, const LazInfo& info, uin
     in_.open(path, std::ios::binary);
     if (!in_) throw Error(path, "cannot open for reading");
     file_size_ = static_cast<uint64_t>(std::filesystem::file_size(path));
-    const uint64_t chunks_start = offset_to_points + 8;
     if (point_count == 0) return;
+    if (info.compressor == 1) {
+        // Pointwise, not chunked: no chunk-table pointer; the first point
+        // raw at the start of the point data, then one arithmetic-coded
+        // stream for all the others (a single "chunk").
+        if (offset_to_points >= file_size_) throw Error(path, "LAZ file ends before its point data (truncated)");
+        chunks_.push_back({0, 0, 0, point_count});
+        sequential_offset_ = offset_to_points;
+        std::vector<bool> all(1, true);
+        select_chunks(all);
+        return;
+    }
+    const uint64_t chunks_start = offset_to_points + 8;
     if (chunks_start > file_size_) throw Error(path, "LAZ file ends before its first chunk (truncated)");
     auto read_at = [&](uint64_t pos, void* dst, std::size_t n) {
         in_.clear();

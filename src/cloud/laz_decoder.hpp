@@ -1,13 +1,16 @@
 #pragma once
 // LASzip (LAZ) decoding, our own implementation of the published format
-// (Debian 12 has neither LASzip nor laz-perf). Supports the chunked
-// compressors: 2 = pointwise (item version 2: POINT10, GPSTIME11, RGB12,
-// BYTE extra bytes; WAVEPACKET13 version 1) for point formats 0-5, and 3 = layered (item versions 3 and 4:
-// POINT14, RGB14, RGBNIR14, BYTE14 extra bytes) for point formats 6-8; fixed
-// and variable chunk sizes, with or without a chunk table. Decoded records
-// are byte-identical to LASzip / laz-perf output (tested against the corpus
-// oracle). Everything else (compressor 1, WAVEPACKET14 of formats 9/10, other versions) is
-// refused with a one-line Error naming the file.
+// (Debian 12 has neither LASzip nor laz-perf). Supports compressor 1 =
+// pointwise, not chunked (LASzip 1.x: one stream for all points), and the
+// chunked compressors: 2 = pointwise (item versions 1 and 2: POINT10,
+// GPSTIME11, RGB12, BYTE extra bytes; WAVEPACKET13 version 1) for point
+// formats 0-5, and 3 = layered (item versions 3 and 4: POINT14, RGB14,
+// RGBNIR14, BYTE14 extra bytes) for point formats 6-8; fixed and variable
+// chunk sizes, with or without a chunk table. Decoded records are
+// byte-identical to LASzip / laz-perf output (tested against the corpus
+// oracle and LAS twins). Everything else (WAVEPACKET14 of formats 9/10,
+// other versions, unknown compressors) is refused with a one-line Error
+// naming the file.
 #include <cstddef>
 #include <cstdint>
 #include <fstream>
@@ -28,7 +31,7 @@ std::string to_string(const LazItem& item);
 
 /// The LASzip VLR (user "laszip encoded", record 22204).
 struct LazInfo {
-    uint16_t compressor = 0;  ///< 0 none, 1 pointwise, 2 pointwise chunked, 3 layered chunked
+    uint16_t compressor = 0;  ///< 0 none, 1 pointwise (one stream, chunk_size 0), 2 pointwise chunked, 3 layered chunked
     uint16_t coder = 0;       ///< 0 = arithmetic
     int version_major = 0, version_minor = 0, version_revision = 0;  ///< of the writing LASzip
     uint32_t options = 0;
