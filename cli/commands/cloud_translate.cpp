@@ -41,12 +41,17 @@ void add_cloud_translate_command(CLI::App& cloud, const GlobalFlags& g, CommandL
                        }
                        if (!s->crs.empty()) o.crs_wkt = crs_from_user_input(s->crs, "--crs").wkt;
                        const CloudTranslateResult r = translate_cloud(o);
-                       if (!g.quiet)
+                       if (!g.quiet) {
+                           std::string skipped;
+                           if (r.laz_chunks_skipped > 0)
+                               skipped = ", " + std::to_string(r.laz_chunks_skipped) + " of " + std::to_string(r.laz_chunks) +
+                                         (r.copc_nodes_skipped ? " COPC nodes outside --bounds not decoded"
+                                                               : " LAZ chunks skipped (their XY layer has no point in --bounds)");
                            std::fprintf(stderr, "cityforge: %llu of %llu points%s%s -> %s (point records sha256 %s)\n",
                                         static_cast<unsigned long long>(r.points_written), static_cast<unsigned long long>(r.points_read),
-                                        r.decompressed ? ", decompressed from LAZ" : "",
-                                        r.copc_nodes_skipped ? ", only the COPC nodes meeting --bounds decoded" : "", o.output.c_str(),
+                                        r.decompressed ? ", decompressed from LAZ" : "", skipped.c_str(), o.output.c_str(),
                                         r.points_sha256.c_str());
+                       }
                        return 0;
                    }});
 }

@@ -42,10 +42,19 @@ public:
     }
     std::size_t read_chunk(PointCloud& out, std::size_t max_points) override { return reader_.read_chunk(out, max_points); }
     void restrict_to_box(double min_x, double min_y, double max_x, double max_y) override {
-        if (!copc_) return;
-        // Pad by one quantum: points sit on the scale grid, the cubes need not.
-        const double pad = std::max(reader_.header().scale[0], reader_.header().scale[1]);
-        reader_.select_laz_chunks(copc_chunks_in_box(*copc_, reader_.laz_source()->chunks(), min_x, min_y, max_x, max_y, pad, -1, path_));
+        LazPointSource* laz = reader_.laz_source();
+        if (!laz) return;
+        const LasHeader& h = reader_.header();
+        if (copc_) {
+            // Pad by one quantum: points sit on the scale grid, the cubes need not.
+            const double pad = std::max(h.scale[0], h.scale[1]);
+            reader_.select_laz_chunks(copc_chunks_in_box(*copc_, laz->chunks(), min_x, min_y, max_x, max_y, pad, -1, path_));
+            return;
+        }
+        // Layered LAZ: skip the chunks whose XY layer has no point in the box
+        // (closed box: a superset of the caller's half-open one).
+        const auto keep = laz->chunks_meeting_box({min_x, min_y, max_x, max_y, h.scale[0], h.scale[1], h.offset[0], h.offset[1]});
+        if (!keep.empty()) reader_.select_laz_chunks(keep);
     }
     std::string path_;
     LasReader reader_;

@@ -54,8 +54,9 @@ public:
     bool copc() const { return copc_; }
     /// A hint before the first read: the caller keeps only points with
     /// min_x <= x < max_x, min_y <= y < max_y (file CRS). COPC files then
-    /// decode only the octree nodes whose cube meets the box; other formats
-    /// still hand out every point (the caller filters).
+    /// decode only the octree nodes whose cube meets the box; layered LAZ
+    /// (point formats 6-8) only the chunks whose XY layer has a point in it;
+    /// other formats still hand out every point (the caller filters).
     void restrict_to_box(double min_x, double min_y, double max_x, double max_y) { impl_->restrict_to_box(min_x, min_y, max_x, max_y); }
 
 private:

@@ -102,14 +102,22 @@ CloudTranslateResult translate_las(const CloudTranslateOptions& o) {
         epos += 60 + length;
     }
 
-    // A COPC crop decodes only the nodes that meet the box.
+    // A COPC crop decodes only the nodes that meet the box; a layered LAZ
+    // crop only the chunks whose XY layer has a point in it.
+    if (reader.laz_source()) res.laz_chunks = reader.laz_source()->chunks().size();
     if (o.bounds && reader.laz_source()) {
+        const auto& b = *o.bounds;
+        std::vector<bool> keep;
         if (const auto copc = read_copc_hierarchy(o.input, h)) {
-            const auto& b = *o.bounds;
             const double pad = std::max(h.scale[0], h.scale[1]);
             // copc_chunks_in_box takes a half-open box; widen it so max is kept.
-            const auto keep = copc_chunks_in_box(*copc, reader.laz_source()->chunks(), b[0], b[1], b[2] + pad, b[3] + pad, pad, -1, o.input);
+            keep = copc_chunks_in_box(*copc, reader.laz_source()->chunks(), b[0], b[1], b[2] + pad, b[3] + pad, pad, -1, o.input);
             res.copc_nodes_skipped = std::find(keep.begin(), keep.end(), false) != keep.end();
+        } else {
+            keep = reader.laz_source()->chunks_meeting_box({b[0], b[1], b[2], b[3], h.scale[0], h.scale[1], h.offset[0], h.offset[1]});
+        }
+        if (!keep.empty()) {
+            res.laz_chunks_skipped = static_cast<uint64_t>(std::count(keep.begin(), keep.end(), false));
             reader.select_laz_chunks(keep);
         }
     }

@@ -32,6 +32,8 @@ struct CloudTranslateResult {
     uint64_t points_written = 0;
     bool decompressed = false;    ///< the input was LAZ
     bool copc_nodes_skipped = false;  ///< a COPC crop decoded only some nodes
+    uint64_t laz_chunks = 0;          ///< chunks of a LAZ input
+    uint64_t laz_chunks_skipped = 0;  ///< of them, not decoded: COPC nodes, or layered chunks whose XY layer has no point in --bounds
     std::string points_sha256;    ///< SHA-256 of the written point records
 };
 

@@ -647,6 +647,152 @@ private:
     std::vector<SymbolModel> models_;
 };
 
+// ------------------------------------------------------------ pointwise v1
+// Item version 1 (LASzip 1.x, compressor 1 and early compressor 2 files):
+// simpler predictors than version 2 over the same arithmetic coder and
+// integer correctors.
+
+// POINT10 v1: x and y predicted by the median of the last three differences,
+// z by the last z; the other fields only when the "changed" symbol says so.
+class Point10V1 final : public ItemV2 {
+public:
+    explicit Point10V1(const uint8_t* first) { std::memcpy(last_, first, 20); }
+    void read(ArithDecoder& dec, uint8_t* item) override {
+        const int32_t median_x = median3(last_x_diff_), median_y = median3(last_y_diff_);
+        const int32_t x_diff = ic_dx_.decompress(dec, median_x);
+        bytes::store<uint32_t>(last_, bytes::get<uint32_t>(last_) + static_cast<uint32_t>(x_diff));
+        uint32_t k = ic_dx_.k();
+        const int32_t y_diff = ic_dy_.decompress(dec, median_y, std::min<uint32_t>(k, 19));
+        bytes::store<uint32_t>(last_ + 4, bytes::get<uint32_t>(last_ + 4) + static_cast<uint32_t>(y_diff));
+        k = (k + ic_dy_.k()) / 2;
+        bytes::store<int32_t>(last_ + 8, ic_z_.decompress(dec, bytes::get<int32_t>(last_ + 8), std::min<uint32_t>(k, 19)));
+        if (const uint32_t changed = dec.decode_symbol(changed_values_)) {
+            if (changed & 32)
+                bytes::store<uint16_t>(last_ + 12, static_cast<uint16_t>(ic_intensity_.decompress(dec, bytes::get<uint16_t>(last_ + 12))));
+            if (changed & 16) last_[14] = static_cast<uint8_t>(dec.decode_symbol(bit_byte_[last_[14]].get(256)));
+            if (changed & 8) last_[15] = static_cast<uint8_t>(dec.decode_symbol(classification_[last_[15]].get(256)));
+            if (changed & 4) last_[16] = static_cast<uint8_t>(ic_scan_angle_.decompress(dec, last_[16], k < 3 ? 1 : 0));
+            if (changed & 2) last_[17] = static_cast<uint8_t>(dec.decode_symbol(user_data_[last_[17]].get(256)));
+            if (changed & 1)
+                bytes::store<uint16_t>(last_ + 18, static_cast<uint16_t>(ic_point_source_.decompress(dec, bytes::get<uint16_t>(last_ + 18))));
+        }
+        last_x_diff_[incr_] = x_diff;
+        last_y_diff_[incr_] = y_diff;
+        incr_ = incr_ == 2 ? 0 : incr_ + 1;
+        std::memcpy(item, last_, 20);
+    }
+
+private:
+    static int32_t median3(const std::array<int32_t, 3>& d) {
+        if (d[0] < d[1]) return d[1] < d[2] ? d[1] : (d[0] < d[2] ? d[2] : d[0]);
+        return d[0] < d[2] ? d[0] : (d[1] < d[2] ? d[2] : d[1]);
+    }
+    uint8_t last_[20];
+    std::array<int32_t, 3> last_x_diff_{}, last_y_diff_{};
+    uint32_t incr_ = 0;
+    IntegerDecompressor ic_dx_{32, 1}, ic_dy_{32, 20}, ic_z_{32, 20};
+    IntegerDecompressor ic_intensity_{16, 1}, ic_scan_angle_{8, 2}, ic_point_source_{16, 1};
+    SymbolModel changed_values_{64};
+    std::array<LazyModel, 256> bit_byte_, classification_, user_data_;
+};
+
+// GPSTIME11 v1: one sequence; the difference to the last time as a multiple
+// of the last 32-bit difference, a new difference, a raw 64-bit time, or "same".
+class GpsTime11V1 final : public ItemV2 {
+public:
+    explicit GpsTime11V1(const uint8_t* first) : time_(bytes::get<uint64_t>(first)) {}
+    void read(ArithDecoder& dec, uint8_t* item) override {
+        constexpr uint32_t kMulti = 512;
+        if (diff_ == 0) {
+            const uint32_t m = dec.decode_symbol(zero_diff_);
+            if (m == 1) {
+                diff_ = ic_.decompress(dec, 0, 0);
+                time_ += static_cast<uint64_t>(static_cast<int64_t>(diff_));
+            } else if (m == 2) {
+                time_ = read_int64(dec);
+            }
+        } else {
+            const uint32_t m = dec.decode_symbol(multi_);
+            if (m < kMulti - 2) {
+                int32_t d;
+                const uint32_t ld = static_cast<uint32_t>(diff_);
+                if (m == 1) {
+                    d = ic_.decompress(dec, diff_, 1);
+                    diff_ = d;
+                    extreme_ = 0;
+                } else if (m == 0) {
+                    d = ic_.decompress(dec, diff_ / 4, 2);
+                    if (++extreme_ > 3) {
+                        diff_ = d;
+                        extreme_ = 0;
+                    }
+                } else {
+                    d = ic_.decompress(dec, static_cast<int32_t>(m * ld), m < 10 ? 3 : (m < 50 ? 4 : 5));
+                    if (m == kMulti - 3 && ++extreme_ > 3) {
+                        diff_ = d;
+                        extreme_ = 0;
+                    }
+                }
+                time_ += static_cast<uint64_t>(static_cast<int64_t>(d));
+            } else if (m < kMulti - 1) {
+                time_ = read_int64(dec);
+            }
+        }
+        bytes::store<uint64_t>(item, time_);
+    }
+
+private:
+    static uint64_t read_int64(ArithDecoder& dec) {
+        const uint64_t low = dec.read_int();
+        return (static_cast<uint64_t>(dec.read_int()) << 32) | low;
+    }
+    uint64_t time_;
+    int32_t diff_ = 0;
+    uint32_t extreme_ = 0;
+    SymbolModel multi_{512}, zero_diff_{3};
+    IntegerDecompressor ic_{32, 6};
+};
+
+// RGB12 v1: which of the six colour bytes changed, then each changed byte
+// as an 8-bit correction of the last one (contexts 0..5).
+class Rgb12V1 final : public ItemV2 {
+public:
+    explicit Rgb12V1(const uint8_t* first) { std::memcpy(last_, first, 6); }
+    void read(ArithDecoder& dec, uint8_t* item) override {
+        const uint32_t sym = dec.decode_symbol(byte_used_);
+        uint16_t out[3];
+        for (uint32_t c = 0; c < 3; ++c) {
+            const uint32_t lo = (sym >> (2 * c)) & 1 ? static_cast<uint32_t>(ic_.decompress(dec, last_[c] & 0xFF, 2 * c)) : (last_[c] & 0xFFu);
+            const uint32_t hi = (sym >> (2 * c + 1)) & 1 ? static_cast<uint32_t>(ic_.decompress(dec, last_[c] >> 8, 2 * c + 1)) << 8
+                                                         : (last_[c] & 0xFF00u);
+            out[c] = static_cast<uint16_t>(lo | hi);
+        }
+        std::memcpy(last_, out, 6);
+        std::memcpy(item, out, 6);
+    }
+
+private:
+    uint16_t last_[3];
+    SymbolModel byte_used_{64};
+    IntegerDecompressor ic_{8, 6};
+};
+
+// BYTE v1 (extra bytes): each byte an 8-bit correction of the last, context = its index.
+class ByteV1 final : public ItemV2 {
+public:
+    ByteV1(const uint8_t* first, std::size_t n) : last_(first, first + n), ic_(8, static_cast<uint32_t>(n)) {}
+    void read(ArithDecoder& dec, uint8_t* item) override {
+        for (std::size_t i = 0; i < last_.size(); ++i) {
+            last_[i] = static_cast<uint8_t>(ic_.decompress(dec, last_[i], static_cast<uint32_t>(i)));
+            item[i] = last_[i];
+        }
+    }
+
+private:
+    std::vector<uint8_t> last_;
+    IntegerDecompressor ic_;
+};
+
 // WAVEPACKET13 v1 (point formats 4 and 5, 29 bytes): the descriptor index
 // (a byte), then the 64-bit offset to the waveform data, coded as "same",
 // "previous offset + previous packet size", "previous + a 32-bit difference"
@@ -713,12 +859,13 @@ std::size_t decode_pointwise(const LazInfo& info, int rl, const uint8_t* data, s
     std::size_t off = 0;
     for (const LazItem& it : info.items) {
         const uint8_t* first = out + off;
+        const bool v1 = it.version == 1;
         switch (it.type) {
-            case 6: items.push_back(std::make_unique<Point10V2>(first)); break;
-            case 7: items.push_back(std::make_unique<GpsTime11V2>(first)); break;
-            case 8: items.push_back(std::make_unique<Rgb12V2>(first)); break;
+            case 6: items.push_back(v1 ? std::unique_ptr<ItemV2>(std::make_unique<Point10V1>(first)) : std::make_unique<Point10V2>(first)); break;
+            case 7: items.push_back(v1 ? std::unique_ptr<ItemV2>(std::make_unique<GpsTime11V1>(first)) : std::make_unique<GpsTime11V2>(first)); break;
+            case 8: items.push_back(v1 ? std::unique_ptr<ItemV2>(std::make_unique<Rgb12V1>(first)) : std::make_unique<Rgb12V2>(first)); break;
             case 9: items.push_back(std::make_unique<WavePacket13V1>(first)); break;
-            default: items.push_back(std::make_unique<ByteV2>(first, it.size)); break;
+            default: items.push_back(v1 ? std::unique_ptr<ItemV2>(std::make_unique<ByteV1>(first, it.size)) : std::make_unique<ByteV2>(first, it.size)); break;
         }
         offsets.push_back(off);
         off += it.size;
@@ -729,7 +876,9 @@ std::size_t decode_pointwise(const LazInfo& info, int rl, const uint8_t* data, s
     // The layouts of point formats 0-3 without extra bytes (nearly all
     // pointwise files) get a loop with the item calls resolved at compile
     // time; anything else goes through the item list.
-    const auto type = [&](std::size_t k) { return k < info.items.size() ? info.items[k].type : 0xFFFF; };
+    const auto type = [&](std::size_t k) {
+        return k < info.items.size() && info.items[k].version == 2 ? info.items[k].type : 0xFFFF;  // the fused loops are v2 only
+    };
     const std::size_t n_items = info.items.size();
     if (n_items == 1 && type(0) == 6)
         decode_fused<false, false>(dec, items, out, rl, count);
@@ -1031,8 +1180,10 @@ private:
     std::array<std::unique_ptr<Ctx>, 4> contexts_;
 };
 
+// layers: 0 every layer, 1 the PointCloud fields, 2 the XY layer only.
 std::size_t decode_layered(const LazInfo& info, int rl, const uint8_t* data, std::size_t size, uint64_t count, char* out_chars,
-                           bool point_fields_only) {
+                           int layers_wanted) {
+    const bool point_fields_only = layers_wanted == 1, xy_only = layers_wanted == 2;
     if (count == 0) return 0;
     auto* out = reinterpret_cast<uint8_t*>(out_chars);
     std::size_t pos = 0;
@@ -1065,8 +1216,9 @@ std::size_t decode_layered(const LazInfo& info, int rl, const uint8_t* data, std
             // and extra bytes are not needed for a PointCloud; their layers are
             // independent of the others and are skipped (fields keep the chunk's
             // first value).
-            const bool skip = point_fields_only && ((it.type == 10 && (j == 3 || j == 5 || j == 6 || j == 7)) ||
-                                                    (it.type == 12 && j == 1) || it.type == 14);
+            const bool skip = (point_fields_only && ((it.type == 10 && (j == 3 || j == 5 || j == 6 || j == 7)) ||
+                                                     (it.type == 12 && j == 1) || it.type == 14)) ||
+                              (xy_only && (it.type != 10 || j != 0));
             layer.open(data + pos, skip ? 0 : sizes[li]);
             pos += sizes[li];
         }
@@ -1096,6 +1248,12 @@ std::size_t decode_layered(const LazInfo& info, int rl, const uint8_t* data, std
             slots.push_back({2, bytes.size() - 1, off});
         }
         off += it.size;
+    }
+    if (xy_only) {
+        // The XY layer depends on no other layer: x and y (and the returns,
+        // the scanner channel) are exact, every other field is stale.
+        for (uint64_t i = 1; i < count; ++i) point.read(out + i * rl);
+        return pos;
     }
     for (uint64_t i = 1; i < count; ++i) {
         uint8_t* rec = out + i * rl;
@@ -1175,21 +1333,21 @@ void check_laz_supported(const LazInfo& info, int point_format, int record_lengt
         return s;
     };
     if (info.coder != 0) throw Error(path, "LAZ coder " + std::to_string(info.coder) + " is unknown (only 0 = arithmetic exists)");
-    if (info.compressor == 1)
-        throw Error(path, "LAZ compressor 1 (pointwise, not chunked, LASzip 1.x items " + items() +
-                              ") is not supported; re-compress with a current LASzip/laz-perf or convert to LAS");
-    if (info.compressor != 2 && info.compressor != 3)
-        throw Error(path, "LAZ compressor " + info.compressor_name() + " is not supported (only 2 = pointwise chunked and 3 = layered chunked)");
-    if (info.chunk_size == 0) throw Error(path, "LAZ chunk size 0 is invalid");
+    if (info.compressor < 1 || info.compressor > 3)
+        throw Error(path, "LAZ compressor " + info.compressor_name() +
+                              " is not supported (only 1 = pointwise, 2 = pointwise chunked and 3 = layered chunked)");
+    if (info.chunk_size == 0 && info.compressor != 1) throw Error(path, "LAZ chunk size 0 is invalid");
     if (info.items.empty()) throw Error(path, "LASzip VLR lists no items");
     int total = 0;
     for (std::size_t i = 0; i < info.items.size(); ++i) {
         const LazItem& it = info.items[i];
         total += it.size;
         bool ok;
-        if (info.compressor == 2) {
-            ok = (it.version == 2 && ((it.type == 6 && it.size == 20 && i == 0) || (it.type == 7 && it.size == 8) ||
-                                      (it.type == 8 && it.size == 6) || (it.type == 0 && it.size > 0))) ||
+        if (info.compressor <= 2) {
+            // Item versions 1 (LASzip 1.x) and 2; WAVEPACKET13 has only version 1.
+            ok = ((it.version == 1 || it.version == 2) &&
+                  ((it.type == 6 && it.size == 20 && i == 0) || (it.type == 7 && it.size == 8) || (it.type == 8 && it.size == 6) ||
+                   (it.type == 0 && it.size > 0))) ||
                  (it.version == 1 && it.type == 9 && it.size == 29);
         } else {
             ok = (it.version == 3 || it.version == 4) && it.version == info.items[0].version &&
@@ -1204,7 +1362,7 @@ void check_laz_supported(const LazInfo& info, int point_format, int record_lengt
         throw Error(path, "LAZ items " + items() + " cover " + std::to_string(total) + " bytes but the point record is " +
                               std::to_string(record_length));
     const bool legacy = point_format <= 5;
-    if ((info.compressor == 2) != legacy || point_format > 8)
+    if ((info.compressor <= 2) != legacy || point_format > 8)
         throw Error(path, "LAZ compressor " + info.compressor_name() + " with point format " + std::to_string(point_format) +
                               " is not supported");
 }
@@ -1212,8 +1370,20 @@ void check_laz_supported(const LazInfo& info, int point_format, int record_lengt
 std::size_t decode_laz_chunk(const LazInfo& info, int record_length, const uint8_t* data, std::size_t size, uint64_t count,
                              char* out, const std::string& path, std::size_t chunk_index, bool point_fields_only) {
     try {
-        if (info.compressor == 3) return decode_layered(info, record_length, data, size, count, out, point_fields_only);
+        if (info.compressor == 3) return decode_layered(info, record_length, data, size, count, out, point_fields_only ? 1 : 0);
         return decode_pointwise(info, record_length, data, size, count, out);
+    } catch (const Corrupt& c) {
+        throw Error(path, "chunk " + std::to_string(chunk_index) + ": " + c.what);
+    } catch (const std::bad_alloc&) {
+        throw Error(path, "chunk " + std::to_string(chunk_index) + ": out of memory while decoding");
+    }
+}
+
+std::size_t decode_laz_chunk_xy(const LazInfo& info, int record_length, const uint8_t* data, std::size_t size, uint64_t count,
+                                char* out, const std::string& path, std::size_t chunk_index) {
+    if (info.compressor != 3) throw Error(path, "chunk " + std::to_string(chunk_index) + ": only layered LAZ chunks have an XY layer");
+    try {
+        return decode_layered(info, record_length, data, size, count, out, 2);
     } catch (const Corrupt& c) {
         throw Error(path, "chunk " + std::to_string(chunk_index) + ": " + c.what);
     } catch (const std::bad_alloc&) {
@@ -1229,8 +1399,19 @@ LazPointSource::LazPointSource(const std::string& path, const LazInfo& info, uin
     in_.open(path, std::ios::binary);
     if (!in_) throw Error(path, "cannot open for reading");
     file_size_ = static_cast<uint64_t>(std::filesystem::file_size(path));
-    const uint64_t chunks_start = offset_to_points + 8;
     if (point_count == 0) return;
+    if (info.compressor == 1) {
+        // Pointwise, not chunked: no chunk-table pointer; the first point
+        // raw at the start of the point data, then one arithmetic-coded
+        // stream for all the others (a single "chunk").
+        if (offset_to_points >= file_size_) throw Error(path, "LAZ file ends before its point data (truncated)");
+        chunks_.push_back({0, 0, 0, point_count});
+        sequential_offset_ = offset_to_points;
+        std::vector<bool> all(1, true);
+        select_chunks(all);
+        return;
+    }
+    const uint64_t chunks_start = offset_to_points + 8;
     if (chunks_start > file_size_) throw Error(path, "LAZ file ends before its first chunk (truncated)");
     auto read_at = [&](uint64_t pos, void* dst, std::size_t n) {
         in_.clear();
@@ -1369,6 +1550,48 @@ void LazPointSource::fill() {
                          point_fields_only_);
     });
     next_ = end;
+}
+
+std::vector<bool> LazPointSource::chunks_meeting_box(const LazXYBox& box) {
+    if (info_.compressor != 3 || !has_table_) return {};
+    std::vector<bool> keep(chunks_.size(), false);
+    const std::size_t rl = static_cast<std::size_t>(record_length_);
+    // Batches bound the memory (compressed bytes and one XY scratch buffer per chunk).
+    std::size_t i = 0;
+    std::vector<std::vector<uint8_t>> raw;
+    while (i < order_.size()) {
+        std::size_t end = i;
+        uint64_t bytes = 0;
+        while (end < order_.size() && (end == i || bytes + chunks_[order_[end]].bytes <= (64ull << 20)) && end - i < 64) {
+            bytes += chunks_[order_[end]].bytes;
+            ++end;
+        }
+        raw.resize(std::max(raw.size(), end - i));
+        for (std::size_t k = i; k < end; ++k) read_raw(order_[k], raw[k - i]);
+        std::vector<char> hit(end - i, 0);
+        tbb::parallel_for(tbb::blocked_range<std::size_t>(i, end, 1), [&](const tbb::blocked_range<std::size_t>& r) {
+            std::vector<char> scratch;
+            for (std::size_t k = r.begin(); k < r.end(); ++k) {
+                const std::size_t ci = order_[k];
+                const LazChunk& c = chunks_[ci];
+                scratch.resize(static_cast<std::size_t>(c.point_count) * rl);
+                decode_laz_chunk_xy(info_, record_length_, raw[k - i].data(), raw[k - i].size(), c.point_count, scratch.data(), path_, ci);
+                for (uint64_t p = 0; p < c.point_count; ++p) {
+                    const char* rec = scratch.data() + p * rl;
+                    // The same arithmetic as the readers' coordinates.
+                    const double x = bytes::get<int32_t>(rec) * box.scale_x + box.offset_x;
+                    const double y = bytes::get<int32_t>(rec + 4) * box.scale_y + box.offset_y;
+                    if (x >= box.min_x && x <= box.max_x && y >= box.min_y && y <= box.max_y) {
+                        hit[k - i] = 1;
+                        break;
+                    }
+                }
+            }
+        });
+        for (std::size_t k = i; k < end; ++k) keep[order_[k]] = hit[k - i] != 0;
+        i = end;
+    }
+    return keep;
 }
 
 std::size_t LazPointSource::decode_direct(char* out, std::size_t max_points) {

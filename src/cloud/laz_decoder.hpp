@@ -1,13 +1,16 @@
 #pragma once
 // LASzip (LAZ) decoding, our own implementation of the published format
-// (Debian 12 has neither LASzip nor laz-perf). Supports the chunked
-// compressors: 2 = pointwise (item version 2: POINT10, GPSTIME11, RGB12,
-// BYTE extra bytes; WAVEPACKET13 version 1) for point formats 0-5, and 3 = layered (item versions 3 and 4:
-// POINT14, RGB14, RGBNIR14, BYTE14 extra bytes) for point formats 6-8; fixed
-// and variable chunk sizes, with or without a chunk table. Decoded records
-// are byte-identical to LASzip / laz-perf output (tested against the corpus
-// oracle). Everything else (compressor 1, WAVEPACKET14 of formats 9/10, other versions) is
-// refused with a one-line Error naming the file.
+// (Debian 12 has neither LASzip nor laz-perf). Supports compressor 1 =
+// pointwise, not chunked (LASzip 1.x: one stream for all points), and the
+// chunked compressors: 2 = pointwise (item versions 1 and 2: POINT10,
+// GPSTIME11, RGB12, BYTE extra bytes; WAVEPACKET13 version 1) for point
+// formats 0-5, and 3 = layered (item versions 3 and 4: POINT14, RGB14,
+// RGBNIR14, BYTE14 extra bytes) for point formats 6-8; fixed and variable
+// chunk sizes, with or without a chunk table. Decoded records are
+// byte-identical to LASzip / laz-perf output (tested against the corpus
+// oracle and LAS twins). Everything else (WAVEPACKET14 of formats 9/10,
+// other versions, unknown compressors) is refused with a one-line Error
+// naming the file.
 #include <cstddef>
 #include <cstdint>
 #include <fstream>
@@ -28,7 +31,7 @@ std::string to_string(const LazItem& item);
 
 /// The LASzip VLR (user "laszip encoded", record 22204).
 struct LazInfo {
-    uint16_t compressor = 0;  ///< 0 none, 1 pointwise, 2 pointwise chunked, 3 layered chunked
+    uint16_t compressor = 0;  ///< 0 none, 1 pointwise (one stream, chunk_size 0), 2 pointwise chunked, 3 layered chunked
     uint16_t coder = 0;       ///< 0 = arithmetic
     int version_major = 0, version_minor = 0, version_revision = 0;  ///< of the writing LASzip
     uint32_t options = 0;
@@ -64,6 +67,22 @@ struct LazChunk {
 std::size_t decode_laz_chunk(const LazInfo& info, int record_length, const uint8_t* data, std::size_t size, uint64_t count,
                              char* out, const std::string& path, std::size_t chunk_index, bool point_fields_only = false);
 
+/// Decodes only the XY layer of a layered (compressor 3) chunk: the records'
+/// X and Y (and return numbers, scanner channel) are exact, every other field
+/// holds a stale value. The XY layer is the first of POINT14's nine and
+/// depends on no other, so this costs a fraction of a full decode. Throws
+/// Error for a pointwise chunk or corrupt data, as decode_laz_chunk.
+std::size_t decode_laz_chunk_xy(const LazInfo& info, int record_length, const uint8_t* data, std::size_t size, uint64_t count,
+                                char* out, const std::string& path, std::size_t chunk_index);
+
+/// A closed box in the file CRS and the header's X/Y scale and offset: a
+/// point is inside when min_x <= X * scale_x + offset_x <= max_x (the
+/// readers' arithmetic), likewise for y.
+struct LazXYBox {
+    double min_x = 0, min_y = 0, max_x = 0, max_y = 0;
+    double scale_x = 1, scale_y = 1, offset_x = 0, offset_y = 0;
+};
+
 /// Streams the decoded point records of a LAZ file, chunk by chunk, several
 /// chunks decoded in parallel (TBB) and handed out in file order. With a
 /// chunk table, the whole chunks that fit in a read() are decoded straight
@@ -80,6 +99,13 @@ public:
     /// Chunks in file order (offsets and sizes known only with a chunk table).
     const std::vector<LazChunk>& chunks() const { return chunks_; }
     bool has_chunk_table() const { return has_table_; }
+    /// Layered chunks with a chunk table: per chunk (size == chunks().size()),
+    /// whether one of its points lies in `box`, found by decoding only the
+    /// XY layer of each selected chunk (in parallel). LAZ has no per-chunk
+    /// bounds; this is how a window read skips chunks of a non-COPC file.
+    /// Empty for pointwise chunks (one stream interleaves all fields, so x
+    /// and y cost a full decode) and without a chunk table. Before the first read.
+    std::vector<bool> chunks_meeting_box(const LazXYBox& box);
     /// Decode only the chunks with keep[i] (size == chunks().size()); before the first read.
     void select_chunks(const std::vector<bool>& keep);
     /// Before the first read: decode only what a PointCloud holds (see decode_laz_chunk).

@@ -2,6 +2,7 @@
 // files from LASzip, laz-perf, PDAL and IGN writers), `cloud translate`,
 // window reads and corrupt input.
 #include <catch2/catch.hpp>
+#include <algorithm>
 #include <cstring>
 #include <fstream>
 #include <nlohmann/json.hpp>
@@ -122,11 +123,24 @@ TEST_CASE("LAZ info: compressor, chunks and items are read from the LASzip VLR",
     CHECK(n == 0);
 }
 
-TEST_CASE("LAZ compressor 1 is refused in one line naming the file", "[laz]") {
+TEST_CASE("LAZ compressor 1 (LASzip 1.x, not chunked, item version 1) decodes to its LAS twin", "[laz]") {
+    // laz-perf aborts on this file (no oracle); PDAL's 1.2-with-color.las holds the same 1,065 points.
     const std::string p = corpus("simple-laszip-compressor-version-1.2r0.laz");
-    CHECK_THROWS_WITH(LasReader(p), Catch::Contains("simple-laszip-compressor-version-1.2r0.laz") &&
-                                        Catch::Contains("compressor 1") && !Catch::Contains("\n"));
-    CHECK_THROWS_AS(CloudReader(p), Error);
+    LasReader laz(p), las(corpus("reference_las/1.2-with-color.las"));
+    REQUIRE(laz.header().laz);
+    CHECK(laz.header().laz->compressor == 1);
+    CHECK(laz.header().laz->items[0].version == 1);
+    CHECK(laz.laz_source()->chunks().size() == 1);
+    CHECK_FALSE(laz.laz_source()->has_chunk_table());
+    uint64_t n = 0;
+    CHECK(records_sha(laz, &n) == records_sha(las));
+    CHECK(n == 1065);
+    // Cut inside its one stream: a one-line error naming the file, never a crash.
+    ScratchDir dir("laz_c1");
+    std::string bytes = slurp(p);
+    bytes.resize(bytes.size() / 2);
+    write_file(dir / "cut.laz", bytes);
+    CHECK_THAT(decode_all(dir / "cut.laz"), Catch::Contains("cut.laz") && !Catch::Contains("\n"));
 }
 
 TEST_CASE("LAZ decodes the same points as its uncompressed LAS twin", "[laz]") {
@@ -204,6 +218,71 @@ TEST_CASE("COPC window reads decode only the nodes that meet the window and miss
     const auto r = translate_cloud(o);
     CHECK(r.copc_nodes_skipped);
     CHECK(r.points_written == inside);
+}
+
+TEST_CASE("Window reads on layered LAZ skip the chunks whose XY layer misses the window and give the same points", "[laz][window]") {
+    // 14 chunks of 50,000 points; their footprints differ (a scan order), so
+    // a window in the south-west corner misses several of them.
+    const std::string p = corpus("las_with_several_extra_byte_bloc.laz");
+    const double box[4] = {484649, 6632629, 484800, 6632800};
+    LasReader probe(p);
+    const LasHeader& h = probe.header();
+    const auto keep = probe.laz_source()->chunks_meeting_box({box[0], box[1], box[2], box[3], h.scale[0], h.scale[1], h.offset[0], h.offset[1]});
+    REQUIRE(keep.size() == 14);
+    const auto skipped = static_cast<std::size_t>(std::count(keep.begin(), keep.end(), false));
+    CHECK(skipped >= 3);
+    CHECK(skipped < keep.size());
+    // Exact both ways: a chunk is kept if and only if one of its points (full
+    // decode) lies in the closed box.
+    LasReader full(p);
+    std::vector<char> rec;
+    std::vector<bool> truth(14, false);
+    uint64_t index = 0;
+    Sha256 inside_sha;
+    uint64_t inside_closed = 0;
+    while (const std::size_t n = full.read_records(rec, 100000)) {
+        for (std::size_t i = 0; i < n; ++i, ++index) {
+            const char* q = rec.data() + i * h.point_record_length;
+            int32_t xi, yi;
+            std::memcpy(&xi, q, 4);
+            std::memcpy(&yi, q + 4, 4);
+            const double x = xi * h.scale[0] + h.offset[0], y = yi * h.scale[1] + h.offset[1];
+            if (x >= box[0] && x <= box[2] && y >= box[1] && y <= box[3]) {
+                truth[index / 50000] = true;
+                inside_sha.update(q, h.point_record_length);
+                ++inside_closed;
+            }
+        }
+    }
+    CHECK(keep == truth);
+    REQUIRE(inside_closed > 0);
+    // Window read (the path of run's tiles and heights): the same points as a full decode + crop.
+    const PointCloud all = read_point_cloud(p);
+    PointCloud crop;
+    for (std::size_t i = 0; i < all.size(); ++i)
+        if (all.x[i] >= box[0] && all.x[i] < box[2] && all.y[i] >= box[1] && all.y[i] < box[3]) crop.append(all, i);
+    const PointCloud window = read_point_cloud_in(p, box[0], box[1], box[2], box[3]);
+    REQUIRE(window.size() == crop.size());
+    CHECK(window.x == crop.x);
+    CHECK(window.y == crop.y);
+    CHECK(window.z == crop.z);
+    CHECK(window.gps_time == crop.gps_time);
+    CHECK(window.classification == crop.classification);
+    // cloud translate --bounds: the same records, byte for byte, fewer chunks decoded.
+    ScratchDir dir("laz_window");
+    CloudTranslateOptions o;
+    o.input = p;
+    o.output = dir / "crop.las";
+    o.bounds = std::array<double, 4>{box[0], box[1], box[2], box[3]};
+    const auto r = translate_cloud(o);
+    CHECK(r.laz_chunks == 14);
+    CHECK(r.laz_chunks_skipped == skipped);
+    CHECK(r.points_written == inside_closed);
+    CHECK(r.points_read < h.point_count);
+    CHECK(r.points_sha256 == inside_sha.hex());
+    // Pointwise chunks interleave every field in one stream: no XY-only scan.
+    LasReader pointwise(corpus("lone-star.laz"));
+    CHECK(pointwise.laz_source()->chunks_meeting_box({0, 0, 1, 1, 0.01, 0.01, 0, 0}).empty());
 }
 
 TEST_CASE("cloud translate crops, converts XYZ and refuses to overwrite", "[laz]") {
@@ -379,9 +458,20 @@ TEST_CASE("CLI: cloud translate and info on LAZ - refusals are one line and non-
     CHECK_THAT(info.out, Catch::Contains("LAZ:       compressor 3 (layered chunked)") && Catch::Contains("chunk size variable") &&
                              Catch::Contains("POINT14 v3") && Catch::Contains("COPC:"));
 
-    const auto refused = cityforge::test::run_cli("cloud translate " + corpus("simple-laszip-compressor-version-1.2r0.laz") + " " + dir / "s.las");
+    // Compressor 1 (LASzip 1.x) through the CLI: the records of its LAS twin.
+    const auto c1 = cityforge::test::run_cli("cloud translate " + corpus("simple-laszip-compressor-version-1.2r0.laz") + " " + dir / "c1.las");
+    REQUIRE(c1.exit_code == 0);
+    {
+        LasReader twin(corpus("reference_las/1.2-with-color.las"));
+        CHECK_THAT(c1.err, Catch::Contains(records_sha(twin)) && Catch::Contains("1065 of 1065 points"));
+    }
+    // An unknown compressor (the LASzip VLR's first field patched to 5): refused in one line.
+    std::string unknown = slurp(corpus("simple-laszip-compressor-version-1.2r0.laz"));
+    unknown[227 + 54] = 5;  // payload of the only VLR, after the 227-byte header and the 54-byte VLR header
+    write_file(dir / "c5.laz", unknown);
+    const auto refused = cityforge::test::run_cli("cloud translate " + dir / "c5.laz" + " " + dir / "s.las");
     CHECK(refused.exit_code != 0);
-    CHECK_THAT(refused.err, Catch::Contains("simple-laszip-compressor-version-1.2r0.laz") && Catch::Contains("compressor 1"));
+    CHECK_THAT(refused.err, Catch::Contains("c5.laz") && Catch::Contains("compressor 5"));
     CHECK(std::count(refused.err.begin(), refused.err.end(), '\n') == 1);
     CHECK_FALSE(std::filesystem::exists(dir / "s.las"));
 
