@@ -21,6 +21,7 @@ void DensifyOptions::validate() const {
     if (!(min_ncc > -1 && min_ncc < 1)) throw Error("--min-ncc", "must be in (-1, 1)");
     if (min_views < 2 || min_views > 20) throw Error("--min-views", "must be 2..20");
     if (neighbour_images < 1 || neighbour_images > 50) throw Error("--neighbour-images", "must be 1..50");
+    if (!(min_baseline_ratio >= 0 && min_baseline_ratio < 1)) throw Error("--min-baseline", "must be 0..1 of the depth");
     if (!(max_view_angle_deg > 10 && max_view_angle_deg < 89)) throw Error("--max-view-angle", "must be 10..89 degrees");
     if (iterations < 1 || iterations > 10) throw Error("--iterations", "must be 1..10");
     if (max_expansion_steps < 1 || max_expansion_steps > 10000) throw Error("--max-expansion-steps", "must be 1..10000");
@@ -75,14 +76,20 @@ public:
             v.cols = (local_[i].width + o.cell_px - 1) / o.cell_px;
             v.rows = (local_[i].height + o.cell_px - 1) / o.cell_px;
         }
-        // Neighbours: images whose centres are closest, among those looking the same way.
+        // Neighbours: images whose centres are closest, among those looking the
+        // same way with a baseline: the heads of one oblique camera share a
+        // centre, and a pure rotation sees every depth alike.
+        const bool z_known = set.scene_z_range_m[0] != 0.0 || set.scene_z_range_m[1] != 0.0;
+        const double zmid = 0.5 * (set.scene_z_range_m[0] + set.scene_z_range_m[1]);
         for (std::size_t i = 0; i < views_.size(); ++i) {
             std::vector<std::pair<double, int>> d;
             const Eigen::Vector3d zi = local_[i].rotation.row(2).transpose();
+            const double depth = z_known ? std::max(1.0, set.cameras[i].centre.z() - zmid) : 0.0;
             for (std::size_t j = 0; j < views_.size(); ++j) {
                 if (j == i) continue;
                 const Eigen::Vector3d zj = local_[j].rotation.row(2).transpose();
                 if (zi.dot(zj) < std::cos(60.0 * std::numbers::pi / 180.0)) continue;
+                if ((local_[j].centre - local_[i].centre).norm() < o.min_baseline_ratio * depth) continue;
                 d.push_back({(local_[j].centre - local_[i].centre).norm(), static_cast<int>(j)});
             }
             std::sort(d.begin(), d.end());
