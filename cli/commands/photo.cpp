@@ -107,6 +107,7 @@ void add_photo(CLI::App& parent, const GlobalFlags& g, CommandList& out) {
     auto o = std::make_shared<PhotoRunOptions>();
     auto* cmd = parent.add_subcommand("photo", "Photos to a dense georeferenced cloud: orient + densify [+ true ortho + run]");
     add_orient_options(cmd, o->orient);
+    cmd->add_option("--oriented", o->oriented_dir, "Start from this oriented folder (of `orient`, or an earlier OUT/orient): no re-orientation");
     add_densify_options(cmd, o->densify);
     cmd->add_option("--out", o->out_dir, "Output folder (cloud.las, sparse.las, cameras.json, photo_report.json)")->required();
     cmd->add_flag("--overwrite", o->overwrite, "Replace an existing output folder");

@@ -450,7 +450,7 @@ DensifyResult densify_patches(const std::vector<cv::Mat>& images, const CameraSe
         }
         if (best >= 0) seeds.push_back({l, best});
     }
-    progress(0.1, "seeds");
+    progress(0.1, std::to_string(seeds.size()) + " seeds");
     {
         std::vector<std::optional<Patch>> cand(seeds.size());
         tbb::parallel_for(std::size_t(0), seeds.size(), [&](std::size_t k) {
@@ -462,7 +462,7 @@ DensifyResult densify_patches(const std::vector<cv::Mat>& images, const CameraSe
             if (c && e.commit(std::move(*c))) ++res.seeds;
     }
     if (res.seeds == 0) throw Error(subject, "no seed patch: the images do not overlap or have no texture");
-    progress(0.2, "seed patches");
+    progress(0.2, std::to_string(res.seeds) + " seed patches");
 
     for (int iter = 0; iter < o.iterations; ++iter) {
         // Expansion fronts: all live patches first, then only the new ones.
@@ -479,6 +479,12 @@ DensifyResult densify_patches(const std::vector<cv::Mat>& images, const CameraSe
                     if (e.commit(std::move(p))) next.push_back(id), ++res.expanded;
                 }
             front.swap(next);
+            // The fronts shrink as the cells fill: count the steps against a
+            // horizon that grows with them (a guide, not a promise).
+            const double within = double(step + 1) / double(step + 8);
+            progress(0.2 + 0.8 * (iter + within) / o.iterations,
+                     "round " + std::to_string(iter + 1) + "/" + std::to_string(o.iterations) + " step " + std::to_string(step + 1) + ": " +
+                         std::to_string(e.patches().size()) + " patches, front " + std::to_string(front.size()));
         }
         res.filtered += e.filter();
         progress(0.2 + 0.8 * double(iter + 1) / o.iterations, "expand + filter");
