@@ -11,7 +11,7 @@ void add_roofs_command(CLI::App& parent, const GlobalFlags& g, CommandList& out)
     struct State {
         std::string footprints, cloud, out, formats = "geojson,gpkg,citygml,cityjson,cityjsonseq,3dtiles,gltf", lods = "0,1,2";
         RoofsRunOptions options;
-        bool recompute_ground = false, no_outliers = false;
+        bool recompute_ground = false, no_outliers = false, no_retry = false;
     };
     auto s = std::make_shared<State>();
     auto& o = s->options;
@@ -23,6 +23,7 @@ void add_roofs_command(CLI::App& parent, const GlobalFlags& g, CommandList& out)
     cmd->add_option("--layer", o.heights.footprint_layer, "Footprint layer name (default: first)");
     cmd->add_option("--formats", s->formats, "Comma-separated: geojson, gpkg, citygml, cityjson, cityjsonseq, 3dtiles (3dtiles/tileset.json), gltf (buildings.glb)")->capture_default_str();
     cmd->add_option("--lod", s->lods, "Comma-separated levels of detail: 0, 1, 2")->capture_default_str();
+    cmd->add_option("--texture-ortho", o.model.texture_ortho, "Texture the LOD2 roofs with this ortho's pixels (CityJSON, buildings.glb)");
     cmd->add_option("--db", o.model.database, "Also write the building table to PostGIS: \"PG:dbname=... [tables=NAME]\" (table replaced)");
     cmd->add_option("--id-field", o.model.id_field, "Building id attribute (absent: the feature id)")->capture_default_str();
     cmd->add_option("--vertical-crs", o.model.vertical_crs, "Vertical CRS of the heights when the cloud names none, e.g. EPSG:5709");
@@ -34,12 +35,17 @@ void add_roofs_command(CLI::App& parent, const GlobalFlags& g, CommandList& out)
     cmd->add_option("--lod2-min-points", o.lod2.min_points, "Fewer roof points -> flat roof (LOD1.2)")->capture_default_str();
     cmd->add_option("--max-median-residual-m", o.lod2.max_median_residual_m, "A roof model missing its points by more (median) -> flat roof")
         ->capture_default_str();
+    cmd->add_option("--lod2-retry-rmse-m", o.lod2.retry_rmse_m,
+                    "A roof model with a larger RMSE (or a fallback) is rebuilt with alternative plane settings, the best kept")
+        ->capture_default_str();
+    cmd->add_flag("--no-lod2-retry", s->no_retry, "Keep the first roof model (no alternative plane settings)");
     cmd->add_flag("--recompute-ground", s->recompute_ground, "Ignore class 2 and classify ground with SMRF");
     cmd->add_flag("--no-outlier-filter", s->no_outliers, "Skip statistical outlier removal");
     out.push_back({cmd, [s, &g]() {
                        RoofsRunOptions opt = s->options;
                        opt.heights.ground.trust_classification = !s->recompute_ground;
                        opt.heights.outliers.enabled = !s->no_outliers;
+                       opt.lod2.retry_alternatives = !s->no_retry;
                        opt.model.formats = split_list(s->formats);
                        opt.model.lods = parse_lods(s->lods);
                        refuse_existing_output(g, s->out);

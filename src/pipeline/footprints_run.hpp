@@ -14,6 +14,7 @@
 #include "footprint/building_mask.hpp"
 #include "footprint/rectangle_fit.hpp"
 #include "footprint/regularize.hpp"
+#include "footprint/roof_seams.hpp"
 #include "footprint/segment_classifier.hpp"
 #include "pipeline/ortho_buildings.hpp"
 
@@ -76,12 +77,21 @@ struct FootprintsRunOptions {
     /// empty = the shipped default for the ortho's bands.
     std::string model;
     BuildingMaskOptions mask;      ///< detection thresholds (gsd_m is the raster cell)
+    RoofSeamOptions seams;         ///< ortho_cloud: terraces split at roof seams (gsd_m is the raster cell)
     double simplify_m = 0.25;      ///< Douglas–Peucker tolerance of the raw outline, metres
     FootprintFit fit = FootprintFit::recursive;  ///< geometry written
     RecursiveFitOptions recursive;     ///< tolerance etc. of the recursive fit (areas in m2)
     RegularizeOptions regularize;      ///< snapping of the regularised fit (lengths in metres)
     OutlierFilterOptions outliers;
     GroundFilterOptions ground;
+    /// A cloud announcing more points is never held whole: its rasters are
+    /// made window by window (tiles of at most `cloud_tile_m`, smaller when
+    /// the density asks, read as windows grown by `cloud_overlap_m`,
+    /// streamed) and joined; the footprints are the same as a whole-cloud
+    /// run's (see pipeline/cloud_windows.hpp).
+    uint64_t max_points_in_memory = 20'000'000;
+    double cloud_tile_m = 1000.0;
+    double cloud_overlap_m = 100.0;
     void validate() const;
 };
 
@@ -109,11 +119,13 @@ struct FootprintsReport {
     std::string detector;          ///< ortho_only: "model FILE" or "rules"
     std::string height_source;     ///< "point cloud", "nDSM raster", "ortho band N" or "" (ortho only)
     int cloud_cell_factor = 1;     ///< cloud rasters on cells of this many pixels a side
+    std::size_t cloud_windows = 0; ///< windows the cloud was read in (0 = held whole)
     uint32_t segments = 0;         ///< ortho modes: merged segments
     std::string segments_path;     ///< the label raster read for --segments (empty: segmented here)
     std::string crs;               ///< CRS of the written footprints
     std::string working_crs;       ///< CRS the detection worked in (metres)
     std::size_t buildings = 0;
+    int seam_splits = 0;           ///< ortho_cloud: seams cut between touching roofs (terraces)
     bool used_classes = false;
     int width = 0, height = 0;
     double seconds = 0.0;

@@ -49,6 +49,7 @@ CityModel build_lod2_model(const HeightsStage& st, const CrsInfo& crs, const Roo
         b.attributes.emplace_back("lod2_rmse_m", num(r.rmse_m));
         b.attributes.emplace_back("lod2_median_residual_m", num(r.median_residual_m));
         b.attributes.emplace_back("lod2_fallback", have && r.fallback ? AttributeValue(r.fallback_reason) : AttributeValue());
+        b.attributes.emplace_back("lod2_plane_settings", have && !r.fallback ? AttributeValue(r.attempt) : AttributeValue());
         b.attributes.emplace_back("lod2_kind", have ? AttributeValue(std::string(r.fallback ? "LOD1.2 flat roof" : "LOD2.2 roof planes"))
                                                     : AttributeValue());
         if (!have) continue;
@@ -62,7 +63,7 @@ CityModel build_lod2_model(const HeightsStage& st, const CrsInfo& crs, const Roo
     for (const auto& [name, type] : std::initializer_list<std::pair<const char*, FieldType>>{
              {"roof_planes", FieldType::integer}, {"roof_slope_deg", FieldType::real}, {"roof_azimuth_deg", FieldType::real},
              {"lod2_rmse_m", FieldType::real}, {"lod2_median_residual_m", FieldType::real}, {"lod2_fallback", FieldType::string},
-             {"lod2_kind", FieldType::string}})
+             {"lod2_plane_settings", FieldType::string}, {"lod2_kind", FieldType::string}})
         model.attribute_types.emplace_back(name, type);
     rep.mean_rmse_m = rep.lod2 ? rmse_sum / double(rep.lod2) : 0.0;
     return model;
@@ -76,7 +77,7 @@ RoofsRunReport run_roofs(const std::string& footprints_path, const std::string& 
     HeightsRunOptions ho = o.heights;
     ho.heights.keep_roof_points = true;
     // The roof attributes written below replace input fields of their names (re-runs).
-    for (const char* n : {"roof_planes", "roof_slope_deg", "roof_azimuth_deg", "lod2_rmse_m", "lod2_median_residual_m", "lod2_fallback", "lod2_kind"})
+    for (const char* n : {"roof_planes", "roof_slope_deg", "roof_azimuth_deg", "lod2_rmse_m", "lod2_median_residual_m", "lod2_fallback", "lod2_plane_settings", "lod2_kind"})
         ho.later_fields.push_back(n);
     HeightsStage st = compute_heights_stage(footprints_path, cloud_path, ho, progress.sub(0.0, 0.6));
     rep.heights = st.report;

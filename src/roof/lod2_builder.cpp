@@ -22,6 +22,7 @@ void Lod2Options::validate() const {
     if (min_points < 3) throw Error("--lod2-min-points", "must be >= 3");
     if (!(max_median_residual_m > 0)) throw Error("--max-median-residual-m", "must be > 0");
     if (!(unit_m > 0) || !(z_unit_m > 0)) throw Error("units", "CRS units must be > 0 metres");
+    if (!(retry_rmse_m >= 0)) throw Error("--lod2-retry-rmse-m", "must be >= 0");
 }
 
 namespace {
@@ -558,11 +559,9 @@ double rmse_to_solids(const std::vector<Solid>& solids, const std::vector<std::a
     return std::sqrt(s2 / double(pts.size()));
 }
 
-}  // namespace
-
-Lod2Result reconstruct_lod2(const std::vector<Polygon>& footprint, const std::vector<std::array<double, 3>>& roof_points, double ground_z,
-                            double fallback_roof_z, const Lod2Options& o) {
-    o.validate();
+Lod2Result reconstruct_once(const std::vector<Polygon>& footprint, const std::vector<std::array<double, 3>>& roof_points, double ground_z,
+                            double fallback_roof_z, const Lod2Options& o, bool& retryable) {
+    retryable = false;
     Lod2Result r;
     auto fallback = [&](const std::string& why) {
         r = Lod2Result{};
@@ -581,6 +580,7 @@ Lod2Result reconstruct_lod2(const std::vector<Polygon>& footprint, const std::ve
     };
     if (footprint.empty()) return fallback("no footprint");
     if (static_cast<int>(roof_points.size()) < o.min_points) return fallback("too few roof points for planes");
+    retryable = true;  // from here on, other plane settings may do better
     // Local metric frame: origin at the first outline vertex, z from the ground.
     const double ox = footprint[0].outer[0].x, oy = footprint[0].outer[0].y;
     std::vector<std::array<double, 3>> local(roof_points.size());
@@ -686,6 +686,40 @@ Lod2Result reconstruct_lod2(const std::vector<Polygon>& footprint, const std::ve
         return fallback(why.str());
     }
     return r;
+}
+
+}  // namespace
+
+Lod2Result reconstruct_lod2(const std::vector<Polygon>& footprint, const std::vector<std::array<double, 3>>& roof_points, double ground_z,
+                            double fallback_roof_z, const Lod2Options& o) {
+    o.validate();
+    bool retryable = false;
+    Lod2Result best = reconstruct_once(footprint, roof_points, ground_z, fallback_roof_z, o, retryable);
+    if (!o.retry_alternatives || !retryable || (!best.fallback && best.rmse_m <= o.retry_rmse_m)) return best;
+    // Plane detection and the partition are sensitive to their tolerances on
+    // small, steep or cluttered roofs (Delft: steep gables with dormers, low
+    // annexes); a few alternative settings, tried in a fixed order, and the
+    // valid model closest to the points wins (ties keep the earlier one).
+    std::vector<std::pair<std::string, Lod2Options>> alternatives;
+    Lod2Options a = o;
+    a.planes.normal_tolerance_deg = std::max(o.planes.normal_tolerance_deg, 20.0);
+    if (a.planes.normal_tolerance_deg != o.planes.normal_tolerance_deg) alternatives.emplace_back("normal_tolerance_20deg", a);
+    a = o;
+    a.planes.min_points = std::max(3, std::min(6, o.planes.min_points / 2));
+    if (a.planes.min_points != o.planes.min_points) alternatives.emplace_back("min_support_" + std::to_string(a.planes.min_points), a);
+    a = o;
+    a.line_extension_m = 2.0 * o.line_extension_m;
+    if (a.line_extension_m != o.line_extension_m) alternatives.emplace_back("long_partition_lines", a);
+    for (const auto& [name, ao] : alternatives) {
+        bool unused = false;
+        Lod2Result r = reconstruct_once(footprint, roof_points, ground_z, fallback_roof_z, ao, unused);
+        if (r.fallback) continue;
+        if (best.fallback || r.rmse_m < best.rmse_m) {
+            best = std::move(r);
+            best.attempt = name;
+        }
+    }
+    return best;
 }
 
 }  // namespace cityforge

@@ -25,6 +25,12 @@ struct Lod2Options {
     double min_roof_height_m = 0.3;    ///< roof vertices must be at least this far above the ground, else fallback
     int min_points = 30;               ///< fewer roof points -> flat-roof fallback
     double max_median_residual_m = 0.5;///< a model whose points' median residual is larger -> flat-roof fallback
+    /// A model that falls back (planes or partition failed) or whose RMSE is
+    /// above `retry_rmse_m` is rebuilt with alternative plane settings (wider
+    /// normal tolerance, smaller minimum support, longer partition lines);
+    /// the valid model with the lowest RMSE is kept. Deterministic.
+    bool retry_alternatives = true;
+    double retry_rmse_m = 0.3;         ///< metres; see retry_alternatives
     double unit_m = 1.0;               ///< metres per horizontal CRS unit
     double z_unit_m = 1.0;             ///< metres per z unit
     void validate() const;             ///< throws Error naming the option
@@ -42,6 +48,9 @@ struct Lod2Result {
     /// wall and ground faces), metres; like 3DBAG's b3_rmse_lod22.
     double rmse_m = 0.0;
     double median_residual_m = 0.0;    ///< median vertical distance (robust to chimneys, trees and wall points), metres
+    /// Which plane settings made the model: "default", or the alternative that
+    /// replaced it ("normal_tolerance_20deg", "min_support_6", "long_partition_lines").
+    std::string attempt = "default";
 };
 
 /// `roof_points` are the building's roof points (x, y in the footprint's CRS,

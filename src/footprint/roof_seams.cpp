@@ -1,0 +1,342 @@
+#include "footprint/roof_seams.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <numeric>
+#include <cstdio>
+#include <cstdlib>
+
+#include "core/error.hpp"
+
+namespace cityforge {
+
+void RoofSeamOptions::validate() const {
+    if (!(gsd_m > 0)) throw Error("roof seams", "gsd_m must be > 0");
+    if (!(window_m >= gsd_m)) throw Error("--seam-window-m", "must be at least one cell");
+    if (!(min_part_length_m > 0)) throw Error("--seam-min-part-length-m", "must be > 0");
+    if (!(min_part_area_m2 >= 0)) throw Error("--seam-min-part-area-m2", "must be >= 0");
+    if (!(min_colour_contrast > 0) || !(min_colour_step_share >= 0)) throw Error("--seam-min-contrast", "must be > 0");
+    if (!(ridge_rise_m > 0) || !(valley_depth_m > 0)) throw Error("roof seams", "ridge / valley heights must be > 0");
+    if (!(min_width_share > 0 && min_width_share <= 1)) throw Error("roof seams", "min_width_share must be in (0, 1]");
+}
+
+namespace {
+
+constexpr double kPi = 3.14159265358979323846;
+
+struct Slice {
+    double count = 0;               // cells
+    double colour_count = 0;        // cells with valid colours
+    std::vector<double> colour;     // per band sums
+    double height = 0, height_count = 0;
+    double strip_count[3] = {0, 0, 0};  // the same across three strips of the building's width
+    std::vector<double> strip_colour[3];
+};
+
+struct Axis {
+    double cx, cy;  // unit direction, in cell units
+};
+
+// Cells of one building (linear indices) split into pieces by seams across
+// `axis`; returns a piece index per cell (0 = no split).
+std::vector<int> seams_along(const std::vector<std::size_t>& cells, int w, Axis axis, const Image<float>& colours, const std::vector<uint8_t>& valid,
+                             const Image<float>& ndsm, const std::vector<double>& pixel_sd, const RoofSeamOptions& o, int& cuts) {
+    const int bands = colours.bands;
+    std::vector<double> u(cells.size()), vv(cells.size());
+    double umin = INFINITY, umax = -INFINITY, vmin = INFINITY, vmax = -INFINITY;
+    for (std::size_t i = 0; i < cells.size(); ++i) {
+        const double x = double(cells[i] % std::size_t(w)), y = double(cells[i] / std::size_t(w));
+        u[i] = x * axis.cx + y * axis.cy;
+        vv[i] = -x * axis.cy + y * axis.cx;
+        umin = std::min(umin, u[i]), umax = std::max(umax, u[i]);
+        vmin = std::min(vmin, vv[i]), vmax = std::max(vmax, vv[i]);
+    }
+    std::vector<int> piece(cells.size(), 0);
+    const int nbins = static_cast<int>(std::floor(umax - umin)) + 1;
+    const int W = std::max(1, static_cast<int>(std::lround(o.window_m / o.gsd_m)));
+    const int min_len = static_cast<int>(std::ceil(o.min_part_length_m / o.gsd_m));
+    if (nbins < 2 * min_len + 1) return piece;
+    std::vector<Slice> s(static_cast<std::size_t>(nbins));
+    for (auto& sl : s) {
+        sl.colour.assign(static_cast<std::size_t>(bands), 0.0);
+        for (auto& sc : sl.strip_colour) sc.assign(static_cast<std::size_t>(bands), 0.0);
+    }
+    std::vector<int> bin(cells.size());
+    for (std::size_t i = 0; i < cells.size(); ++i) {
+        const int b = std::min(nbins - 1, static_cast<int>(std::floor(u[i] - umin)));
+        bin[i] = b;
+        Slice& sl = s[static_cast<std::size_t>(b)];
+        sl.count += 1;
+        const std::size_t k = cells[i];
+        if (valid.empty() || valid[k]) {
+            sl.colour_count += 1;
+            const int strip = std::clamp(static_cast<int>(3.0 * (vv[i] - vmin) / std::max(vmax - vmin, 1e-9)), 0, 2);
+            sl.strip_count[strip] += 1;
+            for (int c = 0; c < bands; ++c) {
+                sl.colour[static_cast<std::size_t>(c)] += colours.band_data(c)[k];
+                sl.strip_colour[strip][static_cast<std::size_t>(c)] += colours.band_data(c)[k];
+            }
+        }
+        const float z = ndsm.data[k];
+        if (!std::isnan(z)) sl.height += z, sl.height_count += 1;
+    }
+    // Window statistics on [a, b): count-weighted mean colour, the spread of
+    // the slices' means around it, mean height, mean width.
+    struct Win {
+        bool ok = false;
+        std::vector<double> mean;
+        double noise2 = 0, height = NAN, width = 0;
+        double slope = NAN;  // height change per cell along the axis (least squares over the slices)
+    };
+    auto window = [&](int a, int b) {
+        Win r;
+        if (a < 0 || b > nbins) return r;
+        r.mean.assign(static_cast<std::size_t>(bands), 0.0);
+        double cc = 0, hs = 0, hc = 0;
+        for (int j = a; j < b; ++j) {
+            const Slice& sl = s[static_cast<std::size_t>(j)];
+            if (sl.colour_count < 2) return r;
+            for (int c = 0; c < bands; ++c) r.mean[static_cast<std::size_t>(c)] += sl.colour[static_cast<std::size_t>(c)];
+            cc += sl.colour_count, hs += sl.height, hc += sl.height_count, r.width += sl.count;
+        }
+        for (double& m : r.mean) m /= cc;
+        double v = 0;
+        for (int j = a; j < b; ++j) {
+            const Slice& sl = s[static_cast<std::size_t>(j)];
+            for (int c = 0; c < bands; ++c) {
+                const double d = sl.colour[static_cast<std::size_t>(c)] / sl.colour_count - r.mean[static_cast<std::size_t>(c)];
+                v += d * d;
+            }
+        }
+        r.noise2 = v / double(std::max(1, (b - a) * bands));
+        r.height = hc > 0 ? hs / hc : NAN;
+        r.width /= double(b - a);
+        double st = 0, sh = 0, stt = 0, sth = 0, sn = 0;
+        for (int j = a; j < b; ++j) {
+            const Slice& sl = s[static_cast<std::size_t>(j)];
+            if (sl.height_count < 1) continue;
+            const double t = j, z = sl.height / sl.height_count;
+            st += t, sh += z, stt += t * t, sth += t * z, sn += 1;
+        }
+        if (sn >= 3 && sn * stt - st * st > 0) r.slope = (sn * sth - st * sh) / (sn * stt - st * st);
+        r.ok = true;
+        return r;
+    };
+    double scale = 0;
+    for (double sd : pixel_sd) scale += sd;
+    scale /= double(std::max(1, bands));
+    struct Candidate {
+        int seam;
+        double strength;
+    };
+    // A colour seam between houses of a terrace lies where the roof surface
+    // runs on unchanged (same height trend on both sides, no ridge, hip or
+    // valley in between): there, a change of colour is a change of roof,
+    // not of shading between two facets.
+    const double min_slope = o.ridge_rise_m / o.window_m * o.gsd_m;  // per cell
+    auto slice_height = [&](int j) {
+        const Slice& sl = s[static_cast<std::size_t>(j)];
+        return sl.height_count > 0 ? sl.height / sl.height_count : NAN;
+    };
+    auto same_surface = [&](const Win& L, const Win& R, int m) {
+        if (std::isnan(L.slope) || std::isnan(R.slope)) return true;  // no heights: colours alone
+        if (std::abs(L.slope - R.slope) > min_slope) return false;
+        double peak = -INFINITY, low = INFINITY;
+        for (int j = std::max(0, m - W); j <= std::min(nbins - 1, m + W); ++j) {
+            const double z = slice_height(j);
+            if (!std::isnan(z)) peak = std::max(peak, z), low = std::min(low, z);
+        }
+        const double ends = std::max(slice_height(std::max(0, m - W)), slice_height(std::min(nbins - 1, m + W)));
+        return std::isnan(ends) || peak - ends <= o.ridge_rise_m;
+    };
+    // The step runs straight across the whole width: each third of the width
+    // changes colour the same way (a shadow edge or a crown does not).
+    auto straight = [&](int m, const std::vector<double>& step_vec, double step) {
+        for (int t = 0; t < 3; ++t) {
+            std::vector<double> l(static_cast<std::size_t>(bands), 0.0), r(static_cast<std::size_t>(bands), 0.0);
+            double lc = 0, rc = 0;
+            for (int j = m - W; j < m; ++j)
+                for (int c = 0; c < bands; ++c) l[static_cast<std::size_t>(c)] += s[static_cast<std::size_t>(j)].strip_colour[t][static_cast<std::size_t>(c)];
+            for (int j = m - W; j < m; ++j) lc += s[static_cast<std::size_t>(j)].strip_count[t];
+            for (int j = m + 1; j <= m + W; ++j)
+                for (int c = 0; c < bands; ++c) r[static_cast<std::size_t>(c)] += s[static_cast<std::size_t>(j)].strip_colour[t][static_cast<std::size_t>(c)];
+            for (int j = m + 1; j <= m + W; ++j) rc += s[static_cast<std::size_t>(j)].strip_count[t];
+            if (lc < 2 || rc < 2) return false;
+            double along = 0;  // this strip's step projected on the whole step
+            for (int c = 0; c < bands; ++c) along += (l[static_cast<std::size_t>(c)] / lc - r[static_cast<std::size_t>(c)] / rc) * step_vec[static_cast<std::size_t>(c)];
+            along /= std::max(step, 1e-9) * double(std::max(1, bands));
+            if (along < 0.6 * step) return false;
+        }
+        return true;
+    };
+    std::vector<Candidate> cand;
+    for (int m = min_len; m + min_len < nbins; ++m) {
+        // Seam slice m (mixed pixels) left out; windows on both sides.
+        const Win L = window(m - W, m), R = window(m + 1, m + 1 + W);
+        if (!L.ok || !R.ok) continue;
+        const Slice& at = s[static_cast<std::size_t>(m)];
+        // A straight stretch of a row: the seam slice and both sides about equally wide.
+        if (at.count < o.min_width_share * std::max(L.width, R.width) || std::min(L.width, R.width) < o.min_width_share * std::max(L.width, R.width))
+            continue;
+        const double hm = at.height_count > 0 ? at.height / at.height_count : NAN;
+        bool seam = false;
+        double strength = 0;
+        if (!std::isnan(hm) && !std::isnan(L.height) && !std::isnan(R.height) && std::min(L.height, R.height) - hm > o.valley_depth_m) {
+            seam = true;  // a valley across the row
+            strength = 1e6 + std::min(L.height, R.height) - hm;
+        } else if (same_surface(L, R, m)) {
+            double d2 = 0;
+            std::vector<double> step_vec(static_cast<std::size_t>(bands));
+            for (int c = 0; c < bands; ++c) {
+                const double d = L.mean[static_cast<std::size_t>(c)] - R.mean[static_cast<std::size_t>(c)];
+                step_vec[static_cast<std::size_t>(c)] = d;
+                d2 += d * d;
+            }
+            const double step = std::sqrt(d2 / double(std::max(1, bands)));
+            const double noise = std::sqrt(0.5 * (L.noise2 + R.noise2));
+            const double contrast = step / std::max(noise, 1e-6 * std::max(scale, 1e-6));
+            if (contrast >= o.min_colour_contrast && step >= o.min_colour_step_share * scale && straight(m, step_vec, step)) seam = true, strength = contrast;
+            if (std::getenv("SEAMDBG") && contrast > 3) std::fprintf(stderr, "SEAM cell %zu m %d/%d step %.2f noise %.2f contrast %.1f scale %.2f hm %.2f L %.2f R %.2f\n", cells[0], m, nbins, step, noise, contrast, scale, hm, L.height, R.height);
+        }
+        if (seam) cand.push_back({m, strength});
+    }
+    if (cand.empty()) return piece;
+    // Strongest first; a seam too close to a kept one or to the ends, or
+    // leaving a small part, is dropped.
+    std::sort(cand.begin(), cand.end(), [](const Candidate& a, const Candidate& b) { return a.strength != b.strength ? a.strength > b.strength : a.seam < b.seam; });
+    std::vector<double> cum(static_cast<std::size_t>(nbins) + 1, 0.0);
+    for (int j = 0; j < nbins; ++j) cum[static_cast<std::size_t>(j) + 1] = cum[static_cast<std::size_t>(j)] + s[static_cast<std::size_t>(j)].count;
+    const double min_cells = o.min_part_area_m2 / (o.gsd_m * o.gsd_m);
+    std::vector<int> kept;
+    for (const Candidate& c : cand) {
+        std::vector<int> trial = kept;
+        trial.push_back(c.seam);
+        std::sort(trial.begin(), trial.end());
+        bool ok = true;
+        int prev = 0;
+        for (std::size_t t = 0; t <= trial.size() && ok; ++t) {
+            const int next = t < trial.size() ? trial[t] : nbins;
+            if (next - prev < min_len || cum[static_cast<std::size_t>(next)] - cum[static_cast<std::size_t>(prev)] < min_cells) ok = false;
+            prev = next;
+        }
+        if (ok) kept = std::move(trial);
+    }
+    if (kept.empty()) return piece;
+    cuts += static_cast<int>(kept.size());
+    // Pieces: slices before the first seam are 0, and so on; the seam slice's
+    // own cells go to the side whose colour they are closer to.
+    for (std::size_t i = 0; i < cells.size(); ++i) {
+        int p = 0;
+        while (p < static_cast<int>(kept.size()) && bin[i] > kept[static_cast<std::size_t>(p)]) ++p;
+        if (p < static_cast<int>(kept.size()) && bin[i] == kept[static_cast<std::size_t>(p)]) {
+            const int m = kept[static_cast<std::size_t>(p)];
+            const Win L = window(m - W, m), R = window(m + 1, m + 1 + W);
+            double dl = 0, dr = 0;
+            const std::size_t k = cells[i];
+            if (L.ok && R.ok && (valid.empty() || valid[k]))
+                for (int c = 0; c < bands; ++c) {
+                    const double v = colours.band_data(c)[k];
+                    dl += (v - L.mean[static_cast<std::size_t>(c)]) * (v - L.mean[static_cast<std::size_t>(c)]);
+                    dr += (v - R.mean[static_cast<std::size_t>(c)]) * (v - R.mean[static_cast<std::size_t>(c)]);
+                }
+            if (dr < dl) ++p;
+        }
+        piece[i] = p;
+    }
+    return piece;
+}
+
+}  // namespace
+
+int split_at_roof_seams(BuildingMask& mask, const Image<float>& colours, const std::vector<uint8_t>& valid, const Image<float>& ndsm,
+                        const RoofSeamOptions& o0) {
+    RoofSeamOptions o = o0;
+    if (std::getenv("SEAMC")) o.min_colour_contrast = std::atof(std::getenv("SEAMC"));
+    if (std::getenv("SEAMS")) o.min_colour_step_share = std::atof(std::getenv("SEAMS"));
+    if (std::getenv("SEAMON")) o.enabled = true;
+    o.validate();
+    if (!o.enabled || mask.count == 0 || colours.bands == 0) return 0;
+    const int w = mask.labels.width, h = mask.labels.height;
+    const std::size_t n = mask.labels.pixel_count();
+    if (colours.pixel_count() != n || ndsm.pixel_count() != n || (!valid.empty() && valid.size() != n))
+        throw Error("roof seams", "ortho, heights and building grid differ in size");
+    std::vector<std::vector<std::size_t>> cells(mask.count + 1);
+    for (std::size_t k = 0; k < n; ++k)
+        if (mask.labels.data[k]) cells[mask.labels.data[k]].push_back(k);
+    // part id per cell: (building, piece) numbered across the whole grid.
+    std::vector<uint32_t> part(n, 0);
+    uint32_t next_part = 0;
+    int cuts = 0;
+    for (uint32_t l = 1; l <= mask.count; ++l) {
+        const auto& cl = cells[l];
+        if (cl.empty()) continue;
+        const uint32_t base = next_part + 1;
+        if (double(cl.size()) * o.gsd_m * o.gsd_m < 2.0 * o.min_part_area_m2) {
+            for (std::size_t k : cl) part[k] = base;
+            ++next_part;
+            continue;
+        }
+        // Principal axes from the second moments; seams across each.
+        double mx = 0, my = 0;
+        for (std::size_t k : cl) mx += double(k % std::size_t(w)), my += double(k / std::size_t(w));
+        mx /= double(cl.size()), my /= double(cl.size());
+        double sxx = 0, sxy = 0, syy = 0;
+        for (std::size_t k : cl) {
+            const double dx = double(k % std::size_t(w)) - mx, dy = double(k / std::size_t(w)) - my;
+            sxx += dx * dx, sxy += dx * dy, syy += dy * dy;
+        }
+        const double ang = 0.5 * std::atan2(2 * sxy, sxx - syy);
+        // Snap to the grid when within 3 degrees (axis-aligned rows: slices follow the pixel rows).
+        double a0 = ang;
+        for (double q : {-kPi / 2, 0.0, kPi / 2})
+            if (std::abs(ang - q) < 3.0 * kPi / 180.0) a0 = q;
+        std::vector<double> sd(static_cast<std::size_t>(colours.bands), 0.0);
+        for (int c = 0; c < colours.bands; ++c) {
+            double sum = 0, sum2 = 0, cnt = 0;
+            for (std::size_t k : cl)
+                if (valid.empty() || valid[k]) {
+                    const double v = colours.band_data(c)[k];
+                    sum += v, sum2 += v * v, cnt += 1;
+                }
+            sd[static_cast<std::size_t>(c)] = cnt > 1 ? std::sqrt(std::max(0.0, sum2 / cnt - (sum / cnt) * (sum / cnt))) : 0.0;
+        }
+        const Axis along{std::cos(a0), std::sin(a0)}, across{-std::sin(a0), std::cos(a0)};
+        const std::vector<int> p1 = seams_along(cl, w, along, colours, valid, ndsm, sd, o, cuts);
+        const int n1 = p1.empty() ? 1 : *std::max_element(p1.begin(), p1.end()) + 1;
+        uint32_t used = 0;
+        for (int a = 0; a < n1; ++a) {
+            std::vector<std::size_t> sub;
+            for (std::size_t i = 0; i < cl.size(); ++i)
+                if (p1[i] == a) sub.push_back(cl[i]);
+            if (sub.empty()) continue;
+            const std::vector<int> p2 = seams_along(sub, w, across, colours, valid, ndsm, sd, o, cuts);
+            const int n2 = p2.empty() ? 1 : *std::max_element(p2.begin(), p2.end()) + 1;
+            for (std::size_t i = 0; i < sub.size(); ++i) part[sub[i]] = base + used + static_cast<uint32_t>(p2[i]);
+            used += static_cast<uint32_t>(n2);
+        }
+        next_part += used;
+    }
+    if (cuts == 0) return 0;
+    // New labels: 4-connected components of equal part ids, in raster order.
+    Image<uint32_t> out(w, h, 1, 0);
+    uint32_t count = 0;
+    std::vector<std::size_t> stack;
+    for (std::size_t s0 = 0; s0 < n; ++s0) {
+        if (!part[s0] || out.data[s0]) continue;
+        out.data[s0] = ++count;
+        stack.push_back(s0);
+        while (!stack.empty()) {
+            const std::size_t p = stack.back();
+            stack.pop_back();
+            const int x = static_cast<int>(p % std::size_t(w)), y = static_cast<int>(p / std::size_t(w));
+            const std::size_t nb[4] = {x > 0 ? p - 1 : p, x + 1 < w ? p + 1 : p, y > 0 ? p - std::size_t(w) : p, y + 1 < h ? p + std::size_t(w) : p};
+            for (std::size_t q : nb)
+                if (q != p && part[q] == part[p] && !out.data[q]) out.data[q] = count, stack.push_back(q);
+        }
+    }
+    mask.labels = std::move(out);
+    mask.count = count;
+    return cuts;
+}
+
+}  // namespace cityforge

@@ -1,0 +1,50 @@
+#pragma once
+// Terraces: touching buildings of one height come out of the cloud as one
+// component. Their party walls still show as straight seams across the row:
+// the roofs' colours step there (each house re-roofed on its own), and pitched
+// roofs whose ridges run across the row meet in a valley. This splits a
+// building along such seams, perpendicular to either of its principal axes.
+// Pure raster algorithm on the building grid (no GDAL).
+#include <cstdint>
+#include <vector>
+
+#include "core/image.hpp"
+#include "footprint/building_mask.hpp"
+
+namespace cityforge {
+
+struct RoofSeamOptions {
+    bool enabled = false;  ///< off until it is reliable on towns without terraces (false splits at shadow edges)
+    double gsd_m = 0.5;              ///< cell size of the rasters, metres
+    double window_m = 2.0;           ///< colour / height profiles compared over this length on each side of a seam
+    double min_part_length_m = 4.5;  ///< parts shorter than this along the axis are not split off (house widths >= 5 m)
+    double min_part_area_m2 = 30.0;  ///< parts smaller than this are not split off
+    /// Colour step across the seam, in units of the profile's own noise
+    /// (standard deviation of the per-slice colour means on both sides).
+    double min_colour_contrast = 6.0;
+    /// and as a share of the roof's colour scale (mean over bands of the
+    /// building's own pixel standard deviation): steps smaller than this
+    /// fraction of the roof's texture are shading or noise.
+    double min_colour_step_share = 0.6;
+    /// A seam where the roof is higher than on both sides by more than this
+    /// is a ridge across the axis (the two slopes shade differently), not a
+    /// party wall; metres.
+    double ridge_rise_m = 0.3;
+    /// A valley across the axis deeper than this on both sides (pitched
+    /// terraces with ridges across the row) is a seam whatever the colours; metres.
+    double valley_depth_m = 1.0;
+    /// The seam's slice must span at least this share of the neighbouring
+    /// slices' width (a row of houses, not the corner of an L).
+    double min_width_share = 0.85;
+    void validate() const;  ///< throws Error naming the option
+};
+
+/// Splits the buildings of `mask` at roof seams (see RoofSeamOptions).
+/// `colours` = the ortho's colour bands on the mask's grid (any value range),
+/// `valid` its data mask (may be empty), `ndsm` heights above ground in metres
+/// (NaN = none). Parts are relabelled 1..count in raster order of first
+/// appearance. Returns the number of seams cut. Deterministic.
+int split_at_roof_seams(BuildingMask& mask, const Image<float>& colours, const std::vector<uint8_t>& valid, const Image<float>& ndsm,
+                        const RoofSeamOptions& options);
+
+}  // namespace cityforge
