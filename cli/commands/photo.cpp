@@ -61,6 +61,7 @@ void add_densify_options(CLI::App* cmd, photo::DensifyOptions& d) {
     cmd->add_option("--patch-grid", d.patch_grid, "Patch samples mu per side")->capture_default_str();
     cmd->add_option("--min-ncc", d.min_ncc, "NCC for an image to count as seeing a patch")->capture_default_str();
     cmd->add_option("--min-views", d.min_views, "Images per patch, reference included")->capture_default_str();
+    cmd->add_option("--neighbour-images", d.neighbour_images, "Candidate images per reference image")->capture_default_str();
     cmd->add_option("--iterations", d.iterations, "Expansion + filtering rounds")->capture_default_str();
     cmd->add_option("--points-per-patch", d.points_per_patch_side, "Output points per patch side (1 = centres)")->capture_default_str();
 }
@@ -106,6 +107,7 @@ void add_photo(CLI::App& parent, const GlobalFlags& g, CommandList& out) {
     auto o = std::make_shared<PhotoRunOptions>();
     auto* cmd = parent.add_subcommand("photo", "Photos to a dense georeferenced cloud: orient + densify [+ true ortho + run]");
     add_orient_options(cmd, o->orient);
+    cmd->add_option("--oriented", o->oriented_dir, "Start from this oriented folder (of `orient`, or an earlier OUT/orient): no re-orientation");
     add_densify_options(cmd, o->densify);
     cmd->add_option("--out", o->out_dir, "Output folder (cloud.las, sparse.las, cameras.json, photo_report.json)")->required();
     cmd->add_flag("--overwrite", o->overwrite, "Replace an existing output folder");

@@ -21,6 +21,7 @@ void DensifyOptions::validate() const {
     if (!(min_ncc > -1 && min_ncc < 1)) throw Error("--min-ncc", "must be in (-1, 1)");
     if (min_views < 2 || min_views > 20) throw Error("--min-views", "must be 2..20");
     if (neighbour_images < 1 || neighbour_images > 50) throw Error("--neighbour-images", "must be 1..50");
+    if (!(min_baseline_ratio >= 0 && min_baseline_ratio < 1)) throw Error("--min-baseline", "must be 0..1 of the depth");
     if (!(max_view_angle_deg > 10 && max_view_angle_deg < 89)) throw Error("--max-view-angle", "must be 10..89 degrees");
     if (iterations < 1 || iterations > 10) throw Error("--iterations", "must be 1..10");
     if (max_expansion_steps < 1 || max_expansion_steps > 10000) throw Error("--max-expansion-steps", "must be 1..10000");
@@ -75,14 +76,20 @@ public:
             v.cols = (local_[i].width + o.cell_px - 1) / o.cell_px;
             v.rows = (local_[i].height + o.cell_px - 1) / o.cell_px;
         }
-        // Neighbours: images whose centres are closest, among those looking the same way.
+        // Neighbours: images whose centres are closest, among those looking the
+        // same way with a baseline: the heads of one oblique camera share a
+        // centre, and a pure rotation sees every depth alike.
+        const bool z_known = set.scene_z_range_m[0] != 0.0 || set.scene_z_range_m[1] != 0.0;
+        const double zmid = 0.5 * (set.scene_z_range_m[0] + set.scene_z_range_m[1]);
         for (std::size_t i = 0; i < views_.size(); ++i) {
             std::vector<std::pair<double, int>> d;
             const Eigen::Vector3d zi = local_[i].rotation.row(2).transpose();
+            const double depth = z_known ? std::max(1.0, set.cameras[i].centre.z() - zmid) : 0.0;
             for (std::size_t j = 0; j < views_.size(); ++j) {
                 if (j == i) continue;
                 const Eigen::Vector3d zj = local_[j].rotation.row(2).transpose();
                 if (zi.dot(zj) < std::cos(60.0 * std::numbers::pi / 180.0)) continue;
+                if ((local_[j].centre - local_[i].centre).norm() < o.min_baseline_ratio * depth) continue;
                 d.push_back({(local_[j].centre - local_[i].centre).norm(), static_cast<int>(j)});
             }
             std::sort(d.begin(), d.end());
@@ -443,7 +450,7 @@ DensifyResult densify_patches(const std::vector<cv::Mat>& images, const CameraSe
         }
         if (best >= 0) seeds.push_back({l, best});
     }
-    progress(0.1, "seeds");
+    progress(0.1, std::to_string(seeds.size()) + " seeds");
     {
         std::vector<std::optional<Patch>> cand(seeds.size());
         tbb::parallel_for(std::size_t(0), seeds.size(), [&](std::size_t k) {
@@ -455,7 +462,7 @@ DensifyResult densify_patches(const std::vector<cv::Mat>& images, const CameraSe
             if (c && e.commit(std::move(*c))) ++res.seeds;
     }
     if (res.seeds == 0) throw Error(subject, "no seed patch: the images do not overlap or have no texture");
-    progress(0.2, "seed patches");
+    progress(0.2, std::to_string(res.seeds) + " seed patches");
 
     for (int iter = 0; iter < o.iterations; ++iter) {
         // Expansion fronts: all live patches first, then only the new ones.
@@ -472,6 +479,12 @@ DensifyResult densify_patches(const std::vector<cv::Mat>& images, const CameraSe
                     if (e.commit(std::move(p))) next.push_back(id), ++res.expanded;
                 }
             front.swap(next);
+            // The fronts shrink as the cells fill: count the steps against a
+            // horizon that grows with them (a guide, not a promise).
+            const double within = double(step + 1) / double(step + 8);
+            progress(0.2 + 0.8 * (iter + within) / o.iterations,
+                     "round " + std::to_string(iter + 1) + "/" + std::to_string(o.iterations) + " step " + std::to_string(step + 1) + ": " +
+                         std::to_string(e.patches().size()) + " patches, front " + std::to_string(front.size()));
         }
         res.filtered += e.filter();
         progress(0.2 + 0.8 * double(iter + 1) / o.iterations, "expand + filter");

@@ -27,6 +27,9 @@ struct DensifyOptions {
     double min_ncc = 0.65;           ///< an image joins V*(p) when its NCC with R(p) is at least this
     int min_views = 2;               ///< |V*(p)| including R(p)
     int neighbour_images = 6;        ///< candidate images per reference image (closest centres)
+    /// Neighbours need a baseline of at least this share of the reference
+    /// camera's height above the scene (heads of one oblique camera have none).
+    double min_baseline_ratio = 0.05;
     double max_view_angle_deg = 65;  ///< normal vs. viewing ray, for visibility
     int iterations = 3;              ///< expansion + filtering rounds
     int max_expansion_steps = 400;   ///< expansion fronts per iteration (each grows by one cell)

@@ -13,6 +13,7 @@
 #include <optional>
 #include <spawn.h>
 #include <sstream>
+#include <csignal>
 #include <sys/wait.h>
 #include <unistd.h>
 
@@ -215,10 +216,26 @@ CameraMatrix read_camera_matrix(const std::string& path, int width, int height) 
     return k;
 }
 
-void run_tool(const std::vector<std::string>& args, const fs::path& log, const std::string& step) {
+// The last "[a/b" counter in `text` (COLMAP logs "Processed file [3/12]",
+// "Matching block [1/2, 2/2]", "Matching image [5/40]"), as a / b.
+std::optional<std::pair<long, long>> last_counter(const std::string& text) {
+    for (std::size_t p = text.rfind('['); p != std::string::npos; p = p ? text.rfind('[', p - 1) : std::string::npos) {
+        long a = 0, b = 0;
+        char slash = 0;
+        std::istringstream in(text.substr(p + 1, 40));
+        if (in >> a >> slash >> b && slash == '/' && a > 0 && b > 0 && a <= b) return std::pair<long, long>(a, b);
+        if (p == 0) break;
+    }
+    return std::nullopt;
+}
+
+// Runs one COLMAP step with its output appended to `log`; while it runs, the
+// log's counters feed `progress` ("matching 3/12 ...": count, rate, ETA).
+void run_tool(const std::vector<std::string>& args, const fs::path& log, const std::string& step, const Progress& progress = {}) {
     std::vector<char*> argv;
     for (const auto& a : args) argv.push_back(const_cast<char*>(a.c_str()));
     argv.push_back(nullptr);
+    const std::uintmax_t log_start = fs::exists(log) ? fs::file_size(log) : 0;
     posix_spawn_file_actions_t fa;
     posix_spawn_file_actions_init(&fa);
     posix_spawn_file_actions_addopen(&fa, 1, log.c_str(), O_WRONLY | O_CREAT | O_APPEND, 0644);
@@ -228,7 +245,33 @@ void run_tool(const std::vector<std::string>& args, const fs::path& log, const s
     posix_spawn_file_actions_destroy(&fa);
     if (rc != 0) throw Error(args[0], "cannot run (is COLMAP installed? apt-get install colmap)");
     int status = 0;
-    while (waitpid(pid, &status, 0) < 0 && errno == EINTR) {
+    std::uintmax_t read_to = log_start;
+    std::string tail;
+    for (;;) {
+        const pid_t w = waitpid(pid, &status, progress.active() ? WNOHANG : 0);
+        if (w == pid) break;
+        if (w < 0 && errno != EINTR) throw Error(step, "lost the COLMAP process");
+        if (w == 0) {
+            usleep(500000);
+            std::error_code ec;
+            const std::uintmax_t size = fs::file_size(log, ec);
+            if (ec || size <= read_to) continue;
+            std::ifstream in(log, std::ios::binary);
+            in.seekg(static_cast<std::streamoff>(read_to));
+            std::string chunk(static_cast<std::size_t>(size - read_to), '\0');
+            in.read(chunk.data(), static_cast<std::streamsize>(chunk.size()));
+            read_to = size;
+            tail = tail.substr(tail.size() > 200 ? tail.size() - 200 : 0) + chunk;
+            if (const auto c = last_counter(tail)) {
+                try {
+                    progress(double(c->first) / double(c->second), step + " " + std::to_string(c->first) + "/" + std::to_string(c->second));
+                } catch (...) {
+                    kill(pid, SIGTERM);
+                    waitpid(pid, &status, 0);
+                    throw;
+                }
+            }
+        }
     }
     if (!WIFEXITED(status) || WEXITSTATUS(status) != 0) {
         // The work folder (and its log) is removed: quote the log's last line.
@@ -291,7 +334,7 @@ OrientRunResult run_orient(const OrientRunOptions& o, const Progress& progress) 
         if (scale < 1.0) cv::resize(m, m, cv::Size(), scale, scale, cv::INTER_AREA);
         const fs::path dst = img_dir / (fs::path(names[i]).stem().string() + ".png");
         if (!cv::imwrite(dst.string(), m)) throw Error(dst.string(), "cannot write image");
-        progress(0.1 * double(i + 1) / double(names.size()), "images");
+        progress(0.1 * double(i + 1) / double(names.size()), "images " + std::to_string(i + 1) + "/" + std::to_string(names.size()));
     }
     const fs::path log = colmap_dir / "colmap.log", db = colmap_dir / "database.db";
     const std::string th = std::to_string(o.threads);
@@ -312,14 +355,14 @@ OrientRunResult run_orient(const OrientRunOptions& o, const Progress& progress) 
     } else {
         fe.insert(fe.end(), {"--ImageReader.camera_model", "SIMPLE_RADIAL"});
     }
-    run_tool(fe, log, "feature extraction");
+    run_tool(fe, log, "feature extraction", progress.sub(0.1, 0.3));
     progress(0.3, "features");
     std::vector<std::string> match{o.colmap, o.matcher + "_matcher", "--database_path", db.string(), "--SiftMatching.use_gpu", "0",
                                    "--SiftMatching.num_threads", th};
     if (o.matcher == "sequential")
         match.insert(match.end(), {"--SequentialMatching.overlap", std::to_string(o.sequential_overlap),
                                    "--SequentialMatching.quadratic_overlap", "0"});
-    run_tool(match, log, "matching");
+    run_tool(match, log, "matching", progress.sub(0.3, 0.5));
     progress(0.5, "matching");
     const fs::path sparse = colmap_dir / "sparse";
     ensure_directory(sparse);
@@ -329,7 +372,7 @@ OrientRunResult run_orient(const OrientRunOptions& o, const Progress& progress) 
     // focal length nearly unobservable in self-calibration.
     if (k) mapper.insert(mapper.end(), {"--Mapper.ba_refine_focal_length", "0", "--Mapper.ba_refine_extra_params", "0"});
     try {
-        run_tool(mapper, log, "mapping");
+        run_tool(mapper, log, "mapping", progress.sub(0.5, 0.8));
     } catch (const Error&) {
         throw Error(o.images_dir, "COLMAP could not orient the photos (no image pair to start from): the photos do not overlap or have no texture");
     }
@@ -531,6 +574,35 @@ void PhotoRunOptions::validate() const {
     }
 }
 
+OrientRunResult read_orient_folder(const std::string& dir) {
+    const fs::path d(dir), report = d / "orient_report.json";
+    if (!fs::exists(report) || !fs::exists(d / "cameras.json") || !fs::exists(d / "sparse.las") || !fs::is_directory(d / "images"))
+        throw Error(dir, "not an oriented folder of `cityforge orient` (orient_report.json, cameras.json, sparse.las, images/)");
+    nlohmann::json j;
+    try {
+        std::ifstream in(report);
+        j = nlohmann::json::parse(in);
+        OrientRunResult r;
+        r.images = j.at("images").get<int>();
+        r.oriented = j.at("oriented").get<int>();
+        r.sparse_points = j.at("sparse_points").get<uint64_t>();
+        r.mean_reprojection_error_px = j.at("mean_reprojection_error_px").get<double>();
+        r.gps_rmse_m = j.at("georeferencing").at("rmse_m").get<double>();
+        r.scale = j.at("georeferencing").at("scale_m_per_model_unit").get<double>();
+        r.crs = j.at("crs").get<std::string>();
+        r.seconds = j.at("seconds").get<double>();
+        for (const auto& e : j.at("residuals_m"))
+            r.residuals.push_back({e.at("image").get<std::string>(), e.at("dx").get<double>(), e.at("dy").get<double>(), e.at("dz").get<double>()});
+        r.cameras_path = (d / "cameras.json").string();
+        r.sparse_path = (d / "sparse.las").string();
+        r.report_path = report.string();
+        r.images_dir = (d / "images").string();
+        return r;
+    } catch (const nlohmann::json::exception& e) {
+        throw Error(report.string(), std::string("not an orient report: ") + e.what());
+    }
+}
+
 PhotoRunResult run_photo(const PhotoRunOptions& o, const Progress& progress) {
     o.validate();
     const auto t0 = std::chrono::steady_clock::now();
@@ -539,7 +611,8 @@ PhotoRunResult run_photo(const PhotoRunOptions& o, const Progress& progress) {
     OrientRunOptions oo = o.orient;
     oo.out_dir = (out / "orient").string();
     oo.overwrite = true;
-    oo.validate();
+    if (o.oriented_dir.empty()) oo.validate();
+    else read_orient_folder(o.oriented_dir);  // refused before anything is written
     if (fs::exists(out)) fs::remove_all(out);
     ensure_directory(out);
     PhotoRunResult r;
@@ -549,7 +622,12 @@ PhotoRunResult run_photo(const PhotoRunOptions& o, const Progress& progress) {
     r.report_path = (out / "photo_report.json").string();
     const double dense_end = o.run ? 0.75 : 0.98;
     try {
-        r.orient = run_orient(oo, progress.sub(0.0, 0.45));
+        if (o.oriented_dir.empty()) {
+            r.orient = run_orient(oo, progress.sub(0.0, 0.45));
+        } else {
+            r.orient = read_orient_folder(o.oriented_dir);
+            oo.out_dir = o.oriented_dir;
+        }
         DensifyRunOptions dd;
         dd.model_dir = oo.out_dir;
         dd.out_path = r.cloud_path;
@@ -597,7 +675,9 @@ PhotoRunResult run_photo(const PhotoRunOptions& o, const Progress& progress) {
          {"gps_rmse_m", r.orient.gps_rmse_m}},
         {{"step", "densify"}, {"seconds", r.densify.seconds}, {"points", r.densify.points}, {"seeds", r.densify.seeds},
          {"expanded", r.densify.expanded}, {"filtered", r.densify.filtered}}};
-    j["files"] = {{"cloud", "cloud.las"}, {"sparse", "sparse.las"}, {"cameras", "cameras.json"}, {"oriented", "orient/"}};
+    j["files"] = {{"cloud", "cloud.las"}, {"sparse", "sparse.las"}, {"cameras", "cameras.json"},
+                  {"oriented", o.oriented_dir.empty() ? std::string("orient/") : fs::absolute(o.oriented_dir).string()}};
+    if (!o.oriented_dir.empty()) j["steps"][0]["reused_from"] = fs::absolute(o.oriented_dir).string();
     if (o.run) {
         j["steps"].push_back({{"step", "true_ortho"}, {"seconds", r.ortho_seconds}, {"gsd_m", o.ortho_gsd_m}});
         j["steps"].push_back({{"step", "run"}, {"seconds", r.city.seconds}, {"buildings", r.city.buildings},

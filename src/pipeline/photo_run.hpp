@@ -116,6 +116,9 @@ struct PhotoRunOptions {
     photo::DensifyOptions densify;
     std::string out_dir;           ///< OUT
     bool overwrite = false;
+    /// An oriented folder of `orient` (or an earlier OUT/orient) to start from:
+    /// orientation is skipped and its report reused; empty = orient the images.
+    std::string oriented_dir;
     /// Also run the building chain (`run`) on the dense cloud: OUT/ortho.tif
     /// (true ortho from the cloud) and OUT/run/ (DSM, footprints, heights, LOD2).
     bool run = false;
@@ -134,6 +137,10 @@ struct PhotoRunResult {
     double ortho_seconds = 0;
     double seconds = 0;
 };
+
+/// The orientation result recorded in an oriented folder (orient_report.json).
+/// Throws Error naming the folder when it is not one.
+OrientRunResult read_orient_folder(const std::string& dir);
 
 /// The chain: orient -> densify [-> true ortho -> run]. Writes OUT/orient/
 /// (oriented folder), OUT/cameras.json, OUT/sparse.las, OUT/cloud.las,
