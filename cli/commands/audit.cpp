@@ -1,6 +1,8 @@
 // cityforge audit ...: accuracy audits (footprints, rectangles, heights, clouds) with CI gates.
+#include <cmath>
 #include <cstdio>
 #include <memory>
+#include <string>
 
 #include "commands/commands.hpp"
 #include "pipeline/audit_run.hpp"
@@ -28,6 +30,15 @@ std::vector<AuditGate> gates_of(const AuditCommon& c) {
     const auto a = parse_gates(c.above, "--fail-above", false);
     gates.insert(gates.end(), a.begin(), a.end());
     return gates;
+}
+
+// `v` printed with the printf format `f`, or n/a when it is not defined (NaN:
+// a mean over no match).
+std::string defined_or_na(double v, const char* f) {
+    if (!std::isfinite(v)) return "n/a";
+    char buf[64];
+    std::snprintf(buf, sizeof buf, f, v);
+    return buf;
 }
 
 // Exit status 4 when an audit's gates failed (said on stderr), else 0.
@@ -60,11 +71,7 @@ void add_footprint_audit(CLI::App& audit, const GlobalFlags& g, CommandList& out
                        const FootprintAuditReport r = audit_footprints(s->pred, s->ref, s->common.out, opt);
                        const auto& sc = r.scores;
                        // Means over matches are not defined without a match: n/a.
-                       auto over = [&](double v, const char* f) {
-                           char buf[32];
-                           std::snprintf(buf, sizeof buf, f, v);
-                           return sc.true_positives ? std::string(buf) : std::string("n/a");
-                       };
+                       auto over = [&](double v, const char* f) { return sc.true_positives ? defined_or_na(v, f) : std::string("n/a"); };
                        std::printf("precision %.4f recall %.4f F1 %.4f mean IoU %s mean |area error| %s %% mean PoLiS %s (TP %zu of %zu predicted, %zu reference)%s\n",
                                    sc.precision, sc.recall, sc.f1, over(sc.mean_iou, "%.4f").c_str(), over(sc.mean_abs_area_error_pct, "%.2f").c_str(),
                                    over(sc.mean_polis, "%.3f").c_str(), sc.true_positives, sc.predicted, sc.reference,
@@ -95,8 +102,9 @@ void add_rectangle_audit(CLI::App& audit, const GlobalFlags& g, CommandList& out
                        RectangleAuditOptions opt = s->options;
                        opt.gates = gates_of(s->common);
                        const RectangleAuditReport r = audit_rectangles(s->in, s->common.out, opt);
-                       std::printf("mean |area error| %.3f %% max %.3f %% mean signed %+.3f %% over %zu of %zu footprints\n", r.mean_abs_error_pct,
-                                   r.max_abs_error_pct, r.mean_error_pct, r.rows.size(), r.fitted);
+                       std::printf("mean |area error| %s %% max %s %% mean signed %s %% over %zu of %zu footprints\n",
+                                   defined_or_na(r.mean_abs_error_pct, "%.3f").c_str(), defined_or_na(r.max_abs_error_pct, "%.3f").c_str(),
+                                   defined_or_na(r.mean_error_pct, "%+.3f").c_str(), r.rows.size(), r.fitted);
                        return gate_exit(r.output);
                    }});
 }
@@ -123,8 +131,9 @@ void add_height_audit(CLI::App& audit, const GlobalFlags& g, CommandList& out) {
                        HeightAuditOptions opt = s->options;
                        opt.gates = gates_of(s->common);
                        const HeightAuditReport r = audit_heights(s->pred, s->ref, s->common.out, opt);
-                       std::printf("MAE %.3f m RMSE %.3f m bias %+.3f m max %.3f m over %zu buildings (%zu matched of %zu reference)\n", r.mae,
-                                   r.rmse, r.bias, r.max_abs, r.with_values, r.matched, r.reference);
+                       std::printf("MAE %s m RMSE %s m bias %s m max %s m over %zu buildings (%zu matched of %zu reference)\n",
+                                   defined_or_na(r.mae, "%.3f").c_str(), defined_or_na(r.rmse, "%.3f").c_str(), defined_or_na(r.bias, "%+.3f").c_str(),
+                                   defined_or_na(r.max_abs, "%.3f").c_str(), r.with_values, r.matched, r.reference);
                        return gate_exit(r.output);
                    }});
 }

@@ -24,9 +24,10 @@ void add_rasterize_command(CLI::App& cloud, const GlobalFlags& g, CommandList& o
     cmd->add_option("--gsd", o.gsd_m, "Cell size in metres when no --grid is given")->capture_default_str();
     cmd->add_option("--cloud-crs", o.cloud_crs, "CRS of the cloud, e.g. EPSG:7415");
     cmd->add_flag("--recompute-ground", s->recompute_ground, "Ignore class 2 and classify ground with SMRF");
-    cmd->add_option("--max-points-in-memory", o.max_points_in_memory, "With --grid, larger clouds are read window by window")
+    cmd->add_option("--max-points-in-memory", o.max_points_in_memory, "Larger clouds are read window by window")
         ->capture_default_str();
-    cmd->add_option("--tile-m", o.tile_m, "Tile edge of windowed reading, metres")->capture_default_str();
+    cmd->add_option("--tile-m", o.tile_m, "Largest tile edge of windowed reading, metres")->capture_default_str();
+    cmd->add_option("--overlap-m", o.overlap_m, "Context read around each tile, metres")->capture_default_str();
     out.push_back({cmd, [s, &g]() {
                        RasterizeOptions opt = s->options;
                        opt.ground.trust_classification = !s->recompute_ground;

@@ -22,6 +22,9 @@ void add_footprints_command(CLI::App& parent, const GlobalFlags& g, CommandList&
     cmd->add_option("--ndsm-band", o.ndsm_band, "Heights without a cloud: 1-based band of the ortho holding the nDSM");
     cmd->add_option("--cloud-cell-px", o.cloud_cell_factor, "Cloud rasters on cells of N x N ortho pixels (0 = from the cloud's density)")
         ->capture_default_str();
+    cmd->add_option("--max-points-in-memory", o.max_points_in_memory, "Larger clouds are read window by window (tiles of --tile-m)")
+        ->capture_default_str();
+    cmd->add_option("--tile-m", o.cloud_tile_m, "Largest tile edge of windowed cloud reading, metres")->capture_default_str();
     cmd->add_option("--nir-band", o.nir_band, "1-based band of the ortho holding near infrared: NDVI marks vegetation");
     cmd->add_option("--mode", s->mode, "Detection: ortho_cloud (segments voted by the cloud), ortho_only, cloud_only; auto = from the inputs")
         ->check(CLI::IsMember({"auto", "ortho_cloud", "ortho_only", "cloud_only"}))

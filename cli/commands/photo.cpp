@@ -51,6 +51,9 @@ void add_orient_options(CLI::App* cmd, OrientRunOptions& o) {
     cmd->add_option("--max-image-px", o.max_image_px, "Downscale photos to this longest side")->capture_default_str();
     cmd->add_option("--threads", o.threads, "COLMAP threads")->capture_default_str();
     cmd->add_option("--colmap", o.colmap, "COLMAP executable")->capture_default_str();
+    cmd->add_option("--max-features", o.max_features, "SIFT features per image")->capture_default_str();
+    cmd->add_option("--matcher", o.matcher, "exhaustive (every pair) or sequential (file-name = flight order)")->capture_default_str();
+    cmd->add_option("--sequential-overlap", o.sequential_overlap, "Sequential matcher: photos after each one to match")->capture_default_str();
 }
 
 void add_densify_options(CLI::App* cmd, photo::DensifyOptions& d) {
@@ -101,17 +104,24 @@ void add_densify(CLI::App& parent, const GlobalFlags& g, CommandList& out) {
 
 void add_photo(CLI::App& parent, const GlobalFlags& g, CommandList& out) {
     auto o = std::make_shared<PhotoRunOptions>();
-    auto* cmd = parent.add_subcommand("photo", "Photos to a dense georeferenced cloud: orient + densify");
+    auto* cmd = parent.add_subcommand("photo", "Photos to a dense georeferenced cloud: orient + densify [+ true ortho + run]");
     add_orient_options(cmd, o->orient);
     add_densify_options(cmd, o->densify);
     cmd->add_option("--out", o->out_dir, "Output folder (cloud.las, sparse.las, cameras.json, photo_report.json)")->required();
     cmd->add_flag("--overwrite", o->overwrite, "Replace an existing output folder");
-    out.push_back({cmd, [o, &g]() {
+    cmd->add_flag("--run", o->run, "Then the building chain on the dense cloud: OUT/ortho.tif (true ortho) and OUT/run/ (as `run`)");
+    cmd->add_option("--ortho-gsd", o->ortho_gsd_m, "True ortho cell (the run's grid), metres")->capture_default_str();
+    auto run_config = std::make_shared<std::string>();
+    cmd->add_option("--run-config", *run_config, "JSON config of the run (schemas/run_config.schema.json; ortho and cloud are set)");
+    out.push_back({cmd, [o, run_config, &g]() {
+                       if (!run_config->empty()) o->city = run_options_from_json(read_json_file(*run_config), *run_config);
                        const PhotoRunResult r = run_photo(*o, make_progress(g));
                        if (!g.quiet)
-                           std::fprintf(stderr, "cityforge: photo wrote %s: %llu dense points, %llu sparse (%s), %.0f s\n",
+                           std::fprintf(stderr, "cityforge: photo wrote %s: %llu dense points, %llu sparse (%s)%s%s, %.0f s\n",
                                         o->out_dir.c_str(), static_cast<unsigned long long>(r.densify.points),
-                                        static_cast<unsigned long long>(r.orient.sparse_points), r.orient.crs.c_str(), r.seconds);
+                                        static_cast<unsigned long long>(r.orient.sparse_points), r.orient.crs.c_str(),
+                                        o->run ? "; buildings: " : "",
+                                        o->run ? std::to_string(r.city.buildings).c_str() : "", r.seconds);
                        return 0;
                    }});
 }

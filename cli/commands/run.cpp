@@ -28,7 +28,7 @@ RunShare mpi_share() {
 
 // The inputs `run` and `plan` share; given options override the config file.
 struct RunInputs {
-    std::string ortho, cloud, cloud_crs, footprints, config, formats, lods, vertical_crs, id_field, fit, db;
+    std::string ortho, cloud, cloud_crs, footprints, config, formats, lods, vertical_crs, id_field, fit, db, working_crs, out_crs, texture_ortho;
     int tile_size = 0, threads = -1;
     double overlap_m = -1;
 };
@@ -38,6 +38,8 @@ void add_run_inputs(CLI::App* cmd, RunInputs& r) {
     cmd->add_option("--cloud", r.cloud, "Dense point cloud (LAS, LAZ, COPC, PLY, XYZ)");
     cmd->add_option("--cloud-crs", r.cloud_crs, "CRS of the cloud, e.g. EPSG:7415");
     cmd->add_option("--footprints", r.footprints, "Existing footprints: skip extraction, compute heights, roofs and models");
+    cmd->add_option("--working-crs", r.working_crs, "Projected CRS to work in (default: the ortho's; a lon/lat ortho: the UTM zone of its centre)");
+    cmd->add_option("--out-crs", r.out_crs, "Projected CRS of the city models (default: the input's; the working CRS for a lon/lat input)");
     cmd->add_option("--config", r.config, "JSON config (schemas/run_config.schema.json); command-line options override it");
     cmd->add_option("--tile-size", r.tile_size, "Tile core edge in pixels (default 4000)");
     cmd->add_option("--overlap-m", r.overlap_m, "Context around each tile, metres (default 100)");
@@ -47,6 +49,7 @@ void add_run_inputs(CLI::App* cmd, RunInputs& r) {
     cmd->add_option("--db", r.db, "Also write the building table to PostGIS: \"PG:dbname=... [tables=NAME]\" (table replaced)");
     cmd->add_option("--vertical-crs", r.vertical_crs, "Vertical CRS when the cloud names none, e.g. EPSG:5709");
     cmd->add_option("--id-field", r.id_field, "Building id attribute of given footprints");
+    cmd->add_option("--texture-ortho", r.texture_ortho, "Texture the LOD2 roofs with this ortho's pixels (CityJSON, buildings.glb), e.g. the --ortho");
     cmd->add_option("--fit", r.fit, "Footprint geometry: recursive, regularised, rectangle or raw");
 }
 
@@ -58,6 +61,8 @@ RunManifest plan_from(const RunInputs& rc) {
     if (!rc.cloud.empty()) ro.cloud = rc.cloud;
     if (!rc.cloud_crs.empty()) ro.cloud_crs = rc.cloud_crs;
     if (!rc.footprints.empty()) ro.footprints = rc.footprints;
+    if (!rc.working_crs.empty()) ro.working_crs = rc.working_crs;
+    if (!rc.out_crs.empty()) ro.out_crs = rc.out_crs;
     if (rc.tile_size > 0) ro.tile_size_px = rc.tile_size;
     if (rc.overlap_m >= 0) ro.overlap_m = rc.overlap_m;
     if (rc.threads >= 0) ro.threads = rc.threads;
@@ -66,6 +71,7 @@ RunManifest plan_from(const RunInputs& rc) {
     if (!rc.vertical_crs.empty()) ro.buildings.model.vertical_crs = rc.vertical_crs;
     if (!rc.id_field.empty()) ro.buildings.model.id_field = rc.id_field;
     if (!rc.db.empty()) ro.buildings.model.database = rc.db;
+    if (!rc.texture_ortho.empty()) ro.buildings.model.texture_ortho = rc.texture_ortho;
     if (!rc.fit.empty()) ro.extraction.fit = footprint_fit_from_string(rc.fit);
     return plan_run(ro);
 }

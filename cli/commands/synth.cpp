@@ -34,6 +34,9 @@ void add_synth_command(CLI::App& parent, const GlobalFlags& g, CommandList& out)
     cmd->add_option("--view-size", s->view_size, "Photo width and height in pixels (default 640 480)")->expected(2);
     cmd->add_option("--forward-overlap", views.forward_overlap, "Along-strip overlap of neighbouring photos")->capture_default_str();
     cmd->add_option("--side-overlap", views.side_overlap, "Overlap of neighbouring strips")->capture_default_str();
+    cmd->add_option("--oblique-deg", views.oblique_deg,
+                    "Oblique camera: 5 photos per station (nadir + 4 tilted N/E/S/W by this angle); 0 = nadir only")
+        ->capture_default_str();
     cmd->add_option("--surface-spacing", views.surface_spacing_m, "Sample spacing of OUT/surface.las, metres")->capture_default_str();
     // Variations of the town (defaults: the default town, byte for byte).
     synth::SceneVariation& v = s->options.variation;

@@ -19,14 +19,17 @@ void add_view_command(CLI::App& parent, const GlobalFlags& g, CommandList& out) 
     cmd->add_option("--out", o.out, "Page to write (default DIR/view/index.html)");
     cmd->add_option("--buildings", o.buildings, "Building table (default DIR/buildings.gpkg)");
     cmd->add_option("--glb", o.glb, "3D model (default DIR/buildings.glb)");
+    cmd->add_option("--tileset", o.tileset, "3D Tiles tileset shown in 3D as well (default DIR/3dtiles/tileset.json; bundled as tiles.js beside the page)");
     cmd->add_option("--ortho", o.ortho, "Raster under the footprints (default: the run's ortho from DIR/manifest.json)");
     cmd->add_option("--ortho-max-px", o.ortho_max_px, "Longer side of the ortho quick-look, pixels")->capture_default_str();
     cmd->add_flag("--overwrite", o.overwrite, "Replace an existing page");
     out.push_back({cmd, [s, &g]() {
                        const ViewReport r = write_view(s->dir, s->options);
-                       if (!g.quiet)
+                       if (!g.quiet) {
                            std::fprintf(stderr, "cityforge: %zu buildings (%zu in 3D)%s, %zu audit report(s); %.1f MB -> %s\n", r.buildings, r.meshed,
                                         r.ortho ? " over the ortho" : "", r.audits, double(r.bytes) / 1e6, r.path.c_str());
+                           if (r.tiles) std::fprintf(stderr, "cityforge: 3D Tiles: %zu content tiles -> %s\n", r.tiles, r.tiles_bundle.c_str());
+                       }
                        return 0;
                    }});
 }

@@ -10,12 +10,18 @@ namespace cityforge {
 
 GridSpec grid_over_cloud(const PointCloud& c, double cell) {
     if (c.size() == 0) throw Error("rasterize", "cloud is empty");
-    if (!(cell > 0)) throw Error("rasterize", "cell size must be > 0");
     double minx = INFINITY, miny = INFINITY, maxx = -INFINITY, maxy = -INFINITY;
     for (std::size_t i = 0; i < c.size(); ++i) {
         minx = std::min(minx, c.x[i]), maxx = std::max(maxx, c.x[i]);
         miny = std::min(miny, c.y[i]), maxy = std::max(maxy, c.y[i]);
     }
+    return grid_over_extent({minx, miny, maxx, maxy}, cell);
+}
+
+GridSpec grid_over_extent(const Extent& e, double cell) {
+    if (!(cell > 0)) throw Error("rasterize", "cell size must be > 0");
+    if (!(e.min_x <= e.max_x && e.min_y <= e.max_y)) throw Error("rasterize", "cloud is empty");
+    const double minx = e.min_x, miny = e.min_y, maxx = e.max_x, maxy = e.max_y;
     const double x0 = std::floor(minx / cell) * cell, y1 = std::ceil(maxy / cell) * cell;
     GridSpec g{{x0, cell, y1, -cell}, static_cast<int>(std::floor((maxx - x0) / cell)) + 1,
                static_cast<int>(std::floor((y1 - miny) / cell)) + 1};
@@ -25,8 +31,15 @@ GridSpec grid_over_cloud(const PointCloud& c, double cell) {
 
 CloudRasters rasterize_cloud(const PointCloud& c, const std::vector<uint8_t>& keep, const std::vector<uint8_t>& is_ground,
                              const GridSpec& g, double unit_m) {
-    if (g.width <= 0 || g.height <= 0) throw Error("rasterize", "grid has no cells");
+    return rasterize_cloud(c, keep, is_ground, g, 0, 0, g.width, g.height, unit_m);
+}
+
+CloudRasters rasterize_cloud(const PointCloud& c, const std::vector<uint8_t>& keep, const std::vector<uint8_t>& is_ground,
+                             const GridSpec& full, int col0, int row0, int width, int height, double unit_m) {
+    if (width <= 0 || height <= 0) throw Error("rasterize", "grid has no cells");
     if (is_ground.size() != c.size()) throw Error("rasterize", "ground mask size differs from the cloud");
+    // The window's cells, with points placed through the full grid's transform.
+    const GridSpec g{full.transform.window(col0, row0), width, height};
     const std::size_t n = static_cast<std::size_t>(g.width) * g.height;
     CloudRasters r;
     r.dsm = Image<float>(g.width, g.height, 1, NAN);
@@ -35,8 +48,8 @@ CloudRasters rasterize_cloud(const PointCloud& c, const std::vector<uint8_t>& ke
     std::vector<uint32_t> ground_n(n, 0), above_n(n, 0), building_n(n, 0), vegetation_n(n, 0);
     for (std::size_t i = 0; i < c.size(); ++i) {
         if (!keep.empty() && !keep[i]) continue;
-        const PixelPoint p = g.transform.map_to_pixel({c.x[i], c.y[i]});
-        const auto col = static_cast<int>(std::floor(p.col)), row = static_cast<int>(std::floor(p.row));
+        const PixelPoint p = full.transform.map_to_pixel({c.x[i], c.y[i]});
+        const auto col = static_cast<int>(std::floor(p.col)) - col0, row = static_cast<int>(std::floor(p.row)) - row0;
         if (col < 0 || row < 0 || col >= g.width || row >= g.height) continue;
         const std::size_t k = static_cast<std::size_t>(row) * g.width + col;
         const auto z = static_cast<float>(c.z[i]);

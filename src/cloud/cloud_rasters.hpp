@@ -36,10 +36,21 @@ struct CloudRasters {
 /// A grid of square `cell` (CRS units) covering the cloud, its origin snapped
 /// to multiples of the cell so that grids of neighbouring tiles align.
 GridSpec grid_over_cloud(const PointCloud& cloud, double cell);
+/// The same grid over the points' bounding box `extent` (e.g. measured while
+/// streaming a cloud too large to hold).
+GridSpec grid_over_extent(const Extent& extent, double cell);
 
 /// Rasterises `cloud` (points with keep[i] == 0 skipped; keep may be empty)
 /// on `grid`. `unit_m` = metres per horizontal CRS unit (for the density).
 CloudRasters rasterize_cloud(const PointCloud& cloud, const std::vector<uint8_t>& keep, const std::vector<uint8_t>& is_ground,
                              const GridSpec& grid, double unit_m);
+
+/// The same on the window of `grid` whose top-left cell is (col0, row0), of
+/// width x height cells: points are placed through `grid`'s own transform, so
+/// each window cell gets exactly the points the same cell of the whole grid
+/// gets (no rounding of a shifted origin). The DTM's gaps are filled within
+/// the window.
+CloudRasters rasterize_cloud(const PointCloud& cloud, const std::vector<uint8_t>& keep, const std::vector<uint8_t>& is_ground,
+                             const GridSpec& grid, int col0, int row0, int width, int height, double unit_m);
 
 }  // namespace cityforge

@@ -6,6 +6,7 @@
 #include <filesystem>
 #include <limits>
 #include <vector>
+#include <tbb/parallel_for.h>
 
 #include "core/atomic_file.hpp"
 #include "cloud/le_bytes.hpp"
@@ -229,7 +230,9 @@ std::size_t LasReader::read_chunk(PointCloud& out, std::size_t max_points) {
     const int class_offset = extended ? 16 : 15;
     const int gps_offset = extended ? 22 : 20;
     const int rgb = rgb_offset[h.point_format];
-    for (std::size_t i = 0; i < n; ++i) {
+    // Records decoded in parallel blocks: each point's fields depend on its record only.
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, 1u << 16), [&](const tbb::blocked_range<std::size_t>& range) {
+    for (std::size_t i = range.begin(); i != range.end(); ++i) {
         const char* p = buf.data() + i * rl;
         const std::size_t k = base + i;
         out.x[k] = get<int32_t>(p) * h.scale[0] + h.offset[0];
@@ -248,6 +251,7 @@ std::size_t LasReader::read_chunk(PointCloud& out, std::size_t max_points) {
             out.blue[k] = get<uint16_t>(p + rgb + 4);
         }
     }
+    });
     return n;
 }
 

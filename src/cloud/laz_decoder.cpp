@@ -1,5 +1,6 @@
 #include "cloud/laz_decoder.hpp"
 
+#include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
 #include <tbb/task_arena.h>
 
@@ -32,17 +33,24 @@ struct Corrupt {
 class ByteIn {
 public:
     ByteIn() = default;
-    ByteIn(const uint8_t* p, std::size_t n) : p_(p), n_(n) {}
+    ByteIn(const uint8_t* p, std::size_t n) : begin_(p), cur_(p), end_(p + n) {}
     uint32_t get() {
-        if (pos_ < n_) return p_[pos_++];
+        if (cur_ < end_) return *cur_++;
         if (++overrun_ > 4) throw Corrupt{"arithmetic decoder ran off the end of its data"};
         return 0;
     }
-    std::size_t pos() const { return pos_; }
+    /// At least 4 bytes left: peek32() and skip() may be used instead of get().
+    bool has4() const { return end_ - cur_ >= 4; }
+    /// The next 4 bytes, first byte highest (needs has4()).
+    uint32_t peek32() const { return __builtin_bswap32(bytes::get<uint32_t>(cur_)); }
+    void skip(std::size_t n) { cur_ += n; }
+    std::size_t pos() const { return static_cast<std::size_t>(cur_ - begin_); }
 
 private:
-    const uint8_t* p_ = nullptr;
-    std::size_t n_ = 0, pos_ = 0, overrun_ = 0;
+    const uint8_t* begin_ = nullptr;
+    const uint8_t* cur_ = nullptr;
+    const uint8_t* end_ = nullptr;
+    std::size_t overrun_ = 0;
 };
 
 constexpr uint32_t kMinLength = 0x01000000u;
@@ -88,7 +96,7 @@ public:
         store_.assign(2 * static_cast<std::size_t>(symbols) + 1 + table_size_ + 2, 0);
         bind_store();
         for (uint32_t n = 0; n < symbols; ++n) count_[n] = 1;
-        distribution_[symbols] = kSymMaxCount;
+        distribution_[symbols] = std::numeric_limits<uint32_t>::max();  // sentinel above any dv (<= kSymMaxCount)
         total_count_ = 0;
         update_cycle_ = symbols;
         update();
@@ -162,18 +170,19 @@ public:
         value_ |= in_->get() << 16;
         value_ |= in_->get() << 8;
         value_ |= in_->get();
+        // An encoder's first word is below the initial length; the decoder
+        // keeps value_ < length_ from here on, which bounds every table index.
+        if (value_ == kMaxLength) throw Corrupt{"arithmetic-coded stream starts with an impossible value"};
     }
+    // Branch-free where the outcome is data-dependent (the coded bit, the
+    // renormalisation); the same arithmetic as LASzip's decoder.
     [[gnu::always_inline]] uint32_t decode_bit(BitModel& m) {
         const uint32_t x = m.bit0_prob * (length_ >> kBitShift);
         const uint32_t sym = value_ >= x;
-        if (sym == 0) {
-            length_ = x;
-            ++m.bit0_count;
-        } else {
-            value_ -= x;
-            length_ -= x;
-        }
-        if (length_ < kMinLength) renorm();
+        value_ -= sym ? x : 0;
+        length_ = sym ? length_ - x : x;
+        m.bit0_count += sym ^ 1u;
+        renorm();
         if (--m.until_update == 0) m.update();
         return sym;
     }
@@ -181,28 +190,33 @@ public:
         const uint32_t y0 = length_;
         length_ >>= kSymShift;
         const uint32_t dv = value_ / length_;
-        const uint32_t t = std::min(dv >> m.table_shift_, m.table_size_);
+        // value_ < length_ (see init) gives dv < 2^15 + 2^7, so t <= table_size_.
+        const uint32_t t = dv >> m.table_shift_;
         uint32_t sym = m.table_[t];
-        uint32_t n = m.table_[t + 1] + 1;
-        while (n > sym + 1) {
-            const uint32_t k = (sym + n) >> 1;
-            if (m.distribution_[k] > dv) n = k;
-            else sym = k;
+        const uint32_t n = m.table_[t + 1] + 1;
+        if (n > sym + 2) [[unlikely]] {
+            bisect(m, dv, sym, n);
+        } else {
+            // sym or sym + 1 (distribution_[symbols] is a sentinel above any dv).
+            sym += m.distribution_[sym + 1] <= dv;
         }
         const uint32_t x = m.distribution_[sym] * length_;
         const uint32_t y = sym != m.last_symbol_ ? m.distribution_[sym + 1] * length_ : y0;
         value_ -= x;
         length_ = y - x;
-        if (length_ < kMinLength) renorm();
+        renorm();
         ++m.count_[sym];
         if (--m.until_update_ == 0) m.update();
         return sym;
     }
-    uint32_t read_bits(uint32_t bits) {
-        if (bits > 19) {
+    [[gnu::always_inline]] uint32_t read_bits(uint32_t bits) {
+        if (bits > 19) [[unlikely]] {
             const uint32_t low = read_short();
-            return (read_bits(bits - 16) << 16) | low;
+            return (read_bits_19(bits - 16) << 16) | low;
         }
+        return read_bits_19(bits);
+    }
+    [[gnu::always_inline]] uint32_t read_bits_19(uint32_t bits) {
         const uint32_t sym = value_ / (length_ >>= bits);
         value_ -= length_ * sym;
         if (length_ < kMinLength) renorm();
@@ -222,7 +236,28 @@ public:
     }
 
 private:
-    [[gnu::noinline]] void renorm() {
+    [[gnu::noinline]] static void bisect(const SymbolModel& m, uint32_t dv, uint32_t& sym, uint32_t n) {
+        while (n > sym + 1) {
+            const uint32_t k = (sym + n) >> 1;
+            if (m.distribution_[k] > dv) n = k;
+            else sym = k;
+        }
+    }
+    // Shifts in whole bytes until length_ >= kMinLength: the byte count is
+    // the leading zero bytes of length_ (length_ > 0 always), read as one
+    // big-endian word while 4 bytes remain.
+    [[gnu::always_inline]] void renorm() {
+        if (in_->has4()) [[likely]] {
+            const uint32_t sh = static_cast<uint32_t>(__builtin_clz(length_)) & 24u;
+            const uint64_t w = in_->peek32();
+            value_ = static_cast<uint32_t>((static_cast<uint64_t>(value_) << sh) | (w >> (32 - sh)));
+            length_ <<= sh;
+            in_->skip(sh >> 3);
+        } else if (length_ < kMinLength) {
+            renorm_tail();
+        }
+    }
+    [[gnu::noinline]] void renorm_tail() {
         do {
             value_ = (value_ << 8) | in_->get();
         } while ((length_ <<= 8) < kMinLength);
@@ -250,10 +285,11 @@ public:
     }
     [[gnu::always_inline]] int32_t decompress(ArithDecoder& dec, int32_t pred, uint32_t context = 0) {
         uint32_t real = static_cast<uint32_t>(pred) + static_cast<uint32_t>(read_corrector(dec, k_models_[context]));
+        // Wrap into the corrector's range (a no-op for 32 bits, range 0), without branches.
         const int32_t sreal = static_cast<int32_t>(real);
-        if (sreal < 0) real += corr_range_;
-        else if (real >= corr_range_) real -= corr_range_;
-        return static_cast<int32_t>(real);
+        const uint32_t add = sreal < 0 ? corr_range_ : 0u;
+        const uint32_t sub = (sreal >= 0 && real >= corr_range_) ? corr_range_ : 0u;
+        return static_cast<int32_t>(real + add - sub);
     }
     uint32_t k() const { return k_; }
 
@@ -262,16 +298,13 @@ private:
         k_ = dec.decode_symbol(model);
         if (k_ == 0) return static_cast<int32_t>(dec.decode_bit(bit_));
         if (k_ >= 32) return corr_min_;
-        uint32_t c;
-        if (k_ <= bits_high_) {
-            c = dec.decode_symbol(corrector_[k_ - 1]);
-        } else {
+        uint32_t c = dec.decode_symbol(corrector_[k_ - 1]);
+        if (k_ > bits_high_) {
             const uint32_t k1 = k_ - bits_high_;
-            c = dec.decode_symbol(corrector_[k_ - 1]);
             c = (c << k1) | dec.read_bits(k1);
         }
-        if (c >= (1u << (k_ - 1))) c += 1;
-        else c -= (1u << k_) - 1;
+        // c >= 2^(k-1): c + 1; else c - (2^k - 1) (the negative half), without a branch.
+        c = c + 1u - (static_cast<uint32_t>(c < (1u << (k_ - 1))) << k_);
         return static_cast<int32_t>(c);
     }
     uint32_t bits_high_, corr_bits_, corr_range_;
@@ -656,6 +689,20 @@ private:
     IntegerDecompressor ic_offset_diff_{32, 1}, ic_packet_size_{32, 1}, ic_return_point_{32, 1}, ic_xyz_{32, 3};
 };
 
+// POINT10 [+ GPSTIME11] [+ RGB12], in that order, nothing else.
+template <bool Gps, bool Rgb>
+void decode_fused(ArithDecoder& dec, const std::vector<std::unique_ptr<ItemV2>>& items, uint8_t* out, int rl, uint64_t count) {
+    auto& point = static_cast<Point10V2&>(*items[0]);
+    GpsTime11V2* gps = Gps ? static_cast<GpsTime11V2*>(items[1].get()) : nullptr;
+    Rgb12V2* rgb = Rgb ? static_cast<Rgb12V2*>(items[Gps ? 2 : 1].get()) : nullptr;
+    for (uint64_t i = 1; i < count; ++i) {
+        uint8_t* rec = out + i * static_cast<std::size_t>(rl);
+        point.Point10V2::read(dec, rec);
+        if constexpr (Gps) gps->GpsTime11V2::read(dec, rec + 20);
+        if constexpr (Rgb) rgb->Rgb12V2::read(dec, rec + (Gps ? 28 : 20));
+    }
+}
+
 std::size_t decode_pointwise(const LazInfo& info, int rl, const uint8_t* data, std::size_t size, uint64_t count, char* out_chars) {
     if (count == 0) return 0;
     if (size < static_cast<std::size_t>(rl)) throw Corrupt{"truncated chunk (shorter than one raw point)"};
@@ -679,10 +726,24 @@ std::size_t decode_pointwise(const LazInfo& info, int rl, const uint8_t* data, s
     ByteIn in(data + rl, size - rl);
     ArithDecoder dec;
     dec.init(&in);
-    for (uint64_t i = 1; i < count; ++i) {
-        uint8_t* rec = out + i * rl;
-        for (std::size_t k = 0; k < items.size(); ++k) items[k]->read(dec, rec + offsets[k]);
-    }
+    // The layouts of point formats 0-3 without extra bytes (nearly all
+    // pointwise files) get a loop with the item calls resolved at compile
+    // time; anything else goes through the item list.
+    const auto type = [&](std::size_t k) { return k < info.items.size() ? info.items[k].type : 0xFFFF; };
+    const std::size_t n_items = info.items.size();
+    if (n_items == 1 && type(0) == 6)
+        decode_fused<false, false>(dec, items, out, rl, count);
+    else if (n_items == 2 && type(0) == 6 && type(1) == 7)
+        decode_fused<true, false>(dec, items, out, rl, count);
+    else if (n_items == 2 && type(0) == 6 && type(1) == 8)
+        decode_fused<false, true>(dec, items, out, rl, count);
+    else if (n_items == 3 && type(0) == 6 && type(1) == 7 && type(2) == 8)
+        decode_fused<true, true>(dec, items, out, rl, count);
+    else
+        for (uint64_t i = 1; i < count; ++i) {
+            uint8_t* rec = out + i * rl;
+            for (std::size_t k = 0; k < items.size(); ++k) items[k]->read(dec, rec + offsets[k]);
+        }
     return rl + in.pos();
 }
 
@@ -1294,14 +1355,8 @@ void LazPointSource::fill() {
     raw.resize(std::max(raw.size(), end - next_));
     decoded_.resize(end - next_);
     for (std::size_t i = next_; i < end; ++i) {
-        const LazChunk& c = chunks_[order_[i]];
-        raw[i - next_].resize(static_cast<std::size_t>(c.bytes));
-        in_.clear();
-        in_.seekg(static_cast<std::streamoff>(c.offset));
-        in_.read(reinterpret_cast<char*>(raw[i - next_].data()), static_cast<std::streamsize>(c.bytes));
-        if (static_cast<uint64_t>(in_.gcount()) != c.bytes)
-            throw Error(path_, "chunk " + std::to_string(order_[i]) + ": truncated (the file ends inside it)");
-        decoded_[i - next_].resize(static_cast<std::size_t>(c.point_count) * rl);
+        read_raw(order_[i], raw[i - next_]);
+        decoded_[i - next_].resize(static_cast<std::size_t>(chunks_[order_[i]].point_count) * rl);
     }
     const std::size_t base = next_;
     tbb::parallel_for(std::size_t(0), end - next_, [&](std::size_t k) {
@@ -1312,11 +1367,68 @@ void LazPointSource::fill() {
     next_ = end;
 }
 
+std::size_t LazPointSource::decode_direct(char* out, std::size_t max_points) {
+    // Whole chunks that fit into the caller's buffer, decoded in parallel
+    // straight into it (no intermediate buffer, no copy). The chunks of one
+    // call are many when the caller asks for many points, which keeps both
+    // cores busy to the end of the call.
+    const std::size_t rl = static_cast<std::size_t>(record_length_);
+    std::size_t end = next_;
+    uint64_t points = 0;
+    uint64_t raw_bytes = 0;
+    while (end < order_.size()) {
+        const LazChunk& c = chunks_[order_[end]];
+        if (points + c.point_count > max_points || raw_bytes + c.bytes > (256ull << 20)) break;
+        points += c.point_count;
+        raw_bytes += c.bytes;
+        ++end;
+    }
+    if (end == next_) return 0;
+    std::vector<std::vector<uint8_t>>& raw = raw_;
+    raw.resize(std::max(raw.size(), end - next_));
+    std::vector<std::size_t> first(end - next_);
+    std::size_t at = 0;
+    for (std::size_t i = next_; i < end; ++i) {
+        const LazChunk& c = chunks_[order_[i]];
+        read_raw(order_[i], raw[i - next_]);
+        first[i - next_] = at;
+        at += static_cast<std::size_t>(c.point_count);
+    }
+    const std::size_t base = next_;
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, end - next_, 1), [&](const tbb::blocked_range<std::size_t>& r) {
+        for (std::size_t k = r.begin(); k < r.end(); ++k) {
+            const LazChunk& c = chunks_[order_[base + k]];
+            decode_laz_chunk(info_, record_length_, raw[k].data(), raw[k].size(), c.point_count, out + first[k] * rl, path_,
+                             order_[base + k], point_fields_only_);
+        }
+    });
+    next_ = end;
+    return static_cast<std::size_t>(points);
+}
+
+void LazPointSource::read_raw(std::size_t chunk, std::vector<uint8_t>& raw) {
+    const LazChunk& c = chunks_[chunk];
+    raw.resize(static_cast<std::size_t>(c.bytes));
+    in_.clear();
+    in_.seekg(static_cast<std::streamoff>(c.offset));
+    in_.read(reinterpret_cast<char*>(raw.data()), static_cast<std::streamsize>(c.bytes));
+    if (static_cast<uint64_t>(in_.gcount()) != c.bytes)
+        throw Error(path_, "chunk " + std::to_string(chunk) + ": truncated (the file ends inside it)");
+}
+
 std::size_t LazPointSource::read(char* out, std::size_t max_points) {
     const std::size_t rl = static_cast<std::size_t>(record_length_);
     std::size_t done = 0;
     while (done < max_points) {
         if (batch_index_ >= decoded_.size()) {
+            // Nothing buffered: whole chunks go straight into `out`; only a
+            // chunk larger than what is left of the request is buffered.
+            if (has_table_) {
+                if (const std::size_t n = decode_direct(out + done * rl, max_points - done); n > 0) {
+                    done += n;
+                    continue;
+                }
+            }
             fill();
             if (decoded_.empty()) break;
         }

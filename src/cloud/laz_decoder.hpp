@@ -65,7 +65,9 @@ std::size_t decode_laz_chunk(const LazInfo& info, int record_length, const uint8
                              char* out, const std::string& path, std::size_t chunk_index, bool point_fields_only = false);
 
 /// Streams the decoded point records of a LAZ file, chunk by chunk, several
-/// chunks decoded in parallel (TBB) and handed out in file order.
+/// chunks decoded in parallel (TBB) and handed out in file order. With a
+/// chunk table, the whole chunks that fit in a read() are decoded straight
+/// into the caller's buffer; only a chunk split between two reads is buffered.
 class LazPointSource {
 public:
     /// Reads the chunk table (or plans a sequential read when there is none).
@@ -90,6 +92,10 @@ public:
 
 private:
     void fill();
+    /// Decodes the next whole chunks that fit into max_points straight into `out`; returns their points (0: none fits).
+    std::size_t decode_direct(char* out, std::size_t max_points);
+    /// Reads chunk `chunk`'s compressed bytes (chunk table known) into `raw`.
+    void read_raw(std::size_t chunk, std::vector<uint8_t>& raw);
     std::string path_;
     LazInfo info_;
     int record_length_;

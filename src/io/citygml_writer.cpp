@@ -93,6 +93,32 @@ std::string join(const std::vector<std::string>& v) {
     return s;
 }
 
+// lod2Solid (referencing the semantic surfaces' polygons, as in the OGC examples) and boundedBy surfaces.
+void write_lod2(std::ostream& out, GmlWriter& gml, const std::vector<Solid>& solids, const std::string& id) {
+    auto poly_id = [&](std::size_t s, std::size_t f) { return id + ".s" + std::to_string(s) + ".f" + std::to_string(f); };
+    auto shell = [&](std::size_t s) {
+        out << "<gml:Solid gml:id=\"" << id << ".lod2." << s << "\"><gml:exterior><gml:CompositeSurface>";
+        for (std::size_t f = 0; f < solids[s].faces.size(); ++f) out << "<gml:surfaceMember xlink:href=\"#" << poly_id(s, f) << "\"/>";
+        out << "</gml:CompositeSurface></gml:exterior></gml:Solid>";
+    };
+    out << "<bldg:lod2Solid>";
+    if (solids.size() == 1) shell(0);
+    else {
+        out << "<gml:CompositeSolid gml:id=\"" << id << ".lod2\">";
+        for (std::size_t s = 0; s < solids.size(); ++s) out << "<gml:solidMember>", shell(s), out << "</gml:solidMember>";
+        out << "</gml:CompositeSolid>";
+    }
+    out << "</bldg:lod2Solid>\n";
+    for (std::size_t s = 0; s < solids.size(); ++s)
+        for (std::size_t f = 0; f < solids[s].faces.size(); ++f) {
+            const Face& face = solids[s].faces[f];
+            const char* type = citygml_name(face.type);
+            out << "<bldg:boundedBy><bldg:" << type << " gml:id=\"" << poly_id(s, f) << ".surface\"><bldg:lod2MultiSurface><gml:MultiSurface><gml:surfaceMember>";
+            gml.polygon(face.outer, face.holes, poly_id(s, f));
+            out << "</gml:surfaceMember></gml:MultiSurface></bldg:lod2MultiSurface></bldg:" << type << "></bldg:boundedBy>\n";
+        }
+}
+
 }  // namespace
 
 CityGmlWriteReport write_citygml(const std::string& path, const CityModel& model, const CityGmlWriteOptions& o) {
@@ -130,6 +156,9 @@ CityGmlWriteReport write_citygml(const std::string& path, const CityModel& model
         if (!b.ground_z && !b.footprint.empty()) write_attribute(out, "footprint_z_estimated", int64_t(1));
         if (!b.reason.empty()) write_attribute(out, "reason", b.reason);
         const auto& errs = o.lod == 1 ? b.lod1_errors : b.lod2_errors;
+        // CityGML 2.0 has LOD 1 and 2 only: the refined LOD (3DBAG's naming) as an attribute.
+        if (!solids.empty()) write_attribute(out, "refined_lod", std::string(o.lod == 1 ? "1.2" : "2.2"));
+        if (o.lod == 2 && b.roof_parts.size() > 1) write_attribute(out, "lod22_parts", int64_t(b.roof_parts.size()));
         if (!solids.empty()) {
             write_attribute(out, "lod" + std::to_string(o.lod) + "_valid", int64_t(errs.empty() ? 1 : 0));
             if (!errs.empty()) write_attribute(out, "lod" + std::to_string(o.lod) + "_errors", join(errs));
@@ -171,30 +200,22 @@ CityGmlWriteReport write_citygml(const std::string& path, const CityModel& model
                     out << "</gml:CompositeSolid>";
                 }
                 out << "</bldg:lod1Solid>\n";
-            } else {
-                // The solid references the semantic surfaces' polygons (as in the OGC examples).
-                auto poly_id = [&](std::size_t s, std::size_t f) { return id + ".s" + std::to_string(s) + ".f" + std::to_string(f); };
-                auto shell = [&](std::size_t s) {
-                    out << "<gml:Solid gml:id=\"" << id << ".lod2." << s << "\"><gml:exterior><gml:CompositeSurface>";
-                    for (std::size_t f = 0; f < solids[s].faces.size(); ++f) out << "<gml:surfaceMember xlink:href=\"#" << poly_id(s, f) << "\"/>";
-                    out << "</gml:CompositeSurface></gml:exterior></gml:Solid>";
-                };
-                out << "<bldg:lod2Solid>";
-                if (solids.size() == 1) shell(0);
-                else {
-                    out << "<gml:CompositeSolid gml:id=\"" << id << ".lod2\">";
-                    for (std::size_t s = 0; s < solids.size(); ++s) out << "<gml:solidMember>", shell(s), out << "</gml:solidMember>";
-                    out << "</gml:CompositeSolid>";
+            } else if (b.roof_parts.size() > 1) {
+                // LOD2.2: one BuildingPart per roof part where heights step (after boundedBy in the schema's order).
+                for (std::size_t k = 0; k < b.roof_parts.size(); ++k) {
+                    const RoofPart& part = b.roof_parts[k];
+                    const std::string pid = id + "-" + std::to_string(k);
+                    out << "<bldg:consistsOfBuildingPart><bldg:BuildingPart gml:id=\"" << pid << "\">\n";
+                    write_attribute(out, "cityforge_id", b.id + "-" + std::to_string(k));
+                    write_attribute(out, "refined_lod", std::string("2.2"));
+                    write_attribute(out, "lod22_valid", int64_t(part.lod22_errors.empty() ? 1 : 0));
+                    if (!part.lod22_errors.empty()) write_attribute(out, "lod22_errors", join(part.lod22_errors));
+                    write_attribute(out, "volume_m3", part.lod22_volume * model.crs.linear_unit_m * model.crs.linear_unit_m * model.crs.z_unit_m);
+                    write_lod2(out, gml, {part.lod22}, pid);
+                    out << "</bldg:BuildingPart></bldg:consistsOfBuildingPart>\n";
                 }
-                out << "</bldg:lod2Solid>\n";
-                for (std::size_t s = 0; s < solids.size(); ++s)
-                    for (std::size_t f = 0; f < solids[s].faces.size(); ++f) {
-                        const Face& face = solids[s].faces[f];
-                        const char* type = citygml_name(face.type);
-                        out << "<bldg:boundedBy><bldg:" << type << " gml:id=\"" << poly_id(s, f) << ".surface\"><bldg:lod2MultiSurface><gml:MultiSurface><gml:surfaceMember>";
-                        gml.polygon(face.outer, face.holes, poly_id(s, f));
-                        out << "</gml:surfaceMember></gml:MultiSurface></bldg:lod2MultiSurface></bldg:" << type << "></bldg:boundedBy>\n";
-                    }
+            } else {
+                write_lod2(out, gml, solids, id);
             }
         }
         out << "</bldg:Building>\n</core:cityObjectMember>\n";

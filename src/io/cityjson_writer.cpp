@@ -4,6 +4,7 @@
 #include <array>
 #include <cmath>
 #include <nlohmann/json.hpp>
+#include <map>
 #include <unordered_map>
 
 #include "core/atomic_file.hpp"
@@ -41,6 +42,28 @@ private:
     double s_;
     std::unordered_map<Key, int64_t, KeyHash> index_;
     std::vector<Key> list_;
+};
+
+// Deduplicated texture coordinates (CityJSON's origin is the image's bottom-left corner).
+class UvPool {
+public:
+    int64_t add(double u, double v) {
+        const std::array<int64_t, 2> k{std::llround(u * 1e7), std::llround(v * 1e7)};
+        const auto [it, inserted] = index_.emplace(k, static_cast<int64_t>(list_.size()));
+        if (inserted) list_.push_back(k);
+        return it->second;
+    }
+    json list_json() const {
+        json a = json::array();
+        for (const auto& k : list_) a.push_back({double(k[0]) * 1e-7, double(k[1]) * 1e-7});
+        return a;
+    }
+    bool empty() const { return list_.empty(); }
+    void clear() { index_.clear(), list_.clear(); }
+
+private:
+    std::map<std::array<int64_t, 2>, int64_t> index_;
+    std::vector<std::array<int64_t, 2>> list_;
 };
 
 json value_json(const AttributeValue& v) {
@@ -83,7 +106,49 @@ json solids_json(const std::vector<Solid>& solids, const std::string& lod, Verte
     return g;
 }
 
-json building_json(const Building& b, const CityJsonWriteOptions& o, const ModelCrs& crs, VertexPool& pool, double fallback_z) {
+// Theme "ortho": texture coordinates of the roof rings (texture 0), null for the other surfaces;
+// theme "surfaces": a plain material per surface type (0 ground, 1 wall, 2 roof).
+void add_roof_texture(json& g, const Solid& s, const RoofTextureLayout& t, const RoofTextureWindow& w, UvPool& uvs) {
+    json shell = json::array(), mats = json::array();
+    for (const Face& f : s.faces) {
+        mats.push_back(semantic_index(f.type));
+        if (f.type != SurfaceType::roof) {
+            shell.push_back(json::array({json::array({nullptr})}));
+            continue;
+        }
+        json rings = json::array();
+        auto ring = [&](const Ring3& r) {
+            json a = json::array({0});
+            for (const Point3& p : r) {
+                const auto uv = t.uv(w, p.x, p.y);
+                a.push_back(uvs.add(uv[0], 1.0 - uv[1]));
+            }
+            rings.push_back(a);
+        };
+        ring(f.outer);
+        for (const Ring3& h : f.holes) ring(h);
+        shell.push_back(rings);
+    }
+    g["texture"] = {{"ortho", {{"values", json::array({shell})}}}};
+    g["material"] = {{"surfaces", {{"values", json::array({mats})}}}};
+}
+
+json appearance_json(const CityJsonWriteOptions& o, const UvPool& uvs) {
+    json a;
+    a["materials"] = json::array({{{"name", "GroundSurface"}, {"diffuseColor", {0.45, 0.42, 0.38}}},
+                                  {{"name", "WallSurface"}, {"diffuseColor", {0.86, 0.84, 0.78}}},
+                                  {{"name", "RoofSurface"}, {"diffuseColor", {0.72, 0.30, 0.24}}}});
+    a["textures"] = json::array({{{"type", "PNG"}, {"image", o.texture_image}, {"wrapMode", "clamp"}, {"textureType", "specific"}}});
+    a["vertices-texture"] = uvs.list_json();
+    a["default-theme-texture"] = "ortho";
+    a["default-theme-material"] = "surfaces";
+    return a;
+}
+
+// The Building and its BuildingParts (one per roof part: LOD1.3 block and LOD2.2 solid), as (id, object) pairs.
+std::vector<std::pair<std::string, json>> building_objects(const Building& b, std::size_t index, const CityJsonWriteOptions& o, const ModelCrs& crs,
+                                                           VertexPool& pool, UvPool& uvs, double fallback_z) {
+    const RoofTextureWindow* tex = o.textures ? o.textures->window_of(index) : nullptr;
     json obj;
     obj["type"] = "Building";
     json attrs = json::object();
@@ -98,17 +163,46 @@ json building_json(const Building& b, const CityJsonWriteOptions& o, const Model
     const bool want1 = std::find(o.lods.begin(), o.lods.end(), 1) != o.lods.end();
     const bool want2 = std::find(o.lods.begin(), o.lods.end(), 2) != o.lods.end();
     const double unit3 = crs.linear_unit_m * crs.linear_unit_m * crs.z_unit_m;
+    // Refined LODs, named as 3DBAG names them (lod12 = "1.2", ...); the list of those written in `lods`.
+    json lods = json::array();
+    if (want0 && !b.footprint.empty()) lods.push_back("0");
     if (want1 && !b.lod1.empty()) {
-        attrs["lod1_valid"] = b.lod1_errors.empty();
-        if (!b.lod1_errors.empty()) attrs["lod1_errors"] = b.lod1_errors;
-        attrs["lod1_volume_m3"] = b.lod1_volume * unit3;
+        lods.push_back("1.2");
+        attrs["lod12_valid"] = b.lod1_errors.empty();
+        if (!b.lod1_errors.empty()) attrs["lod12_errors"] = b.lod1_errors;
+        attrs["lod12_volume_m3"] = b.lod1_volume * unit3;
     }
-    if (want2 && !b.lod2.empty()) {
-        attrs["lod2_valid"] = b.lod2_errors.empty();
-        if (!b.lod2_errors.empty()) attrs["lod2_errors"] = b.lod2_errors;
-        attrs["lod2_volume_m3"] = b.lod2_volume * unit3;
+    const std::vector<RoofPart>& parts = b.roof_parts;
+    auto part_errors = [&](bool lod13) {
+        json all = json::array();
+        for (std::size_t i = 0; i < parts.size(); ++i)
+            for (const std::string& e : lod13 ? parts[i].lod13_errors : parts[i].lod22_errors) all.push_back("part " + std::to_string(i) + ": " + e);
+        return all;
+    };
+    const bool with13 = want1 && !parts.empty(), with22 = want2 && !parts.empty();
+    if (with13) {
+        lods.push_back("1.3");
+        const json e = part_errors(true);
+        double v = 0;
+        for (const RoofPart& p : parts) v += p.lod13_volume;
+        attrs["lod13_valid"] = e.empty();
+        if (!e.empty()) attrs["lod13_errors"] = e;
+        attrs["lod13_volume_m3"] = v * unit3;
+    }
+    if (with22) {
+        lods.push_back("2.2");
+        const json e = part_errors(false);
+        double v = 0;
+        for (const RoofPart& p : parts) v += p.lod22_volume;
+        attrs["lod22_valid"] = e.empty();
+        if (!e.empty()) attrs["lod22_errors"] = e;
+        attrs["lod22_volume_m3"] = v * unit3;
+        attrs["lod22_parts"] = parts.size();
+        if (!b.roof_parts_unsplit.empty()) attrs["lod22_unsplit"] = b.roof_parts_unsplit;
         if (!b.roof_type.empty()) attrs["roofType"] = b.roof_type;
+        if (tex) attrs["roof_textured"] = true;
     }
+    attrs["lods"] = lods;
     obj["attributes"] = attrs;
     json geometry = json::array();
     if (want0 && !b.footprint.empty()) {
@@ -124,13 +218,45 @@ json building_json(const Building& b, const CityJsonWriteOptions& o, const Model
         }
         geometry.push_back({{"type", "MultiSurface"}, {"lod", "0"}, {"boundaries", surfaces}});
     }
-    if (want1 && !b.lod1.empty()) geometry.push_back(solids_json(b.lod1, "1", pool));
-    if (want2 && !b.lod2.empty()) geometry.push_back(solids_json(b.lod2, "2", pool));
+    if (want1 && !b.lod1.empty()) geometry.push_back(solids_json(b.lod1, "1.2", pool));
     obj["geometry"] = geometry;
     // Extent of this building (footprint x/y; z from its solids or ground).
     const auto e = building_extent(b);
     obj["geographicalExtent"] = {e[0], e[1], e[2], e[3], e[4], e[5]};
-    return obj;
+    std::vector<std::pair<std::string, json>> out;
+    if (with13 || with22) {
+        json children = json::array();
+        for (std::size_t i = 0; i < parts.size(); ++i) children.push_back(b.id + "-" + std::to_string(i));
+        obj["children"] = children;
+    }
+    out.emplace_back(b.id, std::move(obj));
+    if (with13 || with22)
+        for (std::size_t i = 0; i < parts.size(); ++i) {
+            const RoofPart& p = parts[i];
+            json part;
+            part["type"] = "BuildingPart";
+            part["parents"] = json::array({b.id});
+            json pa = {{"roof_part", i}, {"footprint_part", p.solid}};
+            json g = json::array();
+            if (with13 && !p.lod13.faces.empty()) {
+                pa["lod13_roof_z"] = p.lod13_roof_z;
+                pa["lod13_height_m"] = (p.lod13_roof_z - p.ground_z) * crs.z_unit_m;
+                pa["lod13_valid"] = p.lod13_errors.empty();
+                pa["lod13_volume_m3"] = p.lod13_volume * unit3;
+                g.push_back(solids_json({p.lod13}, "1.3", pool));
+            }
+            if (with22) {
+                pa["lod22_valid"] = p.lod22_errors.empty();
+                pa["lod22_volume_m3"] = p.lod22_volume * unit3;
+                json g22 = solids_json({p.lod22}, "2.2", pool);
+                if (tex) add_roof_texture(g22, p.lod22, *o.textures, *tex, uvs);
+                g.push_back(std::move(g22));
+            }
+            part["attributes"] = pa;
+            part["geometry"] = g;
+            out.emplace_back(b.id + "-" + std::to_string(i), std::move(part));
+        }
+    return out;
 }
 
 json vertices_json(const VertexPool& pool) {
@@ -160,16 +286,23 @@ CityJsonWriteReport write_cityjson(const std::string& path, const CityModel& mod
     std::ostream& out = file.stream();
     CityJsonWriteReport rep;
     VertexPool pool(translate, o.scale);
+    UvPool uvs;
     const double fallback_z = fallback_footprint_z(model);
+    const bool want2 = std::find(o.lods.begin(), o.lods.end(), 2) != o.lods.end();
+    for (std::size_t bi = 0; bi < model.buildings.size(); ++bi)
+        rep.textured_buildings += o.textures && want2 && o.textures->window_of(bi) && !model.buildings[bi].roof_parts.empty();
     if (o.sequence) {
         out << header.dump() << '\n';
-        for (const Building& b : model.buildings) {
-            pool.clear();
+        for (std::size_t bi = 0; bi < model.buildings.size(); ++bi) {
+            const Building& b = model.buildings[bi];
+            pool.clear(), uvs.clear();
             json f;
             f["type"] = "CityJSONFeature";
             f["id"] = b.id;
-            f["CityObjects"] = {{b.id, building_json(b, o, model.crs, pool, fallback_z)}};
+            f["CityObjects"] = json::object();
+            for (auto& [id, obj] : building_objects(b, bi, o, model.crs, pool, uvs, fallback_z)) f["CityObjects"][id] = std::move(obj);
             f["vertices"] = vertices_json(pool);
+            if (!uvs.empty()) f["appearance"] = appearance_json(o, uvs);
             rep.vertices += pool.list().size();
             out << f.dump() << '\n';
             ++rep.buildings;
@@ -178,11 +311,16 @@ CityJsonWriteReport write_cityjson(const std::string& path, const CityModel& mod
         // Streamed: the header's members, then one CityObject at a time, then the vertices.
         out << "{\"type\":\"CityJSON\",\"version\":\"2.0\",\"transform\":" << header["transform"].dump()
             << ",\"metadata\":" << header["metadata"].dump() << ",\"CityObjects\":{";
-        for (const Building& b : model.buildings) {
-            out << (rep.buildings ? ",\n" : "\n") << json(b.id).dump() << ':' << building_json(b, o, model.crs, pool, fallback_z).dump();
+        for (std::size_t bi = 0; bi < model.buildings.size(); ++bi) {
+            const Building& b = model.buildings[bi];
+            bool first = true;
+            for (const auto& [id, obj] : building_objects(b, bi, o, model.crs, pool, uvs, fallback_z))
+                out << (rep.buildings || !first ? ",\n" : "\n") << json(id).dump() << ':' << obj.dump(), first = false;
             ++rep.buildings;
         }
-        out << "\n},\"vertices\":[";
+        out << "\n}";
+        if (!uvs.empty()) out << ",\"appearance\":" << appearance_json(o, uvs).dump();
+        out << ",\"vertices\":[";
         const auto& list = pool.list();
         for (std::size_t i = 0; i < list.size(); ++i) out << (i ? "," : "") << '[' << list[i][0] << ',' << list[i][1] << ',' << list[i][2] << ']';
         out << "]}\n";

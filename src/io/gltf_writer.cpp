@@ -39,7 +39,7 @@ private:
 };
 
 struct Primitive {
-    std::vector<float> positions, normals, feature_ids;
+    std::vector<float> positions, normals, feature_ids, uvs;
     std::vector<uint32_t> indices;
     std::vector<uint32_t> distinct;  // feature ids seen, ascending (buildings come in order)
 };
@@ -112,21 +112,27 @@ std::vector<GltfProperty> building_properties(const CityModel& model) {
 }
 
 std::string encode_glb(const GlbContent& c, const std::vector<GltfProperty>& properties, GlbStats* stats) {
-    if (c.faces.size() != c.buildings.size() || c.lods.size() != c.buildings.size())
-        throw Error("glTF", "internal: one face list and one LOD per building are required");
-    std::array<Primitive, 3> prims;  // ground, wall, roof
+    if (c.faces.size() != c.buildings.size() || c.lods.size() != c.buildings.size() || (!c.uv.empty() && c.uv.size() != c.buildings.size()))
+        throw Error("glTF", "internal: one face list, one LOD (and one texture coordinate list) per building are required");
+    if (!c.uv.empty() && c.texture_png.empty()) throw Error("glTF", "internal: texture coordinates without an image");
+    std::array<Primitive, 4> prims;  // ground, wall, roof, textured roof
     auto type_index = [](SurfaceType t) { return t == SurfaceType::ground ? 0 : t == SurfaceType::wall ? 1 : 2; };
     GlbStats st;
     for (std::size_t b = 0; b < c.buildings.size(); ++b) {
-        for (const Face& f : c.faces[b]) {
+        for (std::size_t fi = 0; fi < c.faces[b].size(); ++fi) {
+            const Face& f = c.faces[b][fi];
+            const std::vector<std::array<float, 2>>* uv = !c.uv.empty() && fi < c.uv[b].size() && !c.uv[b][fi].empty() ? &c.uv[b][fi] : nullptr;
             const auto tris = triangulate_face(f);
             if (tris.empty()) continue;
             auto n = newell_normal(f.outer);
             const double len = std::sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]);
             if (!(len > 0)) continue;
             for (double& v : n) v /= len;
-            Primitive& p = prims[type_index(f.type)];
             const std::vector<Point3> verts = face_vertices(f);
+            if (uv && uv->size() != verts.size()) throw Error("glTF", "internal: one texture coordinate per face vertex is required");
+            Primitive& p = prims[uv ? 3 : type_index(f.type)];
+            if (uv)
+                for (const auto& t : *uv) p.uvs.insert(p.uvs.end(), {t[0], t[1]});
             const uint32_t base = static_cast<uint32_t>(p.positions.size() / 3);
             for (const Point3& q : verts) {
                 // z-up (x, y, z) -> glTF y-up (x, z, -y)
@@ -157,10 +163,10 @@ std::string encode_glb(const GlbContent& c, const std::vector<GltfProperty>& pro
     if (!c.extras.is_null()) gltf["asset"]["extras"] = c.extras;
     json views = json::array(), accessors = json::array(), meshes_prims = json::array();
     BinaryBuffer bin;
-    const char* material_names[3] = {"GroundSurface", "WallSurface", "RoofSurface"};
-    const std::array<std::array<double, 4>, 3> colours{{{0.45, 0.42, 0.38, 1.0}, {0.86, 0.84, 0.78, 1.0}, {0.72, 0.30, 0.24, 1.0}}};
+    const char* material_names[4] = {"GroundSurface", "WallSurface", "RoofSurface", "RoofSurface"};
+    const std::array<std::array<double, 4>, 4> colours{{{0.45, 0.42, 0.38, 1.0}, {0.86, 0.84, 0.78, 1.0}, {0.72, 0.30, 0.24, 1.0}, {1.0, 1.0, 1.0, 1.0}}};
     json materials = json::array();
-    for (int k = 0; k < 3; ++k) {
+    for (int k = 0; k < 4; ++k) {
         const Primitive& p = prims[k];
         if (p.indices.empty()) continue;
         // Only vertices that some triangle uses would be tidier; every face vertex is used by its triangles
@@ -181,10 +187,22 @@ std::string encode_glb(const GlbContent& c, const std::vector<GltfProperty>& pro
         const int idx_view = bin.add_view(p.indices.data(), p.indices.size() * 4, 34963, views);
         accessors.push_back({{"bufferView", idx_view}, {"componentType", 5125}, {"count", p.indices.size()}, {"type", "SCALAR"}});
         const int idx_acc = static_cast<int>(accessors.size()) - 1;
-        materials.push_back({{"name", material_names[k]},
-                             {"pbrMetallicRoughness", {{"baseColorFactor", colours[k]}, {"metallicFactor", 0.0}, {"roughnessFactor", 0.9}}},
-                             {"doubleSided", true}});
-        json prim = {{"attributes", {{"POSITION", pos_acc}, {"NORMAL", nrm_acc}, {"_FEATURE_ID_0", fid_acc}}},
+        json mat = {{"name", k == 3 ? "RoofSurface (ortho texture)" : material_names[k]},
+                    {"pbrMetallicRoughness", {{"baseColorFactor", colours[k]}, {"metallicFactor", 0.0}, {"roughnessFactor", 0.9}}},
+                    {"doubleSided", true}};
+        json attributes = {{"POSITION", pos_acc}, {"NORMAL", nrm_acc}, {"_FEATURE_ID_0", fid_acc}};
+        if (k == 3) {
+            const int uv_view = bin.add_view(p.uvs.data(), p.uvs.size() * 4, 34962, views);
+            accessors.push_back({{"bufferView", uv_view}, {"componentType", 5126}, {"count", nv}, {"type", "VEC2"}});
+            attributes["TEXCOORD_0"] = static_cast<int>(accessors.size()) - 1;
+            const int img_view = bin.add_view(c.texture_png.data(), c.texture_png.size(), std::nullopt, views);
+            gltf["images"] = json::array({{{"bufferView", img_view}, {"mimeType", "image/png"}, {"name", "roofs (ortho)"}}});
+            gltf["samplers"] = json::array({{{"magFilter", 9728}, {"minFilter", 9729}, {"wrapS", 33071}, {"wrapT", 33071}}});
+            gltf["textures"] = json::array({{{"source", 0}, {"sampler", 0}}});
+            mat["pbrMetallicRoughness"]["baseColorTexture"] = {{"index", 0}};
+        }
+        materials.push_back(mat);
+        json prim = {{"attributes", attributes},
                      {"indices", idx_acc},
                      {"material", static_cast<int>(materials.size()) - 1},
                      {"mode", 4}};

@@ -3,7 +3,8 @@
 // (ground, wall, roof: each its own material), flat normals, per-building
 // feature ids (EXT_mesh_features) and a property table of the buildings'
 // attributes (EXT_structural_metadata), as 3D Tiles 1.1 content or as a
-// standalone model. glTF is y-up: the encoder turns the z-up frame it is
+// standalone model. Textured roofs (from the ortho) are a fourth primitive
+// whose material has a baseColorTexture. glTF is y-up: the encoder turns the z-up frame it is
 // given into glTF's (x, z, -y).
 #include <array>
 #include <nlohmann/json.hpp>
@@ -39,6 +40,11 @@ struct GlbContent {
     std::vector<const Building*> buildings;
     std::vector<std::vector<Face>> faces;  ///< per building, in the local frame
     std::vector<std::string> lods;          ///< per building: the LOD its faces are ("1.2", "2.2")
+    /// Roof textures (optional): per building, per face, the (u, v) of each of
+    /// face_vertices(face), glTF's convention (v down from the image's top);
+    /// an empty list leaves the face untextured. Empty = no textures.
+    std::vector<std::vector<std::vector<std::array<float, 2>>>> uv;
+    std::string texture_png;                ///< the roofs' image (PNG bytes), embedded; required with `uv`
     std::array<double, 3> translation{0, 0, 0};
     nlohmann::json extras;                  ///< written as the asset's extras (CRS, origin) when not null
 };

@@ -1,5 +1,6 @@
 #include "io/tiles3d_writer.hpp"
 
+
 #include <GeographicLib/Geocentric.hpp>
 #include <algorithm>
 #include <cmath>
@@ -15,6 +16,7 @@
 #include "core/version.hpp"
 #include "crs/crs.hpp"
 #include "io/gltf_writer.hpp"
+#include "model/face_mesh.hpp"
 
 namespace cityforge {
 namespace {
@@ -272,15 +274,29 @@ Tiles3dWriteReport write_3dtiles(const std::string& dir, const CityModel& model,
     return rep;
 }
 
-std::size_t write_glb(const std::string& path, const CityModel& model, bool prefer_lod2) {
+std::size_t write_glb(const std::string& path, const CityModel& model, bool prefer_lod2, const RoofTextureAtlas* textures) {
     const auto e = model_extent(model);
     GlbContent c;
     const std::array<double, 3> origin{std::round(0.5 * (e[0] + e[3])), std::round(0.5 * (e[1] + e[4])), std::floor(e[2])};
-    for (const Building& b : model.buildings) {
+    const bool textured = textures && !textures->png.empty();
+    if (textured) c.texture_png = textures->png;
+    for (std::size_t bi = 0; bi < model.buildings.size(); ++bi) {
+        const Building& b = model.buildings[bi];
         std::string lod;
         const auto* s = mesh_solids(b, prefer_lod2, lod);
         if (!s) continue;
         std::vector<Face> f = faces_of(*s);
+        if (textured) {  // texture coordinates from the map x, y, before the shift to the local frame
+            std::vector<std::vector<std::array<float, 2>>> uv(f.size());
+            const RoofTextureWindow* w = lod == "2" ? textures->layout.window_of(bi) : nullptr;
+            for (std::size_t k = 0; w && k < f.size(); ++k)
+                if (f[k].type == SurfaceType::roof)
+                    for (const Point3& p : face_vertices(f[k])) {
+                        const auto t = textures->layout.uv(*w, p.x, p.y);
+                        uv[k].push_back({float(t[0]), float(t[1])});
+                    }
+            c.uv.push_back(std::move(uv));
+        }
         for_each_point(f, [&](Point3& p) { p = {p.x - origin[0], p.y - origin[1], p.z - origin[2]}; });
         c.buildings.push_back(&b), c.lods.push_back(lod), c.faces.push_back(std::move(f));
     }

@@ -10,6 +10,7 @@
 #include <string>
 
 #include "model/building_model.hpp"
+#include "model/roof_texture.hpp"
 
 namespace cityforge {
 
@@ -37,7 +38,9 @@ Tiles3dWriteReport write_3dtiles(const std::string& dir, const CityModel& model,
 /// Writes one .glb of the whole model in a local frame: x east, y north,
 /// z up in the model CRS units minus `origin` (the extent's centre, rounded
 /// to whole units; glTF itself is y-up), the CRS and origin in asset.extras.
+/// With `textures` (an atlas of `model`), LOD2 roofs of the buildings it covers
+/// carry texture coordinates into the embedded atlas image (baseColorTexture).
 /// Returns the number of triangles.
-std::size_t write_glb(const std::string& path, const CityModel& model, bool prefer_lod2 = true);
+std::size_t write_glb(const std::string& path, const CityModel& model, bool prefer_lod2 = true, const RoofTextureAtlas* textures = nullptr);
 
 }  // namespace cityforge

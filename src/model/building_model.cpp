@@ -31,6 +31,8 @@ void complete_building(Building& b, const ModelCrs& crs, const SolidValidityOpti
     b.lod1_errors.clear();
     b.lod2_errors.clear();
     b.lod1_volume = b.lod2_volume = 0.0;
+    b.roof_parts.clear();
+    b.roof_parts_unsplit.clear();
     if (b.footprint.empty()) {
         b.status = "no_footprint", b.reason = "building has no footprint polygon";
         return;
@@ -62,6 +64,12 @@ void complete_building(Building& b, const ModelCrs& crs, const SolidValidityOpti
         b.lod2_volume += solid_volume(b.lod2[i]);
     }
     if (!b.lod2_errors.empty() && b.status == "ok") b.status = "invalid_lod2", b.reason = b.lod2_errors.front();
+    RoofPartsResult parts = roof_parts(b.lod2, validity);
+    b.roof_parts = std::move(parts.parts);
+    b.roof_parts_unsplit = std::move(parts.unsplit);
+    for (std::size_t i = 0; i < b.roof_parts.size() && b.status == "ok"; ++i)
+        if (!b.roof_parts[i].lod13_errors.empty())
+            b.status = "invalid_lod13", b.reason = "part " + std::to_string(i) + ": " + b.roof_parts[i].lod13_errors.front();
 }
 
 namespace {

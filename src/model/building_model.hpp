@@ -11,6 +11,7 @@
 
 #include "core/attribute.hpp"
 #include "core/geometry.hpp"
+#include "model/refined_lod.hpp"
 #include "model/solid.hpp"
 
 namespace cityforge {
@@ -48,6 +49,10 @@ struct Building {
     std::vector<std::string> lod1_errors, lod2_errors;  ///< validate_solid() messages; empty = valid
     double lod1_volume = 0.0;       ///< CRS units³ (sum over parts)
     double lod2_volume = 0.0;
+    /// Roof parts of the LOD2 solids (LOD1.3 blocks and LOD2.2 BuildingParts), derived from
+    /// `lod2` by complete_building(); empty without LOD2. Not stored in the building lines.
+    std::vector<RoofPart> roof_parts;
+    std::vector<std::string> roof_parts_unsplit;  ///< why a LOD2 solid stayed one part although its roof steps
 };
 
 struct CityModel {
@@ -63,7 +68,8 @@ struct CityModel {
 /// Builds the LOD1 prisms of `b` from ground_z and height_m (converted to z
 /// units with crs.z_unit_m), validates them and LOD2 solids if any, and sets
 /// status, reason, errors and volumes. A building without heights keeps no
-/// LOD1 and gets status "no_height".
+/// LOD1 and gets status "no_height". Derives the roof parts (LOD1.3, LOD2.2)
+/// from the LOD2 solids; an invalid LOD1.3 block sets status "invalid_lod13".
 void complete_building(Building& b, const ModelCrs& crs, const SolidValidityOptions& validity = {});
 
 /// z of the LOD0 footprint of a building without ground_z (no_height: no

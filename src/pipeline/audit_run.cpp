@@ -156,7 +156,8 @@ AuditOutput finish_report(const std::string& out_dir, nlohmann::json& j, std::st
     return out;
 }
 
-std::string fmt(double v, int digits = 4) { return format_number(v, digits); }
+// A number for the tables; n/a for a value that is not defined (NaN: a mean over no match).
+std::string fmt(double v, int digits = 4) { return std::isfinite(v) ? format_number(v, digits) : std::string("n/a"); }
 
 // Picture of `ortho` under the map, when it shares the reference CRS.
 std::optional<MapPicture> background_for(const std::string& ortho, const CrsInfo& crs, const Parts& shapes) {
@@ -309,7 +310,7 @@ RectangleAuditReport audit_rectangles(const std::string& fitted_path, const std:
     for (const RectangleError& r : rep.rows) {
         if (std::isnan(r.error_pct)) continue;
         sum_abs += std::abs(r.error_pct), sum += r.error_pct, sum_abs_m2 += std::abs(r.error_m2), ++n;
-        rep.max_abs_error_pct = std::max(rep.max_abs_error_pct, std::abs(r.error_pct));
+        rep.max_abs_error_pct = n == 1 ? std::abs(r.error_pct) : std::max(rep.max_abs_error_pct, std::abs(r.error_pct));
     }
     if (n) rep.mean_abs_error_pct = sum_abs / double(n), rep.mean_error_pct = sum / double(n), rep.mean_abs_error_m2 = sum_abs_m2 / double(n);
     std::map<std::string, double> measures;
@@ -320,8 +321,8 @@ RectangleAuditReport audit_rectangles(const std::string& fitted_path, const std:
     j["fitted"] = {{"path", fitted_path}, {"count", rep.fitted}, {"crs", crs_label}};
     j["original"] = o.original_path.empty() ? nlohmann::json{{"area_field", o.original_area_field}}
                                             : nlohmann::json{{"path", o.original_path}, {"iou_threshold", o.iou_threshold}};
-    j["totals"] = {{"buildings", rep.rows.size()}, {"mean_abs_error_pct", rep.mean_abs_error_pct}, {"max_abs_error_pct", rep.max_abs_error_pct},
-                   {"mean_error_pct", rep.mean_error_pct}, {"mean_abs_error_m2", rep.mean_abs_error_m2}};
+    j["totals"] = {{"buildings", rep.rows.size()}, {"mean_abs_error_pct", jnum(rep.mean_abs_error_pct)}, {"max_abs_error_pct", jnum(rep.max_abs_error_pct)},
+                   {"mean_error_pct", jnum(rep.mean_error_pct)}, {"mean_abs_error_m2", jnum(rep.mean_abs_error_m2)}};
     j["reference_study"] = {{"buildings", 8}, {"min_abs_error_pct", 0.44}, {"max_abs_error_pct", 1.61}, {"mean_abs_error_pct", 0.88}};
     nlohmann::json rows = nlohmann::json::array();
     std::vector<std::vector<std::string>> table;
@@ -399,7 +400,7 @@ HeightAuditReport audit_heights(const std::string& pred_path, const std::string&
             if (gmf >= 0 && e.ground_rmse_m) rep.by_ground_method[e.ground_method].mean_ground_rmse_m += *e.ground_rmse_m;
         }
         sum += e.error, sum_abs += std::abs(e.error), sum2 += e.error * e.error;
-        rep.max_abs = std::max(rep.max_abs, std::abs(e.error));
+        rep.max_abs = rep.rows.empty() ? std::abs(e.error) : std::max(rep.max_abs, std::abs(e.error));
         rep.rows.push_back(e);
         err_of_ref[m.reference] = e.error;
     }
@@ -417,8 +418,8 @@ HeightAuditReport audit_heights(const std::string& pred_path, const std::string&
     j["predicted"] = {{"path", pred_path}, {"field", o.pred_field}, {"reprojected", lp.reprojected}, {"crs", lp.pred.crs.label()}};
     j["reference"] = {{"path", ref_path}, {"field", o.ref_field}, {"count", rep.reference}, {"crs", lp.ref.crs.label()}};
     j["iou_threshold"] = o.iou_threshold;
-    j["totals"] = {{"matched", rep.matched}, {"with_values", rep.with_values}, {"mae_m", rep.mae}, {"rmse_m", rep.rmse},
-                   {"bias_m", rep.bias}, {"max_abs_m", rep.max_abs}};
+    j["totals"] = {{"matched", rep.matched}, {"with_values", rep.with_values}, {"mae_m", jnum(rep.mae)}, {"rmse_m", jnum(rep.rmse)},
+                   {"bias_m", jnum(rep.bias)}, {"max_abs_m", jnum(rep.max_abs)}};
     j["reference_study"] = {{"buildings", 10}, {"mae_m", 0.80}, {"max_abs_m", 1.77}};
     if (gmf >= 0) {
         nlohmann::json g = nlohmann::json::object();

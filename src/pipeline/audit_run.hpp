@@ -6,6 +6,7 @@
 // schemas/audit_report.schema.json), DIR/report.md and DIR/report.html
 // (self-contained, SVG charts). Gates (`--fail-below`, `--fail-above`) turn a
 // report into pass/fail for CI.
+#include <cmath>
 #include <map>
 #include <optional>
 #include <string>
@@ -76,8 +77,10 @@ struct RectangleError {
 struct RectangleAuditReport {
     std::size_t fitted = 0;           ///< footprints in the fitted layer
     std::vector<RectangleError> rows;  ///< those with an original area
-    double mean_abs_error_pct = 0.0, max_abs_error_pct = 0.0, mean_error_pct = 0.0;
-    double mean_abs_error_m2 = 0.0;
+    /// Over the rows with a defined error; NaN (null in JSON, n/a in the
+    /// tables) when there is none: a mean over nothing is not 0.
+    double mean_abs_error_pct = NAN, max_abs_error_pct = NAN, mean_error_pct = NAN;
+    double mean_abs_error_m2 = NAN;
     AuditOutput output;
 };
 
@@ -112,7 +115,9 @@ struct HeightErrorGroup {
 
 struct HeightAuditReport {
     std::size_t matched = 0, with_values = 0, reference = 0;
-    double mae = 0.0, rmse = 0.0, bias = 0.0, max_abs = 0.0;  ///< metres
+    /// Metres, over `rows`; NaN (null in JSON, n/a in the tables) when no
+    /// matched footprint has both heights.
+    double mae = NAN, rmse = NAN, bias = NAN, max_abs = NAN;
     std::vector<HeightError> rows;
     std::map<std::string, HeightErrorGroup> by_ground_method;  ///< only when the prediction has ground_method
     AuditOutput output;

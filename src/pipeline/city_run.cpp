@@ -107,6 +107,8 @@ json to_json(const RunOptions& o) {
             {"cloud", o.cloud},
             {"cloud_crs", o.cloud_crs},
             {"footprints", o.footprints},
+            {"working_crs", o.working_crs},
+            {"out_crs", o.out_crs},
             {"tile_size_px", o.tile_size_px},
             {"overlap_m", o.overlap_m},
             {"threads", o.threads},
@@ -143,16 +145,18 @@ json to_json(const RunOptions& o) {
               {"lod2_min_points", l.min_points},
               {"max_median_residual_m", l.max_median_residual_m}}},
             {"export",
-             {{"formats", e.formats}, {"lods", e.lods}, {"geojson_crs", e.geojson_crs}, {"vertical_crs", e.vertical_crs}, {"id_field", e.id_field}}}};
+             {{"formats", e.formats}, {"lods", e.lods}, {"geojson_crs", e.geojson_crs}, {"vertical_crs", e.vertical_crs}, {"id_field", e.id_field},
+              {"texture_ortho", e.texture_ortho}}}};
 }
 
 RunOptions run_options_from_json(const json& j, const std::string& where, RunOptions o) {
-    check_keys(j, {"ortho", "cloud", "cloud_crs", "footprints", "tile_size_px", "overlap_m", "threads", "keep_rasters", "extraction", "cleaning",
+    check_keys(j, {"ortho", "cloud", "cloud_crs", "footprints", "working_crs", "out_crs", "tile_size_px", "overlap_m", "threads", "keep_rasters", "extraction", "cleaning",
                    "heights", "roofs", "export"},
                where);
     take(j, "keep_rasters", o.keep_rasters, where);
     take(j, "ortho", o.ortho, where), take(j, "cloud", o.cloud, where), take(j, "cloud_crs", o.cloud_crs, where);
     take(j, "footprints", o.footprints, where), take(j, "tile_size_px", o.tile_size_px, where);
+    take(j, "working_crs", o.working_crs, where), take(j, "out_crs", o.out_crs, where);
     take(j, "overlap_m", o.overlap_m, where), take(j, "threads", o.threads, where);
     if (j.contains("extraction")) {
         const json& x = j["extraction"];
@@ -218,7 +222,8 @@ RunOptions run_options_from_json(const json& j, const std::string& where, RunOpt
         const json& x = j["export"];
         const std::string w = where + ": export";
         auto& e = o.buildings.model;
-        check_keys(x, {"formats", "lods", "geojson_crs", "vertical_crs", "id_field"}, w);
+        check_keys(x, {"formats", "lods", "geojson_crs", "vertical_crs", "id_field", "texture_ortho"}, w);
+        take(x, "texture_ortho", e.texture_ortho, w);
         take(x, "formats", e.formats, w), take(x, "lods", e.lods, w), take(x, "geojson_crs", e.geojson_crs, w);
         take(x, "vertical_crs", e.vertical_crs, w), take(x, "id_field", e.id_field, w);
     }
@@ -230,6 +235,35 @@ RunOptions run_options_from_json(const json& j, const std::string& where, RunOpt
     return o;
 }
 
+namespace {
+// The CRS a run writes its city models in: --out-crs, else the input's own
+// CRS (ortho or footprints), else, when that is geographic, the working CRS
+// (a city model in degrees is refused, as by `export`).
+CrsInfo run_output_crs(const RunManifest& m, const CrsInfo& grid_crs) {
+    const RunOptions& o = m.options;
+    if (!o.out_crs.empty()) {
+        const CrsInfo out = crs_from_user_input(o.out_crs, "--out-crs");
+        if (out.geographic) throw Error("--out-crs", out.label() + " is geographic; city models need a projected CRS");
+        return out;
+    }
+    if (o.ortho.empty()) return grid_crs;
+    const CrsInfo own = read_raster_info(o.ortho).crs;
+    return own.geographic ? grid_crs : own;
+}
+
+}  // namespace
+
+RasterOpenOptions run_ortho_open_options(const RunOptions& o) {
+    RasterOpenOptions ro;
+    ro.project_geographic = true;  // metres: a lon/lat ortho is read on its UTM zone
+    ro.working_crs = o.working_crs;
+    return ro;
+}
+
+double grid_metres_per_unit(const RunManifest& m) {
+    return ground_metres_per_unit(crs_from_wkt(m.crs_wkt, "manifest"), m.grid.transform, m.grid.width, m.grid.height);
+}
+
 RunManifest plan_run(const RunOptions& in) {
     RunOptions o = run_options_from_json(to_json(in), "options", in);  // normalised: shared cleaning options
     o.validate();
@@ -237,11 +271,13 @@ RunManifest plan_run(const RunOptions& in) {
     m.options = o;
     double gsd_m = 0.0;
     if (!o.ortho.empty()) {
-        const RasterInfo info = read_raster_info(o.ortho);
-        if (info.crs.geographic) throw Error(o.ortho, "the ortho is in a geographic CRS; city models need a projected CRS");
+        // The working grid: the ortho's, or a lon/lat ortho warped onto its UTM zone (as `footprints` reads it).
+        const RasterInfo info = read_raster_info(o.ortho, run_ortho_open_options(o));
+        if (info.crs.geographic) throw Error(o.working_crs.empty() ? o.ortho : "--working-crs", "the working CRS must be projected (metres)");
+        if (info.warped) log::info(o.ortho + ": " + info.source_crs.label() + " read on " + info.crs.label() + " (working CRS)");
         m.grid = {info.transform, info.width, info.height};
         m.crs_wkt = info.crs.wkt;
-        gsd_m = std::abs(info.transform.pixel_width) * info.crs.linear_unit_m;
+        gsd_m = std::abs(info.transform.pixel_width) * info.metres_per_unit;
     } else {
         const PolygonLayer fp = read_polygon_layer(o.footprints, o.buildings.heights.footprint_layer);
         if (fp.crs.empty() || fp.crs.geographic) throw Error(o.footprints, "footprints need a projected CRS");
@@ -254,6 +290,7 @@ RunManifest plan_run(const RunOptions& in) {
         m.crs_wkt = fp.crs.wkt;
         gsd_m = o.footprint_grid_m;
     }
+    run_output_crs(m, crs_from_wkt(m.crs_wkt, "grid"));  // a geographic --out-crs is refused before any tile runs
     m.overlap_px = static_cast<int>(std::ceil(o.overlap_m / gsd_m));
     if (o.cloud.empty()) {
         // Ortho only: segmentation merges regions across the whole raster, so it runs as one tile.
@@ -283,10 +320,11 @@ RunManifest plan_run(const RunOptions& in) {
         if (extract && ex.mask.use_classes < 0) {
             // The sample on the run's cloud cells, decided as a window would.
             const double cell = std::abs(m.grid.transform.pixel_width) * std::max(1, ex.cloud_cell_factor);
-            const double half = 200.0 / grid_crs.linear_unit_m;
+            const double unit = grid_metres_per_unit(m);
+            const double half = 200.0 / unit;
             const int n = std::max(1, static_cast<int>(std::ceil(2 * half / cell)));
             const GridSpec g{GeoTransform{centre.x - half, cell, centre.y + half, -cell}, n, n};
-            const CloudRasters r = points.cloud.size() ? rasterize_cloud(points.cloud, points.keep, points.is_ground, g, grid_crs.linear_unit_m) : CloudRasters{};
+            const CloudRasters r = points.cloud.size() ? rasterize_cloud(points.cloud, points.keep, points.is_ground, g, unit) : CloudRasters{};
             ex.mask.use_classes = points.cloud.size() && point_classes_present(r.building_share, r.vegetation_share) ? 1 : 0;
         }
     }
@@ -352,6 +390,49 @@ RunManifest read_manifest(const std::string& path) {
 }
 
 namespace {
+
+// Buildings (footprints and solids) from `from` to `to`, horizontally.
+void reproject_buildings(std::vector<Building>& buildings, const CrsInfo& from, const CrsInfo& to, const std::string& subject) {
+    std::vector<double> x, y, z;
+    auto each = [&](auto&& visit) {
+        for (Building& b : buildings) {
+            for (Polygon& p : b.footprint) {
+                for (MapPoint& q : p.outer) visit(q.x, q.y, nullptr);
+                for (Ring& h : p.holes)
+                    for (MapPoint& q : h) visit(q.x, q.y, nullptr);
+            }
+            for (std::vector<Solid>* solids : {&b.lod1, &b.lod2})
+                for (Solid& sd : *solids)
+                    for (Face& f : sd.faces) {
+                        for (Point3& q : f.outer) visit(q.x, q.y, &q.z);
+                        for (Ring3& h : f.holes)
+                            for (Point3& q : h) visit(q.x, q.y, &q.z);
+                    }
+        }
+    };
+    each([&](double& px, double& py, double* pz) { x.push_back(px), y.push_back(py), z.push_back(pz ? *pz : 0.0); });
+    transform_points(from, to, x, y, z, subject);
+    std::size_t i = 0;
+    each([&](double& px, double& py, double*) { px = x[i], py = y[i], ++i; });  // heights stay in their vertical datum
+}
+
+// Declared attribute types in a tile report: [[name, "integer" | "real" | "string"], ...].
+json attribute_types_json(const std::vector<std::pair<std::string, FieldType>>& types) {
+    json out = json::array();
+    for (const auto& [name, t] : types)
+        out.push_back({name, t == FieldType::integer ? "integer" : t == FieldType::real ? "real" : "string"});
+    return out;
+}
+std::vector<std::pair<std::string, FieldType>> attribute_types_from(const json& j, const std::string& where) {
+    std::vector<std::pair<std::string, FieldType>> out;
+    if (!j.is_array()) throw Error(where, "attribute_types must be an array");
+    for (const json& a : j) {
+        const std::string t = a.at(1).get<std::string>();
+        if (t != "integer" && t != "real" && t != "string") throw Error(where, "unknown attribute type '" + t + "'");
+        out.emplace_back(a.at(0).get<std::string>(), t == "integer" ? FieldType::integer : t == "real" ? FieldType::real : FieldType::string);
+    }
+    return out;
+}
 
 fs::path tile_cloud_path(const std::string& out_dir, int k) { return fs::path(out_dir) / "cloud_tiles" / (tile_name(k) + ".las"); }
 
@@ -493,7 +574,7 @@ struct WindowBuildings {
 WindowBuildings detect_on_window(const RunManifest& m, const PixelWindow& win, PreparedCloud pc, const std::string& where) {
     const RunOptions& o = m.options;
     const CrsInfo grid_crs = crs_from_wkt(m.crs_wkt, "manifest");
-    const double unit = grid_crs.linear_unit_m;
+    const double unit = grid_metres_per_unit(m);
     const GeoTransform& gt = m.grid.transform;
     WindowBuildings d;
     d.window = win;
@@ -520,7 +601,7 @@ WindowBuildings detect_on_window(const RunManifest& m, const PixelWindow& win, P
 
     if (detection == DetectionMode::ortho_cloud) {
         // Each building redrawn along the ortho from a crop around it alone.
-        RasterReader ortho(o.ortho);
+        RasterReader ortho(o.ortho, run_ortho_open_options(o));  // the manifest's grid
         const RasterInfo& oi = ortho.info();
         const Image<float> colours = ortho.read<float>(win);
         const std::vector<uint8_t> valid = data_mask(colours, oi);
@@ -551,7 +632,7 @@ void add_footprints(const RunManifest& m, const WindowBuildings& d, const std::v
     std::set<int64_t> keep;
     for (uint32_t l : labels) keep.insert(d.id[l]);
     const FootprintTable table = footprint_table(d.mask, d.ndsm, m.grid.transform, d.window.col, d.window.row, d.id, d.mode,
-                                                 grid_crs.linear_unit_m, d.pc.crs.z_unit_m, footprints.crs, m.options.extraction);
+                                                 grid_metres_per_unit(m), d.pc.crs.z_unit_m, footprints.crs, m.options.extraction);
     if (footprints.field_names.empty())
         for (const FieldDefinition& f : table.fields) footprints.field_names.push_back(f.name), footprints.field_types.push_back(f.type);
     for (const Feature& f : table.features) {
@@ -579,9 +660,10 @@ std::vector<Building> buildings_of(const RunManifest& m, PolygonLayer footprints
     RoofsRunReport rr;
     RoofsRunOptions ro = o.buildings;
     if (o.footprints.empty()) ro.model.id_field = "id";
-    std::vector<Building> out = build_lod2_model(st, crs, ro, source, rr).buildings;
+    CityModel model = build_lod2_model(st, crs, ro, source, rr);
+    if (rep.attribute_types.empty()) rep.attribute_types = model.attribute_types;
     rep.seconds["roofs"] += since(t0);
-    return out;
+    return std::move(model.buildings);
 }
 
 // The buildings one tile owns, with their heights and LOD2, as building lines.
@@ -589,7 +671,7 @@ std::vector<Building> tile_buildings(const RunManifest& m, const TileSpec& t, co
                                      std::vector<std::string>& warnings) {
     const RunOptions& o = m.options;
     const CrsInfo grid_crs = crs_from_wkt(m.crs_wkt, "manifest");
-    const double unit = grid_crs.linear_unit_m;
+    const double unit = grid_metres_per_unit(m);
     const GeoTransform& gt = m.grid.transform;
     const MapPoint ca = gt.pixel_to_map({double(t.core.col), double(t.core.row)});
     const MapPoint cb = gt.pixel_to_map({double(t.core.col + t.core.width), double(t.core.row + t.core.height)});
@@ -603,6 +685,7 @@ std::vector<Building> tile_buildings(const RunManifest& m, const TileSpec& t, co
         const fs::path tmp = fs::path(out_dir) / "tiles" / "ortho_footprints.gpkg";
         FootprintsRunOptions fo = o.extraction;
         fo.ortho = o.ortho, fo.cloud.clear();
+        fo.working_crs = o.working_crs, fo.out_crs = grid_crs.wkt;  // the grid's CRS; merge_tiles writes the output CRS
         run_footprints(tmp.string(), fo);
         const PolygonLayer layer = read_polygon_layer(tmp.string());
         fs::remove(tmp);
@@ -611,6 +694,7 @@ std::vector<Building> tile_buildings(const RunManifest& m, const TileSpec& t, co
         CityModel model = build_city_model(layer, grid_crs, eo, o.ortho);
         rep.seconds["footprints"] = since(t0);
         rep.buildings = model.buildings.size();
+        rep.attribute_types = model.attribute_types;
         warnings.push_back("no cloud: footprints from the ortho only (no heights, no LOD1/LOD2); ortho-only runs are not tiled");
         return std::move(model.buildings);
     }
@@ -816,7 +900,7 @@ TileReport run_tile(const RunManifest& m, int k, const std::string& out_dir, con
     rep.seconds["total"] = since(t0);
     rep.peak_memory_mb = peak_memory_mb();
     json j{{"index", k}, {"status", rep.status}, {"reason", rep.reason}, {"buildings", rep.buildings}, {"grown", rep.grown}, {"seconds", rep.seconds},
-           {"peak_memory_mb", rep.peak_memory_mb}, {"warnings", warnings}};
+           {"peak_memory_mb", rep.peak_memory_mb}, {"warnings", warnings}, {"attribute_types", attribute_types_json(rep.attribute_types)}};
     write_text_file(summary, j.dump(2) + "\n");
     progress(1.0, tile_name(k));
     return rep;
@@ -843,6 +927,11 @@ RunReport merge_tiles(const RunManifest& m, const std::string& out_dir, const Pr
         tr.index = t.index, tr.status = s.value("status", ""), tr.reason = s.value("reason", "");
         tr.buildings = s.value("buildings", std::size_t(0)), tr.grown = s.value("grown", std::size_t(0)), tr.peak_memory_mb = s.value("peak_memory_mb", 0.0);
         tr.seconds = s.value("seconds", std::map<std::string, double>{});
+        try {
+            if (s.contains("attribute_types")) tr.attribute_types = attribute_types_from(s["attribute_types"], summary.string());
+        } catch (const json::exception& e) {
+            throw Error(summary.string(), std::string("invalid attribute_types: ") + e.what());
+        }
         for (const auto& [k, v] : tr.seconds) stage_seconds[k] += v;
         for (const auto& w : s.value("warnings", std::vector<std::string>{})) rep.warnings.push_back(w);
         if (tr.status == "failed") rep.warnings.push_back("tile " + std::to_string(t.index) + " failed: " + tr.reason);
@@ -875,7 +964,12 @@ RunReport merge_tiles(const RunManifest& m, const std::string& out_dir, const Pr
         return std::pair<long long, std::string>(end && *end == 0 && !id.empty() ? v : LLONG_MAX, id);
     };
     std::sort(buildings.begin(), buildings.end(), [&](const Building& a, const Building& b) { return key(a.id) < key(b.id); });
-    CrsInfo crs = grid_crs;
+    // Worked on the grid's (projected, metric) CRS; written in the input's or --out-crs.
+    CrsInfo crs = run_output_crs(m, grid_crs);
+    if (!same_horizontal_crs(crs, grid_crs)) {
+        log::info("city model reprojected from the working CRS " + grid_crs.label() + " to " + crs.label());
+        reproject_buildings(buildings, grid_crs, crs, out_dir);
+    }
     // The vertical datum: from the cloud (as the tiles saw it) or the option.
     const CrsInfo cloud_crs = m.options.cloud.empty() ? CrsInfo{} : resolve_cloud_crs(m.options.cloud, m.options.cloud_crs).crs;
     crs = combine_with_vertical(crs, cloud_crs);
@@ -884,6 +978,9 @@ RunReport merge_tiles(const RunManifest& m, const std::string& out_dir, const Pr
     CityModel model;
     model.crs = model_crs_of(crs);
     model.buildings = std::move(buildings);
+    // The tile lines hold values only: the declared types come from the tile reports.
+    for (const TileReport& t : rep.tiles)
+        if (model.attribute_types.empty()) model.attribute_types = t.attribute_types;
     for (Building& b : model.buildings) complete_building(b, model.crs, m.options.buildings.model.validity);
     if (m.options.keep_rasters && fs::exists(fs::path(out_dir) / "rasters")) {
         for (const char* name : {"dsm", "dtm", "ndsm"}) {
@@ -896,7 +993,18 @@ RunReport merge_tiles(const RunManifest& m, const std::string& out_dir, const Pr
         }
     }
     const auto te = std::chrono::steady_clock::now();
-    rep.model = write_city_model(model, crs, out_dir, m.options.buildings.model, progress.sub(0.3, 0.95));
+    ExportOptions eo = m.options.buildings.model;
+    if (m.options.cloud.empty()) {
+        // Without a cloud there is no solid: the 3D-only formats have nothing to hold.
+        const std::size_t before = eo.formats.size();
+        eo.formats.erase(std::remove_if(eo.formats.begin(), eo.formats.end(), [](const std::string& f) { return f == "gltf" || f == "3dtiles"; }),
+                         eo.formats.end());
+        if (eo.formats.size() != before) {
+            rep.warnings.push_back("no cloud, no solids: glTF and 3D Tiles not written");
+            log::warning(rep.warnings.back());
+        }
+    }
+    rep.model = write_city_model(model, crs, out_dir, eo, progress.sub(0.3, 0.95));
     stage_seconds["export"] = since(te);
     if (fs::exists(fs::path(out_dir) / "buildings.gpkg")) {  // the viewer page, DIR/view/index.html
         const auto tv = std::chrono::steady_clock::now();
@@ -918,11 +1026,12 @@ RunReport merge_tiles(const RunManifest& m, const std::string& out_dir, const Pr
     j["cityforge_version"] = version();
     j["options"] = to_json(m.options);
     json inputs = json::object();
-    if (!m.options.ortho.empty()) inputs["ortho"] = {{"path", m.options.ortho}, {"crs", grid_crs.label()}};
+    if (!m.options.ortho.empty()) inputs["ortho"] = {{"path", m.options.ortho}, {"crs", read_raster_info(m.options.ortho).crs.label()}};
     if (!m.options.cloud.empty()) inputs["cloud"] = {{"path", m.options.cloud}, {"crs", cloud_crs.label()}};
     if (!m.options.footprints.empty()) inputs["footprints"] = {{"path", m.options.footprints}, {"crs", grid_crs.label()}};
     j["inputs"] = inputs;
     j["crs"] = crs.label();
+    j["working_crs"] = grid_crs.label();
     j["grid"] = {{"width", m.grid.width}, {"height", m.grid.height}, {"geotransform", m.grid.transform.to_gdal()}};
     json tiles = json::array();
     for (const TileReport& t : rep.tiles)

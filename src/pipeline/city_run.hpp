@@ -27,6 +27,14 @@ struct RunOptions {
     std::string cloud;        ///< dense cloud (LAS/PLY/XYZ), required
     std::string cloud_crs;    ///< overrides/supplies the cloud's CRS
     std::string footprints;   ///< existing footprints: extraction is skipped
+    /// Projected CRS the run works in ("EPSG:32723"): the ortho is read
+    /// warped onto it. Empty = the ortho's own CRS, or for an ortho in a
+    /// geographic CRS the UTM zone of its centre (working_crs_for).
+    std::string working_crs;
+    /// CRS of the city models and building tables (projected; a model in
+    /// degrees is refused). Empty = the ortho's (footprints') own CRS, or
+    /// the working CRS when that one is geographic.
+    std::string out_crs;
     int tile_size_px = 4000;  ///< tile core edge, pixels of the grid
     double overlap_m = 100.0; ///< context around each core; must exceed the largest building plus the ground ring
     int threads = 0;          ///< 0 = all cores
@@ -54,10 +62,19 @@ struct TileSpec {
 struct RunManifest {
     RunOptions options;
     GridSpec grid;          ///< the run's pixel grid (the ortho's, or one over the footprints)
-    std::string crs_wkt;    ///< horizontal CRS of the grid
+    std::string crs_wkt;    ///< horizontal CRS of the grid (the working CRS: projected)
     int overlap_px = 0;
     std::vector<TileSpec> tiles;
 };
+
+/// How a run opens its ortho: on the working grid (a lon/lat ortho warped
+/// onto its UTM zone, or onto `working_crs`). plan_run and every tile use it,
+/// so the tiles read the grid the manifest describes.
+RasterOpenOptions run_ortho_open_options(const RunOptions& options);
+
+/// Ground metres per CRS unit of the run's grid at its centre (the nominal
+/// unit, or the projection's scale in Web Mercator: ground_metres_per_unit).
+double grid_metres_per_unit(const RunManifest& manifest);
 
 /// Reads the inputs' headers and cuts the grid into tiles. Throws Error naming the file.
 RunManifest plan_run(const RunOptions& options);
@@ -74,6 +91,9 @@ struct TileReport {
     std::size_t grown = 0;
     std::map<std::string, double> seconds;  ///< per stage
     double peak_memory_mb = 0.0;
+    /// Declared type of each building attribute (source layer and stages), so
+    /// that the merge keeps a field's type when all its values are null.
+    std::vector<std::pair<std::string, FieldType>> attribute_types;
 };
 
 /// Runs tile `k` into `out_dir`/tiles/ (tile_K.jsonl: one building per line,

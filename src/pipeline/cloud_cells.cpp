@@ -31,14 +31,30 @@ std::vector<uint8_t> repeat(const std::vector<uint8_t>& coarse, int cw, int w, i
 }
 }  // namespace
 
+GridSpec cloud_cell_grid(const GridSpec& window, int col0, int row0, int factor) {
+    if (factor < 1) throw Error("cloud cells", "cell factor must be >= 1");
+    if (factor == 1) return window;
+    const auto floor_div = [factor](int v) { return (v >= 0 ? v : v - factor + 1) / factor * factor; };
+    const int dx = col0 - floor_div(col0), dy = row0 - floor_div(row0);
+    const GeoTransform& t = window.transform;
+    return {{t.origin_x - dx * t.pixel_width, t.pixel_width * factor, t.origin_y - dy * t.pixel_height, t.pixel_height * factor},
+            (dx + window.width + factor - 1) / factor, (dy + window.height + factor - 1) / factor};
+}
+
 WindowCloudCells cloud_cells_on_window(const PreparedCloud& pc, const GridSpec& window, int col0, int row0, int factor, double unit_m,
                                        const BuildingMaskOptions& options) {
+    const GridSpec coarse = cloud_cell_grid(window, col0, row0, factor);
+    return cloud_cells_from_rasters(rasterize_cloud(pc.cloud, pc.keep, pc.is_ground, coarse, unit_m), window.width, window.height, col0, row0,
+                                    factor, options);
+}
+
+WindowCloudCells cloud_cells_from_rasters(CloudRasters cr, int w, int h, int col0, int row0, int factor, const BuildingMaskOptions& options) {
     if (factor < 1) throw Error("cloud cells", "cell factor must be >= 1");
     WindowCloudCells out;
     if (factor == 1) {
         BuildingMaskOptions go = options;
         go.grid_col0 = col0, go.grid_row0 = row0;
-        out.rasters = rasterize_cloud(pc.cloud, pc.keep, pc.is_ground, window, unit_m);
+        out.rasters = std::move(cr);
         out.cells = building_cells(out.rasters.ndsm, out.rasters.dsm, out.rasters.building_share, out.rasters.vegetation_share, go);
         return out;
     }
@@ -46,11 +62,8 @@ WindowCloudCells cloud_cells_on_window(const PreparedCloud& pc, const GridSpec& 
     const auto floor_div = [factor](int v) { return (v >= 0 ? v : v - factor + 1) / factor * factor; };
     const int c0 = floor_div(col0), r0 = floor_div(row0);
     const int dx = col0 - c0, dy = row0 - r0;
-    const int w = window.width, h = window.height;
-    const int cw = (dx + w + factor - 1) / factor, ch = (dy + h + factor - 1) / factor;
-    const GeoTransform& t = window.transform;
-    const GridSpec coarse{{t.origin_x - dx * t.pixel_width, t.pixel_width * factor, t.origin_y - dy * t.pixel_height, t.pixel_height * factor}, cw, ch};
-    const CloudRasters cr = rasterize_cloud(pc.cloud, pc.keep, pc.is_ground, coarse, unit_m);
+    const int cw = (dx + w + factor - 1) / factor;
+    if (cr.dsm.width != cw || cr.dsm.height != (dy + h + factor - 1) / factor) throw Error("cloud cells", "coarse rasters differ from the cell grid");
     BuildingMaskOptions co = options;
     co.gsd_m = options.gsd_m * factor;
     co.grid_col0 = c0 / factor, co.grid_row0 = r0 / factor;

@@ -30,4 +30,14 @@ struct WindowCloudCells {
 WindowCloudCells cloud_cells_on_window(const PreparedCloud& pc, const GridSpec& window, int col0, int row0, int factor, double unit_m,
                                        const BuildingMaskOptions& options);
 
+/// The grid of the coarse cells cloud_cells_on_window rasterises on (the
+/// window itself when factor == 1).
+GridSpec cloud_cell_grid(const GridSpec& window, int col0, int row0, int factor);
+
+/// The same from rasters already made on cloud_cell_grid(window, col0, row0,
+/// factor) (e.g. window by window, rasterize_cloud_by_windows); `w` x `h` =
+/// the window's size in pixels.
+WindowCloudCells cloud_cells_from_rasters(CloudRasters coarse, int w, int h, int col0, int row0, int factor,
+                                          const BuildingMaskOptions& options);
+
 }  // namespace cityforge

@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <chrono>
 #include <filesystem>
+#include <optional>
 #include <set>
 
 #include "core/atomic_file.hpp"
@@ -13,6 +14,7 @@
 #include "io/citygml_writer.hpp"
 #include "io/tiles3d_writer.hpp"
 #include "io/vector.hpp"
+#include "pipeline/roof_textures.hpp"
 
 namespace cityforge {
 
@@ -24,7 +26,8 @@ const std::vector<FieldDefinition> kOwnFieldDefinitions{
     {"status", FieldType::string},     {"reason", FieldType::string},      {"roof_z", FieldType::real},
     {"lod1_valid", FieldType::integer}, {"lod1_errors", FieldType::string}, {"lod1_volume_m3", FieldType::real},
     {"lod2_valid", FieldType::integer}, {"lod2_errors", FieldType::string}, {"lod2_volume_m3", FieldType::real},
-    {"roof_type", FieldType::string}};
+    {"roof_type", FieldType::string},   {"lod13_valid", FieldType::integer}, {"lod22_valid", FieldType::integer},
+    {"lod22_parts", FieldType::integer}};
 const std::set<std::string> kOwnFields = [] {
     std::set<std::string> s{"cityforge_id"};
     for (const FieldDefinition& f : kOwnFieldDefinitions) s.insert(f.name);
@@ -65,6 +68,7 @@ void ExportOptions::validate() const {
     if (geojson_crs != "rfc7946" && geojson_crs != "native") throw Error("--geojson-crs", "must be rfc7946 or native");
     if (!database.empty() && !is_database_name(database)) throw Error("--db", "give a database connection, PG:\"dbname=... [tables=NAME]\"");
     if (!(validity.planarity_tolerance > 0) || !(validity.snap_tolerance > 0)) throw Error("validity", "tolerances must be > 0");
+    texture.validate();
 }
 
 CityModel build_city_model(const PolygonLayer& layer, const CrsInfo& crs, const ExportOptions& o, const std::string& path) {
@@ -193,6 +197,11 @@ ExportReport write_city_model(const CityModel& model, const CrsInfo& crs, const 
             f.values.push_back(opt(!b.lod2_errors.empty(), join(b.lod2_errors)));
             f.values.push_back(opt(!b.lod2.empty(), b.lod2_volume * unit3));
             f.values.push_back(opt(!b.roof_type.empty(), b.roof_type));
+            bool v13 = true, v22 = true;
+            for (const RoofPart& p : b.roof_parts) v13 = v13 && p.lod13_errors.empty(), v22 = v22 && p.lod22_errors.empty();
+            f.values.push_back(opt(!b.roof_parts.empty(), int64_t(v13)));
+            f.values.push_back(opt(!b.roof_parts.empty(), int64_t(v22)));
+            f.values.push_back(opt(!b.roof_parts.empty(), int64_t(b.roof_parts.size())));
             features.push_back(std::move(f));
         }
         if (wants(o.formats, "geojson"))
@@ -223,8 +232,27 @@ ExportReport write_city_model(const CityModel& model, const CrsInfo& crs, const 
             timed("citygml_lod1", "buildings_lod1.gml", [&](const std::string& p) { write_citygml(p, model, {1, 3}); });
         if (wants(o.lods, 2)) timed("citygml_lod2", "buildings_lod2.gml", [&](const std::string& p) { write_citygml(p, model, {2, 3}); });
     }
+    // Roof textures from the ortho, for CityJSON and glTF.
+    std::optional<RoofTextureAtlas> atlas;
+    if (!o.texture_ortho.empty() && wants(o.lods, 2) && (wants(o.formats, "cityjson") || wants(o.formats, "cityjsonseq") || wants(o.formats, "gltf"))) {
+        atlas = build_roof_texture_atlas(model, o.texture_ortho, o.texture);
+        const RoofTextureLayout& l = atlas->layout;
+        if (atlas->png.empty()) {
+            log::warning(o.texture_ortho + ": no building's LOD2 roofs lie on the ortho; nothing is textured");
+            atlas.reset();
+        } else {
+            const fs::path png = fs::path(out_dir) / "textures" / "roofs.png";
+            ensure_directory(png.parent_path().string());
+            write_text_file(png, atlas->png);  // atomic; bytes as they are
+            rep.files["textures"] = png.string();
+            log::info(png.string() + ": roofs of " + std::to_string(l.windows.size()) + " buildings, " + std::to_string(l.atlas_width) + " x " +
+                      std::to_string(l.atlas_height) + " px" + (l.outside.empty() ? "" : ", " + std::to_string(l.outside.size()) + " off the ortho") +
+                      (l.no_room.empty() ? "" : ", " + std::to_string(l.no_room.size()) + " left out (atlas full)"));
+        }
+    }
     CityJsonWriteOptions cj;
     cj.lods = o.lods;
+    if (atlas) cj.textures = &atlas->layout;
     if (wants(o.formats, "cityjson")) timed("cityjson", "buildings.city.json", [&](const std::string& p) { write_cityjson(p, model, cj); });
     if (wants(o.formats, "cityjsonseq"))
         timed("cityjsonseq", "buildings.city.jsonl", [&](const std::string& p) {
@@ -232,7 +260,7 @@ ExportReport write_city_model(const CityModel& model, const CrsInfo& crs, const 
             seq.sequence = true;
             write_cityjson(p, model, seq);
         });
-    if (wants(o.formats, "gltf")) timed("gltf", "buildings.glb", [&](const std::string& p) { write_glb(p, model, wants(o.lods, 2)); });
+    if (wants(o.formats, "gltf")) timed("gltf", "buildings.glb", [&](const std::string& p) { write_glb(p, model, wants(o.lods, 2), atlas ? &*atlas : nullptr); });
     if (wants(o.formats, "3dtiles"))
         timed("3dtiles", "3dtiles", [&](const std::string& p) {
             Tiles3dWriteOptions t = o.tiles;

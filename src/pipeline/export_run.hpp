@@ -10,6 +10,7 @@
 #include "core/progress.hpp"
 #include "io/tiles3d_writer.hpp"
 #include "model/building_model.hpp"
+#include "model/roof_texture.hpp"
 
 namespace cityforge {
 
@@ -31,6 +32,10 @@ struct ExportOptions {
     /// (default table `buildings`, replaced in one transaction); empty = none.
     std::string database;
     Tiles3dWriteOptions tiles;               ///< 3D Tiles quadtree (prefer_lod2 follows `lods`)
+    /// Ortho (north-up, the buildings' horizontal CRS) whose pixels texture the LOD2 roofs in
+    /// CityJSON and buildings.glb (atlas DIR/textures/roofs.png); empty = untextured.
+    std::string texture_ortho;
+    RoofTextureOptions texture;
     void validate() const;
 };
 

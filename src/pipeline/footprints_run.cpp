@@ -12,6 +12,9 @@
 #include "footprint/vectorize.hpp"
 #include "heights/building_heights.hpp"
 #include "io/vector.hpp"
+#include "cloud/cloud_reader.hpp"
+#include "io/cloud_crs.hpp"
+#include "pipeline/cloud_windows.hpp"
 #include "pipeline/prepared_cloud.hpp"
 #include "raster/raster.hpp"
 #include "pipeline/cloud_cells.hpp"
@@ -73,6 +76,7 @@ void FootprintsRunOptions::validate() const {
     if (ndsm_band < 0) throw Error("--ndsm-band", "must be >= 1");
     if (nir_band < 0) throw Error("--nir-band", "must be >= 1");
     if (cloud_cell_factor < 0 || cloud_cell_factor > 64) throw Error("--cloud-cell-px", "must be between 0 (automatic) and 64");
+    if (!(cloud_tile_m > 0) || !(cloud_overlap_m >= 0)) throw Error("--tile-m", "cloud tiles must be > 0 m and their overlap >= 0 m");
     if (nir_band > 0 && ortho.empty()) throw Error("--nir-band", "needs the ortho that holds the band (--ortho)");
     if (nir_band > 0 && nir_band == ndsm_band) throw Error("--nir-band", "is the nDSM band");
     if (ndsm_band > 0 && ortho.empty()) throw Error("--ndsm-band", "needs the ortho that holds the band (--ortho)");
@@ -325,17 +329,45 @@ FootprintsReport run_footprints(const std::string& output_path, const Footprints
         BuildingMaskOptions mo = o.mask;
         if (!o.cloud.empty()) {
             rep.height_source = "point cloud";
-            const PreparedCloud pc = prepare_cloud(o.cloud, o.cloud_crs, ortho ? ortho->info().crs : CrsInfo{}, o.outliers, o.ground);
-            crs = pc.crs;
-            if (input_crs.empty()) input_crs = pc.source_crs;
-            unit = ortho ? ortho->info().metres_per_unit : pc.crs.linear_unit_m, z_unit = pc.crs.z_unit_m;
-            if (!ortho) grid = grid_over_cloud(pc.cloud, o.mask.gsd_m / unit);
-            if (ortho) require_cloud_overlap(pc, o.cloud, ortho->info().extent, o.ortho);
-            progress(0.3, "cloud");
+            // Whole-cloud decisions made before the cloud is read, alike whether it
+            // is held whole or read window by window (cloud_windows.hpp).
+            const CrsInfo target = ortho ? ortho->info().crs : CrsInfo{};
+            const bool windows = o.max_points_in_memory > 0 && CloudReader(o.cloud).announced_points() > o.max_points_in_memory;
+            if (!ortho) {
+                unit = require_cloud_crs(o.cloud, o.cloud_crs).linear_unit_m;
+                grid = grid_over_extent(cloud_point_bounds(o.cloud), o.mask.gsd_m / unit);
+            }
+            const CloudPlan plan = plan_cloud(o.cloud, o.cloud_crs, target, o.outliers,
+                                              grid.transform.pixel_to_map({grid.width / 2.0, grid.height / 2.0}));
             mo.gsd_m = std::abs(grid.transform.pixel_width) * unit;
-            mo.min_height_m /= z_unit;
-            rep.cloud_cell_factor = o.cloud_cell_factor > 0 ? o.cloud_cell_factor : cloud_cell_factor(point_density_m2(pc), mo.gsd_m);
-            WindowCloudCells wc = cloud_cells_on_window(pc, grid, 0, 0, rep.cloud_cell_factor, unit, mo);
+            rep.cloud_cell_factor = o.cloud_cell_factor > 0 ? o.cloud_cell_factor : cloud_cell_factor(plan.density_m2, mo.gsd_m);
+            const int f = rep.cloud_cell_factor;
+            WindowCloudCells wc;
+            if (windows) {
+                const GridSpec coarse = cloud_cell_grid(grid, 0, 0, f);
+                const double cell_m = mo.gsd_m * f;
+                const double tile_m = window_tile_edge_m(o.cloud_tile_m, o.cloud_overlap_m, plan.density_m2, o.max_points_in_memory);
+                WindowedRasters w = rasterize_cloud_by_windows(o.cloud, o.cloud_crs, target, coarse, unit, plan.outliers, o.ground,
+                                                               std::max(16, static_cast<int>(std::lround(tile_m / cell_m))),
+                                                               static_cast<int>(std::ceil(o.cloud_overlap_m / cell_m)), progress.sub(0.0, 0.3));
+                if (w.core_points == 0)
+                    throw Error(o.cloud, ortho ? "does not overlap " + o.ortho + ": no kept point of the cloud lies on its grid" : "no kept point");
+                crs = w.crs;
+                if (input_crs.empty()) input_crs = w.source_crs;
+                z_unit = w.crs.z_unit_m;
+                rep.cloud_windows = w.windows;
+                mo.min_height_m /= z_unit;
+                wc = cloud_cells_from_rasters(std::move(w.rasters), grid.width, grid.height, 0, 0, f, mo);
+            } else {
+                const PreparedCloud pc = prepare_cloud(o.cloud, o.cloud_crs, target, plan.outliers, o.ground);
+                crs = pc.crs;
+                if (input_crs.empty()) input_crs = pc.source_crs;
+                z_unit = pc.crs.z_unit_m;
+                if (ortho) require_cloud_overlap(pc, o.cloud, ortho->info().extent, o.ortho);
+                progress(0.3, "cloud");
+                mo.min_height_m /= z_unit;
+                wc = cloud_cells_on_window(pc, grid, 0, 0, f, unit, mo);
+            }
             cells = std::move(wc.cells);
             ndsm = std::move(wc.rasters.ndsm);
         } else {

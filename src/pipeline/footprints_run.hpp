@@ -84,6 +84,14 @@ struct FootprintsRunOptions {
     RegularizeOptions regularize;      ///< snapping of the regularised fit (lengths in metres)
     OutlierFilterOptions outliers;
     GroundFilterOptions ground;
+    /// A cloud announcing more points is never held whole: its rasters are
+    /// made window by window (tiles of at most `cloud_tile_m`, smaller when
+    /// the density asks, read as windows grown by `cloud_overlap_m`,
+    /// streamed) and joined; the footprints are the same as a whole-cloud
+    /// run's (see pipeline/cloud_windows.hpp).
+    uint64_t max_points_in_memory = 20'000'000;
+    double cloud_tile_m = 1000.0;
+    double cloud_overlap_m = 100.0;
     void validate() const;
 };
 
@@ -111,6 +119,7 @@ struct FootprintsReport {
     std::string detector;          ///< ortho_only: "model FILE" or "rules"
     std::string height_source;     ///< "point cloud", "nDSM raster", "ortho band N" or "" (ortho only)
     int cloud_cell_factor = 1;     ///< cloud rasters on cells of this many pixels a side
+    std::size_t cloud_windows = 0; ///< windows the cloud was read in (0 = held whole)
     uint32_t segments = 0;         ///< ortho modes: merged segments
     std::string segments_path;     ///< the label raster read for --segments (empty: segmented here)
     std::string crs;               ///< CRS of the written footprints

@@ -2,6 +2,7 @@
 
 #include <chrono>
 
+#include "pipeline/cloud_windows.hpp"
 #include "pipeline/prepared_cloud.hpp"
 #include "cloud/cloud_reader.hpp"
 #include <cmath>
@@ -57,17 +58,26 @@ PolygonLayer read_footprints_for_heights(const std::string& path, const HeightsR
     return footprints;
 }
 
+namespace {
+// Centre of the footprints' bounding boxes: where the plan's sample is taken.
+MapPoint footprints_centre(const std::vector<Extent>& extents) {
+    Extent all = empty_extent();
+    for (const Extent& e : extents) include(all, e);
+    return {0.5 * (all.min_x + all.max_x), 0.5 * (all.min_y + all.max_y)};
+}
+}  // namespace
+
 HeightsStage compute_heights_stage(const std::string& footprints_path, const std::string& cloud_path, const HeightsRunOptions& o,
                                    const Progress& progress) {
     o.heights.validate();
     PolygonLayer footprints = read_footprints_for_heights(footprints_path, o);
     progress(0.05, "footprints");
-    PreparedCloud cloud = prepare_cloud(cloud_path, o.cloud_crs, footprints.crs, o.outliers, o.ground);
-    {
-        std::vector<Extent> extents;
-        for (const Feature& f : footprints.features) extents.push_back(parts_extent(f.geometry));
-        check_footprint_overlap(cloud, cloud_path, extents, footprints_path);
-    }
+    std::vector<Extent> extents;
+    for (const Feature& f : footprints.features) extents.push_back(parts_extent(f.geometry));
+    // The outlier limit as a windowed run fixes it (cloud_windows.hpp): the same heights either way.
+    const CloudPlan plan = plan_cloud(cloud_path, o.cloud_crs, footprints.crs, o.outliers, footprints_centre(extents));
+    PreparedCloud cloud = prepare_cloud(cloud_path, o.cloud_crs, footprints.crs, plan.outliers, o.ground);
+    check_footprint_overlap(cloud, cloud_path, extents, footprints_path);
     progress(0.5, "ground");
     return compute_heights_stage(std::move(footprints), std::move(cloud), o, progress.sub(0.5, 1.0));
 }
@@ -149,11 +159,12 @@ HeightsStage tiled_heights_stage(PolygonLayer footprints, const std::string& foo
     Extent all = empty_extent();
     for (std::size_t i = 0; i < ext.size(); ++i) include(all, ext[i] = parts_extent(footprints.features[i].geometry));
     HeightsRunOptions ho = o;
-    if (ho.outliers.enabled && !(ho.outliers.max_mean_distance > 0))  // one limit for every tile
-        ho.outliers.max_mean_distance =
-            sample_cloud(cloud_path, o.cloud_crs, footprints.crs, o.outliers, {0.5 * (all.min_x + all.max_x), 0.5 * (all.min_y + all.max_y)}).outlier_limit_m;
-    // Footprints grouped by the tile holding their bounding-box centre.
-    const double tile = o.tile_m / unit, margin = o.tile_margin_m / unit;
+    const CloudPlan plan = plan_cloud(cloud_path, o.cloud_crs, footprints.crs, o.outliers, footprints_centre(ext));  // one limit for every tile
+    ho.outliers = plan.outliers;
+    // Footprints grouped by the tile holding their bounding-box centre; tiles
+    // small enough that a window holds about max_points_in_memory points.
+    const double tile = window_tile_edge_m(o.tile_m, o.tile_margin_m, plan.density_m2, o.max_points_in_memory) / unit,
+                 margin = o.tile_margin_m / unit;
     std::map<std::pair<int64_t, int64_t>, std::vector<std::size_t>> groups;
     for (std::size_t i = 0; i < ext.size(); ++i)
         groups[{static_cast<int64_t>(std::floor((0.5 * (ext[i].min_x + ext[i].max_x) - all.min_x) / tile)),

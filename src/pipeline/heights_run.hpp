@@ -23,7 +23,7 @@ struct HeightsRunOptions {
     /// grouped in square tiles of `tile_m` and each group reads only its
     /// window of the cloud (streamed), grown by `tile_margin_m`. The outlier
     /// filter's limit is then measured once on the footprints' central 400 m.
-    uint64_t max_points_in_memory = 60'000'000;
+    uint64_t max_points_in_memory = 20'000'000;
     double tile_m = 1000.0;           ///< tile edge, metres
     double tile_margin_m = 30.0;      ///< window margin around a tile's footprints (>= 4 x the ground buffer), metres
     /// Fields a later stage writes (roofs, export): input fields of these

@@ -25,6 +25,7 @@
 #include "crs/crs.hpp"
 #include "photo/camera.hpp"
 #include "photo/colmap_model.hpp"
+#include "raster/raster.hpp"
 
 namespace cityforge {
 
@@ -104,6 +105,9 @@ void OrientRunOptions::validate() const {
     if (max_image_px < 200 || max_image_px > 20000) throw Error("--max-image-px", "must be 200..20000");
     if (threads < 1 || threads > 256) throw Error("--threads", "must be 1..256");
     if (gps.empty()) throw Error("--gps", "give 'exif' or a file");
+    if (max_features < 256 || max_features > 65536) throw Error("--max-features", "must be 256..65536");
+    if (matcher != "exhaustive" && matcher != "sequential") throw Error("--matcher", "must be 'exhaustive' or 'sequential', got '" + matcher + "'");
+    if (sequential_overlap < 1 || sequential_overlap > 100) throw Error("--sequential-overlap", "must be 1..100");
 }
 
 namespace {
@@ -226,8 +230,16 @@ void run_tool(const std::vector<std::string>& args, const fs::path& log, const s
     int status = 0;
     while (waitpid(pid, &status, 0) < 0 && errno == EINTR) {
     }
-    if (!WIFEXITED(status) || WEXITSTATUS(status) != 0)
-        throw Error(step, "COLMAP failed (exit " + std::to_string(WIFEXITED(status) ? WEXITSTATUS(status) : -1) + "), see " + log.string());
+    if (!WIFEXITED(status) || WEXITSTATUS(status) != 0) {
+        // The work folder (and its log) is removed: quote the log's last line.
+        std::ifstream in(log);
+        std::string line, last;
+        while (std::getline(in, line))
+            if (line.find_first_not_of(" \t\r") != std::string::npos) last = line;
+        if (last.size() > 200) last = last.substr(0, 200) + "...";
+        throw Error(step, "COLMAP failed (exit " + std::to_string(WIFEXITED(status) ? WEXITSTATUS(status) : -1) + ")" +
+                              (last.empty() ? std::string() : ": " + last));
+    }
 }
 
 std::string utm_for(double lat, double lon) {
@@ -285,7 +297,12 @@ OrientRunResult run_orient(const OrientRunOptions& o, const Progress& progress) 
     const std::string th = std::to_string(o.threads);
     std::vector<std::string> fe{o.colmap, "feature_extractor", "--database_path", db.string(), "--image_path", img_dir.string(),
                                 "--ImageReader.single_camera", "1", "--SiftExtraction.use_gpu", "0",
-                                "--SiftExtraction.num_threads", th};
+                                "--SiftExtraction.num_threads", th, "--SiftExtraction.max_num_features",
+                                std::to_string(o.max_features),
+                                // No up-sampled first octave on large photos: at 2000 px it quadruples
+                                // the work for features finer than the block needs.
+                                "--SiftExtraction.first_octave",
+                                std::max(first.cols, first.rows) * scale >= 1200 ? "0" : "-1"};
     if (k) {
         // COLMAP's principal point: top-left pixel centre at (0.5, 0.5).
         char params[200];
@@ -297,9 +314,12 @@ OrientRunResult run_orient(const OrientRunOptions& o, const Progress& progress) 
     }
     run_tool(fe, log, "feature extraction");
     progress(0.3, "features");
-    run_tool({o.colmap, "exhaustive_matcher", "--database_path", db.string(), "--SiftMatching.use_gpu", "0",
-              "--SiftMatching.num_threads", th},
-             log, "matching");
+    std::vector<std::string> match{o.colmap, o.matcher + "_matcher", "--database_path", db.string(), "--SiftMatching.use_gpu", "0",
+                                   "--SiftMatching.num_threads", th};
+    if (o.matcher == "sequential")
+        match.insert(match.end(), {"--SequentialMatching.overlap", std::to_string(o.sequential_overlap),
+                                   "--SequentialMatching.quadratic_overlap", "0"});
+    run_tool(match, log, "matching");
     progress(0.5, "matching");
     const fs::path sparse = colmap_dir / "sparse";
     ensure_directory(sparse);
@@ -308,7 +328,11 @@ OrientRunResult run_orient(const OrientRunOptions& o, const Progress& progress) 
     // A calibrated camera stays fixed: nadir blocks over flat ground make the
     // focal length nearly unobservable in self-calibration.
     if (k) mapper.insert(mapper.end(), {"--Mapper.ba_refine_focal_length", "0", "--Mapper.ba_refine_extra_params", "0"});
-    run_tool(mapper, log, "mapping");
+    try {
+        run_tool(mapper, log, "mapping");
+    } catch (const Error&) {
+        throw Error(o.images_dir, "COLMAP could not orient the photos (no image pair to start from): the photos do not overlap or have no texture");
+    }
     progress(0.8, "mapping");
     // The largest reconstruction.
     fs::path best;
@@ -347,7 +371,7 @@ OrientRunResult run_orient(const OrientRunOptions& o, const Progress& progress) 
         used.push_back(c.image);
         gx.push_back(it->second.lon), gy.push_back(it->second.lat), gz.push_back(it->second.h);
     }
-    if (used.size() < 3) throw Error(o.images_dir, "fewer than 3 oriented photos have GPS positions: cannot georeference");
+    if (used.size() < 3) throw Error(o.images_dir, "fewer than 3 oriented photos have GPS positions: cannot georeference (do the photos overlap?)");
     transform_points(crs_from_user_input("EPSG:4326", "gps"), out_crs, gx, gy, gz, "GPS positions");
     const Eigen::Vector3d origin(std::floor(gx[0] / 1000) * 1000, std::floor(gy[0] / 1000) * 1000, 0.0);
     std::vector<Eigen::Vector3d> from, to;
@@ -423,7 +447,8 @@ OrientRunResult run_orient(const OrientRunOptions& o, const Progress& progress) 
     write_cloud_las((work / "sparse.las").string(), sparse_cloud, out_crs.wkt, "cityforge orient (COLMAP sparse)");
     nlohmann::json j;
     j["crs"] = r.crs;
-    j["engine"] = "COLMAP (feature_extractor, exhaustive_matcher, mapper, image_undistorter; CPU)";
+    j["engine"] = "COLMAP (feature_extractor, " + o.matcher + "_matcher, mapper, image_undistorter; CPU)";
+    j["max_features"] = o.max_features;
     j["images"] = r.images;
     j["oriented"] = r.oriented;
     j["sparse_points"] = r.sparse_points;
@@ -500,6 +525,10 @@ DensifyRunResult run_densify(const DensifyRunOptions& o, const Progress& progres
 void PhotoRunOptions::validate() const {
     if (out_dir.empty()) throw Error("--out", "give the output folder");
     densify.validate();
+    if (run) {
+        if (!(ortho_gsd_m >= 0.02 && ortho_gsd_m <= 5.0)) throw Error("--ortho-gsd", "must be 0.02..5 m");
+        ortho.validate();
+    }
 }
 
 PhotoRunResult run_photo(const PhotoRunOptions& o, const Progress& progress) {
@@ -511,27 +540,54 @@ PhotoRunResult run_photo(const PhotoRunOptions& o, const Progress& progress) {
     oo.out_dir = (out / "orient").string();
     oo.overwrite = true;
     oo.validate();
+    if (fs::exists(out)) fs::remove_all(out);
     ensure_directory(out);
     PhotoRunResult r;
+    r.cloud_path = (out / "cloud.las").string();
+    r.sparse_path = (out / "sparse.las").string();
+    r.cameras_path = (out / "cameras.json").string();
+    r.report_path = (out / "photo_report.json").string();
+    const double dense_end = o.run ? 0.75 : 0.98;
     try {
-        r.orient = run_orient(oo, progress.sub(0.0, 0.5));
+        r.orient = run_orient(oo, progress.sub(0.0, 0.45));
         DensifyRunOptions dd;
         dd.model_dir = oo.out_dir;
-        dd.out_path = (out / "cloud.las").string();
+        dd.out_path = r.cloud_path;
         dd.overwrite = true;
         dd.densify = o.densify;
-        r.densify = run_densify(dd, progress.sub(0.5, 0.98));
+        r.densify = run_densify(dd, progress.sub(0.45, dense_end));
+        fs::copy_file(r.orient.sparse_path, r.sparse_path, fs::copy_options::overwrite_existing);
+        fs::copy_file(r.orient.cameras_path, r.cameras_path, fs::copy_options::overwrite_existing);
+        if (o.run) {
+            // The true ortho: the dense cloud's top-surface colours on a grid
+            // of ortho_gsd_m in the cloud's CRS; it is the run's pixel grid.
+            const auto t1 = std::chrono::steady_clock::now();
+            const PointCloud dense = read_las(r.cloud_path);
+            const GridSpec grid = grid_over_cloud(dense, o.ortho_gsd_m);
+            const Image<uint8_t> ortho = photo::true_ortho_from_cloud(dense, grid, o.ortho, r.cloud_path);
+            r.ortho_path = (out / "ortho.tif").string();
+            GeoTiffWriteOptions wo;
+            wo.nodata = 0.0;
+            wo.rgb = true;
+            const photo::CameraSet cams = photo::read_cameras_json(r.cameras_path);
+            write_geotiff(r.ortho_path, ortho, grid.transform, cams.crs_wkt, wo);
+            r.ortho_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t1).count();
+            progress.sub(dense_end, 0.8)(1.0, "true ortho");
+            RunOptions ro = o.city;
+            ro.ortho = r.ortho_path;
+            ro.cloud = r.cloud_path;
+            ro.keep_rasters = true;  // the DSM (and DTM, nDSM) of the run
+            r.run_dir = (out / "run").string();
+            r.city = run_city(plan_run(ro), r.run_dir, {}, progress.sub(0.8, 0.99));
+            std::size_t failed = 0;
+            for (const auto& t : r.city.tiles) failed += t.status == "failed";
+            if (failed) throw Error(r.run_dir, std::to_string(failed) + " tile(s) of the building run failed: " + r.city.tiles[0].reason);
+        }
     } catch (...) {
         std::error_code ec;
         fs::remove_all(out, ec);  // nothing half-written
         throw;
     }
-    r.cloud_path = (out / "cloud.las").string();
-    r.sparse_path = (out / "sparse.las").string();
-    r.cameras_path = (out / "cameras.json").string();
-    r.report_path = (out / "photo_report.json").string();
-    fs::copy_file(r.orient.sparse_path, r.sparse_path, fs::copy_options::overwrite_existing);
-    fs::copy_file(r.orient.cameras_path, r.cameras_path, fs::copy_options::overwrite_existing);
     r.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
     nlohmann::json j;
     j["crs"] = r.orient.crs;
@@ -542,6 +598,15 @@ PhotoRunResult run_photo(const PhotoRunOptions& o, const Progress& progress) {
         {{"step", "densify"}, {"seconds", r.densify.seconds}, {"points", r.densify.points}, {"seeds", r.densify.seeds},
          {"expanded", r.densify.expanded}, {"filtered", r.densify.filtered}}};
     j["files"] = {{"cloud", "cloud.las"}, {"sparse", "sparse.las"}, {"cameras", "cameras.json"}, {"oriented", "orient/"}};
+    if (o.run) {
+        j["steps"].push_back({{"step", "true_ortho"}, {"seconds", r.ortho_seconds}, {"gsd_m", o.ortho_gsd_m}});
+        j["steps"].push_back({{"step", "run"}, {"seconds", r.city.seconds}, {"buildings", r.city.buildings},
+                              {"valid_lod1", r.city.valid_lod1}, {"valid_lod2", r.city.valid_lod2}, {"tiles", r.city.tiles.size()},
+                              {"warnings", r.city.warnings.size()}});
+        j["files"]["ortho"] = "ortho.tif";
+        j["files"]["run"] = "run/";
+        j["files"]["run_report"] = "run/run_report.json";
+    }
     j["seconds"] = r.seconds;
     write_text_file(r.report_path, j.dump(2) + "\n");
     progress(1.0, "done");

@@ -8,6 +8,8 @@
 #include "core/progress.hpp"
 #include "photo/densify.hpp"
 #include "photo/stereo.hpp"
+#include "photo/true_ortho.hpp"
+#include "pipeline/city_run.hpp"
 
 namespace cityforge {
 
@@ -47,6 +49,11 @@ struct OrientRunOptions {
     std::string crs;                 ///< output CRS (projected, metres); empty = UTM zone of the site
     int max_image_px = 2000;         ///< photos are downscaled to this longest side before matching
     int threads = 2;                 ///< COLMAP threads
+    int max_features = 4096;         ///< SIFT features per image (COLMAP's SiftExtraction.max_num_features)
+    /// "exhaustive" (every pair; best for small blocks) or "sequential" (each
+    /// photo with the next `sequential_overlap` in file-name order = flight order).
+    std::string matcher = "exhaustive";
+    int sequential_overlap = 6;      ///< photos after each one that it is matched with (sequential matcher)
     std::string colmap = "colmap";   ///< the COLMAP executable
     bool overwrite = false;
     void validate() const;
@@ -109,6 +116,12 @@ struct PhotoRunOptions {
     photo::DensifyOptions densify;
     std::string out_dir;           ///< OUT
     bool overwrite = false;
+    /// Also run the building chain (`run`) on the dense cloud: OUT/ortho.tif
+    /// (true ortho from the cloud) and OUT/run/ (DSM, footprints, heights, LOD2).
+    bool run = false;
+    double ortho_gsd_m = 0.25;     ///< cell of OUT/ortho.tif, metres (the run's grid)
+    photo::TrueOrthoOptions ortho;
+    RunOptions city;               ///< the run's options; ortho and cloud are set by the chain
     void validate() const;
 };
 
@@ -116,11 +129,16 @@ struct PhotoRunResult {
     OrientRunResult orient;
     DensifyRunResult densify;
     std::string cloud_path, sparse_path, cameras_path, report_path;
+    std::string ortho_path, run_dir;  ///< empty without `run`
+    RunReport city;                   ///< the run's report (with `run`)
+    double ortho_seconds = 0;
     double seconds = 0;
 };
 
-/// The chain: orient -> densify. Writes OUT/orient/ (oriented folder),
-/// OUT/cameras.json, OUT/sparse.las, OUT/cloud.las, OUT/photo_report.json.
+/// The chain: orient -> densify [-> true ortho -> run]. Writes OUT/orient/
+/// (oriented folder), OUT/cameras.json, OUT/sparse.las, OUT/cloud.las,
+/// OUT/photo_report.json, and with `run` OUT/ortho.tif and OUT/run/.
+/// All or nothing: on an error OUT is removed.
 PhotoRunResult run_photo(const PhotoRunOptions& options, const Progress& progress = {});
 
 }  // namespace cityforge

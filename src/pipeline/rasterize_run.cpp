@@ -8,6 +8,8 @@
 #include "cloud/cloud_reader.hpp"
 #include "core/atomic_file.hpp"
 #include "core/error.hpp"
+#include "io/cloud_crs.hpp"
+#include "pipeline/cloud_windows.hpp"
 #include "pipeline/prepared_cloud.hpp"
 #include "raster/raster.hpp"
 
@@ -35,43 +37,29 @@ RasterizeReport rasterize_run(const std::string& cloud_path, const std::string& 
     CloudRasters r;
     CrsInfo out_crs;
     const uint64_t announced = CloudReader(cloud_path).announced_points();
-    if (!o.grid_raster.empty() && o.max_points_in_memory > 0 && announced > o.max_points_in_memory) {
-        const double unit = target.linear_unit_m;
-        OutlierFilterOptions outliers = o.outliers;
-        const GeoTransform& gt = grid.transform;
-        if (outliers.enabled && !(outliers.max_mean_distance > 0))
-            outliers.max_mean_distance =
-                sample_cloud(cloud_path, o.cloud_crs, target, o.outliers, gt.pixel_to_map({grid.width / 2.0, grid.height / 2.0})).outlier_limit_m;
+    const bool windows = o.max_points_in_memory > 0 && announced > o.max_points_in_memory;
+    // Decisions on the whole cloud, made before it is read and alike in both
+    // paths (cloud_windows.hpp): the grid over every point, the outlier limit
+    // and the density measured on the central 400 m.
+    const CrsInfo source = require_cloud_crs(cloud_path, o.cloud_crs);
+    const double unit = (target.empty() ? source : target).linear_unit_m;
+    if (o.grid_raster.empty()) grid = grid_over_extent(cloud_point_bounds(cloud_path), o.gsd_m / unit);
+    const GeoTransform& gt = grid.transform;
+    const CloudPlan plan = plan_cloud(cloud_path, o.cloud_crs, target, o.outliers, gt.pixel_to_map({grid.width / 2.0, grid.height / 2.0}));
+    if (windows) {
         const double px = std::abs(gt.pixel_width) * unit;
-        const int tile = std::max(64, static_cast<int>(std::lround(o.tile_m / px))), overlap = static_cast<int>(std::ceil(o.overlap_m / px));
-        for (Image<float>* img : {&r.dsm, &r.dtm, &r.ndsm, &r.density}) *img = Image<float>(grid.width, grid.height, 1, NAN);
-        const int tiles_x = (grid.width + tile - 1) / tile, tiles_y = (grid.height + tile - 1) / tile;
-        rep.tiles = static_cast<std::size_t>(tiles_x) * tiles_y;
-        std::size_t done = 0;
-        for (int r0 = 0; r0 < grid.height; r0 += tile)
-            for (int c0 = 0; c0 < grid.width; c0 += tile) {
-                const int cw = std::min(tile, grid.width - c0), ch = std::min(tile, grid.height - r0);
-                const int wc = std::max(0, c0 - overlap), wr = std::max(0, r0 - overlap);
-                const int ww = std::min(grid.width, c0 + cw + overlap) - wc, wh = std::min(grid.height, r0 + ch + overlap) - wr;
-                const MapPoint a = gt.pixel_to_map({double(wc), double(wr)}), b = gt.pixel_to_map({double(wc + ww), double(wr + wh)});
-                const Extent window{std::min(a.x, b.x), std::min(a.y, b.y), std::max(a.x, b.x), std::max(a.y, b.y)};
-                const PreparedCloud pc = prepare_cloud(cloud_path, o.cloud_crs, target, outliers, o.ground, &window);
-                rep.points += pc.cloud.size(), rep.ground_points += pc.ground_points;
-                rep.ground_from_classification = pc.ground_from_classification;
-                if (out_crs.empty() && !pc.crs.empty()) out_crs = pc.crs;
-                if (pc.cloud.size() == 0) continue;
-                const CloudRasters t = rasterize_cloud(pc.cloud, pc.keep, pc.is_ground, GridSpec{gt.window(wc, wr), ww, wh}, unit);
-                for (const auto& [dst, src] : {std::pair<Image<float>*, const Image<float>*>{&r.dsm, &t.dsm}, {&r.dtm, &t.dtm}, {&r.ndsm, &t.ndsm},
-                                              {&r.density, &t.density}})
-                    for (int y = 0; y < ch; ++y)
-                        for (int x = 0; x < cw; ++x) dst->at(0, c0 + x, r0 + y) = src->at(0, c0 - wc + x, r0 - wr + y);
-                progress(0.9 * double(++done) / double(rep.tiles), "tiles");
-            }
-        if (out_crs.empty()) throw Error(cloud_path, "no point of the cloud lies on the grid of " + o.grid_raster);
+        const double tile_m = window_tile_edge_m(o.tile_m, o.overlap_m, plan.density_m2, o.max_points_in_memory);
+        const int tile = std::max(64, static_cast<int>(std::lround(tile_m / px))), overlap = static_cast<int>(std::ceil(o.overlap_m / px));
+        WindowedRasters w = rasterize_cloud_by_windows(cloud_path, o.cloud_crs, target, grid, unit, plan.outliers, o.ground, tile, overlap,
+                                                       progress.sub(0.0, 0.9));
+        if (w.core_points == 0) throw Error(cloud_path, "no point of the cloud lies on the grid" + (o.grid_raster.empty() ? std::string() : " of " + o.grid_raster));
+        r = std::move(w.rasters);
+        out_crs = w.crs;
+        rep.tiles = w.windows;
+        rep.points = w.points, rep.ground_points = w.ground_points, rep.ground_from_classification = w.ground_from_classification;
     } else {
-        const PreparedCloud pc = prepare_cloud(cloud_path, o.cloud_crs, target, o.outliers, o.ground);
+        const PreparedCloud pc = prepare_cloud(cloud_path, o.cloud_crs, target, plan.outliers, o.ground);
         progress(0.5, "cloud");
-        if (o.grid_raster.empty()) grid = grid_over_cloud(pc.cloud, o.gsd_m / pc.crs.linear_unit_m);
         r = rasterize_cloud(pc.cloud, pc.keep, pc.is_ground, grid, pc.crs.linear_unit_m);
         out_crs = pc.crs;
         rep.points = pc.cloud.size(), rep.ground_points = pc.ground_points, rep.ground_from_classification = pc.ground_from_classification;
@@ -81,8 +69,7 @@ RasterizeReport rasterize_run(const std::string& cloud_path, const std::string& 
     namespace fs = std::filesystem;
     GeoTiffWriteOptions wo;
     wo.nodata = -9999.0;
-    auto write = [&](const char* name, const Image<float>& img, const char* what) {
-        Image<float> out = img;
+    auto write = [&](const char* name, Image<float>& out, const char* what) {  // in place: no copy of a large grid
         for (float& v : out.data)
             if (std::isnan(v)) v = -9999.0f;
         wo.band_descriptions = {what};

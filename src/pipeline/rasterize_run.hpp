@@ -20,7 +20,7 @@ struct RasterizeOptions {
     /// `overlap_m` (streamed); each tile's core is kept. The DTM fill is local,
     /// so cores join seamlessly; the outlier limit is measured once on the
     /// grid's central 400 m.
-    uint64_t max_points_in_memory = 60'000'000;
+    uint64_t max_points_in_memory = 20'000'000;
     double tile_m = 1000.0;
     double overlap_m = 100.0;
     void validate() const;

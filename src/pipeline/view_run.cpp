@@ -102,6 +102,70 @@ std::string script_safe(std::string s) {
 
 }  // namespace
 
+// The tileset and its glb contents as a script (window.CITYFORGE_TILES), with the
+// transform from three.js's view of the (y-up) ECEF content to the page's frame
+// (x east, y up, z south; model CRS units minus `origin`), exact at the origin.
+std::string tiles_bundle(const std::string& tileset_path, const CrsInfo& crs, const std::array<double, 3>& origin, std::size_t& tiles) {
+    const json ts = json::parse(read_bytes(tileset_path), nullptr, false);
+    if (ts.is_discarded() || !ts.contains("root")) throw Error(tileset_path, "is not a 3D Tiles tileset (no root tile)");
+    json content = json::object();
+    const fs::path base = fs::path(tileset_path).parent_path();
+    std::vector<const json*> stack{&ts["root"]};
+    while (!stack.empty()) {
+        const json& t = *stack.back();
+        stack.pop_back();
+        if (t.contains("content") && t["content"].contains("uri")) {
+            const std::string uri = t["content"]["uri"];
+            if (!fs::exists(base / uri)) throw Error(tileset_path, "names content " + uri + ", which does not exist");
+            content[uri] = base64(read_bytes(base / uri));
+            ++tiles;
+        }
+        if (t.contains("children"))
+            for (const json& c : t["children"]) stack.push_back(&c);
+    }
+    // Origin and 100 units east, north and up, to ECEF (with the vertical datum where PROJ relates it).
+    std::vector<double> x{origin[0], origin[0] + 100, origin[0], origin[0]}, y{origin[1], origin[1], origin[1] + 100, origin[1]},
+        z{origin[2], origin[2], origin[2], origin[2] + 100};
+    const CrsInfo ecef = crs_from_user_input("EPSG:4978", "3D Tiles");
+    try {
+        transform_points(crs, ecef, x, y, z, tileset_path);
+    } catch (const Error&) {
+        if (!crs.horizontal_epsg) throw;
+        x = {origin[0], origin[0] + 100, origin[0], origin[0]}, y = {origin[1], origin[1], origin[1] + 100, origin[1]};
+        z = {origin[2], origin[2], origin[2], origin[2] + 100};
+        transform_points(crs_from_user_input("EPSG:" + std::to_string(*crs.horizontal_epsg), tileset_path), ecef, x, y, z, tileset_path);
+    }
+    // D: local offset (CRS units) -> ECEF offset; A = D^-1.
+    double D[3][3];
+    for (int c = 0; c < 3; ++c) D[0][c] = (x[c + 1] - x[0]) / 100, D[1][c] = (y[c + 1] - y[0]) / 100, D[2][c] = (z[c + 1] - z[0]) / 100;
+    const double det = D[0][0] * (D[1][1] * D[2][2] - D[1][2] * D[2][1]) - D[0][1] * (D[1][0] * D[2][2] - D[1][2] * D[2][0]) +
+                       D[0][2] * (D[1][0] * D[2][1] - D[1][1] * D[2][0]);
+    if (!(std::abs(det) > 0)) throw Error(tileset_path, "cannot relate the tiles' ECEF frame to the model CRS");
+    double A[3][3];
+    for (int r = 0; r < 3; ++r)
+        for (int c = 0; c < 3; ++c) {
+            const int r1 = (c + 1) % 3, r2 = (c + 2) % 3, c1 = (r + 1) % 3, c2 = (r + 2) % 3;
+            A[r][c] = (D[r1][c1] * D[r2][c2] - D[r1][c2] * D[r2][c1]) / det;  // adjugate / det
+        }
+    // three world (glTF y-up of ECEF) w -> ECEF P w = (w0, -w2, w1); page frame Q l = (l0, l2, -l1).
+    const double P[3][3] = {{1, 0, 0}, {0, 0, -1}, {0, 1, 0}}, Q[3][3] = {{1, 0, 0}, {0, 0, 1}, {0, -1, 0}};
+    double QA[3][3] = {}, M[3][3] = {};
+    for (int r = 0; r < 3; ++r)
+        for (int c = 0; c < 3; ++c)
+            for (int k = 0; k < 3; ++k) QA[r][c] += Q[r][k] * A[k][c];
+    for (int r = 0; r < 3; ++r)
+        for (int c = 0; c < 3; ++c)
+            for (int k = 0; k < 3; ++k) M[r][c] += QA[r][k] * P[k][c];
+    json m = json::array();
+    for (int r = 0; r < 3; ++r) {
+        const double t = -(QA[r][0] * x[0] + QA[r][1] * y[0] + QA[r][2] * z[0]);
+        m.push_back(M[r][0]), m.push_back(M[r][1]), m.push_back(M[r][2]), m.push_back(t);
+    }
+    const json bundle = {{"tileset", ts}, {"content", content}, {"to_page", m}};
+    return "// written by cityforge view: the 3D Tiles tileset and its content for the page beside it\nwindow.CITYFORGE_TILES = " + bundle.dump() +
+           ";\n";
+}
+
 void ViewOptions::validate() const {
     if (ortho_max_px < 64 || ortho_max_px > 8192) throw Error("--ortho-max-px", "must be in 64..8192");
 }
@@ -271,6 +335,16 @@ ViewReport write_view(const std::string& run_dir, const ViewOptions& o) {
     page.append(tmpl.substr(0, at));
     page += "<script type=\"application/json\" id=\"cityforge-data\">" + script_safe(data.dump()) + "</script>\n";
     page += "<script type=\"application/octet-stream\" id=\"cityforge-glb\">" + base64(glb) + "</script>\n";
+    // The tileset, bundled as a script beside the page.
+    const std::string tileset = o.tileset.empty() ? (dir / "3dtiles" / "tileset.json").string() : o.tileset;
+    if (!o.tileset.empty() && !fs::exists(tileset)) throw Error(o.tileset, "does not exist");
+    if (fs::exists(tileset)) {
+        const fs::path bundle = fs::path(out).parent_path() / "tiles.js";
+        ensure_directory(bundle.parent_path());
+        write_text_file(bundle, tiles_bundle(tileset, layer.crs, origin, rep.tiles));
+        rep.tiles_bundle = bundle.string();
+        page += "<script src=\"tiles.js\"></script>\n";
+    }
     page.append(tmpl.substr(at + placeholder.size()));
     ensure_directory(fs::path(out).parent_path());
     write_text_file(out, page);

@@ -11,6 +11,28 @@
 
 namespace cityforge {
 
+std::string encode_png(const std::vector<uint8_t>& bytes, int w, int h, int nb, const std::string& where) {
+    if (w <= 0 || h <= 0 || nb <= 0 || bytes.size() != std::size_t(w) * h * nb) throw Error(where, "internal: picture size does not match its pixels");
+    GdalErrorCapture capture;
+    GDALDriver* mem = GetGDALDriverManager()->GetDriverByName("MEM");
+    GDALDriver* png = GetGDALDriverManager()->GetDriverByName("PNG");
+    if (!mem || !png) throw Error(where, "GDAL lacks the MEM or PNG driver needed for pictures");
+    GDALDataset* ds = mem->Create("", w, h, nb, GDT_Byte, nullptr);
+    if (!ds) throw Error(where, "cannot create an in-memory picture");
+    const CPLErr err = ds->RasterIO(GF_Write, 0, 0, w, h, const_cast<uint8_t*>(bytes.data()), w, h, GDT_Byte, nb, nullptr, nb,
+                                    static_cast<GSpacing>(w) * nb, 1);
+    const std::string vsi = "/vsimem/cityforge_picture_" + std::to_string(reinterpret_cast<std::uintptr_t>(ds)) + ".png";
+    GDALDataset* out = err == CE_None ? png->CreateCopy(vsi.c_str(), ds, FALSE, nullptr, nullptr, nullptr) : nullptr;
+    GDALClose(ds);
+    if (!out) throw Error(where, "cannot encode the picture as PNG: " + capture.message());
+    GDALClose(out);
+    vsi_l_offset size = 0;
+    GByte* buf = VSIGetMemFileBuffer(vsi.c_str(), &size, TRUE);
+    std::string result(reinterpret_cast<const char*>(buf), static_cast<std::size_t>(size));
+    CPLFree(buf);
+    return result;
+}
+
 Quicklook render_quicklook_png(const std::string& path, const Extent& want, int max_px) {
     const RasterReader reader(path);
     const RasterInfo& info = reader.info();
@@ -50,23 +72,8 @@ Quicklook render_quicklook_png(const std::string& path, const Extent& want, int 
             bytes[i * nb + band] = static_cast<uint8_t>(std::clamp((d[i] - lo) / span * 255.0f + 0.5f, 0.0f, 255.0f));
     }
 
-    GdalErrorCapture capture;
-    GDALDriver* mem = GetGDALDriverManager()->GetDriverByName("MEM");
-    GDALDriver* png = GetGDALDriverManager()->GetDriverByName("PNG");
-    if (!mem || !png) throw Error(path, "GDAL lacks the MEM or PNG driver needed for report pictures");
-    GDALDataset* ds = mem->Create("", w, h, nb, GDT_Byte, nullptr);
-    if (!ds) throw Error(path, "cannot create an in-memory picture");
-    const CPLErr err = ds->RasterIO(GF_Write, 0, 0, w, h, bytes.data(), w, h, GDT_Byte, nb, nullptr, nb, static_cast<GSpacing>(w) * nb, 1);
-    const std::string vsi = "/vsimem/cityforge_quicklook_" + std::to_string(reinterpret_cast<std::uintptr_t>(ds)) + ".png";
-    GDALDataset* out = err == CE_None ? png->CreateCopy(vsi.c_str(), ds, FALSE, nullptr, nullptr, nullptr) : nullptr;
-    GDALClose(ds);
-    if (!out) throw Error(path, "cannot encode the report picture as PNG: " + capture.message());
-    GDALClose(out);
-    vsi_l_offset size = 0;
-    GByte* buf = VSIGetMemFileBuffer(vsi.c_str(), &size, TRUE);
     Quicklook q;
-    q.png.assign(reinterpret_cast<const char*>(buf), static_cast<std::size_t>(size));
-    CPLFree(buf);
+    q.png = encode_png(bytes, w, h, nb, path);
     const MapPoint tl = gt.pixel_to_map({double(c0), double(r0)}), br = gt.pixel_to_map({double(c1), double(r1)});
     q.extent = {std::min(tl.x, br.x), std::min(tl.y, br.y), std::max(tl.x, br.x), std::max(tl.y, br.y)};
     q.width = w, q.height = h;

@@ -2,7 +2,9 @@
 // A small 8-bit PNG picture of part of a raster, for reports: the window that
 // covers a map extent, resampled so its longer side is at most `max_px`,
 // contrast-stretched (2-98 % per band). RGB from bands 1-3, grey otherwise.
+#include <cstdint>
 #include <string>
+#include <vector>
 
 #include "core/geo_transform.hpp"
 
@@ -17,5 +19,9 @@ struct Quicklook {
 /// Throws Error naming the file when it cannot be read or does not overlap
 /// `extent` (given in the raster's CRS).
 Quicklook render_quicklook_png(const std::string& raster_path, const Extent& extent, int max_px = 1024);
+
+/// PNG file bytes of an 8-bit picture: `bytes` pixel-interleaved, rows from the
+/// top, `bands` 1 (grey), 3 (RGB) or 4 (RGBA). Throws Error naming `where`.
+std::string encode_png(const std::vector<uint8_t>& bytes, int width, int height, int bands, const std::string& where);
 
 }  // namespace cityforge

@@ -423,6 +423,7 @@ SynthResult write_synthetic_town(const std::string& out_dir, const SynthOptions&
         j["views"] = {{"folder", "views"}, {"count", res.views}, {"gsd_m", o.views.gsd_m},
                       {"width_px", o.views.width_px}, {"height_px", o.views.height_px},
                       {"forward_overlap", o.views.forward_overlap}, {"side_overlap", o.views.side_overlap},
+                      {"oblique_deg", o.views.oblique_deg},
                       {"cameras", "views/cameras_truth.json"}, {"gps", "views/gps.txt"}, {"camera_matrix", "views/K.txt"},
                       {"surface", "surface.las"}, {"surface_points", res.surface_points}};
     write_text_file(res.scene_path, j.dump(2) + "\n");

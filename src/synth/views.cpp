@@ -28,6 +28,9 @@ void ViewsOptions::validate() const {
     if (!(forward_overlap >= 0.0 && forward_overlap <= 0.95)) throw Error("--forward-overlap", "must be in 0..0.95");
     if (!(side_overlap >= 0.0 && side_overlap <= 0.95)) throw Error("--side-overlap", "must be in 0..0.95");
     if (!(focal_px >= 0.0)) throw Error("--focal-px", "must be >= 0");
+    if (!(oblique_deg >= 0.0 && oblique_deg <= 50.0)) throw Error("--oblique-deg", "must be in 0..50 degrees");
+    if (oblique_deg > 0 && views % 5 != 0)
+        throw Error("--views", "with --oblique-deg every station takes 5 photos: give a multiple of 5 (got " + std::to_string(views) + ")");
     if (!(surface_spacing_m >= 0.02 && surface_spacing_m <= 5.0)) throw Error("--surface-spacing", "must be in 0.02..5 m");
 }
 
@@ -200,13 +203,21 @@ ViewsResult write_views(const std::string& out_dir, const Scene& scene, const Vi
     const double altitude = focal * o.gsd_m;
     const double wg = o.width_px * o.gsd_m, hg = o.height_px * o.gsd_m;
     const double fs_m = (1.0 - o.forward_overlap) * wg, ss_m = (1.0 - o.side_overlap) * hg;
-    const int strips = std::max(1, static_cast<int>(std::lround(std::sqrt(o.views * fs_m / ss_m))));
-    const int per_strip = (o.views + strips - 1) / strips;
+    const int heads = o.oblique_deg > 0 ? 5 : 1;  // photos per station
+    const int stations = o.views / heads;
+    const int strips = std::max(1, static_cast<int>(std::lround(std::sqrt(stations * fs_m / ss_m))));
+    const int per_strip = (stations + strips - 1) / strips;
     const double block_w = (per_strip - 1) * fs_m + wg, block_h = (strips - 1) * ss_m + hg;
-    if (block_w > scene.size_m - 4.0 || block_h > scene.size_m - 4.0) {
-        char buf[200];
-        std::snprintf(buf, sizeof buf, "flight block of %.0f x %.0f m does not fit the %.0f m scene: raise --size-m or lower --views/--view-gsd",
-                      block_w, block_h, scene.size_m);
+    // Oblique heads see beyond the nadir block: the far edge of a tilted photo
+    // lies altitude * tan(tilt + half field) from its station.
+    const double tilt = o.oblique_deg * kPi / 180.0;
+    const double reach = heads > 1 ? altitude * std::tan(tilt + std::atan(0.5 * std::max(o.width_px, o.height_px) / focal)) : 0.0;
+    const double need_w = heads > 1 ? std::max(block_w, block_w - wg + 2 * reach) : block_w;
+    const double need_h = heads > 1 ? std::max(block_h, block_h - hg + 2 * reach) : block_h;
+    if (need_w > scene.size_m - 4.0 || need_h > scene.size_m - 4.0 || !std::isfinite(reach)) {
+        char buf[240];
+        std::snprintf(buf, sizeof buf, "flight block of %.0f x %.0f m%s does not fit the %.0f m scene: raise --size-m or lower --views/--view-gsd",
+                      need_w, need_h, heads > 1 ? " (with the oblique photos' reach)" : "", scene.size_m);
         throw Error("--views", buf);
     }
     const fs::path views_dir = fs::path(out_dir) / "views";
@@ -225,14 +236,26 @@ ViewsResult write_views(const std::string& out_dir, const Scene& scene, const Vi
     res.cameras.scene_z_range_m = {hf.zmin, hf.zmax};
     const double x0 = 0.5 * (scene.size_m - block_w) + 0.5 * wg, y0 = 0.5 * (scene.size_m + block_h) - 0.5 * hg;
     for (int i = 0; i < o.views; ++i) {
-        const int strip = i / per_strip, k = i % per_strip;
+        const int station = i / heads, head = i % heads;  // head 0 = nadir, 1..4 = tilted N, E, S, W
+        const int strip = station / per_strip, k = station % per_strip;
         const bool back = strip % 2 == 1;  // serpentine: every other strip flown west
-        Rng rng(seed, 7000 + static_cast<uint64_t>(i));
+        Rng rng(seed, 7000 + static_cast<uint64_t>(heads > 1 ? 100000 + i : i));
         const double x = x0 + (back ? per_strip - 1 - k : k) * fs_m + rng.uniform(-0.5, 0.5);
         const double y = y0 - strip * ss_m + rng.uniform(-0.5, 0.5);
         const double z = zmean + altitude + rng.uniform(-0.5, 0.5);
         const double yaw = (back ? kPi : 0.0) + rng.uniform(-2.0, 2.0) * kPi / 180.0;
-        const double pitch = rng.uniform(-1.5, 1.5) * kPi / 180.0, roll = rng.uniform(-1.5, 1.5) * kPi / 180.0;
+        double pitch = rng.uniform(-1.5, 1.5) * kPi / 180.0, roll = rng.uniform(-1.5, 1.5) * kPi / 180.0;
+        photo::PhotoCamera probe;
+        probe.rotation = attitude(yaw, pitch, roll);
+        if (head > 0) {
+            // Tilt the optical axis towards the head's compass direction (in
+            // the map frame, whatever the strip's heading).
+            const double bearing = (head - 1) * 0.5 * kPi;  // N, E, S, W
+            const Eigen::Vector3d towards(std::sin(bearing), std::cos(bearing), 0.0);
+            const Eigen::Vector3d axis = Eigen::Vector3d::UnitZ().cross(towards);  // rotating -z towards `towards`
+            const Eigen::Matrix3d tilt_world = Eigen::AngleAxisd(-tilt, axis).toRotationMatrix();
+            probe.rotation = probe.rotation * tilt_world.transpose();
+        }
         photo::PhotoCamera cam;
         char name[32];
         std::snprintf(name, sizeof name, "view_%03d.png", i);
@@ -240,7 +263,7 @@ ViewsResult write_views(const std::string& out_dir, const Scene& scene, const Vi
         cam.width = o.width_px, cam.height = o.height_px;
         cam.fx = cam.fy = focal;
         cam.cx = 0.5 * (o.width_px - 1), cam.cy = 0.5 * (o.height_px - 1);
-        cam.rotation = attitude(yaw, pitch, roll);
+        cam.rotation = probe.rotation;
         cam.centre = {x, y, z};  // scene-local for rendering; shifted to map coordinates below
         res.cameras.cameras.push_back(cam);
     }

@@ -1,7 +1,7 @@
 #pragma once
 // Perspective aerial photos of a synthetic scene with exact truth: a flight
 // plan of strips with forward and side overlap, pinhole cameras looking down
-// (small attitude jitter), images ray-cast against the scene's fine DSM with
+// (small attitude jitter) or an oblique camera of 5 heads per station, images ray-cast against the scene's fine DSM with
 // sun shading, cast shadows, facades and ground texture; plus the exact
 // surface (terrain, roofs, walls, tree crowns) as a reference cloud.
 #include <cstdint>
@@ -20,6 +20,11 @@ struct ViewsOptions {
     double forward_overlap = 0.8;    ///< along-strip overlap of neighbouring photos, 0..0.95
     double side_overlap = 0.6;       ///< overlap of neighbouring strips, 0..0.95
     double focal_px = 0.0;           ///< 0 = image width (about 53 degrees across)
+    /// 0 = nadir photos only. > 0: an oblique ("Maltese cross") camera: each
+    /// station takes 5 photos, nadir and 4 tilted by this angle towards north,
+    /// east, south and west, so walls facing every way are seen in several
+    /// photos; `views` must then be a multiple of 5. Degrees, 0..50.
+    double oblique_deg = 0.0;
     double surface_spacing_m = 0.1;  ///< sample spacing of surface.las
     /// Throws Error on out-of-range values.
     void validate() const;

@@ -339,3 +339,111 @@ TEST_CASE("A footprint audit without a match says n/a (null) for the means over 
     const std::string md = slurp(dir / "a/report.md");
     CHECK(md.find("| mean \\|area error\\| (%) | n/a |") != std::string::npos);
 }
+
+TEST_CASE("Rectangle and height audits without a comparable building say n/a (null), not 0", "[inputs][audit]") {
+    ScratchDir dir("inputs_audit_na");
+    const std::string ref = shared_data("delft_ahn3_bgt_west/bgt_pand_west_with_ref_heights.geojson");
+    const std::string schema = cityforge::test::source_dir() + "/schemas/audit_report.schema.json";
+    write_squares(dir / "far.geojson", {{90000.0, 447560.0}}, 4.0, R"({"height_m": 7.5})");
+    // Heights: the one prediction matches no reference footprint.
+    const auto h = run_cli("audit heights --pred " + (dir / "far.geojson") + " --ref " + ref + " --ref-field ref_height_m --out " + (dir / "h"));
+    INFO(h.err);
+    REQUIRE(h.exit_code == 0);
+    CHECK(h.out.find("MAE n/a m RMSE n/a m bias n/a m max n/a m over 0 buildings") != std::string::npos);
+    const json hj = json::parse(slurp(dir / "h/report.json"));
+    for (const char* k : {"mae_m", "rmse_m", "bias_m", "max_abs_m"}) CHECK(hj["totals"][k].is_null());
+    CHECK(hj["measures"].find("mae") == hj["measures"].end());
+    CHECK(cityforge::test::validate_json(schema, dir / "h/report.json").exit_code == 0);
+    CHECK(slurp(dir / "h/report.md").find("| MAE (m) | n/a |") != std::string::npos);
+    // A gate on a measure that is not defined fails (exit 4), it does not pass on a 0.
+    CHECK(run_cli("audit heights --pred " + (dir / "far.geojson") + " --ref " + ref + " --ref-field ref_height_m --fail-above mae=1 --out " +
+                  (dir / "h2")).exit_code == 4);
+    // Rectangles: fitted against original polygons that none of them matches.
+    const auto r = run_cli("audit rectangles --in " + (dir / "far.geojson") + " --original " + ref + " --out " + (dir / "r"));
+    INFO(r.err);
+    REQUIRE(r.exit_code == 0);
+    CHECK(r.out.find("mean |area error| n/a % max n/a % mean signed n/a % over 0 of 1 footprints") != std::string::npos);
+    const json rj = json::parse(slurp(dir / "r/report.json"));
+    for (const char* k : {"mean_abs_error_pct", "max_abs_error_pct", "mean_error_pct", "mean_abs_error_m2"}) CHECK(rj["totals"][k].is_null());
+    CHECK(cityforge::test::validate_json(schema, dir / "r/report.json").exit_code == 0);
+    const std::string md = slurp(dir / "r/report.md");
+    CHECK(md.find("| mean \\|area error\\| (%) | n/a |") != std::string::npos);
+    CHECK(md.find("| max \\|area error\\| (%) | n/a |") != std::string::npos);
+}
+
+// ---------------------------------------------------------------- run's tile merge
+
+namespace {
+// "name: Type" of every field of a layer, from ogrinfo -so.
+std::string ogr_schema(const std::string& path, const std::string& layer) {
+    const auto r = run_command("ogrinfo -ro -so " + path + " " + layer);
+    REQUIRE(r.exit_code == 0);
+    return r.out;
+}
+}  // namespace
+
+TEST_CASE("run's tile merge keeps the declared type of attributes whose values are all null", "[inputs][run]") {
+    ScratchDir dir("inputs_run_types");
+    // 12 Delft footprints in a GeoPackage with three empty fields (Real, Integer64, String).
+    const std::string fp = dir / "fp.gpkg";
+    REQUIRE(run_command("ogr2ogr -f GPKG -nln footprints -limit 12 " + fp + " " +
+                        shared_data("delft_ahn3_bgt_west/bgt_pand_west_with_ref_heights.geojson")).exit_code == 0);
+    for (const char* col : {"survey_z REAL", "floors INTEGER", "note TEXT"})
+        REQUIRE(run_command("ogrinfo -q " + fp + " -sql \"ALTER TABLE footprints ADD COLUMN " + col + "\"").exit_code == 0);
+    // Several tiles: the building lines of each are merged.
+    const auto r = run_cli("run --quiet --footprints " + fp + " --cloud " + shared_data("delft_ahn3_bgt_west/ahn3_delft_west.las") +
+                           " --cloud-crs EPSG:7415 --tile-size 100 --out " + (dir / "run"));
+    INFO(r.err);
+    REQUIRE(r.exit_code == 0);
+    REQUIRE(std::filesystem::exists(dir / "run/tiles/tile_00001.json"));
+    const std::string schema = ogr_schema(dir / "run/buildings.gpkg", "buildings");
+    CHECK(schema.find("survey_z: Real") != std::string::npos);
+    CHECK(schema.find("floors: Integer64") != std::string::npos);
+    CHECK(schema.find("note: String") != std::string::npos);
+    CHECK(schema.find("check_p90_roof_nap_m: Real") != std::string::npos);
+    CHECK(schema.find("Feature Count: 12") != std::string::npos);
+}
+
+TEST_CASE("run takes a lon/lat ortho (Rio) and a Web Mercator ortho (Banepa) as footprints does - outputs name their CRS", "[inputs][geographic][run]") {
+    ScratchDir dir("inputs_run_geographic");
+    const std::string rio = shared_data("spacenet1_rio_rgb/3band_013022223130_Public_img50_rgb.tif");
+    // Same working grid and areas as `footprints` (one working-grid helper).
+    REQUIRE(run_cli("footprints --quiet --ortho " + rio + " --out " + (dir / "fp.gpkg")).exit_code == 0);
+    const auto r = run_cli("run --quiet --ortho " + rio + " --out " + (dir / "rio"));
+    INFO(r.err);
+    REQUIRE(r.exit_code == 0);
+    const json rep = json::parse(slurp(dir / "rio/run_report.json"));
+    CHECK(rep["inputs"]["ortho"]["crs"] == "EPSG:4326");
+    CHECK(rep["working_crs"] == "EPSG:32723");  // UTM 23S, the zone of the tile centre
+    CHECK(rep["crs"] == "EPSG:32723");          // a city model in degrees is refused: the working CRS
+    const auto [fp_area, fp_geodesic] = area_sums(dir / "fp.gpkg");
+    const auto [area, geodesic] = area_sums(dir / "rio/buildings.gpkg");
+    CHECK(area == Approx(fp_area).epsilon(1e-9));
+    CHECK(area == Approx(geodesic).epsilon(0.01));
+    CHECK(rep["counts"]["buildings"] == info_json(dir / "fp.gpkg")["layers"][0]["feature_count"]);
+    CHECK(info_json(dir / "rio/buildings.gpkg")["layers"][0]["crs"]["epsg"] == 32723);
+    CHECK(json::parse(slurp(dir / "rio/buildings.city.json"))["metadata"]["referenceSystem"] == "https://www.opengis.net/def/crs/EPSG/0/32723");
+    CHECK(slurp(dir / "rio/buildings_lod1.gml").find("srsName=\"urn:ogc:def:crs:EPSG::32723\"") != std::string::npos);
+    // No cloud, no solids: the 3D-only formats are skipped with a warning, not a failed run.
+    CHECK(rep["warnings"].dump().find("glTF and 3D Tiles not written") != std::string::npos);
+    CHECK_FALSE(std::filesystem::exists(dir / "rio/buildings.glb"));
+    // --out-crs: another projected CRS; areas stay ground values; a geographic one is refused before any tile runs.
+    REQUIRE(run_cli("run --quiet --ortho " + rio + " --out-crs EPSG:3857 --formats gpkg --out " + (dir / "rio_3857")).exit_code == 0);
+    CHECK(info_json(dir / "rio_3857/buildings.gpkg")["layers"][0]["crs"]["epsg"] == 3857);
+    CHECK(area_sums(dir / "rio_3857/buildings.gpkg").first == Approx(area).epsilon(1e-9));
+    const auto deg = run_cli("run --quiet --ortho " + rio + " --out-crs EPSG:4326 --out " + (dir / "rio_deg"));
+    CHECK(deg.exit_code == 1);
+    CHECK(deg.err.find("geographic") != std::string::npos);
+    CHECK_FALSE(std::filesystem::exists(dir / "rio_deg/manifest.json"));
+
+    // Web Mercator: the grid stays EPSG:3857, measures are ground metres (not x1.27).
+    const std::string banepa = shared_data("oam_catanduanes_banepa/banepa_z19_a_rgba.tif");
+    const auto b = run_cli("run --quiet --ortho " + banepa + " --formats gpkg,cityjson --out " + (dir / "banepa"));
+    INFO(b.err);
+    REQUIRE(b.exit_code == 0);
+    const json brep = json::parse(slurp(dir / "banepa/run_report.json"));
+    CHECK(brep["crs"] == "EPSG:3857");
+    const auto [b_area, b_geodesic] = area_sums(dir / "banepa/buildings.gpkg");
+    CHECK(b_area > 1000.0);
+    CHECK(b_area == Approx(b_geodesic).epsilon(0.01));
+}

@@ -264,3 +264,27 @@ TEST_CASE("A sparse cloud is rasterised on coarser cells and the ortho draws the
     CHECK(a.mean_iou >= 0.93);
     CHECK(a.f1 > f.f1);
 }
+
+TEST_CASE("Footprints from a cloud read window by window (above the memory budget) are the same bytes as a whole-cloud run", "[footprint][synth][windows]") {
+    ScratchDir dir("fp_windows");
+    const SynthResult s = make_town(dir, 300, 11, 8);  // ~720 k points
+    for (const DetectionMode mode : {DetectionMode::cloud_only, DetectionMode::ortho_cloud}) {
+        INFO(to_string(mode));
+        FootprintsRunOptions o;
+        o.cloud = s.cloud_path;
+        if (mode == DetectionMode::ortho_cloud) o.ortho = s.ortho_path;
+        o.mode = mode;
+        const std::string tag = to_string(mode);
+        const FootprintsReport whole = run_footprints(dir / (tag + "_whole.geojson"), o);
+        CHECK(whole.cloud_windows == 0);
+        o.max_points_in_memory = 700000;
+        o.cloud_tile_m = 100.0;
+        o.cloud_overlap_m = 100.0;
+        const FootprintsReport tiled = run_footprints(dir / (tag + "_tiled.geojson"), o);
+        CHECK(tiled.cloud_windows >= 9);
+        CHECK(tiled.buildings == whole.buildings);
+        CHECK(whole.buildings > 10);
+        const bool same = test::slurp(dir / (tag + "_whole.geojson")) == test::slurp(dir / (tag + "_tiled.geojson"));
+        CHECK(same);
+    }
+}

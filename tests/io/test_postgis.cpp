@@ -5,6 +5,7 @@
 // and attributes, the horizontal EPSG code as SRID and the vertical CRS in a column.
 #include <catch2/catch.hpp>
 #include <cmath>
+#include <cstdlib>
 #include <map>
 #include <set>
 
@@ -17,20 +18,32 @@ using test::ScratchDir;
 
 namespace {
 
-// The private server; stopped (and its folder removed) at scope exit.
+// The database: an existing one named by CITYFORGE_TEST_PG ("PG:host=... dbname=... user=...", with
+// PostGIS; the test's tables cityforge_test_* are dropped at the end), else a private server started
+// here and stopped (its folder removed) at scope exit.
 struct PostgisServer {
     std::string dir, connection;
+    bool external = false;
     explicit PostgisServer(const std::string& folder) : dir(folder) {
+        if (const char* env = std::getenv("CITYFORGE_TEST_PG"); env && *env) {
+            connection = env, external = true;
+            REQUIRE(connection.rfind("PG:", 0) == 0);
+            return;
+        }
         const auto r = test::run_command("bash " + test::source_dir() + "/tools/pg/test_server.sh start " + dir + " " +
                                          std::to_string(54000 + ::getpid() % 1000));
         INFO(r.err);
         REQUIRE(r.exit_code == 0);
         connection = r.out.substr(0, r.out.find('\n'));
     }
-    ~PostgisServer() { test::run_command("bash " + test::source_dir() + "/tools/pg/test_server.sh stop " + dir); }
+    ~PostgisServer() {
+        if (external) psql("DROP TABLE IF EXISTS cityforge_test_footprints, cityforge_test_buildings");
+        else test::run_command("bash " + test::source_dir() + "/tools/pg/test_server.sh stop " + dir);
+    }
+    // psql with the connection's key=value pairs (libpq's conninfo, the PG: prefix removed).
     std::string psql(const std::string& sql) const {
-        const std::string port = connection.substr(connection.find("port=") + 5, connection.find(' ', connection.find("port=")) - connection.find("port=") - 5);
-        return test::run_command("/usr/lib/postgresql/15/bin/psql -At -h " + dir + " -p " + port + " -U postgres -d cityforge -c \"" + sql + "\"").out;
+        const char* bin = std::getenv("CITYFORGE_PG_BIN");
+        return test::run_command(std::string(bin && *bin ? bin : "/usr/lib/postgresql/15/bin") + "/psql -At '" + connection.substr(3) + "' -c \"" + sql + "\"").out;
     }
 };
 
@@ -50,23 +63,23 @@ TEST_CASE("PostGIS round trip: footprints from a table, buildings into another, 
     const SynthResult town = test::make_town(dir, 200, 5, 8);
     const PostgisServer pg(dir / "pg");
     // Footprints written by another tool (ogr2ogr) into PostGIS.
-    REQUIRE(test::run_command("ogr2ogr -f PostgreSQL " + quoted(pg.connection) + " " + town.truth_path + " -nln footprints").exit_code == 0);
-    CHECK(pg.psql("SELECT count(*) FROM footprints") == "" + std::to_string(read_polygon_layer(town.truth_path).features.size()) + "\n");
+    REQUIRE(test::run_command("ogr2ogr -overwrite -f PostgreSQL " + quoted(pg.connection) + " " + town.truth_path + " -nln cityforge_test_footprints").exit_code == 0);
+    CHECK(pg.psql("SELECT count(*) FROM cityforge_test_footprints") == "" + std::to_string(read_polygon_layer(town.truth_path).features.size()) + "\n");
 
     const auto run = test::run_cli("run --quiet --ortho " + town.ortho_path + " --cloud " + town.cloud_path + " --footprints " +
-                                   quoted(pg.connection + " tables=footprints") + " --vertical-crs EPSG:5773 --formats gpkg --db " +
-                                   quoted(pg.connection + " tables=buildings_out") + " --out " + (dir / "run"));
+                                   quoted(pg.connection + " tables=cityforge_test_footprints") + " --vertical-crs EPSG:5773 --formats gpkg --db " +
+                                   quoted(pg.connection + " tables=cityforge_test_buildings") + " --out " + (dir / "run"));
     INFO(run.err);
     REQUIRE(run.exit_code == 0);
 
     const PolygonLayer gpkg = read_polygon_layer(dir / "run/buildings.gpkg");
-    const PolygonLayer table = read_polygon_layer(pg.connection + " tables=buildings_out");
+    const PolygonLayer table = read_polygon_layer(pg.connection + " tables=cityforge_test_buildings");
     REQUIRE(gpkg.features.size() > 10);
     REQUIRE(table.features.size() == gpkg.features.size());
     // Real CRS: the horizontal EPSG code is the SRID; the vertical CRS (PostGIS SRIDs are 2-D) is in a column.
     CHECK(table.crs.horizontal_epsg == 32650);
-    CHECK(pg.psql("SELECT DISTINCT ST_SRID(geom) FROM buildings_out") == "32650\n");
-    CHECK(pg.psql("SELECT DISTINCT crs_vertical FROM buildings_out") == "EPSG:5773\n");
+    CHECK(pg.psql("SELECT DISTINCT ST_SRID(geom) FROM cityforge_test_buildings") == "32650\n");
+    CHECK(pg.psql("SELECT DISTINCT crs_vertical FROM cityforge_test_buildings") == "EPSG:5773\n");
     CHECK(gpkg.crs.vertical_epsg == 5773);
 
     std::map<std::string, int> column;
@@ -106,9 +119,9 @@ TEST_CASE("PostGIS round trip: footprints from a table, buildings into another, 
 
     // A second run replaces the table (one transaction), it does not append.
     REQUIRE(test::run_cli("export --quiet --in " + (dir / "run/buildings.gpkg") + " --formats geojson --db " +
-                          quoted(pg.connection + " tables=buildings_out") + " --out " + (dir / "again"))
+                          quoted(pg.connection + " tables=cityforge_test_buildings") + " --out " + (dir / "again"))
                 .exit_code == 0);
-    CHECK(pg.psql("SELECT count(*) FROM buildings_out") == std::to_string(gpkg.features.size()) + "\n");
+    CHECK(pg.psql("SELECT count(*) FROM cityforge_test_buildings") == std::to_string(gpkg.features.size()) + "\n");
 
     // A missing table is one line naming the connection.
     const auto bad = test::run_cli("heights --footprints " + quoted(pg.connection + " tables=nowhere") + " --cloud " + town.cloud_path +

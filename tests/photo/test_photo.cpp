@@ -4,6 +4,7 @@
 #include <catch2/catch.hpp>
 #include <filesystem>
 #include <fstream>
+#include <nlohmann/json.hpp>
 #include <tbb/global_control.h>
 
 #include <opencv2/imgcodecs.hpp>
@@ -186,7 +187,7 @@ TEST_CASE("photo commands refuse bad input in one line and write nothing", "[pho
     CHECK(!fs::exists(dir / "d.las"));
 }
 
-TEST_CASE("orient (COLMAP) recovers the synthetic cameras and georeferences them", "[photo][orient]") {
+TEST_CASE("photo --run: orient, densify, true ortho and the building run on synthetic photos", "[photo][orient][run]") {
     if (std::system("colmap help >/dev/null 2>&1") != 0) {
         WARN("colmap is not installed: orient not tested");
         return;
@@ -194,26 +195,112 @@ TEST_CASE("orient (COLMAP) recovers the synthetic cameras and georeferences them
     ScratchDir dir("photo_orient");
     make_views(dir, 6);
     const std::string views = dir / "views";
-    const auto r = run_cli("orient -q --images " + views + " --gps " + views + "/gps.txt --camera " + views + "/K.txt --out " +
-                           (dir / "ori"));
+    {
+        std::ofstream cfg(dir / "run.json");
+        cfg << R"({"export": {"formats": ["geojson"], "geojson_crs": "native"}})";
+    }
+    const std::string out = dir / "ph";
+    const auto r = run_cli("photo -q --images " + views + " --gps " + views + "/gps.txt --camera " + views + "/K.txt --out " + out +
+                           " --run --run-config " + (dir / "run.json"));
     INFO(r.err);
     REQUIRE(r.exit_code == 0);
-    const photo::CameraSet est = photo::read_cameras_json(dir / "ori/cameras.json");
+    // Orientation: poses against the written truth.
+    const photo::CameraSet est = photo::read_cameras_json(out + "/cameras.json");
     const photo::CameraSet truth = photo::read_cameras_json(views + "/cameras_truth.json");
     const photo::PoseError e = photo::compare_poses(est, truth);
     INFO("pose error " << e.mean_position_m << " m, " << e.mean_angle_deg << " deg");
     CHECK(e.matched == 6);
     CHECK(e.mean_position_m < 0.5);
     CHECK(e.mean_angle_deg < 0.5);
-    CHECK(fs::exists(dir / "ori/sparse.las"));
-    CHECK(fs::exists(dir / "ori/orient_report.json"));
-    // Densify of the oriented folder beats its sparse cloud in recall.
-    const auto d = run_cli("densify -q --model " + (dir / "ori") + " --out " + (dir / "dense.las"));
-    REQUIRE(d.exit_code == 0);
+    // The dense cloud: LAS 1.4, RGB, class 1, in the cameras' CRS; it beats the sparse cloud by far in recall.
+    const PointCloud dense = read_las(out + "/cloud.las");
+    REQUIRE(dense.size() > 10000);
+    CHECK(dense.has_color());
+    CHECK(std::all_of(dense.classification.begin(), dense.classification.end(), [](uint8_t c) { return c == 1; }));
+    CHECK(test::slurp(out + "/cloud.las").substr(24, 2) == std::string("\x01\x04", 2));  // version 1.4
     const PointCloud surface = read_las(dir / "surface.las");
-    const CloudComparison cd = compare_clouds(read_las(dir / "dense.las"), surface, {0.5});
-    const CloudComparison cs = compare_clouds(read_las(dir / "ori/sparse.las"), surface, {0.5});
+    const CloudComparison cd = compare_clouds(dense, surface, {0.5});
+    const CloudComparison cs = compare_clouds(read_las(out + "/sparse.las"), surface, {0.5});
     INFO("dense R " << cd.scores[0].recall << " sparse R " << cs.scores[0].recall);
     CHECK(cd.scores[0].recall > 5 * cs.scores[0].recall);
     CHECK(cd.scores[0].precision > 0.7);
+    // The report names every step with its time and counts.
+    const nlohmann::json rep = nlohmann::json::parse(test::slurp(out + "/photo_report.json"));
+    REQUIRE(rep["steps"].size() == 4);
+    CHECK(rep["steps"][0]["step"] == "orient");
+    CHECK(rep["steps"][0]["oriented"] == 6);
+    CHECK(rep["steps"][1]["points"] == dense.size());
+    CHECK(rep["steps"][3]["step"] == "run");
+    CHECK(rep["crs"] == "EPSG:32650");
+    // The true ortho and the run: DSM mosaic and buildings at the truth's places and heights.
+    CHECK(fs::exists(out + "/ortho.tif"));
+    CHECK(fs::exists(out + "/run/dsm.vrt"));
+    const nlohmann::json found = nlohmann::json::parse(test::slurp(out + "/run/buildings.geojson"));
+    const nlohmann::json truth_fp = nlohmann::json::parse(test::slurp(dir / "truth.geojson"));
+    auto outer_ring = [](const nlohmann::json& f) -> const nlohmann::json& {
+        const auto& geom = f["geometry"];
+        return geom["type"] == "MultiPolygon" ? geom["coordinates"][0][0] : geom["coordinates"][0];
+    };
+    auto inside = [](double x, double y, const nlohmann::json& ring) {
+        bool in = false;
+        for (std::size_t k = 0; k + 1 < ring.size(); ++k) {
+            const double x1 = ring[k][0], y1 = ring[k][1], x2 = ring[k + 1][0], y2 = ring[k + 1][1];
+            if ((y1 > y) != (y2 > y) && x < x1 + (y - y1) * (x2 - x1) / (y2 - y1)) in = !in;
+        }
+        return in;
+    };
+    // A found building (often cut by the block's edge) matches the truth
+    // building holding its vertex centroid when its height lies between that
+    // building's eave and ridge (1 m slack).
+    int ok = 0, matched = 0;
+    for (const auto& f : found["features"]) {
+        if (f["properties"]["status"] != "ok") continue;
+        ++ok;
+        const auto& ring = outer_ring(f);
+        double x = 0, y = 0;
+        for (std::size_t k = 0; k + 1 < ring.size(); ++k) x += ring[k][0].get<double>(), y += ring[k][1].get<double>();
+        x /= double(ring.size() - 1), y /= double(ring.size() - 1);
+        for (const auto& t : truth_fp["features"]) {
+            if (!inside(x, y, outer_ring(t))) continue;
+            const double h = f["properties"]["height_m"].get<double>();
+            if (h > t["properties"]["eave_height_m"].get<double>() - 1.0 && h < t["properties"]["ridge_height_m"].get<double>() + 1.0)
+                ++matched;
+            break;
+        }
+    }
+    INFO(ok << " buildings, " << matched << " at a truth building with its height");
+    CHECK(ok >= 2);
+    CHECK(matched >= ok - 1);
+    // An existing output is refused.
+    const auto again = run_cli("photo -q --images " + views + " --gps " + views + "/gps.txt --camera " + views + "/K.txt --out " + out);
+    CHECK(again.exit_code != 0);
+    CHECK(test::count_lines(again.err) == 1);
+}
+
+TEST_CASE("photo: photos without overlap give a one-line error and write nothing", "[photo][errors][orient]") {
+    if (std::system("colmap help >/dev/null 2>&1") != 0) {
+        WARN("colmap is not installed: orient not tested");
+        return;
+    }
+    ScratchDir dir("photo_no_overlap");
+    SynthOptions o;
+    o.size_m = 120;
+    o.seed = 4;
+    o.cloud_density_m2 = 0;
+    o.views.views = 4;
+    o.views.gsd_m = 0.15;
+    o.views.width_px = 320;
+    o.views.height_px = 240;
+    o.views.forward_overlap = 0.0;
+    o.views.side_overlap = 0.0;
+    o.views.surface_spacing_m = 1.0;
+    write_synthetic_town(dir.path.string(), o);
+    const std::string views = dir / "views";
+    const auto r = run_cli("photo --images " + views + " --gps " + views + "/gps.txt --camera " + views + "/K.txt --out " + (dir / "ph"));
+    INFO(r.err);
+    CHECK(r.exit_code == 1);
+    CHECK(test::count_lines(r.err) == 1);
+    CHECK(r.err.find("overlap") != std::string::npos);
+    CHECK(!fs::exists(dir / "ph"));
+    for (const auto& e : fs::directory_iterator(dir.path)) CHECK(e.path().filename().string().find(".part-") == std::string::npos);
 }

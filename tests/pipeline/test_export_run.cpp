@@ -127,7 +127,12 @@ TEST_CASE("Hand-made model - CityJSON and CityJSONSeq validate against the CityJ
     CHECK(v.exit_code == 0);
     const auto j = nlohmann::json::parse(test::slurp(dir / "m.city.json"));
     CHECK(j["metadata"]["referenceSystem"] == "https://www.opengis.net/def/crs/EPSG/0/7415");
-    CHECK(j["CityObjects"]["box"]["geometry"].size() == 3);  // LOD0, LOD1, LOD2
+    CHECK(j["CityObjects"]["box"]["geometry"].size() == 2);  // LOD0, LOD1.2; its one roof part holds LOD1.3 and LOD2.2
+    CHECK(j["CityObjects"]["box"]["children"] == nlohmann::json::array({"box-0"}));
+    CHECK(j["CityObjects"]["box-0"]["type"] == "BuildingPart");
+    CHECK(j["CityObjects"]["box-0"]["geometry"].size() == 2);
+    CHECK(j["CityObjects"]["box-0"]["geometry"][1]["lod"] == "2.2");
+    CHECK(j["CityObjects"].size() == 4);
     CHECK(j["CityObjects"]["box"]["attributes"]["roofType"] == "gable");
     CHECK(j["CityObjects"]["nothing"]["attributes"]["status"] == "no_height");
     // Vertices are integers after `transform`: the box's first corner comes back to the millimetre.

@@ -3,13 +3,17 @@
 // would look at it:
 //
 //   node view_check.mjs PAGE.html OUTDIR --expect-buildings N [--expect-meshed M]
-//        [--click-id ID --expect-height H] [--click3d-id ID]
+//        [--click-id ID --expect-height H] [--click3d-id ID] [--source glb|tiles]
+//        [--expect-textured]
 //
 // - the page loads with no console error, no page error and no request
 //   leaving the disk (file: and data: only);
 // - buildings drawn on the map == N, buildings drawn in 3D == M;
 // - clicking building ID on the map shows its id and height H (to the shown digits);
 // - clicking building ID in the 3D view selects it;
+// - with --source tiles: the 3D view shows the 3D Tiles tileset (tiles.js beside
+//   the page), every content tile loaded, and the 3D checks run on it;
+// - with --expect-textured: some 3D mesh carries a texture (the ortho on roofs);
 // - a screenshot goes to OUTDIR/viewer.png.
 // Prints a JSON summary; exit 0 = every check passed.
 import { chromium } from "playwright-core";
@@ -49,7 +53,25 @@ try {
   await page.goto(pathToFileURL(path.resolve(page_path)).href, { waitUntil: "load", timeout: 120000 });
   await page.waitForFunction(() => window.cityforgeViewer && (window.cityforgeViewer.ready || window.cityforgeViewer.error), null, { timeout: 120000 });
   summary.load_ms = Date.now() - t0;
-  const st = await page.evaluate(() => ({ ...window.cityforgeViewer, mapPoint: undefined, scenePoint: undefined }));
+  const source = arg("--source");
+  if (source !== null) {
+    const t1 = Date.now();
+    const ok = await page.evaluate(async (s) => {
+      const v = window.cityforgeViewer;
+      if (!v.sources || !v.sources.includes(s)) return false;
+      await v.showSource(s);
+      return true;
+    }, source);
+    summary.source_ms = Date.now() - t1;
+    if (!ok) failures.push(`the page offers no 3D source '${source}'`);
+  }
+  const st = await page.evaluate(() => ({ ...window.cityforgeViewer, mapPoint: undefined, scenePoint: undefined, showSource: undefined }));
+  summary.source = st.source;
+  summary.tiles = { loaded: st.tilesLoaded, total: st.tilesTotal };
+  summary.textured_meshes = st.textured3d;
+  summary.box = st.box;
+  if (source === "tiles" && !(st.tilesTotal > 0 && st.tilesLoaded === st.tilesTotal)) failures.push(`tiles loaded ${st.tilesLoaded} of ${st.tilesTotal}`);
+  if (rest.includes("--expect-textured") && !(st.textured3d > 0)) failures.push("no textured mesh in 3D");
   summary.drawn_map = st.drawn2d;
   summary.drawn_3d = st.drawn3d;
   if (st.error) failures.push(`viewer error: ${st.error}`);

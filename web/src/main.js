@@ -9,7 +9,7 @@ import { OrbitControls } from "three/examples/jsm/controls/OrbitControls.js";
 
 const data = JSON.parse(document.getElementById("cityforge-data").textContent);
 const byId = new Map(data.buildings.map((b, i) => [b.id, i]));
-const state = { selected: -1, colourBy: "status", drawn2d: 0, drawn3d: 0, ready: false, error: null };
+const state = { selected: -1, colourBy: "status", drawn2d: 0, drawn3d: 0, textured3d: 0, tilesLoaded: 0, tilesTotal: 0, source: null, ready: false, error: null };
 // What tests and scripts can read: counts, selection, readiness.
 window.cityforgeViewer = state;
 
@@ -182,8 +182,13 @@ state.mapPoint = (id) => {
 };
 
 // ---------- 3D ----------
+// Two sources: the run's buildings.glb (embedded in the page) and the 3D Tiles
+// tileset (tiles.js beside the page: a page opened from disk cannot fetch),
+// loaded tile by tile, nearest to the view first. Every mesh knows its glb's
+// feature id -> building index table (userData.rows).
 const sceneCanvas = document.getElementById("scene");
-let renderer = null, camera = null, controls = null, scene = null, meshes = [], featureIndex = [], highlight = null;
+let renderer = null, camera = null, controls = null, scene = null, meshes = [], highlight = null, modelGroup = null, loadGeneration = 0;
+const drawnSet = new Set();
 
 function parseGlbIds(bytes) {
   // The property table's id column (EXT_structural_metadata) maps feature ids to buildings.
@@ -221,17 +226,127 @@ function render3d() {
   renderer.render(scene, camera);
 }
 
+function rowsOf(bytes) {
+  return parseGlbIds(bytes).ids.map((id) => (byId.has(id) ? byId.get(id) : -1));
+}
+
+function parseGlb(bytes) {
+  return new Promise((resolve, reject) => new GLTFLoader().parse(bytes.buffer.slice(bytes.byteOffset, bytes.byteOffset + bytes.byteLength), "", resolve, reject));
+}
+
+// Registers the meshes of a loaded glb (already placed in the scene).
+function addMeshes(root, rows) {
+  root.updateMatrixWorld(true);
+  root.traverse((o) => {
+    if (!o.isMesh) return;
+    o.userData.rows = rows;
+    meshes.push(o);
+    if (o.material && o.material.map) state.textured3d += 1;
+    const fid = o.geometry.getAttribute("_feature_id_0");
+    if (fid) for (let i = 0; i < fid.count; ++i) if (rows[fid.getX(i)] >= 0) drawnSet.add(rows[fid.getX(i)]);
+  });
+  state.drawn3d = drawnSet.size;
+}
+
+function clearModel() {
+  ++loadGeneration;
+  if (highlight) scene.remove(highlight), highlight.geometry.dispose(), (highlight = null);
+  for (const c of [...modelGroup.children]) modelGroup.remove(c);
+  meshes = [];
+  drawnSet.clear();
+  state.drawn3d = 0, state.textured3d = 0, state.tilesLoaded = 0, state.tilesTotal = 0;
+}
+
+function fitCamera(object) {
+  const box = new THREE.Box3().setFromObject(object, true);
+  const centre = box.getCenter(new THREE.Vector3()), radius = box.getSize(new THREE.Vector3()).length() / 2 || 10;
+  camera.near = radius / 1000, camera.far = radius * 20;
+  camera.updateProjectionMatrix();
+  camera.position.set(centre.x + radius * 0.9, centre.y + radius * 1.3, centre.z + radius * 1.5);
+  controls.target.copy(centre);
+  controls.update();
+}
+
+function sceneLabel() {
+  const lods = new Set(data.buildings.map((b) => b.lod).filter(Boolean));
+  const tiles = state.source === "tiles" ? ` · tiles ${state.tilesLoaded}/${state.tilesTotal}` : "";
+  document.getElementById("scene-lod").textContent = `${state.drawn3d} buildings` + (lods.size ? ` (LOD ${[...lods].sort().join(", ")})` : "") + tiles;
+}
+
+async function showGlb() {
+  const glbNode = document.getElementById("cityforge-glb");
+  const bytes = base64Bytes(glbNode.textContent);
+  const rows = rowsOf(bytes);
+  const gltf = await parseGlb(bytes);
+  // The glb is in the model CRS minus its origin; the map is relative to data.origin.
+  const o = (gltf.parser.json.asset.extras || {}).origin || data.origin;
+  gltf.scene.position.set(o[0] - data.origin[0], o[2] - data.origin[2], -(o[1] - data.origin[1]));
+  modelGroup.add(gltf.scene);
+  addMeshes(gltf.scene, rows);
+  return gltf.scene;
+}
+
+async function showTiles(generation) {
+  const T = window.CITYFORGE_TILES, m = T.to_page;
+  // Content is y-up ECEF (3D Tiles' glTF convention); to_page maps it to the page's frame.
+  const holder = new THREE.Group();
+  holder.matrixAutoUpdate = false;
+  holder.matrix.set(m[0], m[1], m[2], m[3], m[4], m[5], m[6], m[7], m[8], m[9], m[10], m[11], 0, 0, 0, 1);
+  modelGroup.add(holder);
+  holder.updateMatrixWorld(true);
+  const tiles = [];
+  const walk = (t) => {
+    if (t.content && t.content.uri) {
+      const b = t.boundingVolume.box;
+      tiles.push({ uri: t.content.uri, centre: new THREE.Vector3(b[0], b[2], -b[1]).applyMatrix4(holder.matrix) });
+    }
+    for (const c of t.children || []) walk(c);
+  };
+  walk(T.tileset.root);
+  const target = controls ? controls.target : new THREE.Vector3();
+  tiles.sort((a, b) => a.centre.distanceTo(target) - b.centre.distanceTo(target) || (a.uri < b.uri ? -1 : 1));
+  state.tilesTotal = tiles.length;
+  for (const t of tiles) {
+    if (generation !== loadGeneration) return holder;
+    const bytes = base64Bytes(T.content[t.uri]);
+    const gltf = await parseGlb(bytes);
+    if (generation !== loadGeneration) return holder;
+    holder.add(gltf.scene);
+    addMeshes(gltf.scene, rowsOf(bytes));
+    state.tilesLoaded += 1;
+    sceneLabel();
+    render3d();
+  }
+  return holder;
+}
+
+// Shows `source` ("glb" or "tiles") in 3D; resolves when everything is loaded.
+async function showSource(source) {
+  if (!scene) return;
+  clearModel();
+  const generation = loadGeneration;
+  state.source = source;
+  document.getElementById("scene-source").value = source;
+  const root = source === "tiles" ? await showTiles(generation) : await showGlb();
+  if (generation !== loadGeneration) return;
+  if (!state.cameraSet) fitCamera(root), (state.cameraSet = true);
+  const box = new THREE.Box3().setFromObject(modelGroup, true);  // precise: tile content is rotated (ECEF)
+  state.box = [box.min.x, box.min.y, box.min.z, box.max.x, box.max.y, box.max.z];
+  sceneLabel();
+  if (state.selected >= 0) setHighlight(state.selected);
+  render3d();
+}
+state.showSource = showSource;
+
 function setHighlight(index) {
   if (!scene) return;
   if (highlight) scene.remove(highlight), highlight.geometry.dispose(), (highlight = null);
   if (index < 0) return render3d();
-  const row = featureIndex.indexOf(index);
-  if (row < 0) return render3d();
   const positions = [];
   for (const m of meshes) {
-    const g = m.geometry, fid = g.getAttribute("_feature_id_0"), pos = g.getAttribute("position"), idx = g.getIndex();
+    const g = m.geometry, fid = g.getAttribute("_feature_id_0"), pos = g.getAttribute("position"), idx = g.getIndex(), rows = m.userData.rows;
     for (let t = 0; t < idx.count; t += 3) {
-      if (fid.getX(idx.getX(t)) !== row) continue;
+      if (rows[fid.getX(idx.getX(t))] !== index) continue;
       for (let k = 0; k < 3; ++k) {
         const v = new THREE.Vector3().fromBufferAttribute(pos, idx.getX(t + k)).applyMatrix4(m.matrixWorld);
         positions.push(v.x, v.y, v.z);
@@ -247,13 +362,19 @@ function setHighlight(index) {
 
 async function init3d() {
   const glbNode = document.getElementById("cityforge-glb");
-  if (!glbNode || !glbNode.textContent.trim()) {
-    document.getElementById("scene-lod").textContent = "(no buildings.glb in this run)";
+  const haveGlb = !!(glbNode && glbNode.textContent.trim()), haveTiles = !!window.CITYFORGE_TILES;
+  const sourceSel = document.getElementById("scene-source");
+  for (const [v, label, have] of [["glb", "buildings.glb", haveGlb], ["tiles", "3D Tiles", haveTiles]]) {
+    if (!have) continue;
+    const o = document.createElement("option");
+    o.value = v, o.textContent = label;
+    sourceSel.appendChild(o);
+  }
+  state.sources = [...sourceSel.options].map((o) => o.value);
+  if (!haveGlb && !haveTiles) {
+    document.getElementById("scene-lod").textContent = "(no buildings.glb or 3D Tiles in this run)";
     return;
   }
-  const bytes = base64Bytes(glbNode.textContent);
-  const { ids } = parseGlbIds(bytes);
-  featureIndex = ids.map((id) => (byId.has(id) ? byId.get(id) : -1));
   try {
     renderer = new THREE.WebGLRenderer({ canvas: sceneCanvas, antialias: true, preserveDrawingBuffer: true });
   } catch (e) {
@@ -267,31 +388,12 @@ async function init3d() {
   const sun = new THREE.DirectionalLight(0xffffff, 1.6);
   sun.position.set(-0.5, 1, 0.6);
   scene.add(sun);
-  const gltf = await new Promise((resolve, reject) => new GLTFLoader().parse(bytes.buffer.slice(bytes.byteOffset, bytes.byteOffset + bytes.byteLength), "", resolve, reject));
-  scene.add(gltf.scene);
-  gltf.scene.updateMatrixWorld(true);
-  const drawnRows = new Set();
-  gltf.scene.traverse((o) => {
-    if (!o.isMesh) return;
-    meshes.push(o);
-    const fid = o.geometry.getAttribute("_feature_id_0");
-    if (fid) for (let i = 0; i < fid.count; ++i) drawnRows.add(fid.getX(i));
-  });
-  state.drawn3d = [...drawnRows].filter((r) => featureIndex[r] >= 0).length;
-  // The glb is in the model CRS minus its origin; the map is relative to data.origin.
-  const o = (gltf.parser.json.asset.extras || {}).origin || data.origin;
-  gltf.scene.position.set(o[0] - data.origin[0], o[2] - data.origin[2], -(o[1] - data.origin[1]));
-  gltf.scene.updateMatrixWorld(true);
-  const box = new THREE.Box3().setFromObject(gltf.scene);
-  const centre = box.getCenter(new THREE.Vector3()), radius = box.getSize(new THREE.Vector3()).length() / 2 || 10;
-  camera = new THREE.PerspectiveCamera(45, 1, radius / 1000, radius * 20);
-  camera.position.set(centre.x + radius * 0.9, centre.y + radius * 1.3, centre.z + radius * 1.5);
+  modelGroup = new THREE.Group();
+  scene.add(modelGroup);
+  camera = new THREE.PerspectiveCamera(45, 1, 0.1, 1000);
   controls = new OrbitControls(camera, sceneCanvas);
-  controls.target.copy(centre);
   controls.addEventListener("change", render3d);
-  controls.update();
-  const lods = new Set(data.buildings.map((b) => b.lod).filter(Boolean));
-  document.getElementById("scene-lod").textContent = `${state.drawn3d} buildings` + (lods.size ? ` (LOD ${[...lods].sort().join(", ")})` : "");
+  sourceSel.addEventListener("change", () => showSource(sourceSel.value).catch((e) => console.error(e)));
   let down = null;
   sceneCanvas.addEventListener("pointerdown", (e) => (down = [e.offsetX, e.offsetY]));
   sceneCanvas.addEventListener("pointerup", (e) => {
@@ -302,21 +404,21 @@ async function init3d() {
     const hit = ray.intersectObjects(meshes, false)[0];
     if (!hit) return select(-1);
     const fid = hit.object.geometry.getAttribute("_feature_id_0");
-    select(featureIndex[fid.getX(hit.face.a)] ?? -1);
+    select(hit.object.userData.rows[fid.getX(hit.face.a)] ?? -1);
   });
   new ResizeObserver(render3d).observe(sceneCanvas);
-  render3d();
+  await showSource(haveGlb ? "glb" : "tiles");
 }
 
 // The screen point (3D canvas CSS pixels) of the centre of building `id`'s highest triangles, or null.
 state.scenePoint = (id) => {
-  const i = byId.get(id), row = featureIndex.indexOf(i);
-  if (!camera || row < 0) return null;
+  const i = byId.get(id);
+  if (!camera || i === undefined) return null;
   let best = null;
   for (const m of meshes) {
-    const g = m.geometry, fid = g.getAttribute("_feature_id_0"), pos = g.getAttribute("position"), idx = g.getIndex();
+    const g = m.geometry, fid = g.getAttribute("_feature_id_0"), pos = g.getAttribute("position"), idx = g.getIndex(), rows = m.userData.rows;
     for (let t = 0; t < idx.count; t += 3) {
-      if (fid.getX(idx.getX(t)) !== row) continue;
+      if (rows[fid.getX(idx.getX(t))] !== i) continue;
       const c = new THREE.Vector3();
       for (let k = 0; k < 3; ++k) c.add(new THREE.Vector3().fromBufferAttribute(pos, idx.getX(t + k)).applyMatrix4(m.matrixWorld));
       c.multiplyScalar(1 / 3);

@@ -1,0 +1,84 @@
+#include "model/roof_texture.hpp"
+
+#include <algorithm>
+#include <cmath>
+
+#include "core/error.hpp"
+
+namespace cityforge {
+
+void RoofTextureOptions::validate() const {
+    if (max_atlas_px < 16 || max_atlas_px > 16384) throw Error("--texture-max-px", "must be between 16 and 16384");
+    if (margin_px < 0 || margin_px > 64) throw Error("--texture-margin-px", "must be between 0 and 64");
+}
+
+const RoofTextureWindow* RoofTextureLayout::window_of(std::size_t b) const {
+    const auto it = std::lower_bound(windows.begin(), windows.end(), b, [](const RoofTextureWindow& w, std::size_t i) { return w.building < i; });
+    return it != windows.end() && it->building == b ? &*it : nullptr;
+}
+
+std::array<double, 2> RoofTextureLayout::uv(const RoofTextureWindow& w, double x, double y) const {
+    const PixelPoint p = ortho.map_to_pixel({x, y});
+    return {(w.atlas_col + (p.col - w.col)) / double(atlas_width), (w.atlas_row + (p.row - w.row)) / double(atlas_height)};
+}
+
+RoofTextureLayout layout_roof_textures(const CityModel& model, const GeoTransform& ortho, int ortho_width, int ortho_height,
+                                       const RoofTextureOptions& o) {
+    o.validate();
+    RoofTextureLayout layout;
+    layout.ortho = ortho;
+    std::vector<RoofTextureWindow> wanted;
+    for (std::size_t b = 0; b < model.buildings.size(); ++b) {
+        double c0 = INFINITY, c1 = -INFINITY, r0 = INFINITY, r1 = -INFINITY;
+        for (const Solid& s : model.buildings[b].lod2)
+            for (const Face& f : s.faces)
+                if (f.type == SurfaceType::roof)
+                    for (const Point3& p : f.outer) {
+                        const PixelPoint q = ortho.map_to_pixel({p.x, p.y});
+                        c0 = std::min(c0, q.col), c1 = std::max(c1, q.col), r0 = std::min(r0, q.row), r1 = std::max(r1, q.row);
+                    }
+        if (!std::isfinite(c0)) continue;
+        const int col0 = std::max(0, int(std::floor(c0)) - o.margin_px), col1 = std::min(ortho_width, int(std::ceil(c1)) + o.margin_px);
+        const int row0 = std::max(0, int(std::floor(r0)) - o.margin_px), row1 = std::min(ortho_height, int(std::ceil(r1)) + o.margin_px);
+        // Every roof vertex must be on the ortho (a partly covered roof would be textured with what is not there).
+        if (c0 < 0 || r0 < 0 || c1 > ortho_width || r1 > ortho_height || col1 <= col0 || row1 <= row0) {
+            layout.outside.push_back(b);
+            continue;
+        }
+        wanted.push_back({b, col0, row0, col1 - col0, row1 - row0, 0, 0});
+    }
+    if (wanted.empty()) return layout;
+    // Shelf packing: tallest first; atlas width about the square root of the total area.
+    std::vector<std::size_t> order(wanted.size());
+    for (std::size_t i = 0; i < order.size(); ++i) order[i] = i;
+    std::sort(order.begin(), order.end(), [&](std::size_t a, std::size_t b) {
+        return wanted[a].height != wanted[b].height ? wanted[a].height > wanted[b].height : wanted[a].building < wanted[b].building;
+    });
+    double area = 0;
+    int widest = 0;
+    for (const RoofTextureWindow& w : wanted) area += double(w.width) * w.height, widest = std::max(widest, w.width);
+    const int width = std::min(o.max_atlas_px, std::max(widest, int(std::ceil(std::sqrt(area) * 1.15))));
+    int x = 0, y = 0, shelf = 0, used_w = 0;
+    for (std::size_t i : order) {
+        RoofTextureWindow& w = wanted[i];
+        if (w.width > width) {
+            layout.no_room.push_back(w.building);
+            continue;
+        }
+        if (x + w.width > width) y += shelf, x = 0, shelf = 0;
+        if (y + w.height > o.max_atlas_px) {
+            layout.no_room.push_back(w.building);
+            continue;
+        }
+        w.atlas_col = x, w.atlas_row = y;
+        x += w.width, shelf = std::max(shelf, w.height), used_w = std::max(used_w, x);
+        layout.windows.push_back(w);
+    }
+    layout.atlas_width = used_w;
+    layout.atlas_height = y + shelf;
+    std::sort(layout.windows.begin(), layout.windows.end(), [](const RoofTextureWindow& a, const RoofTextureWindow& b) { return a.building < b.building; });
+    std::sort(layout.no_room.begin(), layout.no_room.end());
+    return layout;
+}
+
+}  // namespace cityforge

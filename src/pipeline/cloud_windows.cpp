@@ -1,0 +1,99 @@
+#include "pipeline/cloud_windows.hpp"
+
+#include <algorithm>
+#include <cmath>
+
+#include "cloud/cloud_reader.hpp"
+#include "core/error.hpp"
+#include "core/geometry.hpp"
+#include "core/log.hpp"
+
+namespace cityforge {
+
+CloudPlan plan_cloud(const std::string& cloud_path, const std::string& cloud_crs_override, const CrsInfo& target,
+                     const OutlierFilterOptions& outliers, const MapPoint& centre) {
+    CloudPlan plan;
+    plan.outliers = outliers;
+    const CloudSample s = sample_cloud(cloud_path, cloud_crs_override, target, outliers, centre);
+    if (outliers.enabled && !(outliers.max_mean_distance > 0)) {
+        plan.outliers.max_mean_distance = s.outlier_limit_m;
+        if (!(s.outlier_limit_m > 0))
+            log::warning(cloud_path + ": no point in the 400 m around the work area's centre; each cloud window measures its own outlier limit");
+    }
+    plan.density_m2 = s.points_per_m2;
+    return plan;
+}
+
+double window_tile_edge_m(double tile_m, double overlap_m, double density_m2, uint64_t max_points) {
+    double edge = tile_m;
+    if (density_m2 > 0 && max_points > 0) edge = std::min(edge, std::sqrt(double(max_points) / density_m2) - 2 * overlap_m);
+    return std::max(edge, 50.0);
+}
+
+WindowedRasters rasterize_cloud_by_windows(const std::string& cloud_path, const std::string& cloud_crs_override, const CrsInfo& target,
+                                           const GridSpec& grid, double unit_m, const OutlierFilterOptions& outliers,
+                                           const GroundFilterOptions& ground, int tile_px, int overlap_px, const Progress& progress) {
+    if (tile_px < 1 || overlap_px < 0) throw Error("cloud windows", "tiles must have at least one cell and the overlap >= 0");
+    WindowedRasters out;
+    CloudRasters& r = out.rasters;
+    const int W = grid.width, H = grid.height;
+    for (Image<float>* img : {&r.dsm, &r.dtm, &r.ndsm, &r.building_share, &r.vegetation_share}) *img = Image<float>(W, H, 1, NAN);
+    r.density = Image<float>(W, H, 1, 0.0f);
+    const GeoTransform& gt = grid.transform;
+    const int tiles_x = (W + tile_px - 1) / tile_px, tiles_y = (H + tile_px - 1) / tile_px;
+    const std::size_t total = static_cast<std::size_t>(tiles_x) * tiles_y;
+    bool first = true;
+    for (int r0 = 0; r0 < H; r0 += tile_px)
+        for (int c0 = 0; c0 < W; c0 += tile_px) {
+            const int cw = std::min(tile_px, W - c0), ch = std::min(tile_px, H - r0);
+            const int wc = std::max(0, c0 - overlap_px), wr = std::max(0, r0 - overlap_px);
+            const int ww = std::min(W, c0 + cw + overlap_px) - wc, wh = std::min(H, r0 + ch + overlap_px) - wr;
+            // The points read reach the overlap beyond the grid's edge too (the
+            // whole cloud's neighbours there count), and one cell more: a
+            // point on a cell's closed edge is read whichever way the axis runs.
+            const MapPoint a = gt.pixel_to_map({double(c0 - overlap_px - 1), double(r0 - overlap_px - 1)}),
+                           b = gt.pixel_to_map({double(c0 + cw + overlap_px + 1), double(r0 + ch + overlap_px + 1)});
+            const Extent window{std::min(a.x, b.x), std::min(a.y, b.y), std::max(a.x, b.x), std::max(a.y, b.y)};
+            const PreparedCloud pc = prepare_cloud(cloud_path, cloud_crs_override, target, outliers, ground, &window);
+            ++out.windows;
+            if (first) out.crs = pc.crs, out.source_crs = pc.source_crs, first = false;
+            out.points += pc.cloud.size(), out.ground_points += pc.ground_points;
+            out.ground_from_classification = out.ground_from_classification || pc.ground_from_classification;
+            out.reprojected = out.reprojected || pc.reprojected;
+            if (pc.cloud.size() > 0) {
+                const CloudRasters t = rasterize_cloud(pc.cloud, pc.keep, pc.is_ground, grid, wc, wr, ww, wh, unit_m);
+                for (const auto& [dst, src] : {std::pair<Image<float>*, const Image<float>*>{&r.dsm, &t.dsm}, {&r.dtm, &t.dtm}, {&r.ndsm, &t.ndsm},
+                                              {&r.density, &t.density}, {&r.building_share, &t.building_share},
+                                              {&r.vegetation_share, &t.vegetation_share}})
+                    for (int y = 0; y < ch; ++y)
+                        std::copy_n(&src->at(0, c0 - wc, r0 - wr + y), cw, &dst->at(0, c0, r0 + y));
+                // Kept points on the core's cells (each point of the grid counted once).
+                for (std::size_t i = 0; i < pc.cloud.size(); ++i) {
+                    if (!pc.keep.empty() && !pc.keep[i]) continue;
+                    const PixelPoint p = gt.map_to_pixel({pc.cloud.x[i], pc.cloud.y[i]});
+                    const double col = std::floor(p.col), row = std::floor(p.row);
+                    out.core_points += col >= c0 && col < c0 + cw && row >= r0 && row < r0 + ch;
+                }
+            }
+            progress(double(out.windows) / double(total), "cloud windows");
+        }
+    return out;
+}
+
+Extent cloud_point_bounds(const std::string& cloud_path) {
+    CloudReader reader(cloud_path);
+    Extent e = empty_extent();
+    PointCloud chunk;
+    while (true) {
+        chunk.clear();
+        if (reader.read_chunk(chunk, 1u << 20) == 0) break;
+        for (std::size_t i = 0; i < chunk.size(); ++i) {
+            e.min_x = std::min(e.min_x, chunk.x[i]), e.max_x = std::max(e.max_x, chunk.x[i]);
+            e.min_y = std::min(e.min_y, chunk.y[i]), e.max_y = std::max(e.max_y, chunk.y[i]);
+        }
+    }
+    if (!(e.min_x <= e.max_x)) throw Error(cloud_path, "point cloud is empty");
+    return e;
+}
+
+}  // namespace cityforge

@@ -1,0 +1,67 @@
+#pragma once
+// Clouds larger than memory, window by window. A command that rasterises a
+// cloud on a grid (cloud rasterize, footprints) or measures it under
+// footprints (heights) either holds the cloud whole or reads it as windows
+// (streamed crops, each grown by an overlap); both give the same bytes:
+//  - the decisions that depend on the whole cloud are made once, before any
+//    window is read, from the central 400 m of the work area (the outlier
+//    filter's limit, the point density), in both paths (plan_cloud);
+//  - points are placed on cells through the full grid's transform, and each
+//    window keeps only its core, whose cells depend on points within the
+//    overlap only (canonical point order, exact neighbours).
+#include <cstdint>
+#include <string>
+
+#include "cloud/cloud_rasters.hpp"
+#include "core/progress.hpp"
+#include "pipeline/prepared_cloud.hpp"
+
+namespace cityforge {
+
+/// Plan-time measures of a cloud for a work area centred on `centre` (target CRS).
+struct CloudPlan {
+    /// `outliers` with max_mean_distance fixed (metres): the given value, or
+    /// the limit measured on the sample (0 = the filter is off or the sample
+    /// holds no point: each cloud read then measures its own).
+    OutlierFilterOptions outliers;
+    double density_m2 = 0.0;  ///< kept points per m² of the sample (0 = unknown)
+};
+
+/// Measures the plan on the 400 m square around `centre` (sample_cloud; the
+/// whole cloud when it is smaller). One streamed pass over the file.
+CloudPlan plan_cloud(const std::string& cloud_path, const std::string& cloud_crs_override, const CrsInfo& target,
+                     const OutlierFilterOptions& outliers, const MapPoint& centre);
+
+/// Edge (metres) of square tiles whose windows (tile + 2 x overlap_m a side)
+/// hold about `max_points` at `density_m2`: at most `tile_m`, at least 50 m.
+double window_tile_edge_m(double tile_m, double overlap_m, double density_m2, uint64_t max_points);
+
+/// The cloud's rasters on a whole grid, computed window by window.
+struct WindowedRasters {
+    CloudRasters rasters;                ///< on the whole grid
+    CrsInfo crs, source_crs;             ///< as PreparedCloud's
+    uint64_t points = 0;                 ///< points read, summed over the windows (overlaps counted in each)
+    std::size_t ground_points = 0;       ///< summed over the windows
+    bool ground_from_classification = false;
+    bool reprojected = false;
+    std::size_t windows = 0;             ///< windows read
+    uint64_t core_points = 0;            ///< kept points on the grid (each counted once)
+};
+
+/// Rasterises the cloud on `grid` (target CRS) in tiles of `tile_px` cells,
+/// each read as a window grown by `overlap_px` cells (prepare_cloud with a
+/// crop: streamed, canonical order, `outliers` with a fixed limit, `ground`),
+/// rasterised on its window of the grid (rasterize_cloud's window form) and
+/// its core copied. Memory: one window's points plus the grid's rasters.
+/// Equal to rasterize_cloud on the whole prepared cloud wherever a core
+/// cell's points, their neighbours and the DTM gaps it fills from lie within
+/// the overlap.
+WindowedRasters rasterize_cloud_by_windows(const std::string& cloud_path, const std::string& cloud_crs_override, const CrsInfo& target,
+                                           const GridSpec& grid, double unit_m, const OutlierFilterOptions& outliers,
+                                           const GroundFilterOptions& ground, int tile_px, int overlap_px, const Progress& progress = {});
+
+/// The bounding box of every point of the cloud (file CRS), one streamed
+/// pass: what grid_over_cloud sees when the cloud is held whole.
+Extent cloud_point_bounds(const std::string& cloud_path);
+
+}  // namespace cityforge
