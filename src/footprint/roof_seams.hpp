@@ -36,7 +36,7 @@ struct RoofSeamOptions {
     /// A valley across the axis deeper than this on both sides, both sides
     /// sloping into it alike (pitched terraces with ridges across the row),
     /// is a seam whatever the colours; metres.
-    double valley_depth_m = 1.0;
+    double valley_depth_m = 0.5;
     /// The seam's slice and both sides must be about equally wide (each at
     /// least this share of the widest): a straight row, not the corner of an
     /// L or the wing of a U. The colour step must also show in each third of
