@@ -9,7 +9,7 @@
 //   build/bin/bench_accuracy [key=value ...]
 //   keys: size seed density sigma sun_az sun_el slope undulation dark trees
 //         ground_like terraced oblique families(0/1) centroid(0/1)
-//         stages=heights,roofs,outlines dir=PATH ground=plane|percentile
+//         stages=heights,roofs,outlines dir=PATH ground=plane|percentile seams(0/1)
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
@@ -155,6 +155,7 @@ int main(int argc, char** argv) try {
         FootprintsRunOptions fo;
         fo.ortho = s.ortho_path;
         fo.cloud = s.cloud_path;
+        fo.seams.enabled = num("seams", 0) != 0;  // terraces split at roof seams (opt-in)
         const std::string out = dir + "/footprints.gpkg";
         const FootprintsReport fr = run_footprints(out, fo);
         FootprintAuditOptions ao;

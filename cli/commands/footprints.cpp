@@ -10,6 +10,7 @@ namespace cityforge::cli {
 void add_footprints_command(CLI::App& parent, const GlobalFlags& g, CommandList& out) {
     struct State {
         std::string out, fit = "recursive", mode = "auto", regularize = "lines", detector = "auto", self_training = "on";
+        bool roof_seams = false;
         FootprintsRunOptions options;
     };
     auto s = std::make_shared<State>();
@@ -65,6 +66,7 @@ void add_footprints_command(CLI::App& parent, const GlobalFlags& g, CommandList&
         ->capture_default_str();
     cmd->add_option("--min-split-part-m2", o.mask.min_split_part_m2, "Smallest part split off at a height step, square metres")
         ->capture_default_str();
+    cmd->add_flag("--roof-seams", s->roof_seams, "ortho_cloud: split touching roofs of one height at straight colour seams / valleys (terraces; experimental)");
     cmd->add_option("--fit-tolerance-pct", o.recursive.tolerance_pct, "Recursive fit: stop below this area error, percent")->capture_default_str();
     cmd->add_option("--regularize-method", s->regularize,
                     "Regularised fit: lines (edge lines snapped to the dominant directions) or cgal (CGAL Shape_regularization contours)")
@@ -74,6 +76,7 @@ void add_footprints_command(CLI::App& parent, const GlobalFlags& g, CommandList&
     out.push_back({cmd, [s, &g]() {
                        FootprintsRunOptions opt = s->options;
                        opt.fit = footprint_fit_from_string(s->fit);
+                       opt.seams.enabled = s->roof_seams;
                        opt.mode = detection_mode_from_string(s->mode);
                        opt.detector = ortho_detector_from_string(s->detector);
                        opt.self_training.enabled = s->self_training == "on";

@@ -12,6 +12,7 @@ void add_roofs_command(CLI::App& parent, const GlobalFlags& g, CommandList& out)
         std::string footprints, cloud, out, formats = "geojson,gpkg,citygml,cityjson,cityjsonseq,3dtiles,gltf", lods = "0,1,2";
         RoofsRunOptions options;
         bool recompute_ground = false, no_outliers = false, no_retry = false;
+        std::string detector = "region_growing";
     };
     auto s = std::make_shared<State>();
     auto& o = s->options;
@@ -35,6 +36,8 @@ void add_roofs_command(CLI::App& parent, const GlobalFlags& g, CommandList& out)
     cmd->add_option("--lod2-min-points", o.lod2.min_points, "Fewer roof points -> flat roof (LOD1.2)")->capture_default_str();
     cmd->add_option("--max-median-residual-m", o.lod2.max_median_residual_m, "A roof model missing its points by more (median) -> flat roof")
         ->capture_default_str();
+    cmd->add_option("--plane-detector", s->detector, "Roof planes: region_growing (ours), cgal_region_growing or cgal_ransac (CGAL Shape_detection)")
+        ->capture_default_str();
     cmd->add_option("--lod2-retry-rmse-m", o.lod2.retry_rmse_m,
                     "A roof model with a larger RMSE (or a fallback) is rebuilt with alternative plane settings, the best kept")
         ->capture_default_str();
@@ -46,6 +49,7 @@ void add_roofs_command(CLI::App& parent, const GlobalFlags& g, CommandList& out)
                        opt.heights.ground.trust_classification = !s->recompute_ground;
                        opt.heights.outliers.enabled = !s->no_outliers;
                        opt.lod2.retry_alternatives = !s->no_retry;
+                       opt.lod2.planes.detector = plane_detector_from_string(s->detector, "--plane-detector");
                        opt.model.formats = split_list(s->formats);
                        opt.model.lods = parse_lods(s->lods);
                        refuse_existing_output(g, s->out);

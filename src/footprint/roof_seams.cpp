@@ -3,8 +3,6 @@
 #include <algorithm>
 #include <cmath>
 #include <numeric>
-#include <cstdio>
-#include <cstdlib>
 
 #include "core/error.hpp"
 
@@ -141,10 +139,10 @@ std::vector<int> seams_along(const std::vector<std::size_t>& cells, int w, Axis 
     auto same_surface = [&](const Win& L, const Win& R, int m) {
         if (std::isnan(L.slope) || std::isnan(R.slope)) return true;  // no heights: colours alone
         if (std::abs(L.slope - R.slope) > min_slope) return false;
-        double peak = -INFINITY, low = INFINITY;
+        double peak = -INFINITY;
         for (int j = std::max(0, m - W); j <= std::min(nbins - 1, m + W); ++j) {
             const double z = slice_height(j);
-            if (!std::isnan(z)) peak = std::max(peak, z), low = std::min(low, z);
+            if (!std::isnan(z)) peak = std::max(peak, z);
         }
         const double ends = std::max(slice_height(std::max(0, m - W)), slice_height(std::min(nbins - 1, m + W)));
         return std::isnan(ends) || peak - ends <= o.ridge_rise_m;
@@ -181,7 +179,11 @@ std::vector<int> seams_along(const std::vector<std::size_t>& cells, int w, Axis 
         const double hm = at.height_count > 0 ? at.height / at.height_count : NAN;
         bool seam = false;
         double strength = 0;
-        if (!std::isnan(hm) && !std::isnan(L.height) && !std::isnan(R.height) && std::min(L.height, R.height) - hm > o.valley_depth_m) {
+        // A valley: both sides slope down into the seam, alike (two pitched roofs of one pitch).
+        const bool valley = !std::isnan(hm) && !std::isnan(L.height) && !std::isnan(R.height) && !std::isnan(L.slope) && !std::isnan(R.slope) &&
+                            std::min(L.height, R.height) - hm > o.valley_depth_m && L.slope < -2 * min_slope && R.slope > 2 * min_slope &&
+                            std::abs(L.slope + R.slope) < 0.5 * std::max(-L.slope, R.slope);
+        if (valley) {
             seam = true;  // a valley across the row
             strength = 1e6 + std::min(L.height, R.height) - hm;
         } else if (same_surface(L, R, m)) {
@@ -196,7 +198,6 @@ std::vector<int> seams_along(const std::vector<std::size_t>& cells, int w, Axis 
             const double noise = std::sqrt(0.5 * (L.noise2 + R.noise2));
             const double contrast = step / std::max(noise, 1e-6 * std::max(scale, 1e-6));
             if (contrast >= o.min_colour_contrast && step >= o.min_colour_step_share * scale && straight(m, step_vec, step)) seam = true, strength = contrast;
-            if (std::getenv("SEAMDBG") && contrast > 3) std::fprintf(stderr, "SEAM cell %zu m %d/%d step %.2f noise %.2f contrast %.1f scale %.2f hm %.2f L %.2f R %.2f\n", cells[0], m, nbins, step, noise, contrast, scale, hm, L.height, R.height);
         }
         if (seam) cand.push_back({m, strength});
     }
@@ -249,11 +250,7 @@ std::vector<int> seams_along(const std::vector<std::size_t>& cells, int w, Axis 
 }  // namespace
 
 int split_at_roof_seams(BuildingMask& mask, const Image<float>& colours, const std::vector<uint8_t>& valid, const Image<float>& ndsm,
-                        const RoofSeamOptions& o0) {
-    RoofSeamOptions o = o0;
-    if (std::getenv("SEAMC")) o.min_colour_contrast = std::atof(std::getenv("SEAMC"));
-    if (std::getenv("SEAMS")) o.min_colour_step_share = std::atof(std::getenv("SEAMS"));
-    if (std::getenv("SEAMON")) o.enabled = true;
+                        const RoofSeamOptions& o) {
     o.validate();
     if (!o.enabled || mask.count == 0 || colours.bands == 0) return 0;
     const int w = mask.labels.width, h = mask.labels.height;

@@ -14,7 +14,9 @@
 namespace cityforge {
 
 struct RoofSeamOptions {
-    bool enabled = false;  ///< off until it is reliable on towns without terraces (false splits at shadow edges)
+    /// Opt-in (--roof-seams): it splits terraces, but still cuts some single
+    /// buildings on the varied towns (precision 0.95 on one of them).
+    bool enabled = false;
     double gsd_m = 0.5;              ///< cell size of the rasters, metres
     double window_m = 2.0;           ///< colour / height profiles compared over this length on each side of a seam
     double min_part_length_m = 4.5;  ///< parts shorter than this along the axis are not split off (house widths >= 5 m)
@@ -26,15 +28,19 @@ struct RoofSeamOptions {
     /// building's own pixel standard deviation): steps smaller than this
     /// fraction of the roof's texture are shading or noise.
     double min_colour_step_share = 0.6;
-    /// A seam where the roof is higher than on both sides by more than this
-    /// is a ridge across the axis (the two slopes shade differently), not a
-    /// party wall; metres.
+    /// A colour seam counts only where the roof surface runs on unchanged:
+    /// the height trends on both sides differ by less than this over the
+    /// window and no ridge within the window stands higher than this above
+    /// its ends (two facets shade differently; that is not a party wall); metres.
     double ridge_rise_m = 0.3;
-    /// A valley across the axis deeper than this on both sides (pitched
-    /// terraces with ridges across the row) is a seam whatever the colours; metres.
-    double valley_depth_m = 1.0;
-    /// The seam's slice must span at least this share of the neighbouring
-    /// slices' width (a row of houses, not the corner of an L).
+    /// A valley across the axis deeper than this on both sides, both sides
+    /// sloping into it alike (pitched terraces with ridges across the row),
+    /// is a seam whatever the colours; metres.
+    double valley_depth_m = 0.5;
+    /// The seam's slice and both sides must be about equally wide (each at
+    /// least this share of the widest): a straight row, not the corner of an
+    /// L or the wing of a U. The colour step must also show in each third of
+    /// the width (a straight seam, not a shadow edge or a crown).
     double min_width_share = 0.85;
     void validate() const;  ///< throws Error naming the option
 };

@@ -7,8 +7,24 @@
 
 #include "cloud/kd_tree.hpp"
 #include "core/error.hpp"
+#include "roof/roof_planes_cgal.hpp"
 
 namespace cityforge {
+
+std::string to_string(PlaneDetector d) {
+    switch (d) {
+        case PlaneDetector::region_growing: return "region_growing";
+        case PlaneDetector::cgal_region_growing: return "cgal_region_growing";
+        case PlaneDetector::cgal_ransac: return "cgal_ransac";
+    }
+    return "region_growing";
+}
+
+PlaneDetector plane_detector_from_string(const std::string& s, const std::string& option) {
+    for (PlaneDetector d : {PlaneDetector::region_growing, PlaneDetector::cgal_region_growing, PlaneDetector::cgal_ransac})
+        if (s == to_string(d)) return d;
+    throw Error(option, "unknown plane detector '" + s + "' (region_growing, cgal_region_growing, cgal_ransac)");
+}
 
 void RoofPlaneOptions::validate() const {
     if (!(distance_tolerance_m > 0)) throw Error("--plane-distance-m", "must be > 0");
@@ -89,12 +105,15 @@ std::vector<RoofPlane> detect_roof_planes(const std::vector<std::array<double, 3
         const double sum = es.eigenvalues().sum();
         curvature[i] = sum > 0 ? es.eigenvalues()(0) / sum : 0.0;
     }
+    std::vector<std::vector<uint32_t>> segments;
+    if (o.detector != PlaneDetector::region_growing) {
+        segments = cgal_plane_segments(p, normal, o, o.detector == PlaneDetector::cgal_ransac);
+    } else {
     std::vector<uint32_t> order(n);
     std::iota(order.begin(), order.end(), 0u);
     std::sort(order.begin(), order.end(), [&](uint32_t a, uint32_t b) { return curvature[a] != curvature[b] ? curvature[a] < curvature[b] : a < b; });
     const double cos_tol = std::cos(o.normal_tolerance_deg * kPi / 180.0);
     std::vector<int> label(n, -1);
-    std::vector<std::vector<uint32_t>> segments;
     for (uint32_t seed : order) {
         if (label[seed] >= 0) continue;
         if (normal[seed].z() < std::cos(o.max_slope_deg * kPi / 180.0)) continue;  // wall-like seed
@@ -138,6 +157,7 @@ std::vector<RoofPlane> detect_roof_planes(const std::vector<std::array<double, 3
             continue;
         }
         segments.push_back(std::move(members));
+    }
     }
     std::vector<RoofPlane> planes;
     for (auto& s : segments)

@@ -6,9 +6,18 @@
 // Deterministic: seeds in (curvature, index) order. No GDAL.
 #include <array>
 #include <cstdint>
+#include <string>
 #include <vector>
 
 namespace cityforge {
+
+/// Which segmentation finds the planar segments (normals, the least-squares
+/// fits and the merging are shared): ours (region growing with a refitted
+/// plane, seeds by curvature), CGAL 5.5 Shape_detection region growing on the
+/// point set, or CGAL efficient RANSAC. Compared in bench/bench_planes.
+enum class PlaneDetector { region_growing, cgal_region_growing, cgal_ransac };
+std::string to_string(PlaneDetector d);
+PlaneDetector plane_detector_from_string(const std::string& s, const std::string& option);  ///< throws Error naming the option
 
 struct RoofPlaneOptions {
     double distance_tolerance_m = 0.2;  ///< max point-to-plane distance when growing and merging
@@ -18,6 +27,7 @@ struct RoofPlaneOptions {
     double merge_angle_deg = 6.0;       ///< adjacent segments closer in orientation ...
     double merge_distance_m = 0.15;     ///< ... and offset (mean distance) are merged
     double max_slope_deg = 70.0;        ///< steeper segments are walls or noise, not roofs
+    PlaneDetector detector = PlaneDetector::region_growing;  ///< see PlaneDetector (ours: better on Delft and synthetic roofs)
     void validate() const;              ///< throws Error naming the option
 };
 
