@@ -180,23 +180,20 @@ std::vector<std::pair<std::string, json>> building_objects(const Building& b, st
         return all;
     };
     const bool with13 = want1 && !parts.empty(), with22 = want2 && !parts.empty();
-    if (with13) {
-        lods.push_back("1.3");
-        const json e = part_errors(true);
+    // LOD1.3 or LOD2.2 over the roof parts: validity, errors and the summed volume.
+    auto part_lod = [&](bool lod13) {
+        const std::string key = lod13 ? "lod13" : "lod22";
+        lods.push_back(lod13 ? "1.3" : "2.2");
+        const json e = part_errors(lod13);
         double v = 0;
-        for (const RoofPart& p : parts) v += p.lod13_volume;
-        attrs["lod13_valid"] = e.empty();
-        if (!e.empty()) attrs["lod13_errors"] = e;
-        attrs["lod13_volume_m3"] = v * unit3;
-    }
+        for (const RoofPart& p : parts) v += lod13 ? p.lod13_volume : p.lod22_volume;
+        attrs[key + "_valid"] = e.empty();
+        if (!e.empty()) attrs[key + "_errors"] = e;
+        attrs[key + "_volume_m3"] = v * unit3;
+    };
+    if (with13) part_lod(true);
     if (with22) {
-        lods.push_back("2.2");
-        const json e = part_errors(false);
-        double v = 0;
-        for (const RoofPart& p : parts) v += p.lod22_volume;
-        attrs["lod22_valid"] = e.empty();
-        if (!e.empty()) attrs["lod22_errors"] = e;
-        attrs["lod22_volume_m3"] = v * unit3;
+        part_lod(false);
         attrs["lod22_parts"] = parts.size();
         if (!b.roof_parts_unsplit.empty()) attrs["lod22_unsplit"] = b.roof_parts_unsplit;
         if (!b.roof_type.empty()) attrs["roofType"] = b.roof_type;

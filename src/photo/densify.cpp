@@ -12,6 +12,7 @@
 #include <opencv2/imgproc.hpp>
 
 #include "core/error.hpp"
+#include "photo/photo_point.hpp"
 
 namespace cityforge::photo {
 
@@ -512,14 +513,7 @@ DensifyResult densify_patches(const std::vector<cv::Mat>& images, const CameraSe
                 const int u = std::clamp(static_cast<int>(std::lround(px->x())), 0, img.cols - 1);
                 const int v = std::clamp(static_cast<int>(std::lround(px->y())), 0, img.rows - 1);
                 const auto* bgr = img.ptr<uint8_t>(v) + 3 * u;
-                PointCloud& pc = res.cloud;
-                pc.x.push_back(w.x()), pc.y.push_back(w.y()), pc.z.push_back(w.z());
-                pc.classification.push_back(1);
-                pc.return_number.push_back(1), pc.number_of_returns.push_back(1);
-                pc.intensity.push_back(static_cast<uint16_t>(std::clamp((1.0 - p.g) * 65535.0, 0.0, 65535.0)));
-                pc.red.push_back(static_cast<uint16_t>(bgr[2] * 257));
-                pc.green.push_back(static_cast<uint16_t>(bgr[1] * 257));
-                pc.blue.push_back(static_cast<uint16_t>(bgr[0] * 257));
+                append_photo_point(res.cloud, w, bgr, static_cast<uint16_t>(std::clamp((1.0 - p.g) * 65535.0, 0.0, 65535.0)));
             }
     }
     if (res.cloud.size() == 0) throw Error(subject, "no patch survived filtering: the images do not overlap or have no texture");

@@ -9,6 +9,7 @@
 #include <opencv2/imgproc.hpp>
 
 #include "core/error.hpp"
+#include "photo/photo_point.hpp"
 
 namespace cityforge::photo {
 
@@ -176,14 +177,7 @@ StereoResult stereo_pair_cloud(const cv::Mat& left_in, const cv::Mat& right_in, 
                 continue;
             }
             const auto* px = left_r.ptr<uint8_t>(y) + 3 * x;
-            PointCloud& pc = res.cloud;
-            pc.x.push_back(w.x()), pc.y.push_back(w.y()), pc.z.push_back(w.z());
-            pc.classification.push_back(1);
-            pc.return_number.push_back(1), pc.number_of_returns.push_back(1);
-            pc.intensity.push_back(0);
-            pc.red.push_back(static_cast<uint16_t>(px[2] * 257));
-            pc.green.push_back(static_cast<uint16_t>(px[1] * 257));
-            pc.blue.push_back(static_cast<uint16_t>(px[0] * 257));
+            append_photo_point(res.cloud, w, px, 0);
         }
     }
     if (res.cloud.size() == 0) throw Error(subject, "no consistent disparity: the images do not overlap or have no texture");
