@@ -8,7 +8,7 @@ PACKAGES=(
   libgdal-dev gdal-bin libproj-dev proj-bin
   libgeographiclib-dev
   libcgal-dev libeigen3-dev libboost-dev
-  libopencv-imgproc-dev libopencv-core-dev
+  libopencv-dev libopencv-imgproc-dev libopencv-core-dev
   libopencv-calib3d-dev libopencv-features2d-dev libopencv-imgcodecs-dev colmap
   catch2 libtbb-dev nlohmann-json3-dev libcli11-dev libgeos-dev libnanoflann-dev
   libxml2-utils
