@@ -23,7 +23,7 @@ void add_export_command(CLI::App& parent, const GlobalFlags& g, CommandList& out
         ->check(CLI::IsMember({"rfc7946", "native"}))
         ->capture_default_str();
     cmd->add_option("--vertical-crs", o.vertical_crs, "Vertical CRS of the heights when the input names none, e.g. EPSG:5709");
-    cmd->add_option("--layer", o.layer, "Input layer (default: the first)");
+    cmd->add_option("--layer", o.layer, "Input layer (default: the only polygon layer; several are an error)");
     cmd->add_option("--id-field", o.id_field, "Building id attribute (absent: the feature id)")->capture_default_str();
     cmd->add_option("--ground-field", o.ground_field, "Ground height attribute (vertical CRS units)")->capture_default_str();
     cmd->add_option("--height-field", o.height_field, "LOD1 height above ground attribute (metres)")->capture_default_str();

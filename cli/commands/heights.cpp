@@ -21,7 +21,7 @@ void add_heights_command(CLI::App& parent, const GlobalFlags& g, CommandList& ou
     cmd->add_option("--cloud", s->cloud, "Point cloud (LAS 1.0-1.4, LAZ, COPC, PLY, XYZ/CSV)")->required();
     cmd->add_option("--out", s->out, "Output .gpkg (layer buildings), .geojson, .fgb or .shp")->required();
     cmd->add_option("--cloud-crs", o.cloud_crs, "CRS of the cloud, e.g. EPSG:7415 (overrides the file's)");
-    cmd->add_option("--layer", o.footprint_layer, "Footprint layer name (default: first)");
+    cmd->add_option("--layer", o.footprint_layer, "Footprint layer name (default: the only polygon layer; several are an error)");
     cmd->add_option("--roof-percentile", o.heights.roof_percentile, "Roof percentile used for height_m")->capture_default_str();
     cmd->add_option("--ground-method", s->ground_method,
                     "Ground under a footprint: plane (robust plane through the ground ring at the footprint's centroid) or percentile")

@@ -21,7 +21,7 @@ void add_roofs_command(CLI::App& parent, const GlobalFlags& g, CommandList& out)
     cmd->add_option("--cloud", s->cloud, "Point cloud (LAS 1.0-1.4, LAZ, COPC, PLY, XYZ/CSV)")->required();
     cmd->add_option("--out", s->out, "Output folder (buildings.gpkg, .geojson, _lod1.gml, _lod2.gml, .city.json, .city.jsonl)")->required();
     cmd->add_option("--cloud-crs", o.heights.cloud_crs, "CRS of the cloud, e.g. EPSG:7415 (overrides the file's)");
-    cmd->add_option("--layer", o.heights.footprint_layer, "Footprint layer name (default: first)");
+    cmd->add_option("--layer", o.heights.footprint_layer, "Footprint layer name (default: the only polygon layer; several are an error)");
     cmd->add_option("--formats", s->formats, "Comma-separated: geojson, gpkg, citygml, cityjson, cityjsonseq, 3dtiles (3dtiles/tileset.json), gltf (buildings.glb)")->capture_default_str();
     cmd->add_option("--lod", s->lods, "Comma-separated levels of detail: 0, 1, 2")->capture_default_str();
     cmd->add_option("--texture-ortho", o.model.texture_ortho, "Texture the LOD2 roofs with this ortho's pixels (CityJSON, buildings.glb)");

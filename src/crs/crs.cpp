@@ -337,6 +337,17 @@ GroundSampleDistance ground_sample_distance(const CrsInfo& crs, const GeoTransfo
     return {std::abs(dx), std::abs(dy)};
 }
 
+std::string non_map_crs_kind(const CrsInfo& crs) {
+    if (crs.empty()) return {};
+    GdalErrorCapture capture;
+    OGRSpatialReference srs;
+    if (srs.importFromWkt(crs.wkt.c_str()) != OGRERR_NONE) return {};
+    if (srs.IsCompound()) srs.StripVertical();
+    if (srs.IsGeocentric()) return "geocentric";
+    if (srs.IsLocal()) return "local";
+    return {};
+}
+
 bool same_horizontal_crs(const CrsInfo& a, const CrsInfo& b) {
     if (a.empty() || b.empty()) return a.empty() && b.empty();
     OGRSpatialReference sa, sb;

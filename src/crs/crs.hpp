@@ -38,6 +38,12 @@ struct CrsInfo {
 /// messages that must tell two unnamed CRSs apart; empty when PROJ has none.
 std::string proj_string(const CrsInfo& crs);
 
+/// What kind of CRS `crs` is when it does not georeference map coordinates:
+/// "geocentric" (ECEF X/Y/Z) or "local" (an engineering CRS, e.g. what GDAL
+/// makes of a user-defined ProjectedCSTypeGeoKey 65535 without parameters).
+/// Empty for a projected or geographic (lon/lat) CRS, compound or not.
+std::string non_map_crs_kind(const CrsInfo& crs);
+
 /// What the z values of data in `crs` are: "EPSG:5709" (the vertical CRS's
 /// code), else the vertical CRS's name, else "unknown (UNIT)" with the unit
 /// of z ("unknown (foot)" for Autzen): never the horizontal CRS's name.

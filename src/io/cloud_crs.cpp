@@ -55,10 +55,22 @@ CloudCrs resolve_cloud_crs(const CloudReader& reader, const std::string& user_cr
     };
     // The file's records in order of precedence, each parsed on its own.
     std::vector<Candidate> file;
+    // A record giving no map CRS (geocentric X/Y/Z, or a local CRS such as
+    // keys with a user-defined ProjectedCSTypeGeoKey 65535 and no parameters)
+    // georeferences nothing we can place: ignored with a warning.
+    auto add = [&](const std::string& source, CrsInfo c) {
+        if (c.empty()) return;
+        const std::string kind = non_map_crs_kind(c);
+        if (!kind.empty()) {
+            warn(path + ": " + source + " ignored: a " + kind + " CRS (" + c.label() + "), not a projected or geographic one");
+            return;
+        }
+        file.push_back({source, std::move(c)});
+    };
     auto add_wkt = [&](const std::string& source, const std::string& wkt) {
         if (wkt.empty()) return;
         try {
-            file.push_back({source, crs_from_wkt(wkt, path)});
+            add(source, crs_from_wkt(wkt, path));
         } catch (const Error& e) {
             warn(path + ": " + source + " ignored: " + e.what());
         }
@@ -66,8 +78,7 @@ CloudCrs resolve_cloud_crs(const CloudReader& reader, const std::string& user_cr
     auto add_geokeys = [&]() {
         if (r.geokey_directory.empty()) return;
         try {
-            CrsInfo c = crs_from_geokeys(r.geokey_directory, r.geo_double_params, r.geo_ascii_params, path);
-            if (!c.empty()) file.push_back({"GeoTIFF keys", std::move(c)});
+            add("GeoTIFF keys", crs_from_geokeys(r.geokey_directory, r.geo_double_params, r.geo_ascii_params, path));
         } catch (const Error& e) {
             warn(path + ": GeoTIFF keys ignored: " + e.what());
         }
@@ -121,8 +132,10 @@ CloudCrs resolve_cloud_crs(const std::string& path, const std::string& user_crs,
 CrsInfo require_cloud_crs(const std::string& path, const std::string& user_crs, const std::string& user_subject) {
     CloudCrs c = resolve_cloud_crs(path, user_crs, user_subject);
     if (c.crs.empty())
-        throw Error(path, "point cloud has no CRS (no WKT or GeoTIFF key record); give it with " + user_subject + " (e.g. EPSG:7415)");
+        throw Error(path, "point cloud has no CRS (no usable WKT or GeoTIFF key record); give it with " + user_subject + " (e.g. EPSG:7415)");
     if (c.crs.geographic) throw Error(path, "point cloud is in a geographic CRS (" + c.crs.label() + "); a projected CRS is needed");
+    if (const std::string kind = non_map_crs_kind(c.crs); !kind.empty())
+        throw Error(user_subject, "is a " + kind + " CRS (" + c.crs.label() + "); a projected CRS is needed");
     return std::move(c.crs);
 }
 

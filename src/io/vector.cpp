@@ -241,9 +241,27 @@ PolygonLayer read_polygon_layer(const std::string& path, const std::string& laye
     GdalErrorCapture capture;
     std::unique_ptr<GDALDataset> ds(GDALDataset::Open(path.c_str(), GDAL_OF_VECTOR | GDAL_OF_READONLY));
     if (!ds) throw Error(path, "not a vector dataset OGR can read" + capture.suffix());
-    OGRLayer* layer = layer_name.empty() ? (ds->GetLayerCount() > 0 ? ds->GetLayer(0) : nullptr)
-                                         : ds->GetLayerByName(layer_name.c_str());
-    if (!layer) throw Error(path, layer_name.empty() ? "has no layer" : "has no layer '" + layer_name + "'");
+    // The layer: the one named, else the only polygon layer (a GeoPackage may
+    // also hold tables without geometry); several are ambiguous, never "the first".
+    std::vector<OGRLayer*> polygon_layers;
+    std::string names;
+    for (int i = 0; i < ds->GetLayerCount(); ++i) {
+        OGRLayer* l = ds->GetLayer(i);
+        names += (names.empty() ? "" : ", ") + std::string(l->GetName());
+        const auto t = wkbFlatten(l->GetGeomType());
+        if (t == wkbPolygon || t == wkbMultiPolygon || t == wkbUnknown || t == wkbGeometryCollection) polygon_layers.push_back(l);
+    }
+    OGRLayer* layer = nullptr;
+    if (!layer_name.empty()) {
+        layer = ds->GetLayerByName(layer_name.c_str());
+        if (!layer) throw Error(path, "has no layer '" + layer_name + "' (layers: " + names + ")");
+    } else if (polygon_layers.size() > 1) {
+        throw Error(path, "has " + std::to_string(polygon_layers.size()) + " polygon layers (" + names +
+                              "); choose one with --layer NAME or the dataset name GPKG:" + path + ":NAME");
+    } else {
+        layer = !polygon_layers.empty() ? polygon_layers.front() : ds->GetLayerCount() > 0 ? ds->GetLayer(0) : nullptr;
+    }
+    if (!layer) throw Error(path, "has no layer");
     PolygonLayer out;
     out.crs = crs_from_ogr(layer->GetSpatialRef(), path);
     OGRFeatureDefn* defn = layer->GetLayerDefn();

@@ -64,10 +64,12 @@ struct PolygonLayer {
     std::vector<int64_t> fids;      ///< OGR feature ids, same order
 };
 
-/// Reads the polygon/multipolygon features of layer `layer` (first layer
-/// when empty). Throws Error naming the file for a missing file, a missing
-/// layer, a layer without polygons, or an invalid (self-intersecting or
-/// empty) polygon (with its feature id).
+/// Reads the polygon/multipolygon features (z dropped) of layer `layer`;
+/// when empty, of the dataset's only polygon layer (tables without geometry
+/// aside). Throws Error naming the file for a missing file, a missing layer
+/// (listing the layers), several polygon layers and no name (listing them),
+/// a layer without polygons, or an invalid (self-intersecting or empty)
+/// polygon (with its feature id).
 PolygonLayer read_polygon_layer(const std::string& path, const std::string& layer = {});
 
 /// Writes polygon features in `crs` (temporary file + rename). Rings are

@@ -612,8 +612,9 @@ WindowBuildings detect_on_window(const RunManifest& m, const PixelWindow& win, P
         // Each building redrawn along the ortho from a crop around it alone.
         RasterReader ortho(o.ortho, run_ortho_open_options(o));  // the manifest's grid
         const RasterInfo& oi = ortho.info();
-        const Image<float> colours = ortho.read<float>(win);
-        const std::vector<uint8_t> valid = data_mask(colours, oi);
+        const std::vector<int> bands = image_bands(oi);  // an alpha band is a mask, not a colour
+        const Image<float> colours = ortho.read<float>(win, bands);
+        const std::vector<uint8_t> valid = valid_pixels(ortho, win, colours, bands);
         SegmentClassifierOptions co = o.extraction.classifier;
         co.gsd_m = oi.gsd.x_m;
         const std::vector<uint8_t> vegetation = cells.used_classes ? std::vector<uint8_t>{} : vegetation_pixels(colours, co);

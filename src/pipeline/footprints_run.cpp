@@ -194,8 +194,13 @@ struct OrthoImage {
     std::vector<uint8_t> valid;
 };
 OrthoImage read_ortho(RasterReader& reader) {
-    OrthoImage o{reader.read_all<float>(), {}};
-    o.valid = data_mask(o.image, reader.info());
+    // The image bands (an alpha band is a mask, not a colour); invalid where
+    // a band holds its nodata value or the alpha / mask band says so.
+    const RasterInfo& info = reader.info();
+    const std::vector<int> bands = image_bands(info);
+    const PixelWindow all{0, 0, info.width, info.height};
+    OrthoImage o{reader.read<float>(all, bands), {}};
+    o.valid = valid_pixels(reader, all, o.image, bands);
     return o;
 }
 
@@ -359,6 +364,8 @@ FootprintsReport run_footprints_unguarded(const std::string& output_path, const 
             throw Error(o.ortho, "has " + std::to_string(info.band_count()) + " bands; --ndsm-band " + std::to_string(o.ndsm_band) + " does not exist");
         if (o.nir_band > info.band_count())
             throw Error(o.ortho, "has " + std::to_string(info.band_count()) + " bands; --nir-band " + std::to_string(o.nir_band) + " does not exist");
+        for (const int b : {o.ndsm_band, o.nir_band})
+            if (b > 0 && b == info.alpha_band) throw Error(o.ortho, "band " + std::to_string(b) + " is the alpha band (a mask), not an image band");
         const bool learned = mode == DetectionMode::ortho_only && o.detector != OrthoDetector::rules && o.segments.empty();  // reads its own bands
         if ((mode != DetectionMode::cloud_only && !learned) || o.ndsm_band > 0) img = read_ortho(*ortho);
     }
@@ -375,9 +382,10 @@ FootprintsReport run_footprints_unguarded(const std::string& output_path, const 
         img.image = std::move(colours);
         // A nodata value in the height band alone does not make the colours invalid.
         std::vector<int> sources;
-        for (int k = 1; k <= ortho->info().band_count(); ++k)
+        for (int k : image_bands(ortho->info()))
             if (k != o.ndsm_band) sources.push_back(k);
-        img.valid = data_mask(img.image, ortho->info(), sources);
+        const RasterInfo& oi = ortho->info();
+        img.valid = valid_pixels(*ortho, {0, 0, oi.width, oi.height}, img.image, sources);
         if (img.image.bands == 0 && mode != DetectionMode::cloud_only) throw Error(o.ortho, "has no colour band besides the nDSM band");
     }
     BuildingCells cells;

@@ -73,6 +73,57 @@ void describe_grid(RasterInfo& info, const std::array<double, 6>& gt) {
 }
 }  // namespace
 
+namespace {
+// Band descriptions, the alpha band and the per-dataset mask of `ds` into `info`.
+void describe_bands(GDALDataset& ds, RasterInfo& info) {
+    info.bands.clear();
+    for (int b = 1; b <= ds.GetRasterCount(); ++b) {
+        GDALRasterBand* band = ds.GetRasterBand(b);
+        RasterBandInfo bi;
+        bi.type = from_gdal(band->GetRasterDataType());
+        int has_nodata = 0;
+        const double nd = band->GetNoDataValue(&has_nodata);
+        if (has_nodata) bi.nodata = nd;
+        bi.color_interpretation = GDALGetColorInterpretationName(band->GetColorInterpretation());
+        bi.description = band->GetDescription();
+        info.bands.push_back(bi);
+    }
+    const int n = ds.GetRasterCount();
+    info.alpha_band = n > 1 && ds.GetRasterBand(n)->GetColorInterpretation() == GCI_AlphaBand ? n : 0;
+    info.masked = n > 0 && (ds.GetRasterBand(1)->GetMaskFlags() & GMF_PER_DATASET) != 0;
+}
+}  // namespace
+
+std::vector<int> image_bands(const RasterInfo& info) {
+    std::vector<int> out;
+    for (int b = 1; b <= info.band_count(); ++b)
+        if (b != info.alpha_band) out.push_back(b);
+    return out;
+}
+
+std::vector<uint8_t> RasterReader::read_mask(const PixelWindow& w) const {
+    std::vector<uint8_t> valid(static_cast<std::size_t>(w.width) * static_cast<std::size_t>(w.height), 1);
+    if (!info_.masked) return valid;
+    if (w.width <= 0 || w.height <= 0 || w.col < 0 || w.row < 0 || w.col + w.width > info_.width || w.row + w.height > info_.height)
+        throw Error(info_.path, "window outside the raster");
+    GdalErrorCapture capture;
+    GDALRasterBand* mask = impl_->ds->GetRasterBand(1)->GetMaskBand();
+    const bool alpha = (impl_->ds->GetRasterBand(1)->GetMaskFlags() & GMF_ALPHA) != 0;
+    std::vector<uint8_t> m(valid.size());
+    if (!mask || mask->RasterIO(GF_Read, w.col, w.row, w.width, w.height, m.data(), w.width, w.height, GDT_Byte, 0, 0, nullptr) != CE_None)
+        throw Error(info_.path, "cannot read the mask band" + capture.suffix());
+    for (std::size_t i = 0; i < m.size(); ++i) valid[i] = alpha ? m[i] >= 128 : m[i] != 0;
+    return valid;
+}
+
+std::vector<uint8_t> valid_pixels(const RasterReader& reader, const PixelWindow& window, const Image<float>& image,
+                                  const std::vector<int>& bands) {
+    std::vector<uint8_t> valid = data_mask(image, reader.info(), bands);
+    const std::vector<uint8_t> mask = reader.read_mask(window);
+    for (std::size_t i = 0; i < valid.size(); ++i) valid[i] = valid[i] && mask[i];
+    return valid;
+}
+
 CrsInfo working_crs_for(const RasterInfo& info, const std::string& working_crs) {
     if (!working_crs.empty()) return crs_from_user_input(working_crs, "--working-crs");
     if (!info.crs.geographic) return info.crs;
@@ -94,17 +145,7 @@ RasterReader::RasterReader(const std::string& path, const RasterOpenOptions& opt
     info_.height = ds.GetRasterYSize();
     if (ds.GetRasterCount() <= 0) throw Error(path, "raster has no bands");
     if (info_.width <= 0 || info_.height <= 0) throw Error(path, "raster has zero size");
-    for (int b = 1; b <= ds.GetRasterCount(); ++b) {
-        GDALRasterBand* band = ds.GetRasterBand(b);
-        RasterBandInfo bi;
-        bi.type = from_gdal(band->GetRasterDataType());
-        int has_nodata = 0;
-        const double nd = band->GetNoDataValue(&has_nodata);
-        if (has_nodata) bi.nodata = nd;
-        bi.color_interpretation = GDALGetColorInterpretationName(band->GetColorInterpretation());
-        bi.description = band->GetDescription();
-        info_.bands.push_back(bi);
-    }
+    describe_bands(ds, info_);
     ds.GetRasterBand(1)->GetBlockSize(&info_.block_width, &info_.block_height);
 
     std::array<double, 6> gt{};
@@ -137,7 +178,18 @@ RasterReader::RasterReader(const std::string& path, const RasterOpenOptions& opt
     const CrsInfo target = working_crs_for(info_, options.working_crs);
     if (same_crs(target, info_.crs)) return;
     // A warped VRT over the file: reads go through GDAL's warper, on demand.
-    GDALDatasetH vrt = GDALAutoCreateWarpedVRT(GDALDataset::ToHandle(&ds), info_.crs.wkt.c_str(), target.wkt.c_str(), GRA_Bilinear, 0.125, nullptr);
+    // The image bands, and an alpha band that is 0 outside the file (and
+    // where the file's own alpha or mask says so): no invented black pixels.
+    GDALWarpOptions* wo = GDALCreateWarpOptions();
+    const std::vector<int> bands = image_bands(info_);
+    wo->nBandCount = static_cast<int>(bands.size());
+    wo->panSrcBands = static_cast<int*>(CPLMalloc(sizeof(int) * bands.size()));
+    wo->panDstBands = static_cast<int*>(CPLMalloc(sizeof(int) * bands.size()));
+    for (std::size_t i = 0; i < bands.size(); ++i) wo->panSrcBands[i] = bands[i], wo->panDstBands[i] = static_cast<int>(i) + 1;
+    wo->nSrcAlphaBand = info_.alpha_band;
+    wo->nDstAlphaBand = wo->nBandCount + 1;
+    GDALDatasetH vrt = GDALAutoCreateWarpedVRT(GDALDataset::ToHandle(&ds), info_.crs.wkt.c_str(), target.wkt.c_str(), GRA_Bilinear, 0.125, wo);
+    GDALDestroyWarpOptions(wo);
     if (!vrt) throw Error(path, "cannot warp onto " + target.label() + capture.suffix());
     impl_->source = impl_->ds;
     impl_->ds = GDALDataset::FromHandle(vrt);
@@ -145,6 +197,7 @@ RasterReader::RasterReader(const std::string& path, const RasterOpenOptions& opt
     info_.warped = true;
     info_.crs = target;
     info_.width = w.GetRasterXSize(), info_.height = w.GetRasterYSize();
+    describe_bands(w, info_);
     w.GetRasterBand(1)->GetBlockSize(&info_.block_width, &info_.block_height);
     std::array<double, 6> wgt{};
     w.GetGeoTransform(wgt.data());

@@ -44,6 +44,13 @@ struct RasterInfo {
     /// project_geographic / working_crs); `source_crs` is then the file's CRS.
     bool warped = false;
     CrsInfo source_crs;          ///< the file's own CRS (same as `crs` when not warped)
+    /// 1-based last band when GDAL reads it as alpha (ColorInterp=Alpha): a
+    /// mask, not a colour. 0 = none. A warped grid always has one (the warper's
+    /// alpha: 0 outside the file).
+    int alpha_band = 0;
+    /// GDAL has a per-dataset mask for the pixels (an alpha band, an internal
+    /// or external .msk mask band): read_mask() reads it.
+    bool masked = false;
 
     int band_count() const { return static_cast<int>(bands.size()); }
 };
@@ -107,6 +114,12 @@ public:
         return read<T>(PixelWindow{0, 0, info_.width, info_.height}, bands);
     }
 
+    /// Validity of `window` from GDAL's per-dataset mask (alpha band >= 50 %,
+    /// internal or external mask band != 0): 1 = data, 0 = masked; all 1 when
+    /// the raster has none (nodata values are data_mask's). Throws Error
+    /// naming the file when the mask cannot be read.
+    std::vector<uint8_t> read_mask(const PixelWindow& window) const;
+
 private:
     struct Impl;
     std::unique_ptr<Impl> impl_;
@@ -117,6 +130,14 @@ private:
 /// image band holds its source band's nodata value, else 1. `bands` = the
 /// 1-based source band of each image band (empty: image band k is band k+1).
 std::vector<uint8_t> data_mask(const Image<float>& image, const RasterInfo& info, const std::vector<int>& bands = {});
+
+/// The 1-based bands holding image values: every band but the alpha band.
+std::vector<int> image_bands(const RasterInfo& info);
+
+/// data_mask() of `image` (read from `bands` over `window`) and the reader's
+/// per-dataset mask (alpha, mask band): 1 where both say data.
+std::vector<uint8_t> valid_pixels(const RasterReader& reader, const PixelWindow& window, const Image<float>& image,
+                                  const std::vector<int>& bands);
 
 /// The working CRS for a raster `info` describes (in its own CRS): `working_crs`
 /// when given, else the UTM zone of its centre when it is geographic, else its

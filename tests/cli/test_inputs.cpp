@@ -447,3 +447,269 @@ TEST_CASE("run takes a lon/lat ortho (Rio) and a Web Mercator ortho (Banepa) as 
     CHECK(b_area > 1000.0);
     CHECK(b_area == Approx(b_geodesic).epsilon(0.01));
 }
+
+// ---------------------------------------------------------------- the corpus of other writers' files
+
+TEST_CASE("LAS 1.0-1.4 from other writers: version, points and CRS record (GeoKeys, WKT, both, none, unusable) through info and rasterize",
+          "[inputs][corpus][crs]") {
+    ScratchDir dir("inputs_las_corpus");
+    // LAS 1.0: laz-perf's point10.las (LAS 1.2, PF0, GeoKeys 26910) with version minor 0 (the 1.0 header has the same 227 bytes).
+    std::string las = slurp(shared_data("laz_corpus/reference_las/point10.las"));
+    REQUIRE(las.size() > 227);
+    las[25] = 0;
+    std::ofstream(dir / "point10_1.0.las", std::ios::binary) << las;
+    struct Case {
+        std::string path, format;
+        int points;
+        int epsg;            // horizontal EPSG the CRS resolves to; 0 = no usable CRS
+        std::string source;  // crs_source
+    };
+    const std::vector<Case> cases{
+        {dir / "point10_1.0.las", "LAS 1.0", 1065, 26910, "GeoTIFF keys"},
+        {shared_data("laz_corpus/lone-star.laz"), "LAS 1.1", 518862, 0, ""},  // geocentric keys over UTM-like numbers: ignored
+        {shared_data("laz_corpus/reference_las/point-time.las"), "LAS 1.2", 1065, 26910, "GeoTIFF keys"},
+        {shared_data("laz_corpus/reference_las/point-color.las"), "LAS 1.2", 1065, 26910, "libLAS WKT VLR"},  // keys + libLAS WKT
+        {shared_data("laz_corpus/reference_las/1.2-with-color.las"), "LAS 1.2", 1065, 0, ""},                 // none (PDAL)
+        {shared_data("laz_corpus/reference_las/no-points-1.3.las"), "LAS 1.3", 0, 0, ""},
+        {shared_data("laz_corpus/point-time-1.4.las.laz"), "LAS 1.4", 1065, 26910, "WKT VLR"},                // WKT only
+        {shared_data("laz_corpus/las_with_several_extra_byte_bloc.laz"), "LAS 1.4", 697721, 2154, "WKT VLR"},  // WKT and keys
+        {shared_data("laz_corpus/test_pdalfail_0643_6319_LA93_IGN69.laz"), "LAS 1.4", 89, 0, ""},            // keys 3072 = 65535, no parameters
+    };
+    for (const Case& c : cases) {
+        INFO(c.path);
+        const json j = info_json(c.path);
+        CHECK(j["format"].get<std::string>().find(c.format) == 0);
+        CHECK(j["point_count"] == c.points);
+        if (c.epsg) {
+            CHECK(j["crs"]["horizontal_epsg"] == c.epsg);
+            CHECK(j["crs_source"] == c.source);
+        } else {
+            CHECK(j["crs"].is_null());
+        }
+        if (c.points == 0) continue;
+        const std::string out = dir / ("r_" + std::filesystem::path(c.path).filename().string());
+        const auto r = run_cli("cloud rasterize --cloud " + c.path + " --gsd 2 --out " + out);
+        if (c.epsg) {
+            INFO(r.err);
+            REQUIRE(r.exit_code == 0);
+            CHECK(run_command("gdalsrsinfo -o epsg " + out + "/dsm.tif").out.find("EPSG:" + std::to_string(c.epsg)) != std::string::npos);
+        } else {
+            // No usable CRS is an error naming the file and --cloud-crs; an unusable record is named in a warning.
+            CHECK(r.exit_code == 1);
+            CHECK(r.err.find("no CRS") != std::string::npos);
+            CHECK(r.err.find("--cloud-crs") != std::string::npos);
+            CHECK_FALSE(std::filesystem::exists(out + "/dsm.tif"));
+        }
+    }
+    const auto geocentric = run_cli("info --json " + shared_data("laz_corpus/lone-star.laz"));
+    CHECK(geocentric.err.find("ignored: a geocentric CRS") != std::string::npos);
+    const auto local = run_cli("info --json " + shared_data("laz_corpus/test_pdalfail_0643_6319_LA93_IGN69.laz"));
+    CHECK(local.err.find("ignored: a local CRS") != std::string::npos);
+    // With the CRS given, the same file works; a geocentric --cloud-crs is refused.
+    const std::string pf = shared_data("laz_corpus/test_pdalfail_0643_6319_LA93_IGN69.laz");
+    CHECK(run_cli("cloud rasterize --quiet --cloud " + pf + " --cloud-crs EPSG:2154 --gsd 1 --out " + (dir / "pf")).exit_code == 0);
+    const auto ecef = run_cli("cloud rasterize --quiet --cloud " + pf + " --cloud-crs EPSG:4978 --gsd 1 --out " + (dir / "pf_ecef"));
+    CHECK(ecef.exit_code == 1);
+    CHECK(ecef.err.find("geocentric") != std::string::npos);
+}
+
+TEST_CASE("Footprint files from other writers: MultiPolygonZ with holes, colliding fields, a GeoPackage with two polygon layers",
+          "[inputs][corpus][ogr]") {
+    ScratchDir dir("inputs_fp_corpus");
+    const std::string delft = shared_data("delft_ahn3_bgt_west/ahn3_delft_west.las");
+    // A MultiPolygonZ (z = 0.5, as 3D exports carry): a 20 m square with a 4 m hole on a Delft roof, and a second part;
+    // fields named like ours (height_m, area_m2) and one of its own.
+    auto ring = [](double x, double y, double h, bool cw) {
+        json r = json::array();
+        std::vector<std::pair<int, int>> c{{-1, -1}, {1, -1}, {1, 1}, {-1, 1}, {-1, -1}};
+        if (cw) std::reverse(c.begin(), c.end());
+        for (auto [dx, dy] : c) r.push_back(json::array({x + dx * h, y + dy * h, 0.5}));
+        return r;
+    };
+    json geometry{{"type", "MultiPolygon"},
+                  {"coordinates", json::array({json::array({ring(84905.0, 447560.0, 10.0, false), ring(84905.0, 447560.0, 2.0, true)}),
+                                               json::array({ring(84960.0, 447500.0, 5.0, false)})})}};
+    json fc{{"type", "FeatureCollection"}, {"crs", {{"type", "name"}, {"properties", {{"name", "urn:ogc:def:crs:EPSG::28992"}}}}}};
+    fc["features"] = json::array({json{{"type", "Feature"}, {"properties", {{"height_m", 99.0}, {"area_m2", 1.0}, {"owner", "x"}}}, {"geometry", geometry}}});
+    std::ofstream(dir / "mz.geojson") << fc.dump();
+    REQUIRE(info_json(dir / "mz.geojson")["layers"][0]["geometry_type"].get<std::string>().find("Multi Polygon") != std::string::npos);
+    const auto h = run_cli("heights --footprints " + (dir / "mz.geojson") + " --cloud " + delft + " --cloud-crs EPSG:7415 --out " + (dir / "mz.gpkg"));
+    INFO(h.err);
+    REQUIRE(h.exit_code == 0);
+    CHECK(h.err.find("height_m") != std::string::npos);  // the colliding fields are named and replaced
+    const auto wkt = run_command("ogr2ogr -f CSV -lco GEOMETRY=AS_WKT /vsistdout/ " + (dir / "mz.gpkg") + " -select owner,height_m,area_m2");
+    REQUIRE(wkt.exit_code == 0);
+    CHECK(wkt.out.find("MULTIPOLYGON") != std::string::npos);
+    CHECK(wkt.out.find("),(") != std::string::npos);  // the hole is kept
+    CHECK(wkt.out.find(")),((") != std::string::npos);  // and both parts
+    CHECK(wkt.out.find(",x,") != std::string::npos);    // the writer's own field passes through
+    CHECK(wkt.out.find("99") == std::string::npos);     // ours replaced theirs
+    const auto area = run_command("ogrinfo -q -ro " + (dir / "mz.gpkg") + " -sql \"SELECT area_m2 FROM buildings\"");
+    const std::size_t at = area.out.find("area_m2 (Real) = ");
+    REQUIRE(at != std::string::npos);
+    CHECK(std::stod(area.out.substr(at + 17)) == Approx(400.0 - 16.0 + 100.0).margin(0.01));  // both parts, minus the hole
+
+    // Two polygon layers and no name: ambiguous, an error listing them; --layer (or GPKG:file:layer) chooses.
+    const std::string two = dir / "two.gpkg";
+    REQUIRE(run_command("ogr2ogr -f GPKG -nln buildings " + two + " " + (dir / "mz.geojson")).exit_code == 0);
+    REQUIRE(run_command("ogr2ogr -update -f GPKG -nln parcels " + two + " " + (dir / "mz.geojson")).exit_code == 0);
+    const auto amb = run_cli("heights --quiet --footprints " + two + " --cloud " + delft + " --cloud-crs EPSG:7415 --out " + (dir / "amb.gpkg"));
+    CHECK(amb.exit_code == 1);
+    CHECK(count_lines(amb.err) == 1);
+    CHECK(amb.err.find("2 polygon layers (buildings, parcels)") != std::string::npos);
+    CHECK(amb.err.find("--layer") != std::string::npos);
+    CHECK_FALSE(std::filesystem::exists(dir / "amb.gpkg"));
+    CHECK(run_cli("heights --quiet --footprints " + two + " --layer parcels --cloud " + delft + " --cloud-crs EPSG:7415 --out " + (dir / "p.gpkg"))
+              .exit_code == 0);
+    const auto missing = run_cli("heights --quiet --footprints " + two + " --layer roads --cloud " + delft + " --cloud-crs EPSG:7415 --out " +
+                                 (dir / "m.gpkg"));
+    CHECK(missing.exit_code == 1);
+    CHECK(missing.err.find("has no layer 'roads' (layers: buildings, parcels)") != std::string::npos);
+    // Commands without --layer take GDAL's dataset name for one layer.
+    const auto audit = run_cli("audit footprints --pred GPKG:" + two + ":parcels --ref " + (dir / "mz.geojson") + " --out " + (dir / "audit"));
+    INFO(audit.err);
+    CHECK(audit.exit_code == 0);
+}
+
+// ---------------------------------------------------------------- the README's promises not tested elsewhere
+
+TEST_CASE("Promises: inputs that are refused in one line with nothing written - out of memory exits 3", "[inputs][promises]") {
+    ScratchDir dir("inputs_promises");
+    const std::string delft = shared_data("delft_ahn3_bgt_west/ahn3_delft_west.las");
+    const std::string fp = shared_data("delft_ahn3_bgt_west/bgt_pand_west_with_ref_heights.geojson");
+    auto refused = [&](const std::string& args, const std::string& why, const std::string& out) {
+        const auto r = run_cli("--quiet " + args + " --out " + out);
+        INFO(args << "\n" << r.err);
+        CHECK(r.exit_code == 1);
+        CHECK(count_lines(r.err) == 1);
+        CHECK(r.err.find(why) != std::string::npos);
+        CHECK_FALSE(std::filesystem::exists(out));
+    };
+    // A cloud in a geographic CRS (heights need metres).
+    refused("heights --footprints " + fp + " --cloud " + delft + " --cloud-crs EPSG:4326", "geographic CRS", dir / "geo.gpkg");
+    // Footprints in a geographic CRS (a GeoJSON without a crs member is RFC 7946 lon/lat), and without any CRS.
+    write_squares(dir / "sq.geojson", {{84905.0, 447560.0}});
+    json lonlat = json::parse(slurp(dir / "sq.geojson"));
+    lonlat.erase("crs");
+    std::ofstream(dir / "lonlat.geojson") << lonlat.dump();
+    refused("heights --footprints " + (dir / "lonlat.geojson") + " --cloud " + delft + " --cloud-crs EPSG:7415", "geographic CRS", dir / "ll.gpkg");
+    REQUIRE(run_command("ogr2ogr -f CSV -lco GEOMETRY=AS_WKT " + (dir / "nocrs.csv") + " " + (dir / "sq.geojson")).exit_code == 0);
+    refused("roofs --footprints " + (dir / "nocrs.csv") + " --cloud " + delft + " --cloud-crs EPSG:7415", "CRS", dir / "roofs");
+    // `footprints` that find no building: a featureless raster gives no file, not an empty one.
+    REQUIRE(run_command("gdal_create -of GTiff -outsize 200 200 -bands 3 -burn 128 -a_srs EPSG:28992 -a_ullr 84900 447600 85000 447500 " +
+                        (dir / "flat.tif")).exit_code == 0);
+    refused("footprints --ortho " + (dir / "flat.tif"), "no building found", dir / "none.gpkg");
+    // Out of memory is exit 3 with one line, not a crash (a 1 cm grid over Delft under a 1.5 GB address-space limit).
+    const auto oom = run_command("bash -c \"ulimit -v 1500000; " + cityforge::test::cli() + " cloud rasterize --quiet --cloud " + delft +
+                                 " --cloud-crs EPSG:7415 --gsd 0.01 --out " + (dir / "oom") + "\"");
+    INFO(oom.err);
+    CHECK(oom.exit_code == 3);
+    CHECK(count_lines(oom.err) == 1);
+}
+
+namespace {
+// Number of footprints and their summed area_m2 (ogrinfo SQL), to compare runs.
+std::pair<int, double> count_and_area(const std::string& path) {
+    const auto r = run_command("ogrinfo -q -ro " + path + " -sql \"SELECT COUNT(*) AS n, SUM(area_m2) AS a FROM buildings\"");
+    const std::size_t n = r.out.find("n (Integer) = "), a = r.out.find("a (Real) = ");
+    REQUIRE(n != std::string::npos);
+    REQUIRE(a != std::string::npos);
+    return {std::stoi(r.out.substr(n + 14)), std::stod(r.out.substr(a + 11))};
+}
+}  // namespace
+
+TEST_CASE("GeoTIFFs with an alpha band, an internal mask band and internal overviews give the same footprints", "[inputs][corpus][raster]") {
+    ScratchDir dir("inputs_masks");
+    const std::string kampala = shared_data("oam_kampala_rgba/kampala_z19_east_rgba.tif");
+    // The OpenAerialMap RGBA as delivered (band 4 = alpha, 0 where the drone saw nothing) ...
+    const json i = info_json(kampala);
+    REQUIRE(i["bands"].size() == 4);
+    // ... the same as RGB with an internal mask band (GDAL_TIFF_INTERNAL_MASK), and that file with internal overviews.
+    REQUIRE(run_command("gdal_translate -q -b 1 -b 2 -b 3 -mask 4 --config GDAL_TIFF_INTERNAL_MASK YES -co COMPRESS=DEFLATE " + kampala + " " +
+                        (dir / "mask.tif")).exit_code == 0);
+    REQUIRE(run_command("cp " + (dir / "mask.tif") + " " + (dir / "ovr.tif") + " && gdaladdo -q -r average " + (dir / "ovr.tif") + " 2 4 8")
+                .exit_code == 0);
+    REQUIRE(run_command("gdalinfo " + (dir / "ovr.tif")).out.find("Overviews:") != std::string::npos);
+    REQUIRE(run_command("gdalinfo " + (dir / "mask.tif")).out.find("PER_DATASET") != std::string::npos);
+    // ... and RGB with the mask thrown away (what a reader that ignores masks sees).
+    REQUIRE(run_command("gdal_translate -q -b 1 -b 2 -b 3 -mask none -co COMPRESS=DEFLATE " + kampala + " " + (dir / "rgb.tif")).exit_code == 0);
+    std::map<std::string, std::pair<int, double>> got;
+    for (const char* name : {"rgba", "mask", "ovr", "rgb"}) {
+        const std::string in = std::string(name) == "rgba" ? kampala : dir / (std::string(name) + ".tif");
+        const auto r = run_cli("footprints --quiet --ortho " + in + " --out " + (dir / (std::string(name) + ".gpkg")));
+        INFO(name << ": " << r.err);
+        REQUIRE(r.exit_code == 0);
+        got[name] = count_and_area(dir / (std::string(name) + ".gpkg"));
+    }
+    CHECK(got["mask"] == got["rgba"]);  // the alpha band is a mask, not a fourth colour
+    CHECK(got["ovr"] == got["mask"]);   // overviews are not read in place of the full resolution
+    CHECK(got["rgb"] != got["mask"]);   // and the mask does change what is found
+}
+
+TEST_CASE("A raster in feet (Autzen ortho, EPSG:2994, 1 ft pixels): GSD and areas in metres, output in feet", "[inputs][corpus][raster]") {
+    ScratchDir dir("inputs_feet");
+    // 700 x 700 px (213 m) of the PDAL Autzen ortho around the practice halls, still EPSG:2994 in international feet.
+    REQUIRE(run_command("gdal_translate -q -srcwin 1300 2300 700 700 " + shared_data("autzen_oregon/autzen_ortho_1ft_epsg2994.tif") + " " +
+                        (dir / "autzen.tif")).exit_code == 0);
+    const json i = info_json(dir / "autzen.tif");
+    CHECK(i["gsd_m"]["x"].get<double>() == Approx(0.3048).epsilon(1e-6));
+    const auto r = run_cli("footprints --quiet --ortho " + (dir / "autzen.tif") + " --out " + (dir / "fp.gpkg"));
+    INFO(r.err);
+    REQUIRE(r.exit_code == 0);
+    CHECK(info_json(dir / "fp.gpkg")["layers"][0]["crs"]["epsg"] == 2994);
+    const auto [area, geodesic] = area_sums(dir / "fp.gpkg");
+    CHECK(area > 100.0);
+    CHECK(area == Approx(geodesic).epsilon(0.01));  // m², not ft² (x10.76)
+}
+
+// ---------------------------------------------------------------- re-runs on our own output
+
+TEST_CASE("Every command runs again on its own output, and again with --overwrite to the same bytes", "[inputs][rerun]") {
+    ScratchDir dir("inputs_idempotent");
+    const std::string delft = shared_data("delft_ahn3_bgt_west/ahn3_delft_west.las");
+    const std::string fp = dir / "fp.gpkg";
+    REQUIRE(run_command("ogr2ogr -f GPKG -nln footprints -limit 12 " + fp + " " +
+                        shared_data("delft_ahn3_bgt_west/bgt_pand_west_with_ref_heights.geojson")).exit_code == 0);
+    auto ok = [](const cityforge::test::CommandResult& r) {
+        INFO(r.err);
+        REQUIRE(r.exit_code == 0);
+    };
+    // footprints, rasterize, translate, audit: the same command again with --overwrite gives the same bytes.
+    const std::string rio = shared_data("spacenet1_rio_rgb/3band_013022223130_Public_img51_rgb.tif");
+    ok(run_cli("footprints --quiet --ortho " + rio + " --out " + (dir / "fp.geojson")));
+    const std::string fp1 = slurp(dir / "fp.geojson");
+    ok(run_cli("footprints --quiet --overwrite --ortho " + rio + " --out " + (dir / "fp.geojson")));
+    CHECK(slurp(dir / "fp.geojson") == fp1);
+    ok(run_cli("cloud rasterize --quiet --cloud " + delft + " --cloud-crs EPSG:7415 --gsd 2 --out " + (dir / "r")));
+    const std::string dsm = slurp(dir / "r/dsm.tif");
+    ok(run_cli("cloud rasterize --quiet --overwrite --cloud " + delft + " --cloud-crs EPSG:7415 --gsd 2 --out " + (dir / "r")));
+    CHECK(slurp(dir / "r/dsm.tif") == dsm);
+    // translate: of its own output, the same file (header, VLRs and records kept).
+    const std::string las = shared_data("laz_corpus/reference_las/point-color.las");
+    ok(run_cli("cloud translate --quiet " + las + " " + (dir / "t1.las")));
+    ok(run_cli("cloud translate --quiet " + (dir / "t1.las") + " " + (dir / "t2.las")));
+    CHECK(slurp(dir / "t2.las") == slurp(dir / "t1.las"));
+    ok(run_cli("audit footprints --pred " + (dir / "fp.geojson") + " --ref " + (dir / "fp.geojson") + " --out " + (dir / "a")));
+    const json a1 = json::parse(slurp(dir / "a/report.json"));
+    ok(run_cli("audit footprints --overwrite --pred " + (dir / "fp.geojson") + " --ref " + (dir / "fp.geojson") + " --out " + (dir / "a")));
+    CHECK(json::parse(slurp(dir / "a/report.json"))["totals"] == a1["totals"]);
+    CHECK(a1["totals"]["f1"] == 1.0);
+
+    // roofs and run on their own buildings.gpkg: the same buildings and fields again.
+    ok(run_cli("roofs --quiet --footprints " + fp + " --cloud " + delft + " --cloud-crs EPSG:7415 --formats gpkg --out " + (dir / "roofs1")));
+    ok(run_cli("roofs --quiet --footprints " + (dir / "roofs1/buildings.gpkg") + " --cloud " + delft + " --cloud-crs EPSG:7415 --formats gpkg --out " +
+               (dir / "roofs2")));
+    CHECK(layer_fields(dir / "roofs2/buildings.gpkg") == layer_fields(dir / "roofs1/buildings.gpkg"));
+    CHECK(info_json(dir / "roofs2/buildings.gpkg")["layers"][0]["feature_count"] == 12);
+    ok(run_cli("run --quiet --footprints " + fp + " --cloud " + delft + " --cloud-crs EPSG:7415 --formats gpkg --out " + (dir / "run1")));
+    ok(run_cli("run --quiet --footprints " + (dir / "run1/buildings.gpkg") + " --cloud " + delft + " --cloud-crs EPSG:7415 --formats gpkg --out " +
+               (dir / "run2")));
+    CHECK(layer_fields(dir / "run2/buildings.gpkg") == layer_fields(dir / "run1/buildings.gpkg"));
+    const std::string heights_sql = " -sql \"SELECT cityforge_id, height_m, roof_type FROM buildings ORDER BY cityforge_id\"";
+    CHECK(run_command("ogrinfo -q -ro " + (dir / "run2/buildings.gpkg") + heights_sql).out ==
+          run_command("ogrinfo -q -ro " + (dir / "run1/buildings.gpkg") + heights_sql).out);
+    // A run folder is where a run resumes: the same command again keeps its tiles and gives the same model.
+    const std::string model = slurp(dir / "run1/buildings.gpkg");
+    ok(run_cli("run --quiet --footprints " + fp + " --cloud " + delft + " --cloud-crs EPSG:7415 --formats gpkg --out " + (dir / "run1")));
+    CHECK(info_json(dir / "run1/buildings.gpkg")["layers"][0]["feature_count"] == 12);
+}
