@@ -23,7 +23,7 @@ int main(int argc, char** argv) {
     const synth::Scene scene = synth::generate_scene(layout);
     const CrsInfo crs = crs_from_user_input("EPSG:32650+5773", "bench");
     CityModel model;
-    model.crs = model_crs_of(crs);
+    model.crs = model_crs_of(crs, Extent{500000.0, 4400000.0, 500000.0 + layout.size_m, 4400000.0 + layout.size_m});
     const double ox = 500000, oy = 4400000;
     for (const synth::SceneBuilding& sb : scene.buildings) {
         Building b;

@@ -301,6 +301,18 @@ double ground_metres_per_unit(const CrsInfo& crs, const GeoTransform& t, int wid
     return (crs.empty() ? 1.0 : crs.linear_unit_m) * ground_scale_factor(crs, t, width, height);
 }
 
+double ground_scale_factor_at(const CrsInfo& crs, const Extent& e) {
+    if (crs.geographic) return 0.0;
+    if (!(e.min_x <= e.max_x && e.min_y <= e.max_y)) return 1.0;
+    const double cx = 0.5 * (e.min_x + e.max_x), cy = 0.5 * (e.min_y + e.max_y);
+    return ground_scale_factor(crs, GeoTransform{cx - 0.5, 1.0, cy + 0.5, -1.0}, 1, 1);
+}
+
+double ground_metres_per_unit_at(const CrsInfo& crs, const Extent& e) {
+    if (crs.geographic) return 0.0;
+    return (crs.empty() ? 1.0 : crs.linear_unit_m) * ground_scale_factor_at(crs, e);
+}
+
 CrsInfo utm_crs_for(const CrsInfo& crs, const MapPoint& lon_lat) {
     const int zone = std::clamp(static_cast<int>(std::floor((lon_lat.x + 180.0) / 6.0)) + 1, 1, 60);
     const bool north = lon_lat.y >= 0.0;

@@ -98,6 +98,15 @@ double ground_scale_factor(const CrsInfo& crs, const GeoTransform& transform, in
 /// multiply by its square to become ground m^2.
 double ground_metres_per_unit(const CrsInfo& crs, const GeoTransform& transform, int width, int height);
 
+/// ground_scale_factor at the centre of `extent` (map units of `crs`), over one
+/// map unit: for vector data (footprints, models) in a distorting CRS. 1 for an
+/// empty extent or a CRS without a horizontal part; 0 for a geographic CRS.
+double ground_scale_factor_at(const CrsInfo& crs, const Extent& extent);
+
+/// Ground metres per map unit at the centre of `extent`: linear unit times
+/// ground_scale_factor_at (0 for a geographic CRS).
+double ground_metres_per_unit_at(const CrsInfo& crs, const Extent& extent);
+
 /// Longitude and latitude (degrees, WGS 84) of a point in `crs`.
 MapPoint to_lon_lat(const CrsInfo& crs, const MapPoint& p);
 

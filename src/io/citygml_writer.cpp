@@ -162,8 +162,7 @@ CityGmlWriteReport write_citygml(const std::string& path, const CityModel& model
         if (!solids.empty()) {
             write_attribute(out, "lod" + std::to_string(o.lod) + "_valid", int64_t(errs.empty() ? 1 : 0));
             if (!errs.empty()) write_attribute(out, "lod" + std::to_string(o.lod) + "_errors", join(errs));
-            write_attribute(out, "volume_m3", (o.lod == 1 ? b.lod1_volume : b.lod2_volume) * model.crs.linear_unit_m * model.crs.linear_unit_m *
-                                                  model.crs.z_unit_m);
+            write_attribute(out, "volume_m3", (o.lod == 1 ? b.lod1_volume : b.lod2_volume) * model.crs.volume_unit_m3());
         }
         if (o.lod == 2 && !b.roof_type.empty()) out << "<bldg:roofType>" << xml_escape(b.roof_type) << "</bldg:roofType>\n";
         if (b.height_m) out << "<bldg:measuredHeight uom=\"m\">", gml.number(*b.height_m), out << "</bldg:measuredHeight>\n";
@@ -210,7 +209,7 @@ CityGmlWriteReport write_citygml(const std::string& path, const CityModel& model
                     write_attribute(out, "refined_lod", std::string("2.2"));
                     write_attribute(out, "lod22_valid", int64_t(part.lod22_errors.empty() ? 1 : 0));
                     if (!part.lod22_errors.empty()) write_attribute(out, "lod22_errors", join(part.lod22_errors));
-                    write_attribute(out, "volume_m3", part.lod22_volume * model.crs.linear_unit_m * model.crs.linear_unit_m * model.crs.z_unit_m);
+                    write_attribute(out, "volume_m3", part.lod22_volume * model.crs.volume_unit_m3());
                     write_lod2(out, gml, {part.lod22}, pid);
                     out << "</bldg:BuildingPart></bldg:consistsOfBuildingPart>\n";
                 }

@@ -162,7 +162,7 @@ std::vector<std::pair<std::string, json>> building_objects(const Building& b, st
     const double z0 = b.ground_z ? *b.ground_z : fallback_z;
     const bool want1 = std::find(o.lods.begin(), o.lods.end(), 1) != o.lods.end();
     const bool want2 = std::find(o.lods.begin(), o.lods.end(), 2) != o.lods.end();
-    const double unit3 = crs.linear_unit_m * crs.linear_unit_m * crs.z_unit_m;
+    const double unit3 = crs.volume_unit_m3();
     // Refined LODs, named as 3DBAG names them (lod12 = "1.2", ...); the list of those written in `lods`.
     json lods = json::array();
     if (want0 && !b.footprint.empty()) lods.push_back("0");

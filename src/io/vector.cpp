@@ -346,6 +346,28 @@ void reproject_features(std::vector<Feature>& features, const CrsInfo& from, con
     });
 }
 
+CrsInfo working_crs_for_layer(const PolygonLayer& layer, const std::string& working_crs, const std::string& subject) {
+    if (!working_crs.empty()) {
+        const CrsInfo w = crs_from_user_input(working_crs, "--working-crs");
+        if (w.geographic) throw Error("--working-crs", w.label() + " is geographic; the working CRS must be projected (metres)");
+        return w;
+    }
+    if (layer.crs.empty()) throw Error(subject, "footprints have no coordinate reference system");
+    if (!layer.crs.geographic) return layer.crs;
+    Extent all = empty_extent();
+    for (const Feature& f : layer.features) include(all, parts_extent(f.geometry));
+    if (!(all.min_x <= all.max_x)) throw Error(subject, "no footprints to place on a working CRS");
+    return utm_crs_for(layer.crs, {0.5 * (all.min_x + all.max_x), 0.5 * (all.min_y + all.max_y)});
+}
+
+void put_layer_on(PolygonLayer& layer, const CrsInfo& target, const std::string& subject) {
+    if (target.empty() || same_horizontal_crs(layer.crs, target)) return;
+    if (layer.crs.empty()) throw Error(subject, "footprints have no coordinate reference system");
+    log::warning(subject + ": footprints in " + layer.crs.label() + " worked on in " + target.label());
+    reproject_features(layer.features, layer.crs, target, subject);
+    layer.crs = target;
+}
+
 std::vector<std::string> drop_colliding_fields(PolygonLayer& layer, const std::vector<std::string>& ours, const std::string& subject) {
     auto lower = [](std::string s) {
         for (char& c : s) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));

@@ -95,6 +95,18 @@ std::vector<std::string> drop_colliding_fields(PolygonLayer& layer, const std::v
 /// transformation for all). Throws Error naming `subject` when PROJ fails.
 void reproject_features(std::vector<Feature>& features, const CrsInfo& from, const CrsInfo& to, const std::string& subject);
 
+/// The projected CRS a layer is worked on: `working_crs` when given (it must
+/// be projected), else the layer's own CRS when projected, else (a lon/lat
+/// layer, as OpenStreetMap extracts and most deliveries are) the UTM zone of
+/// the centre of its features, on its datum (utm_crs_for). Error naming
+/// `subject` for a layer without a CRS or a geographic working CRS.
+CrsInfo working_crs_for_layer(const PolygonLayer& layer, const std::string& working_crs, const std::string& subject);
+
+/// Moves `layer` onto `target` (reproject_features) when its horizontal CRS
+/// differs, with an info line naming `subject` and both CRSs; `layer.crs`
+/// becomes `target`. Nothing happens when they are the same.
+void put_layer_on(PolygonLayer& layer, const CrsInfo& target, const std::string& subject);
+
 /// Output driver for a path: ".gpkg" -> GPKG, ".geojson"/".json" -> GeoJSON,
 /// ".fgb" -> FlatGeobuf, ".shp" -> ESRI Shapefile; Error otherwise.
 std::string vector_driver_for(const std::string& path);

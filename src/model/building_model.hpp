@@ -24,6 +24,12 @@ struct ModelCrs {
     std::optional<int> compound_epsg;     ///< EPSG code of the whole compound CRS (e.g. 7415), if one exists
     double linear_unit_m = 1.0;           ///< metres per x/y unit
     double z_unit_m = 1.0;                ///< metres per z unit
+    /// Ground metres per metre of the CRS's grid at the model (ground_scale_factor at
+    /// the centre of its footprints): cos(latitude) in Web Mercator, exactly 1 for UTM
+    /// and national grids. Areas and volumes in ground units multiply by its square.
+    double ground_scale = 1.0;
+    /// Ground m^3 per CRS unit^3 of a solid (x, y in map units, z in vertical units).
+    double volume_unit_m3() const { return linear_unit_m * linear_unit_m * ground_scale * ground_scale * z_unit_m; }
     /// GML srsName: "urn:ogc:def:crs,crs:EPSG::28992,crs:EPSG::5709" when both parts are
     /// known, else the single code ("urn:ogc:def:crs:EPSG::32650"). Empty without any code.
     std::string gml_srs_name() const;

@@ -288,8 +288,15 @@ RunManifest plan_run(const RunOptions& in) {
         m.crs_wkt = info.crs.wkt;
         gsd_m = std::abs(info.transform.pixel_width) * info.metres_per_unit;
     } else {
-        const PolygonLayer fp = read_polygon_layer(o.footprints, o.buildings.heights.footprint_layer);
-        if (fp.crs.empty() || fp.crs.geographic) throw Error(o.footprints, "footprints need a projected CRS");
+        // The footprints' own projected CRS, or --working-crs, or (lon/lat footprints) the
+        // cloud's projected CRS, else their UTM zone.
+        PolygonLayer fp = read_polygon_layer(o.footprints, o.buildings.heights.footprint_layer);
+        std::string working = o.working_crs;
+        if (working.empty() && fp.crs.geographic) {
+            const CrsInfo cloud = resolve_cloud_crs(o.cloud, o.cloud_crs).crs;
+            if (!cloud.empty() && !cloud.geographic && cloud.horizontal_epsg) working = "EPSG:" + std::to_string(*cloud.horizontal_epsg);
+        }
+        put_layer_on(fp, working_crs_for_layer(fp, working, o.footprints), o.footprints);
         Extent e = empty_extent();
         for (const Feature& f : fp.features) include(e, parts_extent(f.geometry));
         const double cell = o.footprint_grid_m / fp.crs.linear_unit_m;
@@ -722,7 +729,7 @@ std::vector<Building> tile_buildings(const RunManifest& m, const TileSpec& t, co
         footprints.crs = pc.crs.empty() ? grid_crs : pc.crs;
         const CrsInfo layer_crs = footprints.crs;
         PolygonLayer all = read_polygon_layer(o.footprints, o.buildings.heights.footprint_layer);
-        if (!same_horizontal_crs(all.crs, grid_crs)) throw Error(o.footprints, "footprints are not in the grid's CRS");
+        put_layer_on(all, grid_crs, o.footprints);  // footprints in another CRS than the ortho's (or lon/lat ones): on the grid
         footprints.field_names = all.field_names, footprints.field_types = all.field_types;
         const double cx0 = std::min(ca.x, cb.x), cx1 = std::max(ca.x, cb.x), cy0 = std::min(ca.y, cb.y), cy1 = std::max(ca.y, cb.y);
         const bool last_col = t.core.col + t.core.width == m.grid.width, last_row = t.core.row + t.core.height == m.grid.height;
@@ -986,7 +993,9 @@ RunReport merge_tiles(const RunManifest& m, const std::string& out_dir, const Pr
     if (!m.options.buildings.model.vertical_crs.empty() && !crs.vertical_epsg)
         crs = combine_with_vertical(crs, crs_from_user_input(m.options.buildings.model.vertical_crs, "--vertical-crs"));
     CityModel model;
-    model.crs = model_crs_of(crs);
+    Extent extent = empty_extent();
+    for (const Building& b : buildings) include(extent, parts_extent(b.footprint));
+    model.crs = model_crs_of(crs, extent);
     model.buildings = std::move(buildings);
     // The tile lines hold values only: the declared types come from the tile reports.
     for (const TileReport& t : rep.tiles)

@@ -38,8 +38,10 @@ bool wants(const std::vector<int>& v, int s) { return std::find(v.begin(), v.end
 
 }  // namespace
 
-ModelCrs model_crs_of(const CrsInfo& c) {
+ModelCrs model_crs_of(const CrsInfo& c, const Extent& buildings) {
     ModelCrs m;
+    // At the centre of the buildings (Web Mercator's scale varies by 1e-4 over a kilometre at mid latitudes).
+    if (!c.geographic) m.ground_scale = ground_scale_factor_at(c, buildings);
     m.label = c.label();
     m.horizontal_epsg = c.horizontal_epsg;
     m.vertical_epsg = c.vertical_epsg;
@@ -73,7 +75,9 @@ void ExportOptions::validate() const {
 
 CityModel build_city_model(const PolygonLayer& layer, const CrsInfo& crs, const ExportOptions& o, const std::string& path) {
     CityModel model;
-    model.crs = model_crs_of(crs);
+    Extent extent = empty_extent();
+    for (const Feature& f : layer.features) include(extent, parts_extent(f.geometry));
+    model.crs = model_crs_of(crs, extent);
     auto index_of = [&](const std::string& name) -> int {
         for (std::size_t i = 0; i < layer.field_names.size(); ++i)
             if (layer.field_names[i] == name) return static_cast<int>(i);
@@ -178,7 +182,7 @@ ExportReport write_city_model(const CityModel& model, const CrsInfo& crs, const 
             fields.push_back({names[k], t});
         }
         for (const FieldDefinition& f : kOwnFieldDefinitions) fields.push_back(f);
-        const double unit3 = model.crs.linear_unit_m * model.crs.linear_unit_m * model.crs.z_unit_m;
+        const double unit3 = model.crs.volume_unit_m3();
         std::vector<Feature> features;
         features.reserve(model.buildings.size());
         for (const Building& b : model.buildings) {

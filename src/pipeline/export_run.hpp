@@ -48,8 +48,10 @@ struct ExportReport {
     std::map<std::string, double> seconds;        ///< format -> seconds spent writing
 };
 
-/// The exporters' view of a CRS: EPSG codes of the parts and of the compound, units.
-ModelCrs model_crs_of(const CrsInfo& crs);
+/// The exporters' view of a CRS: EPSG codes of the parts and of the compound, units,
+/// and the ground scale at the centre of `buildings` (map units of `crs`; an empty
+/// extent gives the nominal scale 1).
+ModelCrs model_crs_of(const CrsInfo& crs, const Extent& buildings);
 
 /// Builds the city model of a polygon layer: ids (unique), heights from the
 /// named fields, attributes, status carried over from a source `status` /

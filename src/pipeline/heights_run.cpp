@@ -12,6 +12,7 @@
 #include "core/memory.hpp"
 #include "core/log.hpp"
 #include "crs/crs.hpp"
+#include "io/cloud_crs.hpp"
 #include "io/vector.hpp"
 
 namespace cityforge {
@@ -50,10 +51,16 @@ const std::vector<std::string>& heights_output_fields() {
     return names;
 }
 
-PolygonLayer read_footprints_for_heights(const std::string& path, const HeightsRunOptions& o) {
+PolygonLayer read_footprints_for_heights(const std::string& path, const std::string& cloud_path, const HeightsRunOptions& o) {
     PolygonLayer footprints = read_polygon_layer(path, o.footprint_layer);
+    if (footprints.crs.geographic) {
+        // Heights need metres: lon/lat footprints are worked on (and written) in the cloud's
+        // projected CRS (its points then need no reprojection), else in their UTM zone.
+        const CrsInfo cloud = resolve_cloud_crs(cloud_path, o.cloud_crs).crs;
+        const std::string working = !cloud.empty() && !cloud.geographic && cloud.horizontal_epsg ? "EPSG:" + std::to_string(*cloud.horizontal_epsg) : "";
+        put_layer_on(footprints, working_crs_for_layer(footprints, working, path), path);
+    }
     if (footprints.crs.empty()) throw Error(path, "footprints have no coordinate reference system");
-    if (footprints.crs.geographic) throw Error(path, "footprints are in a geographic CRS; reproject them to a projected CRS first");
     std::vector<std::string> ours = heights_output_fields();
     ours.insert(ours.end(), o.later_fields.begin(), o.later_fields.end());
     drop_colliding_fields(footprints, ours, path);
@@ -72,7 +79,7 @@ MapPoint footprints_centre(const std::vector<Extent>& extents) {
 HeightsStage compute_heights_stage(const std::string& footprints_path, const std::string& cloud_path, const HeightsRunOptions& o,
                                    const Progress& progress) {
     o.heights.validate();
-    PolygonLayer footprints = read_footprints_for_heights(footprints_path, o);
+    PolygonLayer footprints = read_footprints_for_heights(footprints_path, cloud_path, o);
     progress(0.05, "footprints");
     std::vector<Extent> extents;
     for (const Feature& f : footprints.features) extents.push_back(parts_extent(f.geometry));
@@ -103,7 +110,9 @@ HeightsStage compute_heights_stage(PolygonLayer footprints_in, PreparedCloud clo
     rep.crs = pc.crs.label();
 
     HeightOptions ho = o.heights;
-    ho.unit_m = footprints.crs.linear_unit_m;
+    Extent all = empty_extent();
+    for (const Feature& f : footprints.features) include(all, parts_extent(f.geometry));
+    ho.unit_m = ground_metres_per_unit_at(footprints.crs, all);  // ground metres (Web Mercator: cos(latitude))
     ho.z_unit_m = cloud_crs.z_unit_m;
     std::vector<std::vector<Polygon>> parts;
     parts.reserve(footprints.features.size());
@@ -156,10 +165,10 @@ namespace {
 // HeightsRunOptions::max_points_in_memory); rows in the footprints' order.
 HeightsStage tiled_heights_stage(PolygonLayer footprints, const std::string& footprints_path, const std::string& cloud_path, const HeightsRunOptions& o, const Progress& progress,
                                  std::size_t& tiles_used) {
-    const double unit = footprints.crs.linear_unit_m;
     std::vector<Extent> ext(footprints.features.size());
     Extent all = empty_extent();
     for (std::size_t i = 0; i < ext.size(); ++i) include(all, ext[i] = parts_extent(footprints.features[i].geometry));
+    const double unit = ground_metres_per_unit_at(footprints.crs, all);
     HeightsRunOptions ho = o;
     const CloudPlan plan = plan_cloud(cloud_path, o.cloud_crs, footprints.crs, o.outliers, footprints_centre(ext));  // one limit for every tile
     ho.outliers = plan.outliers;
@@ -241,7 +250,7 @@ HeightsRunReport run_heights_unguarded(const std::string& footprints_path, const
     HeightsStage st;
     std::size_t tiles = 1;
     if (o.max_points_in_memory > 0 && announced > o.max_points_in_memory) {
-        PolygonLayer footprints = read_footprints_for_heights(footprints_path, o);
+        PolygonLayer footprints = read_footprints_for_heights(footprints_path, cloud_path, o);
         st = tiled_heights_stage(std::move(footprints), footprints_path, cloud_path, o, progress.sub(0.0, 0.95), tiles);
     } else {
         st = compute_heights_stage(footprints_path, cloud_path, o, progress.sub(0.0, 0.95));

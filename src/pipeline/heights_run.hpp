@@ -37,8 +37,11 @@ struct HeightsRunOptions {
 const std::vector<std::string>& heights_output_fields();
 
 /// The footprints of `path` (layer o.footprint_layer) ready for heights: a
-/// projected CRS, input fields that collide with ours left out (a warning).
-PolygonLayer read_footprints_for_heights(const std::string& path, const HeightsRunOptions& o);
+/// projected CRS (lon/lat footprints are moved onto the horizontal CRS of the
+/// cloud `cloud_path` when that is projected, else onto the UTM zone of their
+/// centre; the output is then written in that CRS), input fields that collide
+/// with ours left out (a warning).
+PolygonLayer read_footprints_for_heights(const std::string& path, const std::string& cloud_path, const HeightsRunOptions& o);
 
 struct HeightsRunReport {
     std::string output_path;

@@ -21,7 +21,7 @@ CityModel build_lod2_model(const HeightsStage& st, const CrsInfo& crs, const Roo
 
     const auto t1 = std::chrono::steady_clock::now();
     Lod2Options lo = o.lod2;
-    lo.unit_m = crs.linear_unit_m;
+    lo.unit_m = model.crs.linear_unit_m * model.crs.ground_scale;  // ground metres per map unit
     lo.z_unit_m = st.cloud.source_crs.z_unit_m;
     const PointCloud& cloud = st.cloud.cloud;
     std::vector<Lod2Result> results(model.buildings.size());

@@ -713,3 +713,63 @@ TEST_CASE("Every command runs again on its own output, and again with --overwrit
     ok(run_cli("run --quiet --footprints " + fp + " --cloud " + delft + " --cloud-crs EPSG:7415 --formats gpkg --out " + (dir / "run1")));
     CHECK(info_json(dir / "run1/buildings.gpkg")["layers"][0]["feature_count"] == 12);
 }
+
+// ---------------------------------------------------------------- lon/lat footprints and Web Mercator volumes
+
+TEST_CASE("Lon/lat footprints (as OpenStreetMap extracts are) work in heights, roofs and run, on the cloud's projected CRS",
+          "[inputs][geographic][cli]") {
+    ScratchDir dir("inputs_lonlat_footprints");
+    const std::string data = shared_data("delft_ahn3_bgt_west");
+    const std::string rd = data + "/bgt_pand_west_with_ref_heights.geojson", cloud = data + "/ahn3_delft_west.las";
+    const std::string ll = dir / "fp4326.gpkg";
+    REQUIRE(run_command("ogr2ogr -t_srs EPSG:4326 " + ll + " " + rd).exit_code == 0);
+    auto mean_height = [](const std::string& gpkg) {
+        const auto r = run_command("ogrinfo -q -ro " + gpkg + " -sql \"SELECT avg(height_m) AS h, count(*) AS n FROM buildings\"");
+        const std::size_t at = r.out.find("h (Real) = ");
+        REQUIRE(at != std::string::npos);
+        return std::stod(r.out.substr(at + 11));
+    };
+    const auto a = run_cli("heights --footprints " + rd + " --cloud " + cloud + " --cloud-crs EPSG:7415 --out " + (dir / "rd.gpkg"));
+    REQUIRE(a.exit_code == 0);
+    const auto b = run_cli("heights --footprints " + ll + " --cloud " + cloud + " --cloud-crs EPSG:7415 --out " + (dir / "ll.gpkg"));
+    INFO(b.err);
+    REQUIRE(b.exit_code == 0);
+    CHECK(b.err.find("worked on in EPSG:28992") != std::string::npos);  // the cloud's CRS, not a third one
+    CHECK(mean_height(dir / "ll.gpkg") == Approx(mean_height(dir / "rd.gpkg")).margin(0.002));
+    CHECK(run_command("gdalsrsinfo -o epsg " + (dir / "ll.gpkg")).out.find("EPSG:7415") != std::string::npos);  // RD New + NAP, the cloud's
+    // roofs and run take them too (run without an ortho: the grid is laid on the same CRS).
+    const auto r = run_cli("roofs --quiet --footprints " + ll + " --cloud " + cloud + " --cloud-crs EPSG:7415 --out " + (dir / "roofs"));
+    INFO(r.err);
+    CHECK(r.exit_code == 0);
+    const auto run = run_cli("run --quiet --footprints " + ll + " --cloud " + cloud + " --cloud-crs EPSG:7415 --out " + (dir / "run"));
+    INFO(run.err);
+    REQUIRE(run.exit_code == 0);
+    const json rep = json::parse(slurp(dir / "run/run_report.json"));
+    CHECK(rep.dump().find("28992") != std::string::npos);
+    CHECK(count_lines(slurp(dir / "run/buildings.city.jsonl")) == 136);  // metadata + 135 buildings
+    // Without a CRS from the cloud, the UTM zone of the footprints' centre (Delft: 31N).
+    const auto utm = run_cli("heights --footprints " + ll + " --cloud " + cloud + " --cloud-crs EPSG:7415 --out " + (dir / "utm.gpkg") + " --overwrite");
+    CHECK(utm.exit_code == 0);
+}
+
+TEST_CASE("Web Mercator models: volumes in ground cubic metres (the grid metre is 1/cos(latitude) ground metres)",
+          "[inputs][geographic][cli]") {
+    ScratchDir dir("inputs_webmercator_volume");
+    // A town laid out on EPSG:3857 at 60 deg N, where one grid metre is 0.5 ground metres.
+    REQUIRE(run_cli("synth --quiet --out " + (dir / "s") + " --size-m 120 --epsg 3857 --origin 1113195 8399737 --seed 3").exit_code == 0);
+    REQUIRE(run_cli("heights --quiet --footprints " + (dir / "s/truth.geojson") + " --cloud " + (dir / "s/cloud.las") + " --out " +
+                    (dir / "h.gpkg")).exit_code == 0);
+    REQUIRE(run_cli("export --quiet --in " + (dir / "h.gpkg") + " --out " + (dir / "m") + " --formats geojson,cityjson").exit_code == 0);
+    const json fc = json::parse(slurp(dir / "m/buildings.geojson"));
+    REQUIRE(!fc["features"].empty());
+    std::size_t checked = 0;
+    for (const json& f : fc["features"]) {
+        const json& p = f["properties"];
+        if (p["lod1_volume_m3"].is_null() || p["height_m"].is_null()) continue;
+        // The prism's volume: nominal area (the footprint's grid area, area_m2 of the synthetic truth) x 0.25 x height.
+        const double nominal = p["area_m2"].get<double>(), h = p["height_m"].get<double>();
+        CHECK(p["lod1_volume_m3"].get<double>() == Approx(nominal * 0.25 * h).epsilon(0.01));
+        ++checked;
+    }
+    CHECK(checked > 3);
+}
