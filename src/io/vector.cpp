@@ -235,8 +235,18 @@ Polygon from_ogr(const OGRPolygon* p) {
 }
 }  // namespace
 
-PolygonLayer read_polygon_layer(const std::string& path, const std::string& layer_name) {
+PolygonLayer read_polygon_layer(const std::string& name, const std::string& layer_arg) {
     ensure_gdal_registered();
+    // GDAL's dataset name for one table of a GeoPackage, GPKG:file.gpkg:layer (GDAL 3.6 opens
+    // the whole file with it): the layer is taken from the name.
+    std::string path = name, layer_name = layer_arg;
+    if (name.rfind("GPKG:", 0) == 0) {
+        const std::size_t colon = name.rfind(':');
+        if (colon > 5 && std::filesystem::is_regular_file(name.substr(5, colon - 5))) {
+            path = name.substr(5, colon - 5);
+            if (layer_name.empty()) layer_name = name.substr(colon + 1);
+        }
+    }
     require_dataset_exists(path);
     GdalErrorCapture capture;
     std::unique_ptr<GDALDataset> ds(GDALDataset::Open(path.c_str(), GDAL_OF_VECTOR | GDAL_OF_READONLY));
@@ -257,7 +267,8 @@ PolygonLayer read_polygon_layer(const std::string& path, const std::string& laye
         if (!layer) throw Error(path, "has no layer '" + layer_name + "' (layers: " + names + ")");
     } else if (polygon_layers.size() > 1) {
         throw Error(path, "has " + std::to_string(polygon_layers.size()) + " polygon layers (" + names +
-                              "); choose one with --layer NAME or the dataset name GPKG:" + path + ":NAME");
+                              "); choose one with --layer NAME" +
+                              (ds->GetDriver() && EQUAL(ds->GetDriver()->GetDescription(), "GPKG") ? " or the dataset name GPKG:" + path + ":NAME" : std::string()));
     } else {
         layer = !polygon_layers.empty() ? polygon_layers.front() : ds->GetLayerCount() > 0 ? ds->GetLayer(0) : nullptr;
     }
@@ -346,29 +357,41 @@ void reproject_features(std::vector<Feature>& features, const CrsInfo& from, con
     });
 }
 
+namespace {
+constexpr const char* kNoLayerCrs = "footprints have no CRS (coordinate reference system); give the file one (ogr2ogr -a_srs EPSG:...)";
+}  // namespace
+
 CrsInfo working_crs_for_layer(const PolygonLayer& layer, const std::string& working_crs, const std::string& subject) {
+    if (layer.crs.empty()) throw Error(subject, kNoLayerCrs);
+    Extent all = empty_extent();
+    for (const Feature& f : layer.features) include(all, parts_extent(f.geometry));
+    if (layer.crs.geographic && all.min_x <= all.max_x &&
+        (all.min_x < -540.0 || all.max_x > 540.0 || all.min_y < -90.0 || all.max_y > 90.0)) {
+        char box[160];
+        std::snprintf(box, sizeof box, "x %.6g..%.6g, y %.6g..%.6g", all.min_x, all.max_x, all.min_y, all.max_y);
+        throw Error(subject, std::string("coordinates (") + box + ") are not longitudes and latitudes, but the CRS is " + layer.crs.label() +
+                                 "; are they in a projected CRS? (a GeoJSON without a \"crs\" member is RFC 7946 lon/lat)");
+    }
     if (!working_crs.empty()) {
         const CrsInfo w = crs_from_user_input(working_crs, "--working-crs");
         if (w.geographic) throw Error("--working-crs", w.label() + " is geographic; the working CRS must be projected (metres)");
         return w;
     }
-    if (layer.crs.empty()) throw Error(subject, "footprints have no coordinate reference system");
     if (!layer.crs.geographic) return layer.crs;
-    Extent all = empty_extent();
-    for (const Feature& f : layer.features) include(all, parts_extent(f.geometry));
     if (!(all.min_x <= all.max_x)) throw Error(subject, "no footprints to place on a working CRS");
     return utm_crs_for(layer.crs, {0.5 * (all.min_x + all.max_x), 0.5 * (all.min_y + all.max_y)});
 }
 
 void put_layer_on(PolygonLayer& layer, const CrsInfo& target, const std::string& subject) {
     if (target.empty() || same_horizontal_crs(layer.crs, target)) return;
-    if (layer.crs.empty()) throw Error(subject, "footprints have no coordinate reference system");
-    log::warning(subject + ": footprints in " + layer.crs.label() + " worked on in " + target.label());
+    if (layer.crs.empty()) throw Error(subject, kNoLayerCrs);
+    log::info(subject + ": footprints in " + layer.crs.label() + " worked on in " + target.label());
     reproject_features(layer.features, layer.crs, target, subject);
     layer.crs = target;
 }
 
-std::vector<std::string> drop_colliding_fields(PolygonLayer& layer, const std::vector<std::string>& ours, const std::string& subject) {
+std::vector<std::string> drop_colliding_fields(PolygonLayer& layer, const std::vector<std::string>& ours, const std::string& subject,
+                                               bool warn) {
     auto lower = [](std::string s) {
         for (char& c : s) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
         return s;
@@ -395,7 +418,8 @@ std::vector<std::string> drop_colliding_fields(PolygonLayer& layer, const std::v
     layer.field_types = std::move(types);
     std::string list;
     for (const std::string& n : dropped) list += (list.empty() ? "" : ", ") + n;
-    log::warning(subject + ": input field" + (dropped.size() > 1 ? "s " : " ") + list + (dropped.size() > 1 ? " are" : " is") +
+    if (warn && !dropped.empty())
+        log::warning(subject + ": input field" + (dropped.size() > 1 ? "s " : " ") + list + (dropped.size() > 1 ? " are" : " is") +
                  " replaced by the value" + (dropped.size() > 1 ? "s" : "") + " computed here");
     return dropped;
 }

@@ -88,8 +88,10 @@ bool is_database_name(const std::string& path);
 /// GeoPackage, SQLite and Shapefile compare them), with one warning naming
 /// them and `subject`: our values replace theirs, the other fields pass
 /// through. Re-running a command on its own output therefore works and gives
-/// the same fields. Returns the names left out.
-std::vector<std::string> drop_colliding_fields(PolygonLayer& layer, const std::vector<std::string>& ours, const std::string& subject);
+/// the same fields. Returns the names left out. `warn` false: no warning (a
+/// caller that has said it once already, e.g. per tile).
+std::vector<std::string> drop_colliding_fields(PolygonLayer& layer, const std::vector<std::string>& ours, const std::string& subject,
+                                               bool warn = true);
 
 /// Moves every vertex of `features` from `from` to `to` (one PROJ
 /// transformation for all). Throws Error naming `subject` when PROJ fails.

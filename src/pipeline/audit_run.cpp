@@ -77,11 +77,6 @@ std::string md_cell(const std::string& text) {
     return out;
 }
 
-void reproject_layer(PolygonLayer& layer, const CrsInfo& to, const std::string& path) {
-    reproject_features(layer.features, layer.crs, to, path);
-    layer.crs = to;
-}
-
 // Reads both layers and brings the prediction into the reference's CRS.
 struct LayerPair {
     PolygonLayer pred, ref;
@@ -91,12 +86,12 @@ LayerPair read_pair(const std::string& pred_path, const std::string& ref_path, c
     LayerPair lp{read_polygon_layer(pred_path, pred_layer), read_polygon_layer(ref_path, ref_layer), false};
     if (lp.ref.crs.empty()) throw Error(ref_path, "reference footprints have no CRS");
     if (lp.pred.crs.empty()) throw Error(pred_path, "predicted footprints have no CRS");
-    if (lp.ref.crs.geographic) throw Error(ref_path, "reference footprints are in a geographic CRS; areas need a projected CRS");
-    if (!same_horizontal_crs(lp.pred.crs, lp.ref.crs)) {
-        log::info("reprojecting " + pred_path + " from " + lp.pred.crs.label() + " to " + lp.ref.crs.label());
-        reproject_layer(lp.pred, lp.ref.crs, pred_path);
-        lp.reprojected = true;
-    }
+    // Compared in the reference's CRS; lon/lat references (OpenStreetMap) on the prediction's projected
+    // CRS, else on their UTM zone: IoU, areas and PoLiS need metres.
+    if (lp.ref.crs.geographic)
+        put_layer_on(lp.ref, lp.pred.crs.geographic ? working_crs_for_layer(lp.ref, {}, ref_path) : lp.pred.crs, ref_path);
+    lp.reprojected = !same_horizontal_crs(lp.pred.crs, lp.ref.crs);
+    put_layer_on(lp.pred, lp.ref.crs, pred_path);
     return lp;
 }
 
@@ -290,12 +285,14 @@ RectangleAuditReport audit_rectangles(const std::string& fitted_path, const std:
         }
         std::sort(rep.rows.begin(), rep.rows.end(), [](const RectangleError& a, const RectangleError& b) { return a.fid < b.fid; });
     } else {
-        const PolygonLayer layer = read_polygon_layer(fitted_path);
+        PolygonLayer layer = read_polygon_layer(fitted_path);
         if (layer.crs.empty()) throw Error(fitted_path, "fitted footprints have no CRS");
-        if (layer.crs.geographic) throw Error(fitted_path, "fitted footprints are in a geographic CRS; areas need a projected CRS");
+        put_layer_on(layer, working_crs_for_layer(layer, {}, fitted_path), fitted_path);  // lon/lat: on their UTM zone
         crs_label = layer.crs.label(), layer_crs = layer.crs;
         const int field = field_index(layer, o.original_area_field, fitted_path);
-        const double unit2 = layer.crs.linear_unit_m * layer.crs.linear_unit_m;
+        Extent all = empty_extent();
+        for (const Feature& f : layer.features) include(all, parts_extent(f.geometry));
+        const double unit = ground_metres_per_unit_at(layer.crs, all), unit2 = unit * unit;  // ground m^2 (Web Mercator too)
         rep.fitted = layer.features.size();
         for (std::size_t i = 0; i < layer.features.size(); ++i) {
             const auto a0 = number(layer.features[i].values[field]);

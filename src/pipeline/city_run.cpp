@@ -245,6 +245,14 @@ RunOptions run_options_from_json(const json& j, const std::string& where, RunOpt
 }
 
 namespace {
+// The fields a run computes for given footprints (heights, then roofs): input fields of these names are replaced.
+std::vector<std::string> run_computed_fields() {
+    std::vector<std::string> ours = heights_output_fields();
+    for (const FieldDefinition& f : roof_output_fields()) ours.push_back(f.name);
+    ours.insert(ours.end(), model_output_fields().begin(), model_output_fields().end());
+    return ours;
+}
+
 // The CRS a run writes its city models in: --out-crs, else the input's own
 // CRS (ortho or footprints), else, when that is geographic, the working CRS
 // (a city model in degrees is refused, as by `export`).
@@ -297,6 +305,7 @@ RunManifest plan_run(const RunOptions& in) {
             if (!cloud.empty() && !cloud.geographic && cloud.horizontal_epsg) working = "EPSG:" + std::to_string(*cloud.horizontal_epsg);
         }
         put_layer_on(fp, working_crs_for_layer(fp, working, o.footprints), o.footprints);
+        drop_colliding_fields(fp, run_computed_fields(), o.footprints);  // the warning, once per run
         Extent e = empty_extent();
         for (const Feature& f : fp.features) include(e, parts_extent(f.geometry));
         const double cell = o.footprint_grid_m / fp.crs.linear_unit_m;
@@ -730,6 +739,8 @@ std::vector<Building> tile_buildings(const RunManifest& m, const TileSpec& t, co
         const CrsInfo layer_crs = footprints.crs;
         PolygonLayer all = read_polygon_layer(o.footprints, o.buildings.heights.footprint_layer);
         put_layer_on(all, grid_crs, o.footprints);  // footprints in another CRS than the ortho's (or lon/lat ones): on the grid
+        // Input fields we compute (a run on its own output, truth files) are replaced; plan_run said which.
+        drop_colliding_fields(all, run_computed_fields(), o.footprints, false);
         footprints.field_names = all.field_names, footprints.field_types = all.field_types;
         const double cx0 = std::min(ca.x, cb.x), cx1 = std::max(ca.x, cb.x), cy0 = std::min(ca.y, cb.y), cy1 = std::max(ca.y, cb.y);
         const bool last_col = t.core.col + t.core.width == m.grid.width, last_row = t.core.row + t.core.height == m.grid.height;

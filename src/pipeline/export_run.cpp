@@ -38,6 +38,8 @@ bool wants(const std::vector<int>& v, int s) { return std::find(v.begin(), v.end
 
 }  // namespace
 
+const std::set<std::string>& model_output_fields() { return kOwnFields; }
+
 ModelCrs model_crs_of(const CrsInfo& c, const Extent& buildings) {
     ModelCrs m;
     // At the centre of the buildings (Web Mercator's scale varies by 1e-4 over a kilometre at mid latitudes).

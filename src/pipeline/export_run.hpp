@@ -4,6 +4,7 @@
 // GeoPackage, CityGML 2.0 (LOD0+1, LOD0+2), CityJSON 2.0 and CityJSONSeq, all
 // from one building model, each solid validated and its errors reported.
 #include <map>
+#include <set>
 #include <string>
 #include <vector>
 
@@ -47,6 +48,12 @@ struct ExportReport {
     std::map<std::string, std::string> files;     ///< format -> path written
     std::map<std::string, double> seconds;        ///< format -> seconds spent writing
 };
+
+/// The fields build_city_model computes itself ("cityforge_id", "status",
+/// "reason", "roof_z", validity, volumes, roof type, refined-LOD flags): input
+/// fields of these names are replaced ("status"/"reason" carry a source's
+/// failure over when they say more than "ok").
+const std::set<std::string>& model_output_fields();
 
 /// The exporters' view of a CRS: EPSG codes of the parts and of the compound, units,
 /// and the ground scale at the centre of `buildings` (map units of `crs`; an empty

@@ -58,9 +58,11 @@ PolygonLayer read_footprints_for_heights(const std::string& path, const std::str
         // projected CRS (its points then need no reprojection), else in their UTM zone.
         const CrsInfo cloud = resolve_cloud_crs(cloud_path, o.cloud_crs).crs;
         const std::string working = !cloud.empty() && !cloud.geographic && cloud.horizontal_epsg ? "EPSG:" + std::to_string(*cloud.horizontal_epsg) : "";
-        put_layer_on(footprints, working_crs_for_layer(footprints, working, path), path);
+        const CrsInfo on = working_crs_for_layer(footprints, working, path);
+        log::warning(path + ": lon/lat footprints (" + footprints.crs.label() + ") worked on and written in " + on.label());
+        put_layer_on(footprints, on, path);
     }
-    if (footprints.crs.empty()) throw Error(path, "footprints have no coordinate reference system");
+    if (footprints.crs.empty()) throw Error(path, "footprints have no CRS (coordinate reference system); give the file one (ogr2ogr -a_srs EPSG:...)");
     std::vector<std::string> ours = heights_output_fields();
     ours.insert(ours.end(), o.later_fields.begin(), o.later_fields.end());
     drop_colliding_fields(footprints, ours, path);

@@ -15,6 +15,14 @@ void RoofsRunOptions::validate() const {
     model.validate();
 }
 
+const std::vector<FieldDefinition>& roof_output_fields() {
+    static const std::vector<FieldDefinition> fields{
+        {"roof_planes", FieldType::integer}, {"roof_slope_deg", FieldType::real},         {"roof_azimuth_deg", FieldType::real},
+        {"lod2_rmse_m", FieldType::real},    {"lod2_median_residual_m", FieldType::real}, {"lod2_fallback", FieldType::string},
+        {"lod2_plane_settings", FieldType::string}, {"lod2_kind", FieldType::string}};
+    return fields;
+}
+
 CityModel build_lod2_model(const HeightsStage& st, const CrsInfo& crs, const RoofsRunOptions& o, const std::string& source,
                            RoofsRunReport& rep) {
     CityModel model = build_city_model(st.table, crs, o.model, source);
@@ -60,11 +68,7 @@ CityModel build_lod2_model(const HeightsStage& st, const CrsInfo& crs, const Roo
         else ++rep.lod2, rmse_sum += r.rmse_m;
         complete_building(b, model.crs, o.model.validity);
     }
-    for (const auto& [name, type] : std::initializer_list<std::pair<const char*, FieldType>>{
-             {"roof_planes", FieldType::integer}, {"roof_slope_deg", FieldType::real}, {"roof_azimuth_deg", FieldType::real},
-             {"lod2_rmse_m", FieldType::real}, {"lod2_median_residual_m", FieldType::real}, {"lod2_fallback", FieldType::string},
-             {"lod2_plane_settings", FieldType::string}, {"lod2_kind", FieldType::string}})
-        model.attribute_types.emplace_back(name, type);
+    for (const FieldDefinition& f : roof_output_fields()) model.attribute_types.emplace_back(f.name, f.type);
     rep.mean_rmse_m = rep.lod2 ? rmse_sum / double(rep.lod2) : 0.0;
     return model;
 }
@@ -77,8 +81,7 @@ RoofsRunReport run_roofs(const std::string& footprints_path, const std::string& 
     HeightsRunOptions ho = o.heights;
     ho.heights.keep_roof_points = true;
     // The roof attributes written below replace input fields of their names (re-runs).
-    for (const char* n : {"roof_planes", "roof_slope_deg", "roof_azimuth_deg", "lod2_rmse_m", "lod2_median_residual_m", "lod2_fallback", "lod2_plane_settings", "lod2_kind"})
-        ho.later_fields.push_back(n);
+    for (const FieldDefinition& f : roof_output_fields()) ho.later_fields.push_back(f.name);
     HeightsStage st = compute_heights_stage(footprints_path, cloud_path, ho, progress.sub(0.0, 0.6));
     rep.heights = st.report;
     CrsInfo crs = st.table.crs;

@@ -30,6 +30,10 @@ struct RoofsRunReport {
     double seconds = 0.0;
 };
 
+/// The roof attributes build_lod2_model adds to every building, in order, with
+/// their types. Input fields of these names are replaced (re-runs on our output).
+const std::vector<FieldDefinition>& roof_output_fields();
+
 /// The LOD2 stage on computed heights (made with keep_roof_points): the city
 /// model of the footprints with LOD1 and LOD2 solids and the roof
 /// attributes; fills the roof counts of `report`. `source` names the input in messages.

@@ -78,7 +78,7 @@ DetectionImage read_detection_image(const std::string& path, int nir_band) {
     const RasterInfo& info = reader.info();
     std::vector<int> all;
     for (int b = 1; b <= info.band_count(); ++b) all.push_back(b);
-    // The colour bands' nodata marks invalid pixels (an alpha band is a mask, not data).
+    // The colour bands (an alpha band is a mask, not data).
     std::vector<int> colours;
     for (int b = 1; b <= info.band_count(); ++b)
         if (!(info.band_count() > 1 && info.bands[b - 1].color_interpretation == "Alpha")) colours.push_back(b);
@@ -87,7 +87,8 @@ DetectionImage read_detection_image(const std::string& path, int nir_band) {
     Image<float> colour_image(image.width, image.height, int(colours.size()), 0.0f);
     for (std::size_t k = 0; k < colours.size(); ++k)
         std::copy(image.band_data(colours[k] - 1), image.band_data(colours[k] - 1) + image.pixel_count(), colour_image.band_data(int(k)));
-    const std::vector<uint8_t> valid = data_mask(colour_image, info, colours);
+    // Nodata values, the alpha band and an internal or external mask band (valid_pixels, as every reader of the ortho).
+    const std::vector<uint8_t> valid = valid_pixels(reader, {0, 0, info.width, info.height}, colour_image, colours);
     return detection_image_from(image, all, valid, info, nir_band, path);
 }
 
