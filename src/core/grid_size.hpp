@@ -17,9 +17,13 @@ struct GridSize {
 };
 
 /// At most this many cells per point the grid holds, beyond a floor of
-/// kGridFreeCells (small clouds may have sparse grids).
+/// kGridFreeCells. The floor is set by memory, not by density: 64 M cells
+/// (8,000 x 8,000, 4 km at 0.5 m; a few hundred MB per raster layer) are
+/// always allowed, so sparse but real clouds (1,065 points over 1 x 1.4 km
+/// rasterised at 0.5 m) pass, while garbage coordinates thousands of
+/// kilometres away (10^14 cells) are still refused before any allocation.
 inline constexpr double kGridCellsPerPoint = 256.0;
-inline constexpr double kGridFreeCells = 4.0e6;
+inline constexpr double kGridFreeCells = 64.0e6;
 
 /// The cells covering [min_x, max_x] x [min_y, max_y] (CRS units) with cells
 /// of `cell` units: floor(extent / cell) + 1 a side. Throws Error(subject, ...)

@@ -24,11 +24,12 @@ namespace {
 using json = nlohmann::json;
 namespace fs = std::filesystem;
 
-// The solids a mesh shows for a building, and their LOD name.
+// The solids a mesh shows for a building, and their refined LOD name, as the
+// CityJSON writer and 3DBAG name them ("1.2": one height per footprint, "2.2": roof planes).
 const std::vector<Solid>* mesh_solids(const Building& b, bool prefer_lod2, std::string& lod) {
-    if (prefer_lod2 && !b.lod2.empty()) return lod = "2", &b.lod2;
-    if (!b.lod1.empty()) return lod = "1", &b.lod1;
-    if (!b.lod2.empty()) return lod = "2", &b.lod2;
+    if (prefer_lod2 && !b.lod2.empty()) return lod = "2.2", &b.lod2;
+    if (!b.lod1.empty()) return lod = "1.2", &b.lod1;
+    if (!b.lod2.empty()) return lod = "2.2", &b.lod2;
     return nullptr;
 }
 
@@ -288,7 +289,7 @@ std::size_t write_glb(const std::string& path, const CityModel& model, bool pref
         std::vector<Face> f = faces_of(*s);
         if (textured) {  // texture coordinates from the map x, y, before the shift to the local frame
             std::vector<std::vector<std::array<float, 2>>> uv(f.size());
-            const RoofTextureWindow* w = lod == "2" ? textures->layout.window_of(bi) : nullptr;
+            const RoofTextureWindow* w = lod == "2.2" ? textures->layout.window_of(bi) : nullptr;
             for (std::size_t k = 0; w && k < f.size(); ++k)
                 if (f[k].type == SurfaceType::roof)
                     for (const Point3& p : face_vertices(f[k])) {

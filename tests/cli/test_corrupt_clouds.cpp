@@ -249,6 +249,12 @@ TEST_CASE("grids over scattered or huge coordinates are refused naming the file,
     write_xyz(s.cloud_path, dir / "far.xyz", far);
     check_one_line_error(cli_guarded("heights --footprints " + s.truth_path + " --cloud " + (dir / "far.xyz") + crs + " --out " + (dir / "h.geojson")),
                          dir / "far.xyz", "grid too large");
+    // A sparse but real cloud is not refused: PDAL's 1.2-with-color.las, 1,065 points over about 1 x 1.4 km, at 0.5 m.
+    const auto sparse = cli_guarded("cloud rasterize --quiet --cloud " + test::shared_data("laz_corpus/reference_las/1.2-with-color.las") +
+                                    " --cloud-crs EPSG:2994 --gsd 0.5 --out " + (dir / "sparse"));
+    INFO(sparse.err);
+    CHECK(sparse.exit_code == 0);
+    CHECK(std::filesystem::exists(dir / "sparse/dsm.tif"));
     // 1e308: the extent itself overflows.
     write_xyz(s.cloud_path, dir / "huge.xyz", "1e308 1e308 0 0\n-1e308 -1e308 0 0\n");
     check_one_line_error(cli_guarded("heights --footprints " + s.truth_path + " --cloud " + (dir / "huge.xyz") + crs + " --out " + (dir / "h.geojson")),
