@@ -256,8 +256,8 @@ void add_self_trained_buildings(BuildingMask& mask, std::vector<std::string>& so
                                 const Progress& progress) {
     const int w = mask.labels.width, h = mask.labels.height;
     const std::size_t n = std::size_t(w) * std::size_t(h);
-    std::vector<int> source_bands;  // the colours: every band but the nDSM band
-    for (int b = 1; b <= info.band_count(); ++b)
+    std::vector<int> source_bands;  // the bands read (image_bands: no alpha, also not the warper's), but the nDSM band
+    for (int b : image_bands(info))
         if (b != o.ndsm_band) source_bands.push_back(b);
     const DetectionImage di = detection_image_from(img.image, source_bands, img.valid, info, o.nir_band, o.ortho);
     std::vector<uint8_t> has(n), cloud_building(n);

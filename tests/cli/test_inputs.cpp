@@ -778,3 +778,28 @@ TEST_CASE("Web Mercator models: volumes in ground cubic metres (the grid metre i
     }
     CHECK(checked > 3);
 }
+
+TEST_CASE("A lon/lat ortho with a cloud (ortho_cloud footprints) finds what the projected ortho finds", "[inputs][geographic][cli]") {
+    ScratchDir dir("inputs_lonlat_ortho_cloud");
+    REQUIRE(run_cli("synth --quiet --out " + (dir / "s") + " --size-m 150 --seed 4").exit_code == 0);
+    // The ortho warped to EPSG:4326 (the warped grid read back on UTM carries the warper's alpha band).
+    REQUIRE(run_command("gdalwarp -q -t_srs EPSG:4326 " + (dir / "s/ortho.tif") + " " + (dir / "lonlat.tif")).exit_code == 0);
+    const auto utm = run_cli("footprints --quiet --ortho " + (dir / "s/ortho.tif") + " --cloud " + (dir / "s/cloud.las") + " --out " + (dir / "utm.gpkg"));
+    REQUIRE(utm.exit_code == 0);
+    const auto ll = run_cli("footprints --quiet --ortho " + (dir / "lonlat.tif") + " --cloud " + (dir / "s/cloud.las") + " --out " + (dir / "ll.gpkg"));
+    INFO(ll.err);
+    REQUIRE(ll.exit_code == 0);
+    auto count_area = [](const std::string& gpkg) {
+        const auto r = run_command("ogrinfo -q -ro " + gpkg + " -sql \"SELECT count(*) AS n, sum(area_m2) AS a FROM buildings\"");
+        const std::size_t n = r.out.find("n (Integer) = "), a = r.out.find("a (Real) = ");
+        REQUIRE(n != std::string::npos);
+        REQUIRE(a != std::string::npos);
+        return std::make_pair(std::stoi(r.out.substr(n + 14)), std::stod(r.out.substr(a + 11)));
+    };
+    const auto [n_utm, a_utm] = count_area(dir / "utm.gpkg");
+    const auto [n_ll, a_ll] = count_area(dir / "ll.gpkg");
+    CHECK(n_utm > 10);
+    CHECK(n_ll == n_utm);
+    CHECK(a_ll == Approx(a_utm).epsilon(0.01));
+    CHECK(info_json(dir / "ll.gpkg")["layers"][0]["crs"]["epsg"] == 4326);  // written in the input's CRS
+}
