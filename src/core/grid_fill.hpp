@@ -8,8 +8,21 @@
 
 namespace cityforge {
 
+/// How far (metres) the terrain fills of the cloud stages reach (the DTM under
+/// buildings, SMRF's minimum surface): a filled cell depends on the ground
+/// within this distance only, unless no ground lies that close in any of the 8
+/// directions. Tiled runs add it to the context every window keeps around a
+/// building, so a building's result does not depend on where tiles end.
+inline constexpr double kGapFillReach_m = 40.0;
+
 /// Fills every NaN cell of the row-major `w` x `h` grid from its surroundings.
 /// Leaves the grid unchanged when it has no valid cell at all.
-void fill_gaps(std::vector<double>& grid, int w, int h);
+/// `max_ray_cells` > 0: each ray stops after that many cells; a cell whose 8
+/// rays all stop without meeting a valid cell is filled as with no limit (the
+/// nearest valid cells at any distance, else the mean of the grid).
+void fill_gaps(std::vector<double>& grid, int w, int h, int max_ray_cells = 0);
+
+/// kGapFillReach_m in cells of `cell_m` metres (at least 1).
+int gap_fill_reach_cells(double cell_m);
 
 }  // namespace cityforge

@@ -17,6 +17,7 @@
 #include "cloud/las.hpp"
 #include "core/atomic_file.hpp"
 #include "core/error.hpp"
+#include "core/grid_fill.hpp"
 #include "core/log.hpp"
 #include "core/version.hpp"
 #include "crs/crs.hpp"
@@ -74,8 +75,11 @@ std::string tile_name(int k) {
 // box grown by this stays inside a window (or reaches only the grid's edge)
 // comes out of that window as out of any larger one.
 int context_px(const RunOptions& o, double gsd_m) {
-    double m = o.extraction.segmentation.margin_px * gsd_m + o.buildings.heights.heights.ground_buffer_m + 5.0;
-    if (!o.buildings.heights.ground.trust_classification) m += o.buildings.heights.ground.window;
+    // The DTM under and around a building is filled from ground up to kGapFillReach_m away;
+    // without classes, that ground comes from SMRF's opening window over a minimum surface
+    // filled the same way.
+    double m = o.extraction.segmentation.margin_px * gsd_m + o.buildings.heights.heights.ground_buffer_m + 5.0 + kGapFillReach_m;
+    if (!o.buildings.heights.ground.trust_classification) m += o.buildings.heights.ground.window + kGapFillReach_m;
     m = std::max(m, 20.0);
     return static_cast<int>(std::ceil(m / gsd_m)) + 2 * std::max(1, o.extraction.cloud_cell_factor);
 }
