@@ -5,6 +5,7 @@
 #include <limits>
 #include <numeric>
 #include <tuple>
+#include <utility>
 #include <tbb/parallel_for.h>
 #include <tbb/parallel_sort.h>
 
@@ -98,6 +99,13 @@ void grid_knn(const PointCloud& c, std::size_t k, Visit&& visit) {
     const double area = std::max((maxx - minx) * (maxy - miny), 1e-12);
     const double per_point = std::max(1.0, 0.3 * double(k)) / double(n);
     double cell = std::isfinite(area) ? std::sqrt(area * per_point) : std::sqrt(maxx - minx) * std::sqrt(maxy - miny) * std::sqrt(per_point);
+    // A cloud (nearly) without extent along one axis (every point on one row
+    // or column) has a 1-D density: cells of the 2-D rule would be far smaller
+    // than the point spacing (1e-7 for one exact row), and the ring search ran
+    // for ever. Such a grid is one cell thick. On any other cloud the 2-D cell
+    // is the larger one (the short side spans more than one 1-D cell).
+    const double long_side = std::max(maxx - minx, maxy - miny);
+    if (std::isfinite(long_side)) cell = std::max({cell, long_side * per_point, long_side / 65535.0});
     if (!(cell > 0.0) || !std::isfinite(cell)) cell = 1.0;
     const auto nx = static_cast<int>(std::min(65535.0, std::floor((maxx - minx) / cell) + 1));
     const auto ny = static_cast<int>(std::min(65535.0, std::floor((maxy - miny) / cell) + 1));
@@ -161,17 +169,26 @@ void grid_knn(const PointCloud& c, std::size_t k, Visit&& visit) {
                     };
                     for (uint32_t j : cand) offer(j);
                     // Distance from the point to the edge of the scanned block of
-                    // rings 0..r: any unseen point is at least that far away.
-                    const double edge = std::min(std::min(x - x0, x0 + cx_size - x), std::min(y - y0, y0 + cy_size - y));
+                    // rings 0..r: any unseen point is at least that far away. An
+                    // axis of one cell has no unseen cells, so it does not bound
+                    // the reach (a one-row grid grows it along x alone).
+                    const double edge_x = std::min(x - x0, x0 + cx_size - x), edge_y = std::min(y - y0, y0 + cy_size - y);
+                    const double edge = nx == 1 ? edge_y : ny == 1 ? edge_x : std::min(edge_x, edge_y);
+                    const double step = nx == 1 ? cy_size : ny == 1 ? cx_size : std::min(cx_size, cy_size);
                     for (int r = 2;; ++r) {
-                        const double reach = (r - 1) * std::min(cx_size, cy_size) + std::max(0.0, edge);
+                        const double reach = (r - 1) * step + std::max(0.0, edge);
                         if (count == k && best[k - 1].d2 <= reach * reach) break;
                         if (cx - r < 0 && cy - r < 0 && cx + r >= nx && cy + r >= ny) break;  // every cell seen
-                        for (int yy = cy - r; yy <= cy + r; ++yy) {
-                            if (yy < 0 || yy >= ny) continue;
+                        // Only the ring's cells inside the grid are visited: its
+                        // top and bottom rows whole, the columns cx - r and cx + r
+                        // of the rows between.
+                        for (int yy = std::max(0, cy - r); yy <= std::min(ny - 1, cy + r); ++yy) {
                             const bool edge_row = yy == cy - r || yy == cy + r;
-                            for (int xx = cx - r; xx <= cx + r; xx += edge_row ? 1 : 2 * r) {
-                                if (xx < 0 || xx >= nx) continue;
+                            const int step_x = edge_row ? 1 : 2 * r;
+                            int xx = cx - r;
+                            if (edge_row && xx < 0) xx = 0;
+                            for (; xx <= std::min(nx - 1, cx + r); xx += step_x) {
+                                if (xx < 0) continue;
                                 const std::size_t qq = static_cast<std::size_t>(yy) * nx + xx;
                                 if (start[qq] == start[qq + 1]) continue;
                                 if (count == k) {  // prune by the cell's box (z range included)
@@ -231,34 +248,28 @@ OutlierFilterResult filter_outliers(const PointCloud& c, const OutlierFilterOpti
     return r;
 }
 
-GroundResult classify_ground(const PointCloud& c, const std::vector<uint8_t>& keep, const GroundFilterOptions& o) {
-    o.validate();
-    GroundResult g;
+namespace {
+
+// SMRF over the points with kept(i) (all of them, or one group of
+// split_ground_groups), on a grid over their bounding box; sets g.is_ground
+// and counts g.ground_points.
+template <class Kept>
+void smrf_grid(const PointCloud& c, Kept&& kept, const GroundFilterOptions& o, GroundResult& g) {
     const std::size_t n = c.size();
-    g.is_ground.assign(n, 0);
-    auto kept = [&](std::size_t i) { return keep.empty() || keep[i]; };
-    if (o.trust_classification) {
-        std::size_t class2 = 0;
-        for (std::size_t i = 0; i < n; ++i) class2 += c.classification[i] == las_class::ground && kept(i);
-        if (class2 > 0) {
-            for (std::size_t i = 0; i < n; ++i) g.is_ground[i] = c.classification[i] == las_class::ground && kept(i);
-            g.from_classification = true;
-            g.ground_points = class2;
-            return g;
-        }
-    }
-    if (n == 0) return g;
     // SMRF: minimum surface on a grid, holes filled from neighbours, then
     // progressive openings with growing windows; cells whose height drops by
     // more than slope * window * cell are non-ground.
     double minx = INFINITY, miny = INFINITY, maxx = -INFINITY, maxy = -INFINITY;
     for (std::size_t i = 0; i < n; ++i)
         if (kept(i)) minx = std::min(minx, c.x[i]), maxx = std::max(maxx, c.x[i]), miny = std::min(miny, c.y[i]), maxy = std::max(maxy, c.y[i]);
-    if (minx == INFINITY) return g;  // no kept point
+    if (minx == INFINITY) return;  // no kept point
     // Cells anchored at multiples of the cell size: every window of a cloud
     // uses the same cells, so its ground does not depend on where it starts.
     minx = std::floor(minx / o.cell) * o.cell, miny = std::floor(miny / o.cell) * o.cell;
-    const GridSize size = checked_grid_size(minx, miny, maxx, maxy, o.cell, n, "ground filter", 4e8);
+    // Peak bytes a cell: zmin, surface, dtm (double), object (uint8), the two
+    // nested openings (2 x 2 doubles) and fill_gaps (num, den, last value, last distance).
+    constexpr double kBytesPerCell = 8 + 8 + 8 + 1 + 32 + 28;
+    const GridSize size = checked_grid_size(minx, miny, maxx, maxy, o.cell, kBytesPerCell, "ground filter", 4e8);
     const int w = size.width, h = size.height;
     std::vector<double> zmin(static_cast<std::size_t>(w) * h, INFINITY);
     auto cell_of = [&](std::size_t i) {
@@ -296,6 +307,119 @@ GroundResult classify_ground(const PointCloud& c, const std::vector<uint8_t>& ke
         const double threshold = o.elevation_threshold + o.elevation_scalar * std::sqrt(gx * gx + gy * gy);
         if (std::isfinite(dtm[k]) && std::abs(c.z[i] - dtm[k]) <= threshold) g.is_ground[i] = 1, ++g.ground_points;
     }
+}
+
+// Groups of kept points (ids 0, 1, ...; kNoGroup for a point not kept) whose
+// ground is computed on a grid of its own: occupied blocks of 256 x 256
+// cells closer than 4 blocks join, and groups whose bounding boxes meet merge.
+// Two sites 12 km apart then cost two small grids instead of one of 1.5e8
+// cells (12 GB) that is almost all empty.
+constexpr uint32_t kNoGroup = std::numeric_limits<uint32_t>::max();
+template <class Kept>
+std::vector<uint32_t> split_ground_groups(const PointCloud& c, Kept&& kept, double minx, double miny, double cell, uint32_t& groups) {
+    constexpr double kBlockCells = 256.0;
+    constexpr int64_t kJoin = 4;  // Chebyshev distance in blocks
+    const std::size_t n = c.size();
+    const double bsize = cell * kBlockCells;
+    using Key = std::pair<int64_t, int64_t>;
+    auto key_of = [&](std::size_t i) {
+        return Key{static_cast<int64_t>(std::floor((c.x[i] - minx) / bsize)), static_cast<int64_t>(std::floor((c.y[i] - miny) / bsize))};
+    };
+    std::vector<Key> blocks;
+    for (std::size_t i = 0; i < n; ++i)
+        if (kept(i) && (blocks.empty() || blocks.back() != key_of(i))) blocks.push_back(key_of(i));  // runs of one block: once
+    std::sort(blocks.begin(), blocks.end());
+    blocks.erase(std::unique(blocks.begin(), blocks.end()), blocks.end());
+    const std::size_t m = blocks.size();
+    std::vector<std::size_t> parent(m);
+    std::iota(parent.begin(), parent.end(), std::size_t(0));
+    auto find = [&](std::size_t a) {
+        while (parent[a] != a) a = parent[a] = parent[parent[a]];
+        return a;
+    };
+    auto join = [&](std::size_t a, std::size_t b) {
+        a = find(a), b = find(b);
+        if (a != b) parent[std::max(a, b)] = std::min(a, b);
+    };
+    for (std::size_t b = 0; b < m; ++b)
+        for (int64_t dx = -kJoin; dx <= kJoin; ++dx) {
+            // The blocks of column bx + dx within kJoin rows: one sorted range.
+            const auto lo = std::lower_bound(blocks.begin(), blocks.end(), Key{blocks[b].first + dx, blocks[b].second - kJoin});
+            for (auto it = lo; it != blocks.end() && it->first == blocks[b].first + dx && it->second <= blocks[b].second + kJoin; ++it)
+                join(b, static_cast<std::size_t>(it - blocks.begin()));
+        }
+    // Groups whose bounding boxes (in blocks) meet are merged, until none do.
+    struct Box {
+        int64_t x0, y0, x1, y1;
+    };
+    std::vector<Box> box(m, Box{INT64_MAX, INT64_MAX, INT64_MIN, INT64_MIN});
+    for (std::size_t b = 0; b < m; ++b) {
+        Box& r = box[find(b)];
+        r = {std::min(r.x0, blocks[b].first), std::min(r.y0, blocks[b].second), std::max(r.x1, blocks[b].first), std::max(r.y1, blocks[b].second)};
+    }
+    for (bool merged = true; merged;) {
+        merged = false;
+        std::vector<std::size_t> roots;
+        for (std::size_t b = 0; b < m; ++b)
+            if (find(b) == b) roots.push_back(b);
+        for (std::size_t u = 0; u < roots.size() && !merged; ++u)
+            for (std::size_t v = u + 1; v < roots.size() && !merged; ++v) {
+                const Box &p = box[roots[u]], &q = box[roots[v]];
+                if (p.x0 <= q.x1 && q.x0 <= p.x1 && p.y0 <= q.y1 && q.y0 <= p.y1) {
+                    join(roots[u], roots[v]);
+                    box[find(roots[u])] = {std::min(p.x0, q.x0), std::min(p.y0, q.y0), std::max(p.x1, q.x1), std::max(p.y1, q.y1)};
+                    merged = true;
+                }
+            }
+    }
+    std::vector<uint32_t> id(m, kNoGroup);
+    groups = 0;
+    for (std::size_t b = 0; b < m; ++b)
+        if (find(b) == b) id[b] = groups++;
+    std::vector<uint32_t> group(n, kNoGroup);
+    for (std::size_t i = 0; i < n; ++i)
+        if (kept(i)) group[i] = id[find(static_cast<std::size_t>(std::lower_bound(blocks.begin(), blocks.end(), key_of(i)) - blocks.begin()))];
+    return group;
+}
+
+}  // namespace
+
+GroundResult classify_ground(const PointCloud& c, const std::vector<uint8_t>& keep, const GroundFilterOptions& o) {
+    o.validate();
+    GroundResult g;
+    const std::size_t n = c.size();
+    g.is_ground.assign(n, 0);
+    auto kept = [&](std::size_t i) { return keep.empty() || keep[i]; };
+    if (o.trust_classification) {
+        std::size_t class2 = 0;
+        for (std::size_t i = 0; i < n; ++i) class2 += c.classification[i] == las_class::ground && kept(i);
+        if (class2 > 0) {
+            for (std::size_t i = 0; i < n; ++i) g.is_ground[i] = c.classification[i] == las_class::ground && kept(i);
+            g.from_classification = true;
+            g.ground_points = class2;
+            return g;
+        }
+    }
+    if (n == 0) return g;
+    // One grid over every kept point, unless that grid is large: then kept
+    // points kilometres apart get a grid each (split_ground_groups). Clouds
+    // of up to 4 x 4 km at 1 m cells always take the single grid.
+    double minx = INFINITY, miny = INFINITY, maxx = -INFINITY, maxy = -INFINITY;
+    for (std::size_t i = 0; i < n; ++i)
+        if (kept(i)) minx = std::min(minx, c.x[i]), maxx = std::max(maxx, c.x[i]), miny = std::min(miny, c.y[i]), maxy = std::max(maxy, c.y[i]);
+    if (minx == INFINITY) return g;  // no kept point
+    minx = std::floor(minx / o.cell) * o.cell, miny = std::floor(miny / o.cell) * o.cell;
+    require_finite_extent(minx, miny, maxx, maxy, "ground filter");
+    const double w = std::floor((maxx - minx) / o.cell) + 1.0, h = std::floor((maxy - miny) / o.cell) + 1.0;
+    constexpr double kSingleGridCells = 1.6e7;
+    if (w * h <= kSingleGridCells) {
+        smrf_grid(c, kept, o, g);
+        return g;
+    }
+    if (w > 2.0e9 || h > 2.0e9) checked_grid_size(minx, miny, maxx, maxy, o.cell, 0.0, "ground filter", 4e8);  // throws: too large
+    uint32_t groups = 0;
+    const std::vector<uint32_t> group = split_ground_groups(c, kept, minx, miny, o.cell, groups);
+    for (uint32_t k = 0; k < groups; ++k) smrf_grid(c, [&](std::size_t i) { return group[i] == k; }, o, g);
     return g;
 }
 

@@ -16,15 +16,15 @@ GridSpec grid_over_cloud(const PointCloud& c, double cell, const std::string& su
         minx = std::min(minx, c.x[i]), maxx = std::max(maxx, c.x[i]);
         miny = std::min(miny, c.y[i]), maxy = std::max(maxy, c.y[i]);
     }
-    return grid_over_extent({minx, miny, maxx, maxy}, cell, c.size(), subject);
+    return grid_over_extent({minx, miny, maxx, maxy}, cell, kCloudRasterBytesPerCell, subject);
 }
 
-GridSpec grid_over_extent(const Extent& e, double cell, std::size_t points, const std::string& subject) {
+GridSpec grid_over_extent(const Extent& e, double cell, double bytes_per_cell, const std::string& subject) {
     if (!(cell > 0)) throw Error(subject, "cell size must be > 0");
     if (!(e.min_x <= e.max_x && e.min_y <= e.max_y)) throw Error(subject, "cloud is empty");
     const double minx = e.min_x, miny = e.min_y, maxx = e.max_x, maxy = e.max_y;
     const double x0 = std::floor(minx / cell) * cell, y1 = std::ceil(maxy / cell) * cell;
-    const GridSize size = checked_grid_size(x0, miny, maxx, y1, cell, points, subject);
+    const GridSize size = checked_grid_size(x0, miny, maxx, y1, cell, bytes_per_cell > 0 ? bytes_per_cell : kCloudRasterBytesPerCell, subject);
     return GridSpec{{x0, cell, y1, -cell}, size.width, size.height};
 }
 

@@ -36,13 +36,19 @@ struct CloudRasters {
 
 /// A grid of square `cell` (CRS units) covering the cloud, its origin snapped
 /// to multiples of the cell so that grids of neighbouring tiles align.
-/// Errors (an empty cloud, a grid too large for its points: checked_grid_size)
-/// name `subject`, usually the cloud's path.
+/// Errors (an empty cloud, a grid too large or beyond memory for the rasters
+/// of rasterize_cloud: checked_grid_size) name `subject`, usually the cloud's
+/// path.
 GridSpec grid_over_cloud(const PointCloud& cloud, double cell, const std::string& subject = "rasterize");
+/// Bytes per cell rasterize_cloud allocates at its peak (rasters, counters,
+/// the DTM's gap filling): what the memory check of a cloud's grid assumes.
+inline constexpr double kCloudRasterBytesPerCell = 88.0;
 /// The same grid over the points' bounding box `extent` (e.g. measured while
-/// streaming a cloud too large to hold); `points` = how many it holds (0 =
-/// unknown: only the absolute cap of checked_grid_size applies).
-GridSpec grid_over_extent(const Extent& extent, double cell, std::size_t points = 0, const std::string& subject = "rasterize");
+/// streaming a cloud too large to hold). `bytes_per_cell` = bytes the caller
+/// allocates per cell of the grid, all layers counted (0 = those of
+/// rasterize_cloud, kCloudRasterBytesPerCell), for the memory check of
+/// checked_grid_size (OutOfMemory naming `subject`).
+GridSpec grid_over_extent(const Extent& extent, double cell, double bytes_per_cell = 0, const std::string& subject = "rasterize");
 
 /// Rasterises `cloud` (points with keep[i] == 0 skipped; keep may be empty)
 /// on `grid`. `unit_m` = metres per horizontal CRS unit (for the density).

@@ -1,9 +1,11 @@
 #include "core/grid_size.hpp"
 
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 
 #include "core/error.hpp"
+#include "core/memory.hpp"
 
 namespace cityforge {
 
@@ -16,21 +18,30 @@ void require_finite_extent(double min_x, double min_y, double max_x, double max_
     throw Error(subject, b);
 }
 
-GridSize checked_grid_size(double min_x, double min_y, double max_x, double max_y, double cell, std::size_t points,
+GridSize checked_grid_size(double min_x, double min_y, double max_x, double max_y, double cell, double bytes_per_cell,
                            const std::string& subject, double max_cells) {
     if (!(cell > 0.0) || !std::isfinite(cell)) throw Error(subject, "grid cell size must be a finite value > 0");
     require_finite_extent(min_x, min_y, max_x, max_y, subject);
     const double ex = max_x - min_x, ey = max_y - min_y;
-    char b[320];
+    char b[400];
     const double w = std::floor(ex / cell) + 1.0, h = std::floor(ey / cell) + 1.0;
     const double cells = w * h;
-    const double density_cap = points == 0 ? max_cells : kGridFreeCells + kGridCellsPerPoint * static_cast<double>(points);  // 0: unknown
-    if (w > 2.0e9 || h > 2.0e9 || cells > max_cells || cells > density_cap) {
+    if (w > 2.0e9 || h > 2.0e9 || cells > max_cells) {
         std::snprintf(b, sizeof b,
-                      "grid too large: a data extent of %.6g x %.6g units at cells of %.6g needs %.4g cells for %zu points "
-                      "(at most %.4g): points far from the rest (corrupt coordinates, a wrong CRS) or too fine a cell",
-                      ex, ey, cell, cells, points, std::min(max_cells, density_cap));
+                      "grid too large: a data extent of %.6g x %.6g units at cells of %.6g needs %.4g cells (at most %.4g): "
+                      "points far from the rest (corrupt coordinates, a wrong CRS) or too fine a cell",
+                      ex, ey, cell, cells, max_cells);
         throw Error(subject, b);
+    }
+    const double bytes = cells * std::max(0.0, bytes_per_cell);
+    const double usable = usable_memory_bytes();
+    if (usable > 0.0 && bytes > kGridMemoryShare * usable) {
+        std::snprintf(b, sizeof b,
+                      "a grid of %.0f x %.0f cells (a data extent of %.6g x %.6g units at cells of %.6g) needs %s, more than %.0f %% "
+                      "of the %s this process may use: points far from the rest (corrupt coordinates, a wrong CRS), too fine a "
+                      "cell, or crop the cloud",
+                      w, h, ex, ey, cell, format_bytes(bytes).c_str(), kGridMemoryShare * 100.0, format_bytes(usable).c_str());
+        throw OutOfMemory(subject, b);
     }
     return {static_cast<int>(w), static_cast<int>(h)};
 }

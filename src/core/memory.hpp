@@ -14,6 +14,9 @@ namespace cityforge {
 class OutOfMemory : public Error {
 public:
     OutOfMemory(const std::string& subject, const std::string& problem) : Error(subject, "out of memory: " + problem) {}
+    /// `inner` re-thrown under the file it came from: "SUBJECT: <inner's message>"
+    /// (e.g. "city.xyz: ground filter: out of memory: ...").
+    OutOfMemory(const std::string& subject, const OutOfMemory& inner) : Error(subject, inner.what()) {}
 };
 
 /// Bytes this process may allocate at most: the smaller of the machine's

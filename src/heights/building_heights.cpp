@@ -53,7 +53,7 @@ public:
             miny_ = std::min(miny_, c.y[i]), maxy = std::max(maxy, c.y[i]);
         }
         if (minx_ == INFINITY) return;  // no kept point
-        const GridSize size = checked_grid_size(minx_, miny_, maxx, maxy, cell_, c.size(), "heights point index");
+        const GridSize size = checked_grid_size(minx_, miny_, maxx, maxy, cell_, kBytesPerCell, "heights point index");
         w_ = size.width, h_ = size.height;
         start_.assign(size.cells() + 1, 0);
         for (std::size_t i = 0; i < c.size(); ++i)
@@ -81,6 +81,9 @@ public:
                 for (uint32_t j = start_[k]; j < start_[k + 1]; ++j) f(ids_[j]);
             }
     }
+
+    /// Bytes per cell while the index is built: start_ and its fill copy (uint32 each).
+    static constexpr double kBytesPerCell = 8.0;
 
 private:
     std::size_t cell_of(double x, double y) const {

@@ -11,6 +11,7 @@
 #include "core/error.hpp"
 #include "core/grid_size.hpp"
 #include "core/log.hpp"
+#include "core/memory.hpp"
 #include "io/cloud_crs.hpp"
 
 namespace cityforge {
@@ -43,7 +44,7 @@ void clean_prepared(PreparedCloud& p, const OutlierFilterOptions& outliers, cons
         if (p.keep.empty() || p.keep[i])
             ++kept, minx = std::min(minx, p.cloud.x[i]), maxx = std::max(maxx, p.cloud.x[i]), miny = std::min(miny, p.cloud.y[i]),
                     maxy = std::max(maxy, p.cloud.y[i]);
-    if (kept > 0) checked_grid_size(minx, miny, maxx, maxy, 2.0 / unit, kept, "cloud extent");
+    if (kept > 0) checked_grid_size(minx, miny, maxx, maxy, 2.0 / unit, 8.0, "cloud extent");  // the heights index: 2 x uint32 a cell
 }
 // The same, with a failure (a grid too large for scattered points) naming the file.
 void clean_prepared(PreparedCloud& p, const OutlierFilterOptions& outliers, const GroundFilterOptions& ground, const std::string& name) {
@@ -51,6 +52,8 @@ void clean_prepared(PreparedCloud& p, const OutlierFilterOptions& outliers, cons
         throw Error(name, "the cloud's working CRS (" + p.crs.label() + ") is not projected: the outlier and ground filters need metres");
     try {
         clean_prepared(p, outliers, ground);
+    } catch (const OutOfMemory& e) {  // still exit 3
+        throw OutOfMemory(name, e);
     } catch (const Error& e) {
         throw Error(name, e.what());
     }

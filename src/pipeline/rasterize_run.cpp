@@ -3,11 +3,13 @@
 #include <chrono>
 #include <cmath>
 #include <filesystem>
+#include <new>
 
 #include "cloud/cloud_rasters.hpp"
 #include "cloud/cloud_reader.hpp"
 #include "core/atomic_file.hpp"
 #include "core/error.hpp"
+#include "core/memory.hpp"
 #include "io/cloud_crs.hpp"
 #include "pipeline/cloud_windows.hpp"
 #include "pipeline/prepared_cloud.hpp"
@@ -22,8 +24,24 @@ void RasterizeOptions::validate() const {
     if (!(tile_m > 0) || !(overlap_m >= 0)) throw Error("--tile-m", "tiles must be > 0 m and the overlap >= 0 m");
 }
 
+namespace {
+RasterizeReport rasterize_run_unguarded(const std::string& cloud_path, const std::string& out_dir, const RasterizeOptions& o,
+                                        const Progress& progress);
+}  // namespace
+
 RasterizeReport rasterize_run(const std::string& cloud_path, const std::string& out_dir, const RasterizeOptions& o,
                               const Progress& progress) {
+    try {
+        return rasterize_run_unguarded(cloud_path, out_dir, o, progress);
+    } catch (const std::bad_alloc&) {  // named: a bare "out of memory" does not say which input was too large
+        throw OutOfMemory(cloud_path, "the cloud or its rasters do not fit in memory: read it window by window (--max-points-in-memory, "
+                                      "--tile-m), use a coarser --gsd or crop it");
+    }
+}
+
+namespace {
+RasterizeReport rasterize_run_unguarded(const std::string& cloud_path, const std::string& out_dir, const RasterizeOptions& o,
+                                        const Progress& progress) {
     const auto t0 = std::chrono::steady_clock::now();
     o.validate();
     RasterizeReport rep;
@@ -92,5 +110,7 @@ RasterizeReport rasterize_run(const std::string& cloud_path, const std::string& 
     progress(1.0, "written");
     return rep;
 }
+
+}  // namespace
 
 }  // namespace cityforge

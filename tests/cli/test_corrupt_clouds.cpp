@@ -5,6 +5,7 @@
 // identical to those of the clean file. Never a hang, a crash or a silent
 // change. The corrupt files are made here from a small synthetic town.
 #include <catch2/catch.hpp>
+#include <algorithm>
 #include <cstring>
 #include <filesystem>
 #include <fstream>
@@ -260,6 +261,49 @@ TEST_CASE("grids over scattered or huge coordinates are refused naming the file,
     check_one_line_error(cli_guarded("heights --footprints " + s.truth_path + " --cloud " + (dir / "huge.xyz") + crs + " --out " + (dir / "h.geojson")),
                          dir / "huge.xyz", "is not finite");
     CHECK_FALSE(std::filesystem::exists(dir / "h.geojson"));
+}
+
+TEST_CASE("degenerate and sparse clouds: every point on one row finishes, two sites 12 km apart work", "[faults][corrupt][cli]") {
+    ScratchDir dir("corrupt_sparse");
+    const SynthResult s = test::make_town(dir, 120, 3, 4.0);
+    const std::string crs = " --cloud-crs EPSG:32650";
+    // 400 points sharing one y (garbage records of a corrupt VLR): the outlier
+    // filter's neighbour search once ran for ever. Any answer but a hang will do:
+    // results, or a one-line error naming the file.
+    {
+        std::ofstream out(dir / "one_row.xyz");
+        out.precision(17);
+        for (int k = 0; k < 400; ++k) out << 500000.0 + 0.73 * k << " 4400000 10\n";
+    }
+    for (const std::string& cmd : {"heights --footprints " + s.truth_path + " --cloud " + (dir / "one_row.xyz") + crs + " --out " + (dir / "row.geojson"),
+                                   "cloud rasterize --quiet --cloud " + (dir / "one_row.xyz") + crs + " --gsd 1 --out " + (dir / "row_rasters")}) {
+        INFO(cmd);
+        const auto r = cli_guarded(cmd);
+        INFO(r.err);
+        CHECK(r.exit_code != 124);  // timeout 120: a hang
+        CHECK((r.exit_code == 0 || r.exit_code == 1));
+        if (r.exit_code == 1) {
+            CHECK(r.err.find(dir / "one_row.xyz") != std::string::npos);
+            CHECK(std::count(r.err.begin(), r.err.end(), '\n') == 1);
+        }
+    }
+    // The town twice, the copy 12 km east and 12 km north: a real sparse cloud
+    // (1.5e8 cells of 1 m over its extent) that a cap by point density refused.
+    {
+        const PointCloud c = read_las(s.cloud_path);
+        std::ofstream out(dir / "two_sites.xyz");
+        out.precision(17);
+        for (double shift : {0.0, 12000.0})
+            for (std::size_t i = 0; i < c.size(); ++i) out << c.x[i] + shift << ' ' << c.y[i] + shift << ' ' << c.z[i] << ' ' << c.intensity[i] << '\n';
+    }
+    const auto h = cli_guarded("heights --footprints " + s.truth_path + " --cloud " + (dir / "two_sites.xyz") + crs + " --out " + (dir / "two.geojson"));
+    INFO(h.err);
+    CHECK(h.exit_code == 0);
+    CHECK(std::filesystem::exists(dir / "two.geojson"));
+    const auto r = cli_guarded("cloud rasterize --quiet --cloud " + (dir / "two_sites.xyz") + crs + " --gsd 2 --out " + (dir / "two_rasters"));
+    INFO(r.err);
+    CHECK(r.exit_code == 0);
+    CHECK(std::filesystem::exists(dir / "two_rasters/dsm.tif"));
 }
 
 namespace {
