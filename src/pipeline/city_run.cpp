@@ -26,6 +26,7 @@
 #include "io/vector.hpp"
 #include "model/building_json.hpp"
 #include "pipeline/cloud_cells.hpp"
+#include "pipeline/cloud_windows.hpp"
 #include "pipeline/prepared_cloud.hpp"
 #include "raster/raster.hpp"
 
@@ -274,6 +275,50 @@ CrsInfo run_output_crs(const RunManifest& m, const CrsInfo& grid_crs) {
 
 }  // namespace
 
+namespace {
+// The grid's extent (CRS units).
+Extent grid_extent(const RunManifest& m) {
+    const GeoTransform& t = m.grid.transform;
+    const MapPoint a = t.pixel_to_map({0.0, 0.0}), b = t.pixel_to_map({double(m.grid.width), double(m.grid.height)});
+    return {std::min(a.x, b.x), std::min(a.y, b.y), std::max(a.x, b.x), std::max(a.y, b.y)};
+}
+
+// The bounding box of the cloud's points on the grid's CRS: one streamed pass,
+// the box's outline moved to the grid's CRS.
+Extent cloud_bounds_on_grid(const RunManifest& m) {
+    const RunOptions& o = m.options;
+    const Extent e = cloud_point_bounds(o.cloud);
+    const CrsInfo from = resolve_cloud_crs(o.cloud, o.cloud_crs).crs, to = crs_from_wkt(m.crs_wkt, "grid");
+    if (from.empty() || same_horizontal_crs(from, to)) return e;
+    std::vector<double> x, y;
+    for (int k = 0; k <= 8; ++k) {
+        const double f = k / 8.0;
+        for (const auto& [px, py] : std::initializer_list<std::pair<double, double>>{{e.min_x + f * e.width(), e.min_y},
+                                                                                    {e.min_x + f * e.width(), e.max_y},
+                                                                                    {e.min_x, e.min_y + f * e.height()},
+                                                                                    {e.max_x, e.min_y + f * e.height()}})
+            x.push_back(px), y.push_back(py);
+    }
+    std::vector<double> z(x.size(), 0.0);
+    transform_points(from, to, x, y, z, o.cloud);
+    Extent out = empty_extent();
+    for (std::size_t i = 0; i < x.size(); ++i) include(out, Extent{x[i], y[i], x[i], y[i]});
+    return out;
+}
+
+// The part of the grid the cloud covers; Error naming both inputs and their extents when none.
+Extent covered_part(const RunManifest& m, const Extent& cloud) {
+    const RunOptions& o = m.options;
+    const Extent g = grid_extent(m);
+    const Extent c{std::max(g.min_x, cloud.min_x), std::max(g.min_y, cloud.min_y), std::min(g.max_x, cloud.max_x), std::min(g.max_y, cloud.max_y)};
+    if (c.min_x <= c.max_x && c.min_y <= c.max_y) return c;
+    const std::string& other = o.ortho.empty() ? o.footprints : o.ortho;
+    const CrsInfo crs = crs_from_wkt(m.crs_wkt, "grid");
+    throw Error(o.cloud, "does not overlap " + other + ": cloud " + describe_extent(cloud, crs) + ", " +
+                             std::filesystem::path(other).filename().string() + " " + describe_extent(g, crs));
+}
+}  // namespace
+
 RasterOpenOptions run_ortho_open_options(const RunOptions& o) {
     RasterOpenOptions ro;
     ro.project_geographic = true;  // metres: a lon/lat ortho is read on its UTM zone
@@ -291,6 +336,7 @@ RunManifest plan_run(const RunOptions& in) {
     RunManifest m;
     m.options = o;
     double gsd_m = 0.0;
+    std::vector<Extent> footprint_extents;  // given footprints, on the grid's CRS
     if (!o.ortho.empty()) {
         // The working grid: the ortho's, or a lon/lat ortho warped onto its UTM zone (as `footprints` reads it).
         const RasterInfo info = read_raster_info(o.ortho, run_ortho_open_options(o));
@@ -308,8 +354,11 @@ RunManifest plan_run(const RunOptions& in) {
             const CrsInfo cloud = resolve_cloud_crs(o.cloud, o.cloud_crs).crs;
             if (!cloud.empty() && !cloud.geographic && cloud.horizontal_epsg) working = "EPSG:" + std::to_string(*cloud.horizontal_epsg);
         }
-        put_layer_on(fp, working_crs_for_layer(fp, working, o.footprints), o.footprints);
+        const CrsInfo on = working_crs_for_layer(fp, working, o.footprints);
+        if (fp.crs.geographic) log::warning(o.footprints + ": lon/lat footprints (" + fp.crs.label() + ") worked on in " + on.label());
+        put_layer_on(fp, on, o.footprints);
         drop_colliding_fields(fp, run_computed_fields(), o.footprints);  // the warning, once per run
+        for (const Feature& f : fp.features) footprint_extents.push_back(parts_extent(f.geometry));
         Extent e = empty_extent();
         for (const Feature& f : fp.features) include(e, parts_extent(f.geometry));
         const double cell = o.footprint_grid_m / fp.crs.linear_unit_m;
@@ -328,6 +377,24 @@ RunManifest plan_run(const RunOptions& in) {
         m.tiles.push_back({0, {0, 0, m.grid.width, m.grid.height}, {0, 0, m.grid.width, m.grid.height}});
         return m;
     }
+    // An input that cannot produce a result is an error naming both files and their
+    // extents; given footprints outside the cloud are counted in a warning.
+    Extent cloud_bounds = empty_extent();
+    auto bounds = [&]() -> const Extent& {
+        if (!(cloud_bounds.min_x <= cloud_bounds.max_x)) cloud_bounds = cloud_bounds_on_grid(m);
+        return cloud_bounds;
+    };
+    if (!footprint_extents.empty()) {
+        covered_part(m, bounds());
+        const Extent& c = bounds();
+        std::size_t outside = 0;
+        for (const Extent& e : footprint_extents) outside += e.max_x < c.min_x || e.min_x > c.max_x || e.max_y < c.min_y || e.min_y > c.max_y;
+        if (outside == footprint_extents.size())
+            throw Error(o.footprints, "no footprint overlaps the cloud " + o.cloud + ": cloud " + describe_extent(c, crs_from_wkt(m.crs_wkt, "grid")));
+        if (outside > 0)
+            log::warning(o.footprints + ": " + std::to_string(outside) + " of " + std::to_string(footprint_extents.size()) +
+                         " footprints lie outside the cloud " + o.cloud + " (they get no heights)");
+    }
     // What must be alike in every tile is measured once, on a sample fixed by
     // the grid (its central 400 m square): the outlier filter's limit, the
     // cloud cells' size, and whether point classes decide building cells.
@@ -338,10 +405,16 @@ RunManifest plan_run(const RunOptions& in) {
     if (need_limit || (extract && (ex.cloud_cell_factor == 0 || ex.mask.use_classes < 0))) {
         const CrsInfo grid_crs = crs_from_wkt(m.crs_wkt, "grid");
         PreparedCloud points;
-        const MapPoint centre = m.grid.transform.pixel_to_map({m.grid.width / 2.0, m.grid.height / 2.0});
-        const CloudSample sample = sample_cloud(o.cloud, o.cloud_crs, grid_crs, outliers, centre, &points);
+        MapPoint centre = m.grid.transform.pixel_to_map({m.grid.width / 2.0, m.grid.height / 2.0});
+        CloudSample sample = sample_cloud(o.cloud, o.cloud_crs, grid_crs, outliers, centre, &points);
+        if (points.cloud.size() == 0) {
+            // No point around the grid's centre: the sample is taken at the centre of the part the cloud covers.
+            const Extent covered = covered_part(m, bounds());
+            centre = {0.5 * (covered.min_x + covered.max_x), 0.5 * (covered.min_y + covered.max_y)};
+            sample = sample_cloud(o.cloud, o.cloud_crs, grid_crs, outliers, centre, &points);
+        }
         if (need_limit) {
-            if (!(sample.outlier_limit_m > 0)) throw Error(o.cloud, "no points in the centre of the grid; is the cloud over the ortho?");
+            if (!(sample.outlier_limit_m > 0)) throw Error(o.cloud, "no point left after cleaning in the 400 m around " + describe_extent({centre.x, centre.y, centre.x, centre.y}, grid_crs) + "; is the cloud this sparse?");
             outliers.max_mean_distance = sample.outlier_limit_m;
             ex.outliers.max_mean_distance = sample.outlier_limit_m;
         }
@@ -721,6 +794,7 @@ std::vector<Building> tile_buildings(const RunManifest& m, const TileSpec& t, co
         fs::remove(tmp);
         ExportOptions eo = o.buildings.model;
         eo.id_field = "id";
+        eo.warn_missing_heights = false;  // "no cloud" is said below: the ortho is no table lacking heights
         CityModel model = build_city_model(layer, grid_crs, eo, o.ortho);
         rep.seconds["footprints"] = since(t0);
         rep.buildings = model.buildings.size();
@@ -1062,7 +1136,9 @@ RunReport merge_tiles(const RunManifest& m, const std::string& out_dir, const Pr
     json inputs = json::object();
     if (!m.options.ortho.empty()) inputs["ortho"] = {{"path", m.options.ortho}, {"crs", read_raster_info(m.options.ortho).crs.label()}};
     if (!m.options.cloud.empty()) inputs["cloud"] = {{"path", m.options.cloud}, {"crs", cloud_crs.label()}};
-    if (!m.options.footprints.empty()) inputs["footprints"] = {{"path", m.options.footprints}, {"crs", grid_crs.label()}};
+    if (!m.options.footprints.empty())  // the file's own CRS (the working CRS is `working_crs`)
+        inputs["footprints"] = {{"path", m.options.footprints},
+                                {"crs", read_polygon_layer(m.options.footprints, m.options.buildings.heights.footprint_layer).crs.label()}};
     j["inputs"] = inputs;
     j["crs"] = crs.label();
     j["working_crs"] = grid_crs.label();
@@ -1119,14 +1195,12 @@ RunReport run_city(const RunManifest& m, const std::string& out_dir, const RunSh
     std::vector<int> mine;
     for (const TileSpec& t : m.tiles)
         if (t.index % share.size == share.rank) mine.push_back(t.index);
-    const auto t0 = std::chrono::steady_clock::now();
     const Progress tiles_progress = progress.sub(0.05, share.rank == 0 ? 0.85 : 1.0);
     for (std::size_t i = 0; i < mine.size(); ++i) {
         const TileReport r = run_tile(m, mine[i], out_dir);
         const double done = double(i + 1) / double(mine.size());
-        const double eta = since(t0) / done * (1.0 - done);
-        std::ostringstream msg;
-        msg << "tile " << i + 1 << "/" << mine.size() << " (" << r.status << "), ETA " << static_cast<int>(eta) << " s";
+        std::ostringstream msg;  // the progress line adds the ETA
+        msg << "tile " << i + 1 << "/" << mine.size() << " (" << r.status << ")";
         tiles_progress(done, msg.str());
     }
     if (share.rank != 0) return {};

@@ -803,3 +803,30 @@ TEST_CASE("A lon/lat ortho with a cloud (ortho_cloud footprints) finds what the 
     CHECK(a_ll == Approx(a_utm).epsilon(0.01));
     CHECK(info_json(dir / "ll.gpkg")["layers"][0]["crs"]["epsg"] == 4326);  // written in the input's CRS
 }
+
+TEST_CASE("run: inputs that do not overlap are one-line errors naming both files and extents; partial overlap warns", "[inputs][overlap][cli]") {
+    ScratchDir dir("inputs_run_overlap");
+    const std::string delft = shared_data("delft_ahn3_bgt_west/ahn3_delft_west.las");
+    const std::string fp = shared_data("delft_ahn3_bgt_west/bgt_pand_west_with_ref_heights.geojson");
+    // Delft footprints with Autzen's cloud (in feet, Oregon).
+    const auto a = run_cli("run --quiet --footprints " + fp + " --cloud " + shared_data("laz_corpus/autzen_trim.laz") + " --out " + (dir / "a"));
+    INFO(a.err);
+    CHECK(a.exit_code == 1);
+    CHECK(count_lines(a.err) == 1);
+    CHECK(a.err.find("autzen_trim.laz: does not overlap") != std::string::npos);
+    CHECK(a.err.find("bgt_pand_west_with_ref_heights.geojson 84") != std::string::npos);  // its extent, in the grid's CRS
+    CHECK_FALSE(std::filesystem::exists(dir / "a/buildings.gpkg"));
+    // An ortho in Atlanta with the Delft cloud.
+    const auto b = run_cli("run --quiet --ortho " + shared_data("spacenet4_atlanta_pan_west/atlanta_pan_0p5m_west.tif") + " --cloud " + delft +
+                           " --cloud-crs EPSG:7415 --out " + (dir / "b"));
+    INFO(b.err);
+    CHECK(b.exit_code == 1);
+    CHECK(b.err.find("does not overlap") != std::string::npos);
+    CHECK(b.err.find("atlanta_pan_0p5m_west.tif 733") != std::string::npos);
+    // One footprint over the cloud, one 5 km away: a warning with the count, the run goes on.
+    write_squares(dir / "two.geojson", {{84905.0, 447560.0}, {89905.0, 447560.0}});
+    const auto c = run_cli("run --footprints " + (dir / "two.geojson") + " --cloud " + delft + " --cloud-crs EPSG:7415 --out " + (dir / "c"));
+    INFO(c.err);
+    CHECK(c.exit_code == 0);
+    CHECK(c.err.find("1 of 2 footprints lie outside the cloud") != std::string::npos);
+}
