@@ -281,7 +281,7 @@ void smrf_grid(const PointCloud& c, Kept&& kept, const GroundFilterOptions& o, G
         if (kept(i)) zmin[cell_of(i)] = std::min(zmin[cell_of(i)], c.z[i]);
     for (double& v : zmin)
         if (!std::isfinite(v)) v = NAN;
-    fill_gaps(zmin, w, h);
+    fill_gaps(zmin, w, h, gap_fill_reach_cells(o.cell));  // local: windows of a cloud agree
     std::vector<uint8_t> object(zmin.size(), 0);
     std::vector<double> surface = zmin;
     const int max_r = std::max(1, static_cast<int>(std::ceil(o.window / o.cell)));
@@ -296,7 +296,7 @@ void smrf_grid(const PointCloud& c, Kept&& kept, const GroundFilterOptions& o, G
     std::vector<double> dtm = zmin;
     for (std::size_t k = 0; k < dtm.size(); ++k)
         if (object[k]) dtm[k] = NAN;
-    fill_gaps(dtm, w, h);
+    fill_gaps(dtm, w, h, gap_fill_reach_cells(o.cell));
     // Local slope of the DTM scales the threshold (steep terrain tolerates more).
     for (std::size_t i = 0; i < n; ++i) {
         if (!kept(i)) continue;

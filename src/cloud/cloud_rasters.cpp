@@ -78,7 +78,8 @@ CloudRasters rasterize_cloud(const PointCloud& c, const std::vector<uint8_t>& ke
     for (float& d : r.density.data) d = static_cast<float>(d / cell_m2);
     std::vector<double> dtm(n);
     for (std::size_t k = 0; k < n; ++k) dtm[k] = ground_n[k] ? ground_sum[k] / ground_n[k] : NAN;
-    fill_gaps(dtm, g.width, g.height);
+    // Filled from ground within kGapFillReach_m (a cell depends on nearby ground only: tiles agree).
+    fill_gaps(dtm, g.width, g.height, gap_fill_reach_cells(std::abs(g.transform.pixel_width) * unit_m));
     r.dtm = Image<float>(g.width, g.height, 1, NAN);
     r.ndsm = Image<float>(g.width, g.height, 1, NAN);
     for (std::size_t k = 0; k < n; ++k) {

@@ -283,27 +283,9 @@ Extent grid_extent(const RunManifest& m) {
     return {std::min(a.x, b.x), std::min(a.y, b.y), std::max(a.x, b.x), std::max(a.y, b.y)};
 }
 
-// The bounding box of the cloud's points on the grid's CRS: one streamed pass,
-// the box's outline moved to the grid's CRS.
+// The bounding box of the cloud's points on the grid's CRS (one streamed pass).
 Extent cloud_bounds_on_grid(const RunManifest& m) {
-    const RunOptions& o = m.options;
-    const Extent e = cloud_point_bounds(o.cloud);
-    const CrsInfo from = resolve_cloud_crs(o.cloud, o.cloud_crs).crs, to = crs_from_wkt(m.crs_wkt, "grid");
-    if (from.empty() || same_horizontal_crs(from, to)) return e;
-    std::vector<double> x, y;
-    for (int k = 0; k <= 8; ++k) {
-        const double f = k / 8.0;
-        for (const auto& [px, py] : std::initializer_list<std::pair<double, double>>{{e.min_x + f * e.width(), e.min_y},
-                                                                                    {e.min_x + f * e.width(), e.max_y},
-                                                                                    {e.min_x, e.min_y + f * e.height()},
-                                                                                    {e.max_x, e.min_y + f * e.height()}})
-            x.push_back(px), y.push_back(py);
-    }
-    std::vector<double> z(x.size(), 0.0);
-    transform_points(from, to, x, y, z, o.cloud);
-    Extent out = empty_extent();
-    for (std::size_t i = 0; i < x.size(); ++i) include(out, Extent{x[i], y[i], x[i], y[i]});
-    return out;
+    return cloud_bounds_in(m.options.cloud, m.options.cloud_crs, crs_from_wkt(m.crs_wkt, "grid"));
 }
 
 // The part of the grid the cloud covers; Error naming both inputs and their extents when none.

@@ -7,6 +7,7 @@
 #include "core/error.hpp"
 #include "core/geometry.hpp"
 #include "core/log.hpp"
+#include "io/cloud_crs.hpp"
 
 namespace cityforge {
 
@@ -94,6 +95,23 @@ Extent cloud_point_bounds(const std::string& cloud_path) {
     }
     if (!(e.min_x <= e.max_x)) throw Error(cloud_path, "point cloud is empty");
     return e;
+}
+
+Extent cloud_bounds_in(const std::string& cloud_path, const std::string& cloud_crs_override, const CrsInfo& target) {
+    const Extent e = cloud_point_bounds(cloud_path);
+    const CrsInfo from = resolve_cloud_crs(cloud_path, cloud_crs_override).crs;
+    if (target.empty() || from.empty() || same_horizontal_crs(from, target)) return e;
+    std::vector<double> x, y;
+    for (int k = 0; k <= 8; ++k) {
+        const double f = k / 8.0;
+        x.insert(x.end(), {e.min_x + f * e.width(), e.min_x + f * e.width(), e.min_x, e.max_x});
+        y.insert(y.end(), {e.min_y, e.max_y, e.min_y + f * e.height(), e.min_y + f * e.height()});
+    }
+    std::vector<double> z(x.size(), 0.0);
+    transform_points(from, target, x, y, z, cloud_path);
+    Extent out = empty_extent();
+    for (std::size_t i = 0; i < x.size(); ++i) include(out, Extent{x[i], y[i], x[i], y[i]});
+    return out;
 }
 
 }  // namespace cityforge

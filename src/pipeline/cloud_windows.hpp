@@ -64,4 +64,9 @@ WindowedRasters rasterize_cloud_by_windows(const std::string& cloud_path, const 
 /// pass: what grid_over_cloud sees when the cloud is held whole.
 Extent cloud_point_bounds(const std::string& cloud_path);
 
+/// cloud_point_bounds moved to `target` (its outline, 9 points a side,
+/// transformed; the file's box when `target` is empty or the same CRS).
+/// `cloud_crs_override` as for prepare_cloud.
+Extent cloud_bounds_in(const std::string& cloud_path, const std::string& cloud_crs_override, const CrsInfo& target);
+
 }  // namespace cityforge

@@ -9,6 +9,7 @@
 #include "cloud/cloud_reader.hpp"
 #include "core/atomic_file.hpp"
 #include "core/error.hpp"
+#include "core/log.hpp"
 #include "core/memory.hpp"
 #include "io/cloud_crs.hpp"
 #include "pipeline/cloud_windows.hpp"
@@ -47,15 +48,18 @@ RasterizeReport rasterize_run_unguarded(const std::string& cloud_path, const std
     RasterizeReport rep;
     GridSpec grid;
     CrsInfo target;
+    double unit = 0.0;  // ground metres per grid unit (Web Mercator: its scale at the grid's centre)
     if (!o.grid_raster.empty()) {
-        const RasterInfo info = read_raster_info(o.grid_raster);
+        // Cells, outlier distances and the ground filter's window are metres: a lon/lat grid
+        // raster is read on its working grid (the UTM zone of its centre), as `footprints` reads it.
+        RasterOpenOptions ro;
+        ro.project_geographic = true;
+        const RasterInfo info = read_raster_info(o.grid_raster, ro);
+        if (info.warped)
+            log::warning(o.grid_raster + ": a " + info.source_crs.label() + " grid; the rasters are written on its working grid in " + info.crs.label());
         grid = {info.transform, info.width, info.height};
         target = info.crs;
-        // Cells, outlier distances and the ground filter's window are metres
-        // (a geographic grid once failed with "outlier_limit_m: must be >= 0").
-        if (target.geographic)
-            throw Error(o.grid_raster, "the grid raster is in a geographic CRS (" + target.label() +
-                                           "); rasterizing needs a projected CRS in metres: reproject it, e.g. gdalwarp -t_srs EPSG:<UTM zone>");
+        unit = info.metres_per_unit;
     }
     CloudRasters r;
     CrsInfo out_crs;
@@ -65,9 +69,21 @@ RasterizeReport rasterize_run_unguarded(const std::string& cloud_path, const std
     // paths (cloud_windows.hpp): the grid over every point, the outlier limit
     // and the density measured on the central 400 m.
     const CrsInfo source = require_cloud_crs(cloud_path, o.cloud_crs);
-    const double unit = (target.empty() ? source : target).linear_unit_m;
-    if (o.grid_raster.empty()) grid = grid_over_extent(cloud_point_bounds(cloud_path), o.gsd_m / unit, 0, cloud_path);
+    if (o.grid_raster.empty()) {
+        if (source.geographic) throw Error(cloud_path, "the cloud is in a geographic CRS (" + source.label() + "); rasterizing needs metres: give --grid or --cloud-crs");
+        const Extent bounds = cloud_point_bounds(cloud_path);
+        unit = ground_metres_per_unit_at(source, bounds);
+        grid = grid_over_extent(bounds, o.gsd_m / unit, 0, cloud_path);
+    }
     const GeoTransform& gt = grid.transform;
+    if (!o.grid_raster.empty()) {  // a grid the cloud does not reach gives no raster, not empty ones
+        const MapPoint a = gt.pixel_to_map({0.0, 0.0}), b = gt.pixel_to_map({double(grid.width), double(grid.height)});
+        const Extent g{std::min(a.x, b.x), std::min(a.y, b.y), std::max(a.x, b.x), std::max(a.y, b.y)};
+        const Extent c = cloud_bounds_in(cloud_path, o.cloud_crs, target);
+        if (c.max_x < g.min_x || c.min_x > g.max_x || c.max_y < g.min_y || c.min_y > g.max_y)
+            throw Error(cloud_path, "does not overlap " + o.grid_raster + ": cloud " + describe_extent(c, target) + ", " +
+                                        std::filesystem::path(o.grid_raster).filename().string() + " " + describe_extent(g, target));
+    }
     const CloudPlan plan = plan_cloud(cloud_path, o.cloud_crs, target, o.outliers, gt.pixel_to_map({grid.width / 2.0, grid.height / 2.0}));
     if (windows) {
         const double px = std::abs(gt.pixel_width) * unit;
@@ -83,7 +99,7 @@ RasterizeReport rasterize_run_unguarded(const std::string& cloud_path, const std
     } else {
         const PreparedCloud pc = prepare_cloud(cloud_path, o.cloud_crs, target, plan.outliers, o.ground);
         progress(0.5, "cloud");
-        r = rasterize_cloud(pc.cloud, pc.keep, pc.is_ground, grid, pc.crs.linear_unit_m);
+        r = rasterize_cloud(pc.cloud, pc.keep, pc.is_ground, grid, unit);
         out_crs = pc.crs;
         rep.points = pc.cloud.size(), rep.ground_points = pc.ground_points, rep.ground_from_classification = pc.ground_from_classification;
     }

@@ -357,8 +357,16 @@ TEST_CASE("clear messages naming the file: 1e300 footprints, a 1e9 m footprint, 
     CHECK(oom.err.find(big + ": out of memory: 65000 x 65000 pixels") != std::string::npos);
     CHECK(std::count(oom.err.begin(), oom.err.end(), '\n') == 1);
     CHECK_FALSE(std::filesystem::exists(dir / "f.geojson"));
-    // A grid raster in lon/lat: "outlier_limit_m: must be >= 0" before.
+    // A grid raster in lon/lat ("outlier_limit_m: must be >= 0" once): read on its working grid (UTM), said in a warning.
     REQUIRE(test::run_command("gdalwarp -q -t_srs EPSG:4326 " + s.ortho_path + " " + (dir / "lonlat.tif")).exit_code == 0);
-    check_one_line_error(cli_guarded("cloud rasterize --cloud " + s.cloud_path + " --grid " + (dir / "lonlat.tif") + " --out " + (dir / "ras")),
-                         dir / "lonlat.tif", "the grid raster is in a geographic CRS");
+    const auto ll = cli_guarded("cloud rasterize --cloud " + s.cloud_path + " --grid " + (dir / "lonlat.tif") + " --out " + (dir / "ras"));
+    INFO(ll.err);
+    CHECK(ll.exit_code == 0);
+    CHECK(ll.err.find("working grid in EPSG:326") != std::string::npos);
+    CHECK(test::run_command("gdalsrsinfo -o epsg " + (dir / "ras/dsm.tif")).out.find("EPSG:326") != std::string::npos);
+    // A grid the cloud does not reach: an error naming both, no rasters (not empty ones).
+    REQUIRE(test::run_command("gdal_translate -q -a_ullr 900000 5000000 901000 4999000 " + s.ortho_path + " " + (dir / "far.tif")).exit_code == 0);
+    check_one_line_error(cli_guarded("cloud rasterize --cloud " + s.cloud_path + " --grid " + (dir / "far.tif") + " --out " + (dir / "ras_far")),
+                         s.cloud_path, "does not overlap");
+    CHECK_FALSE(std::filesystem::exists(dir / "ras_far/dsm.tif"));
 }
