@@ -88,6 +88,23 @@ CrsInfo describe(OGRSpatialReference& srs) {
                 }
             }
         }
+        // Parts with codes but no code for the whole (GeoTIFF keys 28992 + 5709, a
+        // compound whose name PROJ does not match): the registered compound of
+        // these parts when PROJ knows one (EPSG:7415), with the same units.
+        if (!info.epsg && info.horizontal_epsg && info.vertical_epsg) {
+            GdalErrorCapture capture;
+            OGRSpatialReference parts;
+            const std::string text = "EPSG:" + std::to_string(*info.horizontal_epsg) + "+" + std::to_string(*info.vertical_epsg);
+            if (parts.SetFromUserInput(text.c_str()) == OGRERR_NONE) {
+                OGRSpatialReference registered;
+                if (const auto code = identify_epsg(parts); code && registered.importFromEPSG(*code) == OGRERR_NONE) {
+                    CrsInfo whole = describe(registered);
+                    if (whole.epsg && whole.horizontal_epsg == info.horizontal_epsg && whole.vertical_epsg == info.vertical_epsg &&
+                        whole.linear_unit_m == info.linear_unit_m && whole.z_unit_m == info.z_unit_m)
+                        return whole;
+                }
+            }
+        }
     } else if (srs.IsVertical()) {
         info.epsg = authority_code(srs, nullptr);
         info.vertical_epsg = info.epsg;

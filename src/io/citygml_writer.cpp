@@ -123,8 +123,8 @@ void write_lod2(std::ostream& out, GmlWriter& gml, const std::vector<Solid>& sol
 
 CityGmlWriteReport write_citygml(const std::string& path, const CityModel& model, const CityGmlWriteOptions& o) {
     if (o.lod != 1 && o.lod != 2) throw Error(path, "CityGML export writes LOD 1 or LOD 2 (LOD 0 footprints are in both)");
+    // Without an EPSG code the envelope has no srsName (it is optional in GML); the CRS is named in the header comment.
     const std::string srs = model.crs.gml_srs_name();
-    if (srs.empty()) throw Error(path, "the model's CRS (" + model.crs.label + ") has no EPSG code to name in srsName");
     AtomicTextFile file(path);
     std::ostream& out = file.stream();
     GmlWriter gml(out, o.decimals);
@@ -137,7 +137,7 @@ CityGmlWriteReport write_citygml(const std::string& path, const CityModel& model
            " http://www.opengis.net/citygml/generics/2.0 http://schemas.opengis.net/citygml/generics/2.0/generics.xsd\">\n"
         << "<!-- written by cityforge " << version() << "; CRS " << xml_escape(model.crs.label) << "; LOD " << o.lod << " -->\n"
         << "<gml:name>" << xml_escape(model.title) << "</gml:name>\n"
-        << "<gml:boundedBy><gml:Envelope srsName=\"" << srs << "\" srsDimension=\"3\"><gml:lowerCorner>";
+        << "<gml:boundedBy><gml:Envelope" << (srs.empty() ? std::string() : " srsName=\"" + srs + "\"") << " srsDimension=\"3\"><gml:lowerCorner>";
     gml.number(e[0]), out << ' ', gml.number(e[1]), out << ' ', gml.number(e[2]);
     out << "</gml:lowerCorner><gml:upperCorner>";
     gml.number(e[3]), out << ' ', gml.number(e[4]), out << ' ', gml.number(e[5]);

@@ -20,8 +20,9 @@ struct CityGmlWriteReport {
     std::size_t with_geometry = 0;      ///< of them with a solid of the requested LOD
 };
 
-/// Throws Error naming `path` when the model has no EPSG-identified CRS or
-/// the file cannot be written.
+/// The envelope's srsName names the model's EPSG codes; without any code it is
+/// left out (the header comment names the CRS). Throws Error naming `path`
+/// when the file cannot be written.
 CityGmlWriteReport write_citygml(const std::string& path, const CityModel& model, const CityGmlWriteOptions& options = {});
 
 /// "bldg_" + the id with every character outside [A-Za-z0-9_-] replaced by '_':

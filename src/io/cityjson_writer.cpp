@@ -265,8 +265,7 @@ json vertices_json(const VertexPool& pool) {
 }  // namespace
 
 CityJsonWriteReport write_cityjson(const std::string& path, const CityModel& model, const CityJsonWriteOptions& o) {
-    const std::string rs = model.crs.cityjson_reference_system();
-    if (rs.empty()) throw Error(path, "the model's CRS (" + model.crs.label + ") has no EPSG code to name in referenceSystem");
+    const std::string rs = model.crs.cityjson_reference_system();  // empty without an EPSG code: metadata has none
     if (!(o.scale > 0)) throw Error(path, "CityJSON vertex scale must be > 0");
     const auto e = model_extent(model);
     // Translate to a whole number of quanta near the minimum corner, so vertices stay small integers.
@@ -275,7 +274,8 @@ CityJsonWriteReport write_cityjson(const std::string& path, const CityModel& mod
     header["type"] = "CityJSON";
     header["version"] = "2.0";
     header["transform"] = {{"scale", {o.scale, o.scale, o.scale}}, {"translate", {translate[0], translate[1], translate[2]}}};
-    header["metadata"] = {{"referenceSystem", rs}, {"geographicalExtent", {e[0], e[1], e[2], e[3], e[4], e[5]}}, {"title", model.title}};
+    header["metadata"] = {{"geographicalExtent", {e[0], e[1], e[2], e[3], e[4], e[5]}}, {"title", model.title}};
+    if (!rs.empty()) header["metadata"]["referenceSystem"] = rs;
     header["CityObjects"] = json::object();
     header["vertices"] = json::array();
 

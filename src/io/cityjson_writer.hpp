@@ -33,8 +33,9 @@ struct CityJsonWriteReport {
     std::size_t textured_buildings = 0;  ///< buildings whose LOD2.2 roofs carry texture coordinates
 };
 
-/// Throws Error naming `path` when the model's CRS has no EPSG code or the
-/// file cannot be written.
+/// metadata.referenceSystem names the model's EPSG code; without any code it
+/// is left out (CityJSON has no place for a WKT). Throws Error naming `path`
+/// when the file cannot be written.
 CityJsonWriteReport write_cityjson(const std::string& path, const CityModel& model, const CityJsonWriteOptions& options = {});
 
 }  // namespace cityforge

@@ -45,6 +45,11 @@ ModelCrs model_crs_of(const CrsInfo& c, const Extent& buildings) {
     // At the centre of the buildings (Web Mercator's scale varies by 1e-4 over a kilometre at mid latitudes).
     if (!c.geographic) m.ground_scale = ground_scale_factor_at(c, buildings);
     m.label = c.label();
+    if (!c.horizontal_epsg && !c.epsg) {
+        // No code to name it by (the writers then leave srsName / referenceSystem out): the PROJ string says what it is.
+        const std::string proj = proj_string(c);
+        if (!proj.empty()) m.label = c.name.empty() || c.name == "unknown" ? proj : c.name + " (" + proj + ")";
+    }
     m.horizontal_epsg = c.horizontal_epsg;
     m.vertical_epsg = c.vertical_epsg;
     if (c.vertical_epsg && c.epsg && c.epsg != c.horizontal_epsg) m.compound_epsg = c.epsg;
@@ -90,8 +95,10 @@ CityModel build_city_model(const PolygonLayer& layer, const CrsInfo& crs, const 
     for (int f : {ground_f, height_f})
         if (f >= 0 && layer.field_types[f] == FieldType::string)
             throw Error(path, "field '" + layer.field_names[f] + "' is text; heights must be numeric");
-    if (ground_f < 0) log::warning(path + ": no field '" + o.ground_field + "'; buildings get no LOD1 (run `cityforge heights` first)");
-    if (height_f < 0) log::warning(path + ": no field '" + o.height_field + "'; buildings get no LOD1 (run `cityforge heights` first)");
+    if (ground_f < 0 && o.warn_missing_heights)
+        log::warning(path + ": no field '" + o.ground_field + "'; buildings get no LOD1 (run `cityforge heights` first)");
+    if (height_f < 0 && o.warn_missing_heights)
+        log::warning(path + ": no field '" + o.height_field + "'; buildings get no LOD1 (run `cityforge heights` first)");
     auto number = [](const AttributeValue& v) -> std::optional<double> {
         if (std::holds_alternative<double>(v)) return std::get<double>(v);
         if (std::holds_alternative<int64_t>(v)) return double(std::get<int64_t>(v));
@@ -152,6 +159,9 @@ ExportReport write_city_model(const CityModel& model, const CrsInfo& crs, const 
         rep.with_lod2 += !b.lod2.empty(), rep.valid_lod2 += !b.lod2.empty() && b.lod2_errors.empty();
         ++rep.status_counts[b.status];
     }
+    if (model.crs.gml_srs_name().empty() && (wants(o.formats, "citygml") || wants(o.formats, "cityjson") || wants(o.formats, "cityjsonseq")))
+        log::warning("the buildings' CRS (" + model.crs.label +
+                     ") has no EPSG code: CityGML is written without srsName (its header comment names the CRS), CityJSON without referenceSystem");
     const std::size_t steps = o.formats.size() + (wants(o.formats, "citygml") && wants(o.lods, 2) ? 1 : 0);
     std::size_t done = 0;
     auto timed = [&](const std::string& format, const std::string& file, auto&& write) {

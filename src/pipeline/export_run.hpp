@@ -28,6 +28,9 @@ struct ExportOptions {
     std::string id_field = "id";             ///< building id attribute; absent -> the feature id
     std::string ground_field = "ground_z";   ///< ground height attribute, vertical CRS units
     std::string height_field = "height_m";   ///< LOD1 height above ground attribute, metres
+    /// Warn when the layer lacks the ground or height field. Off where no heights are
+    /// expected (a run without a cloud, which says so itself).
+    bool warn_missing_heights = true;
     SolidValidityOptions validity;
     /// Also write the building table (the GeoPackage's rows) to a database: "PG:dbname=... [tables=NAME]"
     /// (default table `buildings`, replaced in one transaction); empty = none.

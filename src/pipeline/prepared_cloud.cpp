@@ -158,12 +158,30 @@ void require_cloud_overlap(const PreparedCloud& pc, const std::string& cloud_pat
 std::size_t check_footprint_overlap(const PreparedCloud& pc, const std::string& cloud_path, const std::vector<Extent>& extents,
                                     const std::string& footprints_path) {
     if (extents.empty()) return 0;
-    const Extent c = kept_extent(pc);
+    Extent c = kept_extent(pc);
+    const auto overlaps = [&](const Extent& e) { return !(e.max_x < c.min_x || e.min_x > c.max_x || e.max_y < c.min_y || e.min_y > c.max_y); };
+    if (c.min_x > c.max_x && pc.cloud.size() > 0) {
+        // Nothing kept, but the file has points: if they lie over the footprints, the cleaning removed them all.
+        for (std::size_t i = 0; i < pc.cloud.size(); ++i) {
+            c.min_x = std::min(c.min_x, pc.cloud.x[i]), c.max_x = std::max(c.max_x, pc.cloud.x[i]);
+            c.min_y = std::min(c.min_y, pc.cloud.y[i]), c.max_y = std::max(c.max_y, pc.cloud.y[i]);
+        }
+        if (std::any_of(extents.begin(), extents.end(), overlaps)) {
+            const double unit = pc.crs.empty() ? 1.0 : pc.crs.linear_unit_m;
+            const double area_m2 = (c.max_x - c.min_x) * (c.max_y - c.min_y) * unit * unit;
+            char density[64] = "";
+            if (area_m2 > 0) std::snprintf(density, sizeof density, ", %.3g points per m\u00b2", double(pc.cloud.size()) / area_m2);
+            throw Error(cloud_path, "all " + std::to_string(pc.cloud.size()) + " points were removed as outliers (" +
+                                        std::to_string(pc.removed_statistical) + " statistical or noise class, " +
+                                        std::to_string(pc.removed_isolated) + " isolated" + density +
+                                        "): the cloud is too sparse or noisy for the filter; --no-outlier-filter keeps them");
+        }
+    }
     Extent all = empty_extent();
     std::size_t outside = 0;
     for (const Extent& e : extents) {
         include(all, e);
-        if (e.max_x < c.min_x || e.min_x > c.max_x || e.max_y < c.min_y || e.min_y > c.max_y) ++outside;
+        if (!overlaps(e)) ++outside;
     }
     if (outside == extents.size())
         throw Error(footprints_path, "no footprint overlaps the cloud " + cloud_path + ": footprints " + describe_extent(all, pc.crs) +

@@ -318,7 +318,9 @@ ViewReport write_view(const std::string& run_dir, const ViewOptions& o) {
     const std::string ortho = o.ortho.empty() ? run_ortho(dir) : o.ortho;
     if (!ortho.empty()) {
         const double w = ext.max_x - ext.min_x, h = ext.max_y - ext.min_y, m = 0.05 * std::max(w, h) + 5.0;
-        const Quicklook q = render_quicklook_png(ortho, {ext.min_x - m, ext.min_y - m, ext.max_x + m, ext.max_y + m}, o.ortho_max_px);
+        // The extent is in the buildings' CRS (a lon/lat ortho's run writes UTM): the picture is warped onto it.
+        const Quicklook q = render_quicklook_png(ortho, {ext.min_x - m, ext.min_y - m, ext.max_x + m, ext.max_y + m}, o.ortho_max_px,
+                                                 layer.crs.wkt);
         data["ortho"] = {{"src", "data:image/png;base64," + base64(q.png)},
                          {"extent", {cm(q.extent.min_x - origin[0]), cm(q.extent.min_y - origin[1]), cm(q.extent.max_x - origin[0]),
                                      cm(q.extent.max_y - origin[1])}},

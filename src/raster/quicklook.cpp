@@ -6,6 +6,7 @@
 #include <gdal_priv.h>
 
 #include "core/error.hpp"
+#include "crs/crs.hpp"
 #include "crs/gdal_util.hpp"
 #include "raster/raster.hpp"
 
@@ -33,8 +34,13 @@ std::string encode_png(const std::vector<uint8_t>& bytes, int w, int h, int nb, 
     return result;
 }
 
-Quicklook render_quicklook_png(const std::string& path, const Extent& want, int max_px) {
-    const RasterReader reader(path);
+Quicklook render_quicklook_png(const std::string& path, const Extent& want, int max_px, const std::string& crs_wkt) {
+    RasterReader reader(path);
+    if (!crs_wkt.empty() && reader.info().georeferenced && !same_horizontal_crs(reader.info().crs, crs_from_wkt(crs_wkt, path))) {
+        RasterOpenOptions warped;
+        warped.working_crs = crs_wkt;
+        reader = RasterReader(path, warped);
+    }
     const RasterInfo& info = reader.info();
     const GeoTransform& gt = info.transform;
     const PixelPoint a = gt.map_to_pixel({want.min_x, want.max_y}), b = gt.map_to_pixel({want.max_x, want.min_y});

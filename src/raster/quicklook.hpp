@@ -12,13 +12,16 @@ namespace cityforge {
 
 struct Quicklook {
     std::string png;  ///< PNG file bytes
-    Extent extent;    ///< map extent the picture covers (the request clipped to the raster), raster CRS
+    Extent extent;    ///< map extent the picture covers (the request clipped to the raster), in the CRS of the request
     int width = 0, height = 0;  ///< pixels
 };
 
 /// Throws Error naming the file when it cannot be read or does not overlap
-/// `extent` (given in the raster's CRS).
-Quicklook render_quicklook_png(const std::string& raster_path, const Extent& extent, int max_px = 1024);
+/// `extent`. `extent` is in `crs_wkt` (the picture is then warped onto that
+/// CRS when the raster's horizontal CRS differs, e.g. a lon/lat ortho under a
+/// UTM model) or, when `crs_wkt` is empty, in the raster's own CRS.
+Quicklook render_quicklook_png(const std::string& raster_path, const Extent& extent, int max_px = 1024,
+                               const std::string& crs_wkt = {});
 
 /// PNG file bytes of an 8-bit picture: `bytes` pixel-interleaved, rows from the
 /// top, `bands` 1 (grey), 3 (RGB) or 4 (RGBA). Throws Error naming `where`.

@@ -1,11 +1,13 @@
 #include "raster/raster.hpp"
 
 #include <cmath>
+#include <cstdlib>
 #include <cpl_string.h>
 #include <filesystem>
 #include <gdal_priv.h>
 #include <gdal_utils.h>
 #include <gdalwarper.h>
+#include <ogr_spatialref.h>
 
 #include "core/atomic_file.hpp"
 #include "core/error.hpp"
@@ -35,6 +37,28 @@ template <> constexpr GDALDataType gdal_type<int16_t>() { return GDT_Int16; }
 template <> constexpr GDALDataType gdal_type<uint32_t>() { return GDT_UInt32; }
 template <> constexpr GDALDataType gdal_type<float>() { return GDT_Float32; }
 template <> constexpr GDALDataType gdal_type<double>() { return GDT_Float64; }
+
+// The CRS to store in a GeoTIFF. GDAL's GeoTIFF writer stores a compound CRS
+// as ProjectedCSTypeGeoKey + VerticalCSTypeGeoKey only when its parts carry
+// EPSG codes; the WKT2 of a registered compound (EPSG:7415) carries its code
+// on the compound alone, which GDAL would store as a user-defined CRS that
+// reads back without any code. Rebuilt from the codes when they are known.
+bool geotiff_srs(const std::string& wkt, OGRSpatialReference& srs) {
+    if (srs.importFromWkt(wkt.c_str()) != OGRERR_NONE) return false;
+    if (!srs.IsCompound()) return true;
+    auto epsg_of = [](const OGRSpatialReference& s, const char* node) -> int {
+        const char* auth = s.GetAuthorityName(node);
+        const char* code = s.GetAuthorityCode(node);
+        return auth && code && EQUAL(auth, "EPSG") ? std::atoi(code) : 0;
+    };
+    OGRSpatialReference horizontal(srs);
+    horizontal.StripVertical();
+    const int h = epsg_of(horizontal, nullptr), v = epsg_of(srs, "VERT_CS");
+    if (h > 0 && v > 0) return true;  // the parts carry their codes: GDAL writes them
+    OGRSpatialReference rebuilt;
+    if (const int whole = epsg_of(srs, nullptr); whole > 0 && rebuilt.importFromEPSG(whole) == OGRERR_NONE) srs = rebuilt;
+    return true;
+}
 
 }  // namespace
 
@@ -306,7 +330,7 @@ void write_geotiff(const std::string& path, const Image<T>& image, const GeoTran
     ok = ok && ds->SetGeoTransform(gt.data()) == CE_None;
     if (!crs_wkt.empty()) {
         OGRSpatialReference srs;
-        ok = ok && srs.importFromWkt(crs_wkt.c_str()) == OGRERR_NONE;
+        ok = ok && geotiff_srs(crs_wkt, srs);
         ok = ok && ds->SetSpatialRef(&srs) == CE_None;
     }
     for (int b = 0; b < image.bands && ok; ++b) {

@@ -830,3 +830,98 @@ TEST_CASE("run: inputs that do not overlap are one-line errors naming both files
     CHECK(c.exit_code == 0);
     CHECK(c.err.find("1 of 2 footprints lie outside the cloud") != std::string::npos);
 }
+
+TEST_CASE("A compound CRS keeps its EPSG code: our GeoTIFFs and GeoKeys clouds give EPSG:7415 outputs", "[inputs][crs]") {
+    ScratchDir dir("inputs_compound_7415");
+    const std::string delft = shared_data("delft_ahn3_bgt_west/ahn3_delft_west.las");
+    // A GeoTIFF we write under EPSG:7415 reads back (here and in GDAL) as EPSG:7415, not as a user-defined CRS.
+    const auto r = run_cli("cloud rasterize --quiet --cloud " + delft + " --cloud-crs EPSG:7415 --gsd 2 --out " + (dir / "r"));
+    INFO(r.err);
+    REQUIRE(r.exit_code == 0);
+    const json d = info_json(dir / "r/dsm.tif");
+    CHECK(d["crs"]["epsg"] == 7415);
+    CHECK(d["crs"]["horizontal_epsg"] == 28992);
+    CHECK(d["crs"]["vertical_epsg"] == 5709);
+    CHECK(run_command("gdalsrsinfo -o epsg " + (dir / "r/dsm.tif")).out.find("EPSG:7415") != std::string::npos);
+    // A GeoKeys-only cloud (28992 + vertical 5709) resolves to EPSG:7415 itself: footprints from it go to GeoPackage as 7415.
+    write_geokeys_only_copy(delft, dir / "geokeys.las");
+    CHECK(info_json(dir / "geokeys.las")["crs"]["epsg"] == 7415);
+    const auto f = run_cli("footprints --quiet --cloud " + (dir / "geokeys.las") + " --out " + (dir / "fp.gpkg"));
+    INFO(f.err);
+    REQUIRE(f.exit_code == 0);
+    const auto srs = run_command("ogrinfo -q -ro " + (dir / "fp.gpkg") + " -sql \"SELECT srs_id FROM gpkg_contents\"");
+    CHECK(srs.out.find("srs_id (Integer64) = 7415") != std::string::npos);
+    CHECK(run_command("gdalsrsinfo -o epsg " + (dir / "fp.gpkg")).out.find("EPSG:7415") != std::string::npos);
+    // An ortho made from our DSM (gdal_translate keeps its CRS) gives footprints under 7415 too.
+    REQUIRE(run_command("gdal_translate -q -ot Byte -scale -a_nodata none -b 1 -b 1 -b 1 " + (dir / "r/dsm.tif") + " " + (dir / "ortho.tif"))
+                .exit_code == 0);
+    CHECK(info_json(dir / "ortho.tif")["crs"]["epsg"] == 7415);
+    const auto o = run_cli("footprints --quiet --ortho " + (dir / "ortho.tif") + " --out " + (dir / "fo.gpkg"));
+    INFO(o.err);
+    REQUIRE(o.exit_code == 0);
+    CHECK(run_command("ogrinfo -q -ro " + (dir / "fo.gpkg") + " -sql \"SELECT srs_id FROM gpkg_contents\"").out.find("srs_id (Integer64) = 7415") !=
+          std::string::npos);
+    const auto e = run_cli("export --quiet --in " + (dir / "fp.gpkg") + " --formats citygml,cityjson --out " + (dir / "e"));
+    INFO(e.err);
+    REQUIRE(e.exit_code == 0);
+    CHECK(slurp(dir / "e/buildings_lod1.gml").find("srsName=\"urn:ogc:def:crs,crs:EPSG::28992,crs:EPSG::5709\"") != std::string::npos);
+    CHECK(json::parse(slurp(dir / "e/buildings.city.json"))["metadata"]["referenceSystem"] == "https://www.opengis.net/def/crs/EPSG/0/7415");
+}
+
+TEST_CASE("City models in a CRS without an EPSG code are written, with a warning, not failed half-way", "[inputs][crs]") {
+    ScratchDir dir("inputs_crs_no_code");
+    write_squares(dir / "sq.geojson", {{84905.0, 447560.0}, {84925.0, 447560.0}}, 4.0, R"({"ground_z": 0.5, "height_m": 6.0})");
+    // RD New's parameters as a PROJ string: no EPSG code to name.
+    REQUIRE(run_command("ogr2ogr -q -a_srs \"+proj=sterea +lat_0=52.1561605555556 +lon_0=5.38763888888889 +k=0.9999079 +x_0=155000 "
+                        "+y_0=463000 +ellps=bessel +units=m +no_defs\" " + (dir / "custom.gpkg") + " " + (dir / "sq.geojson"))
+                .exit_code == 0);
+    const auto e = run_cli("export --in " + (dir / "custom.gpkg") + " --formats gpkg,citygml,cityjson --out " + (dir / "e"));
+    INFO(e.err);
+    REQUIRE(e.exit_code == 0);
+    CHECK(e.err.find("has no EPSG code") != std::string::npos);
+    CHECK(e.err.find("+proj=sterea") != std::string::npos);  // the warning says what the CRS is
+    const std::string gml = slurp(dir / "e/buildings_lod1.gml");
+    CHECK(gml.find("srsName") == std::string::npos);
+    CHECK(gml.find("+proj=sterea") != std::string::npos);  // named in the header comment
+    CHECK(gml.find("<bldg:lod1Solid>") != std::string::npos);
+    const json cj = json::parse(slurp(dir / "e/buildings.city.json"));
+    CHECK_FALSE(cj["metadata"].contains("referenceSystem"));
+    CHECK(cj["CityObjects"].size() == 2);
+    CHECK(std::filesystem::exists(dir / "e/buildings.gpkg"));
+}
+
+TEST_CASE("A sparse cloud the outlier filter empties is said to be so, not to miss the footprints", "[inputs][overlap]") {
+    ScratchDir dir("inputs_sparse_cloud");
+    // PDAL's point-color.las: 1065 points over about 1.4 km² (EPSG:26910); a 600 m square over it.
+    json fc{{"type", "FeatureCollection"}, {"crs", {{"type", "name"}, {"properties", {{"name", "urn:ogc:def:crs:EPSG::26910"}}}}}};
+    fc["features"] = json::array({json{{"type", "Feature"}, {"properties", {{"name", "a"}}},
+                                       {"geometry", {{"type", "Polygon"},
+                                                     {"coordinates", json::array({json::array({json::array({494200, 4877800}), json::array({494800, 4877800}),
+                                                                                               json::array({494800, 4878400}), json::array({494200, 4878400}),
+                                                                                               json::array({494200, 4877800})})})}}}}});
+    std::ofstream(dir / "sq.geojson") << fc.dump();
+    const std::string cloud = shared_data("laz_corpus/reference_las/point-color.las");
+    const auto a = run_cli("heights --quiet --footprints " + (dir / "sq.geojson") + " --cloud " + cloud + " --out " + (dir / "a.gpkg"));
+    INFO(a.err);
+    CHECK(a.exit_code == 1);
+    CHECK(count_lines(a.err) == 1);
+    CHECK(a.err.find("all 1065 points were removed as outliers") != std::string::npos);
+    CHECK(a.err.find("--no-outlier-filter") != std::string::npos);
+    CHECK(a.err.find("no footprint overlaps") == std::string::npos);
+    const auto b = run_cli("heights --quiet --no-outlier-filter --footprints " + (dir / "sq.geojson") + " --cloud " + cloud + " --out " + (dir / "b.gpkg"));
+    INFO(b.err);
+    CHECK(b.exit_code == 0);
+}
+
+TEST_CASE("run on a lon/lat ortho without a cloud: no false warnings, the page shows the ortho", "[inputs][geographic][run]") {
+    ScratchDir dir("inputs_rio_warnings");
+    const std::string rio = shared_data("spacenet1_rio_rgb/3band_013022223130_Public_img51_rgb.tif");
+    const auto r = run_cli("run --ortho " + rio + " --out " + (dir / "rio"));
+    INFO(r.err);
+    REQUIRE(r.exit_code == 0);
+    CHECK(r.err.find("does not overlap") == std::string::npos);  // the viewer's quicklook is warped onto the model's UTM
+    CHECK(r.err.find("no field 'ground_z'") == std::string::npos);  // "no cloud" says it once
+    CHECK(r.err.find("no cloud") != std::string::npos);
+    const std::string page = slurp(dir / "rio/view/index.html");
+    CHECK(page.find("\"ortho\":{") != std::string::npos);
+}
