@@ -5,13 +5,28 @@
 #include <fstream>
 #include <sstream>
 
+#include "core/atomic_file.hpp"
 #include "core/error.hpp"
+#include "core/log.hpp"
 
 namespace cityforge::cli {
+
+void remove_stale_temporaries_beside(const std::string& path) {
+    namespace fs = std::filesystem;
+    if (path.empty() || path.rfind("PG:", 0) == 0 || path.rfind("pg:", 0) == 0) return;
+    const fs::path p(path);
+    std::error_code ec;
+    const fs::path parent = p.parent_path().empty() ? fs::path(".") : p.parent_path();
+    std::size_t removed = remove_stale_temporaries(parent);
+    if (fs::is_directory(p, ec)) removed += remove_stale_temporaries(p);
+    if (removed)
+        log::info("removed " + std::to_string(removed) + " temporar" + (removed == 1 ? "y" : "ies") + " of an interrupted process beside " + path);
+}
 
 void refuse_existing_output(const GlobalFlags& g, const std::string& path) {
     namespace fs = std::filesystem;
     std::error_code ec;
+    remove_stale_temporaries_beside(path);
     if (path.empty() || g.overwrite || !fs::exists(path, ec)) return;
     if (fs::is_directory(path, ec) && fs::is_empty(path, ec)) return;
     throw Error(path, std::string(fs::is_directory(path, ec) ? "output folder exists and is not empty" : "output exists") +

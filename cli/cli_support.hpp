@@ -23,7 +23,17 @@ struct GlobalFlags {
 
 // Refuses an existing output (a file, or a folder that is not empty) unless
 // --overwrite was given: Error "PATH: exists; give --overwrite to replace it".
+// First removes the temporaries dead processes left there
+// (remove_stale_temporaries_beside), so a folder holding only those is empty.
 void refuse_existing_output(const GlobalFlags& g, const std::string& path);
+
+// Removes the temporaries ("NAME.part-PID.EXT" files, "NAME.part-PID"
+// folders) that processes of this machine which are no longer running (killed,
+// crashed) left beside the output `path` (in its parent folder) and, when
+// `path` is a folder, inside it; an info line says how many. Every writing
+// command calls it (through refuse_existing_output or directly). Not for
+// folders several hosts write to (run --tile, --mpi, merge-tiles).
+void remove_stale_temporaries_beside(const std::string& path);
 
 // "unknown subcommand 'segmnt'; did you mean 'segment'?" when the first word
 // of `argv` that is not an option names no subcommand of `app` (at any

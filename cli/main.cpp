@@ -9,6 +9,7 @@
 
 #include "cli_support.hpp"
 #include "commands/commands.hpp"
+#include "core/atomic_file.hpp"
 #include "core/error.hpp"
 #include "core/log.hpp"
 #include "core/memory.hpp"
@@ -60,6 +61,9 @@ int main(int argc, char** argv) {
         return app.exit(e) == 0 ? 0 : 2;
     }
     cf::log::set_level(g.quiet ? cf::log::Level::quiet : g.verbose ? cf::log::Level::debug : cf::log::Level::warning);
+    // Ctrl-C, kill and a closed terminal remove the temporaries being written
+    // (x.part-PID.ext, 3dtiles.part-PID/), then end the process as the signal asks.
+    cf::remove_temporaries_on_signals();
 
     try {
         for (const cli::Command& c : commands)

@@ -40,6 +40,7 @@ void add_cloud_translate_command(CLI::App& cloud, const GlobalFlags& g, CommandL
                            o.bounds = b;
                        }
                        if (!s->crs.empty()) o.crs_wkt = crs_from_user_input(s->crs, "--crs").wkt;
+                       remove_stale_temporaries_beside(o.output);
                        const CloudTranslateResult r = translate_cloud(o);
                        if (!g.quiet) {
                            std::string skipped;

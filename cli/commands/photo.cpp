@@ -30,6 +30,7 @@ void add_stereo(CLI::App& parent, const GlobalFlags& g, CommandList& out) {
     cmd->add_flag("--overwrite", o.overwrite, "Replace an existing output");
     out.push_back({cmd, [s, &g]() {
                        StereoRunOptions opt = s->options;
+                       remove_stale_temporaries_beside(opt.out_path);
                        if (s->z_range.size() == 2) opt.stereo.z_min_m = s->z_range[0], opt.stereo.z_max_m = s->z_range[1];
                        const StereoRunResult r = run_stereo(opt, make_progress(g));
                        if (!g.quiet)
@@ -73,6 +74,7 @@ void add_orient(CLI::App& parent, const GlobalFlags& g, CommandList& out) {
     cmd->add_option("--out", o->out_dir, "Output folder (images/, cameras.json, sparse.las, orient_report.json)")->required();
     cmd->add_flag("--overwrite", o->overwrite, "Replace an existing output folder");
     out.push_back({cmd, [o, &g]() {
+                       remove_stale_temporaries_beside(o->out_dir);
                        const OrientRunResult r = run_orient(*o, make_progress(g));
                        if (!g.quiet)
                            std::fprintf(stderr,
@@ -92,6 +94,7 @@ void add_densify(CLI::App& parent, const GlobalFlags& g, CommandList& out) {
     add_densify_options(cmd, o->densify);
     cmd->add_flag("--overwrite", o->overwrite, "Replace an existing output");
     out.push_back({cmd, [o, &g]() {
+                       remove_stale_temporaries_beside(o->out_path);
                        const DensifyRunResult r = run_densify(*o, make_progress(g));
                        if (!g.quiet)
                            std::fprintf(stderr,
@@ -117,6 +120,7 @@ void add_photo(CLI::App& parent, const GlobalFlags& g, CommandList& out) {
     cmd->add_option("--run-config", *run_config, "JSON config of the run (schemas/run_config.schema.json; ortho and cloud are set)");
     out.push_back({cmd, [o, run_config, &g]() {
                        if (!run_config->empty()) o->city = run_options_from_json(read_json_file(*run_config), *run_config);
+                       remove_stale_temporaries_beside(o->out_dir);
                        const PhotoRunResult r = run_photo(*o, make_progress(g));
                        if (!g.quiet)
                            std::fprintf(stderr, "cityforge: photo wrote %s: %llu dense points, %llu sparse (%s)%s%s, %.0f s\n",

@@ -101,10 +101,15 @@ void add_run_commands(CLI::App& parent, const GlobalFlags& g, CommandList& out) 
                        const RunManifest manifest = rs->manifest.empty() ? plan_from(rs->inputs) : read_manifest(rs->manifest);
                        if (rs->tile >= 0) {
                            const TileReport r = run_tile(manifest, rs->tile, rs->out, make_progress(g));
+                           if (r.status == "failed") {  // an error: printed whatever --quiet says
+                               std::fprintf(stderr, "cityforge: error: tile %d failed: %s\n", r.index,
+                                            r.reason.empty() ? "no reason recorded (see the tile's report in --out/tiles)" : r.reason.c_str());
+                               return 1;
+                           }
                            if (!g.quiet)
                                std::fprintf(stderr, "cityforge: tile %d %s: %zu buildings%s%s\n", r.index, r.status.c_str(), r.buildings,
                                             r.reason.empty() ? "" : ": ", r.reason.c_str());
-                           return r.status == "failed" ? 1 : 0;
+                           return 0;
                        }
                        RunShare share;
                        if (rs->mpi) share = mpi_share();

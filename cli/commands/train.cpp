@@ -55,6 +55,7 @@ void add_train_command(CLI::App& parent, const GlobalFlags& g, CommandList& out)
     cmd->add_option("--min-label-share", d.min_label_share, "A segment is building when this share of its pixels is labelled")->capture_default_str();
     cmd->add_option("--min-area-m2", d.min_area_m2, "Smallest building kept when applied, square metres")->capture_default_str();
     out.push_back({cmd, [s, &g]() {
+                       remove_stale_temporaries_beside(s->out);
                        const TrainReport r = run_train(s->out, s->options, s->overwrite, make_progress(g));
                        if (!g.quiet) {
                            std::fprintf(stderr, "cityforge: trained on %zu image(s), %s, %zu segments (%zu building), %zu reference buildings, %zu features\n",

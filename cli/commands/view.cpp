@@ -24,6 +24,7 @@ void add_view_command(CLI::App& parent, const GlobalFlags& g, CommandList& out) 
     cmd->add_option("--ortho-max-px", o.ortho_max_px, "Longer side of the ortho quick-look, pixels")->capture_default_str();
     cmd->add_flag("--overwrite", o.overwrite, "Replace an existing page");
     out.push_back({cmd, [s, &g]() {
+                       remove_stale_temporaries_beside(s->options.out.empty() ? s->dir + "/view/index.html" : s->options.out);
                        const ViewReport r = write_view(s->dir, s->options);
                        if (!g.quiet) {
                            std::fprintf(stderr, "cityforge: %zu buildings (%zu in 3D)%s, %zu audit report(s); %.1f MB -> %s\n", r.buildings, r.meshed,

@@ -8,7 +8,33 @@ namespace cityforge {
 
 /// Temporary sibling path for `final_path` ("name.part-PID.ext", same folder so
 /// the rename is atomic and keeps the extension so that drivers recognise it).
+/// The path is registered (register_temporary) before the caller creates it,
+/// so that an interrupted process removes it; commit_file and discard_file
+/// take it off the list.
 std::filesystem::path temporary_path_for(const std::filesystem::path& final_path);
+
+/// Adds `path` (a file, with its sidecars, or a folder) to this process's list
+/// of live temporaries: remove_registered_temporaries (run on SIGINT, SIGTERM
+/// and SIGHUP once remove_temporaries_on_signals was called) removes it.
+/// Register before creating the file or folder.
+void register_temporary(const std::filesystem::path& path);
+
+/// Takes `path` off the list of live temporaries (after it was renamed into
+/// place or removed). Never throws.
+void unregister_temporary(const std::filesystem::path& path) noexcept;
+
+/// Removes every registered temporary (files with their sidecars and journals,
+/// folders with their content) and empties the list. Returns how many were
+/// listed. Never throws.
+std::size_t remove_registered_temporaries() noexcept;
+
+/// Installs handlers for SIGINT, SIGTERM and SIGHUP (those not ignored when
+/// the process started): on the first signal the registered temporaries are
+/// removed (by a helper thread, outside the signal handler; new temporaries
+/// can no longer be registered) and the signal is raised again with its
+/// default action, so that the process ends as killed by it. A second signal
+/// ends the process at once. For the command-line program; call once.
+void remove_temporaries_on_signals();
 
 /// `message` (e.g. a GDAL error about the temporary file) with every mention
 /// of `tmp` (full path or file name) replaced by `final_path`: errors name the
@@ -28,7 +54,8 @@ void write_text_file(const std::filesystem::path& path, const std::string& conte
 
 /// Removes the temporaries of dead processes of this machine in `dir` (not
 /// recursive): files named like temporary_path_for's "NAME.part-PID.EXT" (and
-/// their sidecars) whose PID is not a running process. Returns how many went.
+/// their sidecars), and folders named "NAME.part-PID" (3D Tiles) with their
+/// content, whose PID is not a running process. Returns how many went.
 /// Only for folders no other machine writes to (a PID names a process of this
 /// host only).
 std::size_t remove_stale_temporaries(const std::filesystem::path& dir);

@@ -11,6 +11,7 @@
 
 #include "core/atomic_file.hpp"
 #include "core/error.hpp"
+#include "core/memory.hpp"
 #include "core/log.hpp"
 #include "core/parallel.hpp"
 #include "core/version.hpp"
@@ -155,11 +156,13 @@ json node_json(const Node& n, double unit_m) {
     return j;
 }
 
-void write_binary(const fs::path& path, const std::string& bytes) {
+// Writes `bytes` to `path` (a temporary); errors name `shown`, the file the user asked for.
+void write_binary(const fs::path& path, const std::string& bytes, const fs::path& shown) {
     std::ofstream f(path, std::ios::binary | std::ios::trunc);
+    if (!f) throw Error(shown.string(), "cannot open for writing");
     f.write(bytes.data(), static_cast<std::streamsize>(bytes.size()));
     f.close();
-    if (!f) throw Error(path.string(), "cannot write");
+    if (!f) throw Error(shown.string(), "write failed (disk full?)");
 }
 
 }  // namespace
@@ -224,11 +227,12 @@ Tiles3dWriteReport write_3dtiles(const std::string& dir, const CityModel& model,
     const fs::path final_dir(dir);
     const fs::path tmp = final_dir.parent_path() / (final_dir.filename().string() + ".part-" + std::to_string(::getpid()));
     std::error_code ec;
+    register_temporary(tmp);  // removed if the process is interrupted
     fs::remove_all(tmp, ec);
-    ensure_directory(tmp / "content");
     const std::vector<GltfProperty> props = building_properties(model);
     std::vector<std::size_t> triangles(leaves.size());
     try {
+        ensure_directory(tmp / "content");
         parallel_for_each_index(leaves.size(), [&](std::size_t li) {
             Node& n = *leaves[li];
             std::vector<std::array<double, 3>> pts;
@@ -248,7 +252,7 @@ Tiles3dWriteReport write_3dtiles(const std::string& dir, const CityModel& model,
             const std::string bytes = encode_glb(c, props, &st);
             triangles[li] = st.triangles;
             n.content = "content/" + std::to_string(n.level) + "_" + std::to_string(n.x) + "_" + std::to_string(n.y) + ".glb";
-            write_binary(tmp / n.content, bytes);
+            write_binary(tmp / n.content, bytes, final_dir / n.content);
         });
         internal_boxes(root, rep.tiles);
         json tileset;
@@ -261,12 +265,22 @@ Tiles3dWriteReport write_3dtiles(const std::string& dir, const CityModel& model,
         std::ofstream f(tmp / "tileset.json");
         f << tileset.dump(1) << '\n';
         f.close();
-        if (!f) throw Error((tmp / "tileset.json").string(), "cannot write");
+        if (!f) throw Error((final_dir / "tileset.json").string(), "write failed (disk full?)");
         fs::remove_all(final_dir, ec);
         fs::rename(tmp, final_dir, ec);
         if (ec) throw Error(dir, "cannot rename the finished tileset into place: " + ec.message());
+        unregister_temporary(tmp);
+    } catch (const OutOfMemory&) {
+        fs::remove_all(tmp, ec);
+        unregister_temporary(tmp);
+        throw;
+    } catch (const Error& err) {
+        fs::remove_all(tmp, ec);
+        unregister_temporary(tmp);
+        throw Error(user_named(err.what(), tmp, final_dir));  // the folder the user asked for, never 3dtiles.part-PID
     } catch (...) {
         fs::remove_all(tmp, ec);
+        unregister_temporary(tmp);
         throw;
     }
     rep.buildings = meshed.size();
@@ -309,7 +323,7 @@ std::size_t write_glb(const std::string& path, const CityModel& model, bool pref
     const std::string bytes = encode_glb(c, building_properties(model), &st);
     const fs::path tmp = temporary_path_for(path);
     try {
-        write_binary(tmp, bytes);
+        write_binary(tmp, bytes, path);
         commit_file(tmp, path);
     } catch (...) {
         discard_file(tmp);

@@ -56,8 +56,10 @@ OGRLinearRing to_ogr(const Ring& r) {
 namespace {
 
 // Creates the layer and writes the features; false on the first failure (GDAL's message stays in the capture).
+// `null_geometry` (empty, or one flag per feature): features written without geometry.
 bool write_layer(GDALDataset* ds, const std::string& name, OGRSpatialReference* srs, const std::vector<FieldDefinition>& fields,
-                 const std::vector<Feature>& features, CPLStringList& lco, bool layer_transaction) {
+                 const std::vector<Feature>& features, CPLStringList& lco, bool layer_transaction,
+                 const std::vector<char>& null_geometry = {}) {
     bool any_multi = false;
     for (const Feature& f : features) any_multi = any_multi || f.geometry.size() > 1;
     OGRLayer* layer = ds->CreateLayer(name.c_str(), srs, any_multi ? wkbMultiPolygon : wkbPolygon, lco.List());
@@ -70,8 +72,9 @@ bool write_layer(GDALDataset* ds, const std::string& name, OGRSpatialReference* 
         ok = layer->CreateField(&defn) == OGRERR_NONE;
     }
     if (ok && layer_transaction) ok = layer->StartTransaction() == OGRERR_NONE;
-    for (const Feature& feature : features) {
+    for (std::size_t fi = 0; fi < features.size(); ++fi) {
         if (!ok) break;
+        const Feature& feature = features[fi];
         OGRFeature f(layer->GetLayerDefn());
         for (std::size_t i = 0; i < fields.size() && i < feature.values.size(); ++i) {
             const AttributeValue& v = feature.values[i];
@@ -80,6 +83,10 @@ bool write_layer(GDALDataset* ds, const std::string& name, OGRSpatialReference* 
             else if (std::holds_alternative<double>(v)) f.SetField(idx, std::get<double>(v));
             else if (std::holds_alternative<std::string>(v)) f.SetField(idx, std::get<std::string>(v).c_str());
             else f.SetFieldNull(idx);
+        }
+        if (!null_geometry.empty() && null_geometry[fi]) {
+            ok = layer->CreateFeature(&f) == OGRERR_NONE;
+            continue;
         }
         OGRMultiPolygon multi;
         for (const Polygon& part : feature.geometry) {
@@ -94,6 +101,77 @@ bool write_layer(GDALDataset* ds, const std::string& name, OGRSpatialReference* 
     }
     if (ok && layer_transaction) ok = layer->CommitTransaction() == OGRERR_NONE;
     return ok;
+}
+
+// RFC 7946 GeoJSON: GDAL moves every feature to WGS 84 lon/lat on write and
+// fails the whole file when one vertex cannot be moved (coordinates far
+// outside the CRS's area). Each feature is tried here first: one flag per
+// feature that cannot be moved (it is then written without geometry), with a
+// warning naming the source and the feature. Empty when all can be moved.
+std::vector<char> features_without_lon_lat(const std::string& path, const OGRSpatialReference& srs, const CrsInfo& crs,
+                                           const std::vector<FieldDefinition>& fields, const std::vector<Feature>& features,
+                                           const VectorWriteOptions& options) {
+    OGRSpatialReference from(srs), wgs84;
+    if (from.IsCompound()) from.StripVertical();
+    wgs84.SetWellKnownGeogCS("WGS84");
+    from.SetAxisMappingStrategy(OAMS_TRADITIONAL_GIS_ORDER);
+    wgs84.SetAxisMappingStrategy(OAMS_TRADITIONAL_GIS_ORDER);
+    if (from.IsSame(&wgs84)) return {};
+    std::unique_ptr<OGRCoordinateTransformation> ct;
+    {
+        GdalErrorCapture capture;
+        ct.reset(OGRCreateCoordinateTransformation(&from, &wgs84));
+        if (!ct) throw Error(path, "no transformation from " + crs.label() + " to WGS 84 lon/lat (RFC 7946)" + capture.suffix());
+    }
+    std::size_t id_index = fields.size();
+    for (std::size_t i = 0; i < fields.size(); ++i)
+        if (!options.id_field.empty() && fields[i].name == options.id_field) id_index = i;
+    auto name_of = [&](std::size_t fi) {
+        if (id_index < features[fi].values.size()) {
+            const AttributeValue& v = features[fi].values[id_index];
+            if (const auto* s = std::get_if<std::string>(&v)) return "'" + *s + "'";
+            if (const auto* n = std::get_if<int64_t>(&v)) return std::to_string(*n);
+        }
+        return "number " + std::to_string(fi + 1);
+    };
+    const std::string source = options.source.empty() ? path : options.source;
+    std::vector<char> null_geometry(features.size(), 0);
+    std::size_t failed = 0;
+    std::vector<double> x, y, z;
+    std::vector<int> ok;
+    for (std::size_t fi = 0; fi < features.size(); ++fi) {
+        x.clear(), y.clear();
+        for (const Polygon& p : features[fi].geometry) {
+            for (const MapPoint& q : p.outer) x.push_back(q.x), y.push_back(q.y);
+            for (const Ring& h : p.holes)
+                for (const MapPoint& q : h) x.push_back(q.x), y.push_back(q.y);
+        }
+        if (x.empty()) continue;
+        const std::vector<double> x0 = x, y0 = y;
+        z.assign(x.size(), 0.0);
+        ok.assign(x.size(), 0);
+        GdalErrorCapture capture;  // PROJ's complaint about the failed points is ours to report
+        const bool all = ct->Transform(static_cast<int>(x.size()), x.data(), y.data(), z.data(), nullptr, ok.data());
+        std::size_t bad = x.size();
+        for (std::size_t i = 0; i < x.size() && bad == x.size(); ++i)
+            if (!ok[i] || !std::isfinite(x[i]) || !std::isfinite(y[i]) || std::abs(y[i]) > 90.0) bad = i;
+        if (bad == x.size() && !all) bad = 0;
+        if (bad == x.size()) continue;
+        null_geometry[fi] = 1;
+        if (++failed <= 10) {
+            char at[96];
+            std::snprintf(at, sizeof at, "%.6g, %.6g", x0[bad], y0[bad]);
+            log::warning(source + ": feature " + name_of(fi) + ": cannot be moved from " + crs.label() +
+                         " to WGS 84 lon/lat for RFC 7946 GeoJSON (a vertex at " + at + "); its row in " + path +
+                         " has no geometry");
+        }
+    }
+    if (failed > 10)
+        log::warning(source + ": " + std::to_string(failed) + " features in all cannot be moved to WGS 84 lon/lat; their rows in " + path +
+                     " have no geometry");
+    CPLErrorReset();
+    if (!failed) null_geometry.clear();
+    return null_geometry;
 }
 
 // "PG:dbname=x tables=schema.name" -> the connection without `tables=` and the table named by it (or `fallback`).
@@ -200,7 +278,18 @@ void write_polygon_features(const std::string& path, const CrsInfo& crs, const s
         if (options.coordinate_precision > 0)
             lco.SetNameValue("COORDINATE_PRECISION", std::to_string(options.coordinate_precision).c_str());
     }
-    const bool ok = write_layer(ds, options.layer, crs.empty() ? nullptr : &srs, fields, features, lco, options.driver == "GPKG");
+    std::vector<char> null_geometry;
+    if (options.driver == "GeoJSON" && options.rfc7946 && !crs.empty()) {
+        try {
+            null_geometry = features_without_lon_lat(path, srs, crs, fields, features, options);
+        } catch (...) {
+            GDALClose(ds);
+            discard_file(tmp);
+            throw;
+        }
+        CPLErrorReset();
+    }
+    const bool ok = write_layer(ds, options.layer, crs.empty() ? nullptr : &srs, fields, features, lco, options.driver == "GPKG", null_geometry);
     GDALClose(ds);
     if (!ok || CPLGetLastErrorType() >= CE_Failure) fail("writing features failed");
     // GDAL 3.6's GDALClose reports no error, and drivers do not check every

@@ -50,7 +50,11 @@ struct VectorWriteOptions {
     std::string driver = "GeoJSON";  ///< any OGR driver name, e.g. "GPKG"
     std::string layer = "buildings";
     /// GeoJSON only: write RFC 7946 (WGS84 lon/lat, no crs member) instead of the native CRS.
+    /// A feature that cannot be moved to lon/lat (coordinates far outside the CRS's area)
+    /// keeps its row with a null geometry, and a warning names it (source, id_field).
     bool rfc7946 = false;
+    std::string source;    ///< the input named in messages about single features; empty = the output path
+    std::string id_field;  ///< field whose value names a feature in messages; empty or absent = its number (from 1)
     int coordinate_precision = 0;  ///< 0 = driver default
 };
 

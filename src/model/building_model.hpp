@@ -65,6 +65,9 @@ struct CityModel {
     ModelCrs crs;
     std::vector<Building> buildings;
     std::string title = "cityforge buildings";
+    /// The input the buildings were read from (e.g. the footprints file), named in
+    /// writers' messages about single buildings; may be empty.
+    std::string source;
     /// Declared type of the buildings' attributes, by name (from the source
     /// layer and the stages that add them); writers use it so that a field
     /// whose values are all null keeps its type. Missing: from the values.

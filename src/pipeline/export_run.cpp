@@ -82,6 +82,7 @@ void ExportOptions::validate() const {
 
 CityModel build_city_model(const PolygonLayer& layer, const CrsInfo& crs, const ExportOptions& o, const std::string& path) {
     CityModel model;
+    model.source = path;
     Extent extent = empty_extent();
     for (const Feature& f : layer.features) include(extent, parts_extent(f.geometry));
     model.crs = model_crs_of(crs, extent);
@@ -226,6 +227,8 @@ ExportReport write_city_model(const CityModel& model, const CrsInfo& crs, const 
                 vo.driver = "GeoJSON";
                 vo.rfc7946 = o.geojson_crs == "rfc7946";
                 if (vo.rfc7946) vo.coordinate_precision = 7;
+                vo.source = model.source;  // a building that cannot go to lon/lat is named with its input
+                vo.id_field = "cityforge_id";
                 write_polygon_features(p, crs, fields, features, vo);
             });
         if (wants(o.formats, "gpkg"))

@@ -311,6 +311,7 @@ OrientRunResult run_orient(const OrientRunOptions& o, const Progress& progress) 
     // Work in a sibling folder; it replaces OUT only at the end.
     const fs::path out = fs::path(o.out_dir);
     const fs::path work = fs::path(out.string() + ".part-" + std::to_string(getpid()));
+    register_temporary(work);  // removed if the process is interrupted
     fs::remove_all(work);
     struct Cleanup {
         fs::path p;
@@ -318,6 +319,7 @@ OrientRunResult run_orient(const OrientRunOptions& o, const Progress& progress) 
         ~Cleanup() {
             std::error_code ec;
             if (!keep) fs::remove_all(p, ec);
+            unregister_temporary(p);
         }
     } cleanup{work};
     const fs::path colmap_dir = work / "colmap", img_dir = colmap_dir / "images";
