@@ -78,6 +78,20 @@ inline CommandResult validate_json(const std::string& schema, const std::string&
     return run_command(cmd);
 }
 
+/// "ulimit -v KB; " for a shell command that must meet an address-space limit,
+/// or "" in the sanitized build: AddressSanitizer reserves terabytes of virtual
+/// address space for its shadow memory and cannot start under such a limit.
+/// The tests using it still hold there: the memory checks refuse by the
+/// machine's physical memory as well.
+inline std::string address_space_limit(long kb) {
+#ifdef CITYFORGE_SANITIZED
+    (void)kb;
+    return "";
+#else
+    return "ulimit -v " + std::to_string(kb) + "; ";
+#endif
+}
+
 inline int count_lines(const std::string& s) {
     int n = 0;
     for (char c : s) n += c == '\n';

@@ -349,6 +349,9 @@ private:
             named_ = true;
         }
         if (ix_ < 0 || iy_ < 0 || iz_ < 0) throw Error(path_, "header does not name x, y and z columns");
+        const int need = std::max({ix_, iy_, iz_, ii_, ic_, ir_, ig_, ib_});
+        if (static_cast<int>(v.size()) <= need)  // a short line (found by fuzzing: it read past the row)
+            throw Error(path_, "a line has " + std::to_string(v.size()) + " columns where " + std::to_string(need + 1) + " are expected");
         out.x.push_back(v[ix_]), out.y.push_back(v[iy_]), out.z.push_back(v[iz_]);
         out.classification.push_back(ic_ >= 0 ? static_cast<uint8_t>(std::clamp(v[ic_], 0.0, 255.0)) : uint8_t(1));
         out.intensity.push_back(ii_ >= 0 ? static_cast<uint16_t>(std::clamp(v[ii_], 0.0, 65535.0)) : uint16_t(0));

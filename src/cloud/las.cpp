@@ -148,12 +148,14 @@ LasReader::LasReader(const std::string& path) : path_(path) {
             if (record_id == 2112) (user == "liblas" ? h.crs.liblas_wkt : h.crs.wkt) = las_text(data.data(), data.size());
             else if (user == "LASF_Projection" && record_id == 34735) {
                 h.crs.geokey_directory.resize(length / 2);
-                std::memcpy(h.crs.geokey_directory.data(), data.data(), h.crs.geokey_directory.size() * 2);
+                if (!h.crs.geokey_directory.empty())  // memcpy from an empty record's null pointer is undefined
+                    std::memcpy(h.crs.geokey_directory.data(), data.data(), h.crs.geokey_directory.size() * 2);
             } else if (user == "LASF_Projection" && record_id == 34736) {
                 h.crs.geo_double_params.resize(length / 8);
-                std::memcpy(h.crs.geo_double_params.data(), data.data(), h.crs.geo_double_params.size() * 8);
+                if (!h.crs.geo_double_params.empty())
+                    std::memcpy(h.crs.geo_double_params.data(), data.data(), h.crs.geo_double_params.size() * 8);
             } else if (user == "LASF_Projection" && record_id == 34737) {
-                h.crs.geo_ascii_params.assign(data.data(), data.size());
+                if (!data.empty()) h.crs.geo_ascii_params.assign(data.data(), data.size());
             }
         }
         if (compressed && user == "laszip encoded" && record_id == 22204) {

@@ -350,7 +350,7 @@ TEST_CASE("clear messages naming the file: 1e300 footprints, a 1e9 m footprint, 
     const std::string big = dir / "big.tif";
     REQUIRE(test::run_command("gdal_create -of GTiff -outsize 65000 65000 -bands 3 -ot Byte -a_srs EPSG:32650 -a_ullr 500000 4432500 532500 4400000 "
                               "-co TILED=YES -co SPARSE_OK=TRUE " + big).exit_code == 0);
-    const auto oom = test::run_command("bash -c 'ulimit -v 4000000; timeout 120 " + test::cli() + " footprints --ortho " + big + " --out " +
+    const auto oom = test::run_command("bash -c '" + test::address_space_limit(4000000) + "timeout 120 " + test::cli() + " footprints --ortho " + big + " --out " +
                                        (dir / "f.geojson") + "'");
     INFO(oom.err);
     CHECK(oom.exit_code == 3);

@@ -605,7 +605,7 @@ TEST_CASE("Promises: inputs that are refused in one line with nothing written - 
                         (dir / "flat.tif")).exit_code == 0);
     refused("footprints --ortho " + (dir / "flat.tif"), "no building found", dir / "none.gpkg");
     // Out of memory is exit 3 with one line, not a crash (a 1 cm grid over Delft under a 1.5 GB address-space limit).
-    const auto oom = run_command("bash -c \"ulimit -v 1500000; " + cityforge::test::cli() + " cloud rasterize --quiet --cloud " + delft +
+    const auto oom = run_command("bash -c \"" + cityforge::test::address_space_limit(1500000) + cityforge::test::cli() + " cloud rasterize --quiet --cloud " + delft +
                                  " --cloud-crs EPSG:7415 --gsd 0.01 --out " + (dir / "oom") + "\"");
     INFO(oom.err);
     CHECK(oom.exit_code == 3);
