@@ -57,6 +57,8 @@ write("xyz", "inf_only.xyz", "inf 1 2\n-inf 1 2\n")
 # "grid too large" / a 4e8-cell ground grid for 1e308 or far points.
 write("xyz", "coordinates_1e308.xyz", "".join(xyz + ["1e308 1e308 1 0 0 0\n", "-1e308 -1e308 1 0 0 0\n"]))
 write("xyz", "far_points.xyz", "".join(xyz + ["4e7 4e7 1 0 0 0\n"]))
+# Heap overflow under ASan: a line with fewer columns than the first read past the row.
+write("xyz", "short_line.xyz", "500000 4400000 10 7\n500001 4400001\n")
 
 g = json.load(open(os.path.join(seeds, "footprints.geojson")))
 # Crash (segfault in heights) and "bad numeric conversion" (audit): coordinates of 1e300.
