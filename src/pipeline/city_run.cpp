@@ -368,14 +368,7 @@ RunManifest plan_run(const RunOptions& in) {
     };
     if (!footprint_extents.empty()) {
         covered_part(m, bounds());
-        const Extent& c = bounds();
-        std::size_t outside = 0;
-        for (const Extent& e : footprint_extents) outside += e.max_x < c.min_x || e.min_x > c.max_x || e.max_y < c.min_y || e.min_y > c.max_y;
-        if (outside == footprint_extents.size())
-            throw Error(o.footprints, "no footprint overlaps the cloud " + o.cloud + ": cloud " + describe_extent(c, crs_from_wkt(m.crs_wkt, "grid")));
-        if (outside > 0)
-            log::warning(o.footprints + ": " + std::to_string(outside) + " of " + std::to_string(footprint_extents.size()) +
-                         " footprints lie outside the cloud " + o.cloud + " (they get no heights)");
+        check_footprints_within(bounds(), crs_from_wkt(m.crs_wkt, "grid"), o.cloud, footprint_extents, o.footprints);
     }
     // What must be alike in every tile is measured once, on a sample fixed by
     // the grid (its central 400 m square): the outlier filter's limit, the

@@ -177,15 +177,20 @@ std::size_t check_footprint_overlap(const PreparedCloud& pc, const std::string& 
                                         "): the cloud is too sparse or noisy for the filter; --no-outlier-filter keeps them");
         }
     }
+    return check_footprints_within(c, pc.crs, cloud_path, extents, footprints_path);
+}
+
+std::size_t check_footprints_within(const Extent& cloud, const CrsInfo& crs, const std::string& cloud_path, const std::vector<Extent>& extents,
+                                    const std::string& footprints_path) {
     Extent all = empty_extent();
     std::size_t outside = 0;
     for (const Extent& e : extents) {
         include(all, e);
-        if (!overlaps(e)) ++outside;
+        outside += e.max_x < cloud.min_x || e.min_x > cloud.max_x || e.max_y < cloud.min_y || e.min_y > cloud.max_y;
     }
-    if (outside == extents.size())
-        throw Error(footprints_path, "no footprint overlaps the cloud " + cloud_path + ": footprints " + describe_extent(all, pc.crs) +
-                                         ", cloud " + (c.min_x <= c.max_x ? describe_extent(c, pc.crs) : std::string("without points")));
+    if (!extents.empty() && outside == extents.size())
+        throw Error(footprints_path, "no footprint overlaps the cloud " + cloud_path + ": footprints " + describe_extent(all, crs) +
+                                         ", cloud " + (cloud.min_x <= cloud.max_x ? describe_extent(cloud, crs) : std::string("without points")));
     if (outside > 0)
         log::warning(footprints_path + ": " + std::to_string(outside) + " of " + std::to_string(extents.size()) +
                      " footprints lie outside the cloud " + cloud_path + " (they get no heights)");

@@ -79,6 +79,13 @@ void require_cloud_overlap(const PreparedCloud& pc, const std::string& cloud_pat
 std::size_t check_footprint_overlap(const PreparedCloud& pc, const std::string& cloud_path, const std::vector<Extent>& extents,
                                     const std::string& footprints_path);
 
+/// The extent part of check_footprint_overlap: footprint bounding boxes
+/// `extents` against the cloud's bounding box `cloud` (both in `crs`). Throws
+/// when none overlaps (both files and extents named), warns with the count
+/// when some do not; returns the count outside.
+std::size_t check_footprints_within(const Extent& cloud, const CrsInfo& crs, const std::string& cloud_path, const std::vector<Extent>& extents,
+                                    const std::string& footprints_path);
+
 /// Kept points per m² over their bounding box (0 for fewer than 2 points).
 double point_density_m2(const PreparedCloud& pc);
 

@@ -84,6 +84,13 @@ TEST_CASE("3D Tiles and glTF of real LOD2 roofs pass the validators with zero er
     CHECK(g.json["meshes"][0]["primitives"].size() == 3);
     CHECK(g.json["asset"]["extras"]["crs"] == "EPSG:28992+5709");
     CHECK(g.json["extensions"]["EXT_structural_metadata"]["propertyTables"][0]["count"] == 135);
+    // The LOD named as CityJSON and 3DBAG name it: the first building shows its roof planes, "2.2".
+    const auto& lod_view = g.json["extensions"]["EXT_structural_metadata"]["propertyTables"][0]["properties"]["lod"];
+    const auto& lod_values = g.json["bufferViews"][lod_view["values"].get<int>()];
+    const auto& lod_offsets = g.json["bufferViews"][lod_view["stringOffsets"].get<int>()];
+    uint32_t lod_end0 = 0;
+    std::memcpy(&lod_end0, g.bin.data() + lod_offsets["byteOffset"].get<std::size_t>() + 4, 4);
+    CHECK(g.bin.substr(lod_values["byteOffset"].get<std::size_t>(), lod_end0) == "2.2");
 }
 
 TEST_CASE("3D Tiles quadtree: deeper tiles, falling errors, ECEF as cs2cs, same bytes twice", "[3dtiles]") {
