@@ -105,7 +105,12 @@ struct VertexHeights {
     }
 };
 
-std::string classify_roof(const std::vector<RoofPlane>& used, double eave_spread_m, double flat_slope_deg) {
+// `eave_spread_m`: roof z range along the footprint outline; `rake_share`:
+// the share of the outline under sloped planes whose downhill direction runs
+// along the outline (a gable end, a rake) rather than out of it (an eave).
+// A hip has eaves all round: a level outline, or (a corner cut at an oblique
+// angle, where the outline climbs the hip planes) next to no rakes.
+std::string classify_roof(const std::vector<RoofPlane>& used, double eave_spread_m, double rake_share, double flat_slope_deg) {
     std::vector<const RoofPlane*> sloped;
     for (const RoofPlane& p : used)
         if (p.slope_deg >= flat_slope_deg) sloped.push_back(&p);
@@ -124,7 +129,7 @@ std::string classify_roof(const std::vector<RoofPlane>& used, double eave_spread
             if (std::abs(d - 180.0) < 25.0 && std::abs(sloped[i]->slope_deg - sloped[j]->slope_deg) < 12.0) opposite = true;
         }
     if (!opposite) return "shed";
-    if (eave_spread_m < 0.35 && sloped.size() >= 3) return "hip";
+    if (sloped.size() >= 3 && (eave_spread_m < 0.35 || rake_share < 0.1)) return "hip";
     return "gable";
 }
 
@@ -132,6 +137,8 @@ struct PartResult {
     Solid solid;
     std::vector<int> used_planes;
     double eave_min = INFINITY, eave_max = -INFINITY;  // roof z along the footprint outline (local metres)
+    double sloped_outline_m = 0.0;  // outline length under sloped planes (metres)
+    double rake_m = 0.0;            // of which under planes sloping along the outline (gable ends)
     std::string failure;
 };
 
@@ -527,8 +534,20 @@ PartResult build_part(const Polygon& part, const std::vector<std::array<double, 
     // Outline eaves (for the roof type), and roofs that dip below the ground.
     for (auto e = arr.halfedges_begin(); e != arr.halfedges_end(); ++e)
         if (e->face()->data() >= 0 && e->twin()->face()->data() == kOutside) {
-            const double z = roof_z(rep.at(e->source()), e->face()->data());
+            const int plane = e->face()->data();
+            const double z = roof_z(rep.at(e->source()), plane);
             res.eave_min = std::min(res.eave_min, z), res.eave_max = std::max(res.eave_max, z);
+            if (planes[plane].slope_deg >= o.flat_slope_deg) {
+                // The face lies left of its halfedge, so the outward normal is the edge turned right.
+                const double dx = CGAL::to_double(e->target()->point().x() - e->source()->point().x());
+                const double dy = CGAL::to_double(e->target()->point().y() - e->source()->point().y());
+                const double len = std::hypot(dx, dy), g = std::hypot(planes[plane].a, planes[plane].b);
+                if (len > 0 && g > 0) {
+                    const double outward_downhill = (dy * -planes[plane].a + -dx * -planes[plane].b) / (len * g);
+                    res.sloped_outline_m += len;
+                    if (std::abs(outward_downhill) < 0.34) res.rake_m += len;  // downhill within 20 deg of the edge
+                }
+            }
             if (z < ground + o.min_roof_height_m) res.failure = "a roof plane runs below the ground at the outline";
         }
     res.used_planes.assign(used.begin(), used.end());
@@ -598,7 +617,7 @@ Lod2Result reconstruct_once(const std::vector<Polygon>& footprint, const std::ve
         for (uint32_t i : planes[k].points) point_plane[i] = static_cast<int>(k);
 
     std::set<int> used;
-    double eave_min = INFINITY, eave_max = -INFINITY;
+    double eave_min = INFINITY, eave_max = -INFINITY, sloped_outline_m = 0.0, rake_m = 0.0;
     for (const Polygon& part_map : footprint) {
         Polygon part = part_map;
         orient_polygon(part);
@@ -654,12 +673,13 @@ Lod2Result reconstruct_once(const std::vector<Polygon>& footprint, const std::ve
         if (!failure.empty()) return fallback(failure);
         used.insert(pr.used_planes.begin(), pr.used_planes.end());
         eave_min = std::min(eave_min, pr.eave_min), eave_max = std::max(eave_max, pr.eave_max);
+        sloped_outline_m += pr.sloped_outline_m, rake_m += pr.rake_m;
         r.solids.push_back(std::move(pr.solid));
     }
     std::vector<RoofPlane> used_planes;
     for (int k : used) used_planes.push_back(planes[k]);
     r.roof_planes = static_cast<int>(used_planes.size());
-    r.roof_type = classify_roof(used_planes, eave_max - eave_min, o.flat_slope_deg);
+    r.roof_type = classify_roof(used_planes, eave_max - eave_min, sloped_outline_m > 0 ? rake_m / sloped_outline_m : 1.0, o.flat_slope_deg);
     const RoofPlane& main = planes[*used.begin()];  // planes are ordered by support: the lowest used index is the largest
     r.roof_slope_deg = main.slope_deg, r.roof_azimuth_deg = main.azimuth_deg;
     // Median residual: each point against the roof surface above it (the first roof face containing it in plan).

@@ -35,7 +35,8 @@ std::string text_field(const PolygonLayer& l, std::size_t i, const std::string& 
 
 // A varied town: 8 % slopes, 3 m undulation, bases at the footprints'
 // centroids, and the other variations at the given shares.
-SynthResult varied_town(const ScratchDir& dir, uint64_t seed, double density, bool all_families, double size_m = 300, double terraced = 0.3) {
+SynthResult varied_town(const ScratchDir& dir, uint64_t seed, double density, bool all_families, double size_m = 300, double terraced = 0.3,
+                        double oblique = 0.0) {
     SynthOptions o;
     o.size_m = size_m;
     o.seed = seed;
@@ -49,6 +50,7 @@ SynthResult varied_town(const ScratchDir& dir, uint64_t seed, double density, bo
     o.variation.terraced_block_share = terraced;
     o.variation.tree_touch_share = 0.5;
     o.variation.all_roof_families = all_families;
+    o.variation.oblique_share = oblique;
     return write_synthetic_town(dir.path.string(), o);
 }
 
@@ -164,6 +166,39 @@ TEST_CASE("Varied town with every roof family - roof types >= 0.95 - valid LOD2 
     CHECK(correct / n >= 0.95);
     CHECK(valid == static_cast<int>(model.buildings.size()));
     CHECK(rep.fallbacks <= 3);  // 2 when written: a sparse gable, a hip whose planes missed their points
+}
+
+TEST_CASE("Hip roofs with a corner cut at an oblique angle stay hips (eaves all round, no rakes) - roof types >= 0.95",
+          "[roof][synth][variation]") {
+    // Half the rectangles lose a corner: the outline then climbs the hip planes
+    // along the cut, so a level outline alone cannot tell a hip from a gable.
+    ScratchDir dir("oblique_roofs");
+    const SynthResult s = varied_town(dir, 71, 8.0, true, 300, 0.0, 0.5);
+    const PolygonLayer truth = read_polygon_layer(s.truth_path, "");
+    RoofsRunOptions ro;
+    ro.heights.heights.keep_roof_points = true;
+    const HeightsStage st = compute_heights_stage(s.truth_path, s.cloud_path, ro.heights);
+    RoofsRunReport rep;
+    const CityModel model = build_lod2_model(st, st.table.crs, ro, s.truth_path, rep);
+    int correct = 0, cut_hips = 0, cut_hips_right = 0, cut_gables = 0, cut_gables_right = 0;
+    for (std::size_t i = 0; i < model.buildings.size(); ++i) {
+        const Building& b = model.buildings[i];
+        const std::string t = text_field(truth, i, "roof_type");
+        correct += b.roof_type == t;
+        const auto& ring = truth.features[i].geometry.front().outer;
+        const std::size_t corners = ring.size() - (ring.front().x == ring.back().x && ring.front().y == ring.back().y ? 1 : 0);
+        const bool cut = text_field(truth, i, "shape") == "rectangle" && corners == 5;
+        if (!cut) continue;
+        if (t == "hip") ++cut_hips, cut_hips_right += b.roof_type == "hip";
+        if (t == "gable") ++cut_gables, cut_gables_right += b.roof_type == "gable";
+    }
+    INFO(correct << " of " << model.buildings.size() << " right; cut-corner hips " << cut_hips_right << "/" << cut_hips << ", gables "
+                 << cut_gables_right << "/" << cut_gables);
+    REQUIRE(cut_hips >= 4);
+    REQUIRE(cut_gables >= 4);
+    CHECK(cut_hips_right >= cut_hips - 1);
+    CHECK(cut_gables_right >= cut_gables - 1);
+    CHECK(correct / double(model.buildings.size()) >= 0.95);
 }
 
 TEST_CASE("Outlines from ortho + cloud on a varied town (slopes, ground-coloured roofs, oblique corners, crowns, low sun) - IoU >= 0.95, |area error| <= 1 %",
