@@ -139,21 +139,29 @@ std::optional<PartShape> part_shape(const std::vector<const Face*>& roofs, doubl
         std::sort(v.begin(), v.end());
         v.erase(std::unique(v.begin(), v.end(), [&](double x, double y) { return zkey(x) == zkey(y); }), v.end());
     }
+    // Outline rings, each with its edges' own 3-D ends: where a step fades out at an
+    // outline vertex, the edges before and after it end and start there at different heights.
+    using Edges3 = std::vector<std::pair<Point3, Point3>>;
     std::vector<Ring3> outers, holes;
+    std::vector<Edges3> outer_edges, hole_edges;
     std::map<Key2, bool> used;
     for (const auto& [start, e0] : next) {
         if (used[start]) continue;
         Ring3 ring;
+        Edges3 ring_edges;
         Key2 k = start;
         while (!used[k]) {
             used[k] = true;
             const auto it = next.find(k);
             if (it == next.end()) return why = "the roof part's outline is open", std::nullopt;
             ring.push_back(it->second.first);
+            ring_edges.push_back(it->second);
             k = s.k2(it->second.second);
         }
         if (k != start) return why = "the roof part's outline is open", std::nullopt;
-        (plan_area2(ring) > 0 ? outers : holes).push_back(std::move(ring));
+        const bool outer = plan_area2(ring) > 0;
+        (outer ? outers : holes).push_back(std::move(ring));
+        (outer ? outer_edges : hole_edges).push_back(std::move(ring_edges));
     }
     if (outers.size() != 1) return why = "the roof part has " + std::to_string(outers.size()) + " outlines", std::nullopt;
     PartShape out;
@@ -175,11 +183,11 @@ std::optional<PartShape> part_shape(const std::vector<const Face*>& roofs, doubl
         if (w.outer.size() > 1 && zkey(w.outer.back().z) == zkey(w.outer.front().z) && s.k2(w.outer.back()) == s.k2(w.outer.front())) w.outer.pop_back();
         if (w.outer.size() >= 3) out.solid.faces.push_back(std::move(w));
     };
-    auto outline_walls = [&](const Ring3& r) {
-        for (std::size_t i = 0; i < r.size(); ++i) wall(r[i], r[(i + 1) % r.size()], ground, ground);
+    auto outline_walls = [&](const Edges3& r) {
+        for (const auto& [p, q] : r) wall(p, q, ground, ground);
     };
-    outline_walls(outers[0]);
-    for (const Ring3& h : holes) outline_walls(h);
+    outline_walls(outer_edges[0]);
+    for (const Edges3& h : hole_edges) outline_walls(h);
     for (const Step& st : steps) wall(st.a, st.b, st.za, st.zb);
     Face g;
     g.type = SurfaceType::ground;

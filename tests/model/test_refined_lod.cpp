@@ -39,6 +39,33 @@ Solid stepped_solid() {
     return s;
 }
 
+// 20 m x 10 m: the west half a flat roof at 3 m; the east half three faces
+// that join without a step except along y = 5 between x = 15 and 20, where
+// the south-east face falls below the flat north face: a step that fades out
+// at (15, 5) inside the part and is 1 m high at (20, 5) on its outline.
+Solid fading_step_solid() {
+    const auto R = SurfaceType::roof, W = SurfaceType::wall, G = SurfaceType::ground;
+    Solid s;
+    s.faces = {
+        face({{0, 0, 3}, {10, 0, 3}, {10, 10, 3}, {0, 10, 3}}, R),
+        face({{10, 0, 7}, {15, 0, 7}, {15, 5, 8}, {10, 5, 8}}, R),
+        face({{15, 0, 7}, {20, 0, 6}, {20, 5, 7}, {15, 5, 8}}, R),
+        face({{10, 5, 8}, {15, 5, 8}, {20, 5, 8}, {20, 10, 8}, {10, 10, 8}}, R),
+        face({{10, 10, 3}, {10, 0, 3}, {10, 0, 7}, {10, 5, 8}, {10, 10, 8}}, W),  // step to the west part
+        face({{15, 5, 8}, {20, 5, 7}, {20, 5, 8}}, W),                            // the fading step
+        face({{0, 0, 0}, {10, 0, 0}, {10, 0, 3}, {0, 0, 3}}, W),
+        face({{10, 0, 0}, {15, 0, 0}, {15, 0, 7}, {10, 0, 7}, {10, 0, 3}}, W),
+        face({{15, 0, 0}, {20, 0, 0}, {20, 0, 6}, {15, 0, 7}}, W),
+        face({{20, 0, 0}, {20, 5, 0}, {20, 5, 7}, {20, 0, 6}}, W),
+        face({{20, 5, 0}, {20, 10, 0}, {20, 10, 8}, {20, 5, 8}, {20, 5, 7}}, W),
+        face({{20, 10, 0}, {10, 10, 0}, {10, 10, 3}, {10, 10, 8}, {20, 10, 8}}, W),
+        face({{10, 10, 0}, {0, 10, 0}, {0, 10, 3}, {10, 10, 3}}, W),
+        face({{0, 10, 0}, {0, 0, 0}, {0, 0, 3}, {0, 10, 3}}, W),
+        face({{0, 0, 0}, {0, 10, 0}, {10, 10, 0}, {20, 10, 0}, {20, 5, 0}, {20, 0, 0}, {15, 0, 0}, {10, 0, 0}}, G),
+    };
+    return s;
+}
+
 CityModel stepped_model() {
     CityModel m;
     m.crs.label = "EPSG:28992+5709", m.crs.horizontal_epsg = 28992, m.crs.vertical_epsg = 5709, m.crs.compound_epsg = 7415;
@@ -149,4 +176,30 @@ TEST_CASE("refined LODs in CityJSON (BuildingParts, 1.2 / 1.3 / 2.2, schema-vali
     CHECK(gml2.find("<bldg:BuildingPart gml:id=\"bldg_step-1\">") != std::string::npos);
     CHECK(gml2.find("name=\"refined_lod\"><gen:value>2.2<") != std::string::npos);
     CHECK(gml1.find("name=\"refined_lod\"><gen:value>1.2<") != std::string::npos);
+}
+
+TEST_CASE("refined LODs: a step that fades out at the part's outline (Delft's unclosed parts) gives closed parts that add up", "[model][lod]") {
+    // The walls under the outline edges meeting at (20, 5) end at different heights there (7 m and 8 m);
+    // before, both took the next edge's start height and left the part's shell open (302 SHELL_NOT_CLOSED).
+    const Solid s = fading_step_solid();
+    REQUIRE(validate_solid(s).empty());
+    double v = 0;
+    REQUIRE(test::cgal_check_solid(s, &v) == "");
+    CHECK(v == Approx(1062.5));
+    const RoofPartsResult r = roof_parts({s});
+    INFO((r.unsplit.empty() ? std::string() : r.unsplit.front()));
+    CHECK(r.unsplit.empty());
+    REQUIRE(r.parts.size() == 2);
+    double sum = 0;
+    for (const RoofPart& p : r.parts) {
+        CHECK(p.lod22_errors.empty());
+        CHECK(p.lod13_errors.empty());
+        double v22 = 0;
+        CHECK(test::cgal_check_solid(p.lod22, &v22) == "");
+        CHECK(v22 == Approx(p.lod22_volume));
+        sum += p.lod22_volume;
+    }
+    CHECK(r.parts[0].lod22_volume == Approx(300.0));
+    CHECK(r.parts[1].lod22_volume == Approx(762.5));
+    CHECK(sum == Approx(v));
 }
