@@ -27,7 +27,7 @@ void add_export_command(CLI::App& parent, const GlobalFlags& g, CommandList& out
     cmd->add_option("--id-field", o.id_field, "Building id attribute (absent: the feature id)")->capture_default_str();
     cmd->add_option("--ground-field", o.ground_field, "Ground height attribute (vertical CRS units)")->capture_default_str();
     cmd->add_option("--height-field", o.height_field, "LOD1 height above ground attribute (metres)")->capture_default_str();
-    cmd->add_option("--texture-ortho", o.texture_ortho, "Texture the LOD2 roofs with this ortho's pixels (CityJSON, buildings.glb)");
+    cmd->add_option("--texture-ortho", o.texture_ortho, "Texture the LOD2 roofs with this ortho's pixels (CityJSON, buildings.glb, 3D Tiles)");
     cmd->add_option("--db", o.database, "Also write the building table to PostGIS: \"PG:dbname=... [tables=NAME]\" (table replaced)");
     cmd->add_option("--tile-buildings", o.tiles.max_buildings_per_tile, "3D Tiles: most buildings in one tile before the quadtree splits it")
         ->capture_default_str();

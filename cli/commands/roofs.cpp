@@ -24,7 +24,7 @@ void add_roofs_command(CLI::App& parent, const GlobalFlags& g, CommandList& out)
     cmd->add_option("--layer", o.heights.footprint_layer, "Footprint layer name (default: the only polygon layer; several are an error)");
     cmd->add_option("--formats", s->formats, "Comma-separated: geojson, gpkg, citygml, cityjson, cityjsonseq, 3dtiles (3dtiles/tileset.json), gltf (buildings.glb)")->capture_default_str();
     cmd->add_option("--lod", s->lods, "Comma-separated levels of detail: 0, 1, 2")->capture_default_str();
-    cmd->add_option("--texture-ortho", o.model.texture_ortho, "Texture the LOD2 roofs with this ortho's pixels (CityJSON, buildings.glb)");
+    cmd->add_option("--texture-ortho", o.model.texture_ortho, "Texture the LOD2 roofs with this ortho's pixels (CityJSON, buildings.glb, 3D Tiles)");
     cmd->add_option("--db", o.model.database, "Also write the building table to PostGIS: \"PG:dbname=... [tables=NAME]\" (table replaced)");
     cmd->add_option("--id-field", o.model.id_field, "Building id attribute (absent: the feature id)")->capture_default_str();
     cmd->add_option("--vertical-crs", o.model.vertical_crs, "Vertical CRS of the heights when the cloud names none, e.g. EPSG:5709");

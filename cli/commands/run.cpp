@@ -49,7 +49,7 @@ void add_run_inputs(CLI::App* cmd, RunInputs& r) {
     cmd->add_option("--db", r.db, "Also write the building table to PostGIS: \"PG:dbname=... [tables=NAME]\" (table replaced)");
     cmd->add_option("--vertical-crs", r.vertical_crs, "Vertical CRS when the cloud names none, e.g. EPSG:5709");
     cmd->add_option("--id-field", r.id_field, "Building id attribute of given footprints");
-    cmd->add_option("--texture-ortho", r.texture_ortho, "Texture the LOD2 roofs with this ortho's pixels (CityJSON, buildings.glb), e.g. the --ortho");
+    cmd->add_option("--texture-ortho", r.texture_ortho, "Texture the LOD2 roofs with this ortho's pixels (CityJSON, buildings.glb, 3D Tiles), e.g. the --ortho");
     cmd->add_option("--fit", r.fit, "Footprint geometry: recursive, regularised, rectangle or raw");
 }
 

@@ -18,6 +18,7 @@
 #include "crs/crs.hpp"
 #include "io/gltf_writer.hpp"
 #include "model/face_mesh.hpp"
+#include "raster/quicklook.hpp"
 
 namespace cityforge {
 namespace {
@@ -172,16 +173,24 @@ void Tiles3dWriteOptions::validate() const {
     if (max_depth < 0 || max_depth > 20) throw Error("3dtiles", "max_depth must be in 0..20");
 }
 
-Tiles3dWriteReport write_3dtiles(const std::string& dir, const CityModel& model, const CrsInfo& crs, const Tiles3dWriteOptions& o) {
+Tiles3dWriteReport write_3dtiles(const std::string& dir, const CityModel& model, const CrsInfo& crs, const Tiles3dWriteOptions& o,
+                                 const RoofTextureAtlas* textures) {
     o.validate();
+    const bool textured = textures && !textures->png.empty();
+    if (textured && textures->layout.windows.size() &&
+        textures->rgb.size() != std::size_t(textures->layout.atlas_width) * textures->layout.atlas_height * 3)
+        throw Error(dir, "internal: the roof texture atlas has no pixels");
     if (crs.empty()) throw Error(dir, "the model has no CRS; 3D Tiles need one to place buildings on the globe");
     // Meshed buildings and their faces in the model CRS.
     std::vector<const Building*> meshed;
+    std::vector<std::size_t> model_index;  // of each meshed building in model.buildings
     std::vector<std::string> lods;
     std::vector<std::vector<Face>> faces;
-    for (const Building& b : model.buildings) {
+    for (std::size_t bi = 0; bi < model.buildings.size(); ++bi) {
+        const Building& b = model.buildings[bi];
         std::string lod;
-        if (const auto* s = mesh_solids(b, o.prefer_lod2, lod)) meshed.push_back(&b), lods.push_back(lod), faces.push_back(faces_of(*s));
+        if (const auto* s = mesh_solids(b, o.prefer_lod2, lod))
+            meshed.push_back(&b), model_index.push_back(bi), lods.push_back(lod), faces.push_back(faces_of(*s));
     }
     if (meshed.empty()) throw Error(dir, "no building has a LOD1 or LOD2 solid (heights missing?); nothing to tile");
 
@@ -241,7 +250,21 @@ Tiles3dWriteReport write_3dtiles(const std::string& dir, const CityModel& model,
             n.box = enu_box(pts);
             GlbContent c;
             c.translation = n.box.centre;
+            // Roof textures: the tile's own atlas, cut from the model's (only its buildings' windows).
+            RoofTextureLayout tile_atlas;
+            if (textured) {
+                std::vector<std::size_t> in_tile;
+                for (std::size_t i : n.items)
+                    if (lods[i] == "2.2") in_tile.push_back(model_index[i]);
+                tile_atlas = repack_roof_textures(textures->layout, in_tile);
+                if (!tile_atlas.windows.empty())
+                    c.texture_png = encode_png(copy_roof_texture_pixels(textures->layout, textures->rgb, tile_atlas), tile_atlas.atlas_width,
+                                               tile_atlas.atlas_height, 3, dir);
+            }
             for (std::size_t i : n.items) {
+                if (!c.texture_png.empty())  // from the map x, y
+                    c.uv.push_back(lods[i] == "2.2" ? roof_face_uvs(faces[i], tile_atlas, model_index[i])
+                                                    : std::vector<std::vector<std::array<float, 2>>>(faces[i].size()));
                 c.buildings.push_back(meshed[i]);
                 c.lods.push_back(lods[i]);
                 std::vector<Face> local = ecef_faces[i];
@@ -301,17 +324,8 @@ std::size_t write_glb(const std::string& path, const CityModel& model, bool pref
         const auto* s = mesh_solids(b, prefer_lod2, lod);
         if (!s) continue;
         std::vector<Face> f = faces_of(*s);
-        if (textured) {  // texture coordinates from the map x, y, before the shift to the local frame
-            std::vector<std::vector<std::array<float, 2>>> uv(f.size());
-            const RoofTextureWindow* w = lod == "2.2" ? textures->layout.window_of(bi) : nullptr;
-            for (std::size_t k = 0; w && k < f.size(); ++k)
-                if (f[k].type == SurfaceType::roof)
-                    for (const Point3& p : face_vertices(f[k])) {
-                        const auto t = textures->layout.uv(*w, p.x, p.y);
-                        uv[k].push_back({float(t[0]), float(t[1])});
-                    }
-            c.uv.push_back(std::move(uv));
-        }
+        if (textured)  // texture coordinates from the map x, y, before the shift to the local frame
+            c.uv.push_back(lod == "2.2" ? roof_face_uvs(f, textures->layout, bi) : std::vector<std::vector<std::array<float, 2>>>(f.size()));
         for_each_point(f, [&](Point3& p) { p = {p.x - origin[0], p.y - origin[1], p.z - origin[2]}; });
         c.buildings.push_back(&b), c.lods.push_back(lod), c.faces.push_back(std::move(f));
     }

@@ -30,10 +30,14 @@ struct Tiles3dWriteReport {
 };
 
 /// Writes `dir`/tileset.json and `dir`/content/L_X_Y.glb (a temporary sibling
-/// directory renamed when complete; an existing `dir` is replaced). Throws
-/// Error naming `dir` when the CRS cannot be transformed to ECEF or no
-/// building has a solid.
-Tiles3dWriteReport write_3dtiles(const std::string& dir, const CityModel& model, const CrsInfo& crs, const Tiles3dWriteOptions& options = {});
+/// directory renamed when complete; an existing `dir` is replaced). With
+/// `textures` (an atlas of `model`, its `rgb` pixels filled), the LOD2 roofs of
+/// the buildings it covers are textured: each tile's glb embeds its own atlas
+/// (PNG) holding only its buildings' windows, the ortho's pixels unchanged, and
+/// texture coordinates into it (baseColorTexture). Throws Error naming `dir`
+/// when the CRS cannot be transformed to ECEF or no building has a solid.
+Tiles3dWriteReport write_3dtiles(const std::string& dir, const CityModel& model, const CrsInfo& crs, const Tiles3dWriteOptions& options = {},
+                                 const RoofTextureAtlas* textures = nullptr);
 
 /// Writes one .glb of the whole model in a local frame: x east, y north,
 /// z up in the model CRS units minus `origin` (the extent's centre, rounded

@@ -6,6 +6,7 @@
 // pipeline. The ortho must be north-up and in the model's horizontal CRS.
 #include <array>
 #include <cstddef>
+#include <cstdint>
 #include <string>
 #include <vector>
 
@@ -39,6 +40,9 @@ struct RoofTextureLayout {
 struct RoofTextureAtlas {
     RoofTextureLayout layout;  ///< windows and texture coordinates
     std::string png;           ///< the atlas image (RGB PNG bytes); empty when no roof is textured
+    /// The same image's pixels: row-major, 3 bytes (R, G, B) per pixel, atlas_width x atlas_height;
+    /// empty when no roof is textured. Lets writers cut smaller atlases (one per 3D Tiles tile).
+    std::vector<uint8_t> rgb;
 };
 
 struct RoofTextureOptions {
@@ -51,5 +55,23 @@ struct RoofTextureOptions {
 /// first, then by building index: deterministic) into one atlas.
 RoofTextureLayout layout_roof_textures(const CityModel& model, const GeoTransform& ortho, int ortho_width, int ortho_height,
                                        const RoofTextureOptions& options = {});
+
+/// The windows of `buildings` (indices into CityModel::buildings; those without a
+/// window in `layout` are skipped) packed the same way into an atlas of their own:
+/// the same ortho pixels, new atlas positions. Windows that do not fit in
+/// `max_atlas_px` go to `no_room`. Deterministic: depends only on the windows.
+RoofTextureLayout repack_roof_textures(const RoofTextureLayout& layout, const std::vector<std::size_t>& buildings, int max_atlas_px = 16384);
+
+/// The pixels of atlas `to` (row-major RGB, to.atlas_width x to.atlas_height,
+/// black outside the windows) copied from atlas `from` (pixels `from_rgb`, the
+/// same windows placed elsewhere; every window of `to` must be in `from`).
+std::vector<uint8_t> copy_roof_texture_pixels(const RoofTextureLayout& from, const std::vector<uint8_t>& from_rgb, const RoofTextureLayout& to);
+
+/// Texture coordinates (glTF convention, as RoofTextureLayout::uv) of building
+/// `building`'s faces, given in map x, y (model CRS): per face, one (u, v) per
+/// face_vertices(face) for roof faces, empty for walls and ground; all empty when
+/// the building has no window in `layout`.
+std::vector<std::vector<std::array<float, 2>>> roof_face_uvs(const std::vector<Face>& faces, const RoofTextureLayout& layout,
+                                                             std::size_t building);
 
 }  // namespace cityforge

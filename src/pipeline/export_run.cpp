@@ -251,9 +251,10 @@ ExportReport write_city_model(const CityModel& model, const CrsInfo& crs, const 
             timed("citygml_lod1", "buildings_lod1.gml", [&](const std::string& p) { write_citygml(p, model, {1, 3}); });
         if (wants(o.lods, 2)) timed("citygml_lod2", "buildings_lod2.gml", [&](const std::string& p) { write_citygml(p, model, {2, 3}); });
     }
-    // Roof textures from the ortho, for CityJSON and glTF.
+    // Roof textures from the ortho, for CityJSON, glTF and 3D Tiles.
     std::optional<RoofTextureAtlas> atlas;
-    if (!o.texture_ortho.empty() && wants(o.lods, 2) && (wants(o.formats, "cityjson") || wants(o.formats, "cityjsonseq") || wants(o.formats, "gltf"))) {
+    if (!o.texture_ortho.empty() && wants(o.lods, 2) &&
+        (wants(o.formats, "cityjson") || wants(o.formats, "cityjsonseq") || wants(o.formats, "gltf") || wants(o.formats, "3dtiles"))) {
         atlas = build_roof_texture_atlas(model, o.texture_ortho, o.texture);
         const RoofTextureLayout& l = atlas->layout;
         if (atlas->png.empty()) {
@@ -284,7 +285,7 @@ ExportReport write_city_model(const CityModel& model, const CrsInfo& crs, const 
         timed("3dtiles", "3dtiles", [&](const std::string& p) {
             Tiles3dWriteOptions t = o.tiles;
             t.prefer_lod2 = wants(o.lods, 2);
-            const Tiles3dWriteReport tr = write_3dtiles(p, model, crs, t);
+            const Tiles3dWriteReport tr = write_3dtiles(p, model, crs, t, atlas ? &*atlas : nullptr);
             rep.files["3dtiles"] = (fs::path(p) / "tileset.json").string();
             log::info(p + ": " + std::to_string(tr.buildings) + " buildings in " + std::to_string(tr.content_tiles) + " tiles (depth " +
                       std::to_string(tr.depth) + ", " + std::to_string(tr.triangles) + " triangles)");

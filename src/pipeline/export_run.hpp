@@ -37,7 +37,8 @@ struct ExportOptions {
     std::string database;
     Tiles3dWriteOptions tiles;               ///< 3D Tiles quadtree (prefer_lod2 follows `lods`)
     /// Ortho (north-up, the buildings' horizontal CRS) whose pixels texture the LOD2 roofs in
-    /// CityJSON and buildings.glb (atlas DIR/textures/roofs.png); empty = untextured.
+    /// CityJSON and buildings.glb (atlas DIR/textures/roofs.png) and 3D Tiles (an atlas per tile
+    /// in its glb); empty = untextured.
     std::string texture_ortho;
     RoofTextureOptions texture;
     void validate() const;

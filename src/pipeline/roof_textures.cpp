@@ -47,6 +47,7 @@ RoofTextureAtlas build_roof_texture_atlas(const CityModel& model, const std::str
         }
     }
     atlas.png = encode_png(bytes, l.atlas_width, l.atlas_height, 3, ortho_path);
+    atlas.rgb = std::move(bytes);  // 3D Tiles cut one atlas per tile from these
     return atlas;
 }
 

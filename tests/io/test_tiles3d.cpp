@@ -13,6 +13,9 @@
 #include "io/tiles3d_writer.hpp"
 #include "io/vector.hpp"
 #include "pipeline/export_run.hpp"
+#include "pipeline/roofs_run.hpp"
+#include "raster/raster.hpp"
+#include "synth_fixture.hpp"
 #include "test_support.hpp"
 
 using namespace cityforge;
@@ -60,6 +63,25 @@ std::array<double, 3> first_vertex_ecef(const Glb& g) {
     const auto t = g.json["nodes"][0]["translation"];
     const double x = p[0] + t[0].get<double>(), y = p[1] + t[1].get<double>(), z = p[2] + t[2].get<double>();
     return {x, -z, y};
+}
+
+// Accessor `index` of a glb as floats (FLOAT) or as indices (UNSIGNED_INT), tightly packed.
+std::vector<float> accessor_floats(const Glb& g, int index) {
+    const auto& a = g.json["accessors"][index];
+    REQUIRE(a["componentType"] == 5126);
+    const std::size_t comps = a["type"] == "VEC3" ? 3 : a["type"] == "VEC2" ? 2 : 1;
+    const auto& v = g.json["bufferViews"][a["bufferView"].get<int>()];
+    std::vector<float> out(a["count"].get<std::size_t>() * comps);
+    std::memcpy(out.data(), g.bin.data() + v["byteOffset"].get<std::size_t>(), out.size() * 4);
+    return out;
+}
+std::vector<uint32_t> accessor_indices(const Glb& g, int index) {
+    const auto& a = g.json["accessors"][index];
+    REQUIRE(a["componentType"] == 5125);
+    const auto& v = g.json["bufferViews"][a["bufferView"].get<int>()];
+    std::vector<uint32_t> out(a["count"].get<std::size_t>());
+    std::memcpy(out.data(), g.bin.data() + v["byteOffset"].get<std::size_t>(), out.size() * 4);
+    return out;
 }
 
 }  // namespace
@@ -174,4 +196,88 @@ TEST_CASE("3D Tiles refuse a model without solids and leave nothing behind", "[3
     const auto r = test::run_cli("export --quiet --in " + kDelftFootprints + " --formats 3dtiles --out " + dir / "x");
     CHECK(r.exit_code == 1);
     CHECK(r.err.find("nothing to tile") != std::string::npos);
+}
+
+TEST_CASE("3D Tiles with roof textures: each tile's atlas holds the ortho's pixels under its roofs, zero validator errors", "[3dtiles][gltf][texture]") {
+    ScratchDir dir("tiles3d_textured");
+    const SynthResult town = test::make_town(dir, 220, 11, 8);
+    RoofsRunOptions o;
+    o.model.formats = {"3dtiles", "cityjson"};
+    o.model.texture_ortho = town.ortho_path;
+    o.model.tiles.max_buildings_per_tile = 6;  // several tiles, each with its own atlas
+    const RoofsRunReport rep = run_roofs(town.truth_path, town.cloud_path, dir / "out", o);
+    REQUIRE(rep.model.files.count("textures"));
+    const auto ts = validate("tileset", dir / "out/3dtiles/tileset.json", int(rep.model.buildings));
+    INFO(ts.out << ts.err);
+    CHECK(ts.exit_code == 0);  // the Khronos glTF validator on every tile (textures included) and the tileset checks
+    CHECK(nlohmann::json::parse(ts.out)["errors"].empty());
+
+    // Every sample point inside a textured roof triangle: its ECEF position (node translation, y-up -> z-up)
+    // back to the model CRS through PROJ, then the ortho pixel there (GDAL) against the tile atlas pixel at
+    // its interpolated (u, v) (glTF: v down from the top). Both 8-bit RGB.
+    const RasterReader ortho(town.ortho_path);
+    const GeoTransform& gt = ortho.info().transform;
+    const CrsInfo ecef = crs_from_user_input("EPSG:4978", "test");
+    RasterOpenOptions plain;
+    plain.allow_pixel_coordinates = true;
+    int tiles = 0, textured_tiles = 0;
+    std::size_t samples = 0, same = 0, atlas_px = 0;
+    for (const auto& e : fs::directory_iterator(fs::path(dir.path) / "out/3dtiles/content")) {
+        ++tiles;
+        const Glb g = read_glb(e.path().string());
+        if (!g.json.contains("images")) continue;
+        ++textured_tiles;
+        REQUIRE(g.json["images"].size() == 1);
+        const auto& iv = g.json["bufferViews"][g.json["images"][0]["bufferView"].get<int>()];
+        const fs::path png = fs::path(dir.path) / (e.path().stem().string() + ".png");
+        std::ofstream(png, std::ios::binary) << g.bin.substr(iv["byteOffset"].get<std::size_t>(), iv["byteLength"].get<std::size_t>());
+        const auto atlas = RasterReader(png.string(), plain).read_all<uint8_t>();
+        atlas_px += std::size_t(atlas.width) * atlas.height;
+        const auto& t = g.json["nodes"][0]["translation"];
+        for (const auto& prim : g.json["meshes"][0]["primitives"]) {
+            const auto& mat = g.json["materials"][prim["material"].get<int>()];
+            if (!mat["pbrMetallicRoughness"].contains("baseColorTexture")) continue;
+            const auto pos = accessor_floats(g, prim["attributes"]["POSITION"].get<int>());
+            const auto uv = accessor_floats(g, prim["attributes"]["TEXCOORD_0"].get<int>());
+            const auto idx = accessor_indices(g, prim["indices"].get<int>());
+            std::vector<double> X, Y, Z, U, V;
+            for (std::size_t k = 0; k + 2 < idx.size(); k += 3)
+                for (const auto& w : std::vector<std::array<double, 3>>{{0.6, 0.2, 0.2}, {0.2, 0.6, 0.2}, {0.2, 0.2, 0.6}, {0.34, 0.33, 0.33}}) {
+                    double p[3] = {0, 0, 0}, q[2] = {0, 0};
+                    for (int c = 0; c < 3; ++c) {
+                        const uint32_t i = idx[k + std::size_t(c)];
+                        for (int d = 0; d < 3; ++d) p[d] += w[c] * pos[3 * i + std::size_t(d)];
+                        for (int d = 0; d < 2; ++d) q[d] += w[c] * uv[2 * i + std::size_t(d)];
+                    }
+                    const double x = p[0] + t[0].get<double>(), y = p[1] + t[1].get<double>(), z = p[2] + t[2].get<double>();
+                    X.push_back(x), Y.push_back(-z), Z.push_back(y), U.push_back(q[0]), V.push_back(q[1]);
+                }
+            transform_points(ecef, ortho.info().crs, X, Y, Z, "test");
+            for (std::size_t k = 0; k < X.size(); ++k) {
+                const PixelPoint op = gt.map_to_pixel({X[k], Y[k]});
+                const double ac = U[k] * atlas.width, ar = V[k] * atlas.height;
+                // Points on a pixel boundary (either image) are skipped: which pixel they are in is a matter of rounding.
+                auto near_edge = [](double v) { return std::abs(v - std::round(v)) < 0.02; };
+                if (near_edge(op.col) || near_edge(op.row) || near_edge(ac) || near_edge(ar)) continue;
+                const auto o_px = ortho.read<uint8_t>({int(std::floor(op.col)), int(std::floor(op.row)), 1, 1}, {1, 2, 3});
+                bool equal = true;
+                for (int b = 0; b < 3; ++b) equal = equal && atlas.at(b, int(std::floor(ac)), int(std::floor(ar))) == o_px.at(b, 0, 0);
+                ++samples, same += equal;
+            }
+        }
+    }
+    INFO(tiles << " tiles, " << textured_tiles << " textured, " << samples << " samples");
+    CHECK(tiles >= 4);
+    CHECK(textured_tiles == tiles);
+    CHECK(samples >= 200);
+    CHECK(same == samples);
+    // Each tile carries only its own buildings' roofs: together about the model's atlas, not a copy per tile.
+    const auto full = RasterReader(rep.model.files.at("textures"), plain).info();
+    CHECK(atlas_px < std::size_t(2 * full.width * full.height));
+
+    // Same input, same tiles (atlases included).
+    o.model.formats = {"3dtiles"};
+    run_roofs(town.truth_path, town.cloud_path, dir / "again", o);
+    for (const auto& e : fs::directory_iterator(fs::path(dir.path) / "out/3dtiles/content"))
+        CHECK(test::slurp(e.path().string()) == test::slurp((fs::path(dir.path) / "again/3dtiles/content" / e.path().filename()).string()));
 }

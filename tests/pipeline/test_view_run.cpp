@@ -91,6 +91,23 @@ TEST_CASE("The run's viewer page works in headless Chromium from disk", "[view][
     CHECK(gv.exit_code == 0);
     CHECK(gv.out.find("\"errors\": []") != std::string::npos);
 
+    // The run's 3D Tiles carry the same roof textures (an atlas per tile): zero errors by the glTF validator on
+    // every tile and by the tileset checks, and the page shows them textured from the tileset as well.
+    const auto tv = test::run_command("node " + test::source_dir() + "/tools/validators/validate_3dtiles.mjs tileset " +
+                                      (dir / "run/3dtiles/tileset.json") + " --expect-buildings " + std::to_string(rep.meshed));
+    INFO(tv.out << tv.err);
+    CHECK(tv.exit_code == 0);
+    CHECK(tv.out.find("\"errors\": []") != std::string::npos);
+    const auto textured_tiles = test::run_command("node " + test::source_dir() + "/tools/validators/view_check.mjs " + rep.path + " " +
+                                                  output_folder("viewer_textured_tiles") + " --source tiles --expect-meshed " +
+                                                  std::to_string(rep.meshed) + " --expect-textured");
+    INFO(textured_tiles.out << textured_tiles.err);
+    CHECK(textured_tiles.exit_code == 0);
+    const auto tts = nlohmann::json::parse(textured_tiles.out);
+    CHECK(tts["source"] == "tiles");
+    CHECK(tts["textured_meshes"].get<int>() >= 1);
+    CHECK(tts["drawn_3d"] == rep.meshed);
+
     // The page shows the 3D Tiles tileset too (tiles.js beside it): here one written with small leaves, so that
     // several tiles stream in; every tile loaded, every building drawn where the glb draws it, and clickable.
     CHECK(rep.tiles >= 1);
