@@ -23,6 +23,7 @@ void Lod2Options::validate() const {
     if (!(max_median_residual_m > 0)) throw Error("--max-median-residual-m", "must be > 0");
     if (!(unit_m > 0) || !(z_unit_m > 0)) throw Error("units", "CRS units must be > 0 metres");
     if (!(retry_rmse_m >= 0)) throw Error("--lod2-retry-rmse-m", "must be >= 0");
+    if (max_partition_lines < 1) throw Error("max_partition_lines", "must be >= 1");
 }
 
 namespace {
@@ -156,6 +157,7 @@ PartResult build_part(const Polygon& part, const std::vector<std::array<double, 
     };
     add_ring(part.outer);
     for (const Ring& h : part.holes) add_ring(h);
+    const std::size_t outline_segments = curves.size();
 
     // Adjacent plane pairs and their common boundary samples, from a 0.5 m label grid.
     const double cell = 0.5;
@@ -222,6 +224,12 @@ PartResult build_part(const Polygon& part, const std::vector<std::array<double, 
         auto q = [](double v) { return std::round(v * 1e6) / 1e6; };
         const double ax = q(px + t0 * dx), ay = q(py + t0 * dy), bx = q(px + t1 * dx), by = q(py + t1 * dy);
         if (segment_ok(ax, ay, bx, by)) curves.emplace_back(P2(ax, ay), P2(bx, by));
+    }
+    const std::size_t partition_lines = curves.size() - outline_segments;
+    if (partition_lines > static_cast<std::size_t>(o.max_partition_lines)) {
+        res.failure = "roof too complex: " + std::to_string(partition_lines) + " partition lines between its " + std::to_string(planes.size()) +
+                      " planes (limit " + std::to_string(o.max_partition_lines) + ")";
+        return res;
     }
     CGAL::insert(arr, curves.begin(), curves.end());
 

@@ -25,6 +25,10 @@ struct Lod2Options {
     double min_roof_height_m = 0.3;    ///< roof vertices must be at least this far above the ground, else fallback
     int min_points = 30;               ///< fewer roof points -> flat-roof fallback
     double max_median_residual_m = 0.5;///< a model whose points' median residual is larger -> flat-roof fallback
+    /// A roof whose planes need more partition lines (one per adjacent plane
+    /// pair) falls back flat: the partition's size and time grow with their
+    /// square (noisy photogrammetric roofs gave thousands of planes).
+    int max_partition_lines = 200;
     /// A model that falls back (planes or partition failed) or whose RMSE is
     /// above `retry_rmse_m` is rebuilt with alternative plane settings (wider
     /// normal tolerance, smaller minimum support, longer partition lines);

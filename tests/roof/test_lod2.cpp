@@ -126,3 +126,26 @@ TEST_CASE("A roof model that misses most of its points (vegetation over a flat r
     CHECK_FALSE(kept.fallback);
     CHECK(kept.median_residual_m > 0.5);
 }
+
+TEST_CASE("A roof of very many planes falls back flat at once instead of partitioning their square (noisy photogrammetric roofs)", "[roof]") {
+    // 36 m x 36 m of little pyramids, 6 m each: 144 planes, hundreds of adjacent pairs.
+    std::vector<std::array<double, 3>> pts;
+    for (double y = 0.1; y < 36; y += 0.3)
+        for (double x = 0.1; x < 36; x += 0.3) {
+            const double u = std::fmod(x, 6.0) - 3.0, v = std::fmod(y, 6.0) - 3.0;
+            pts.push_back({x, y, 8.0 + 0.6 * (3.0 - std::max(std::abs(u), std::abs(v)))});
+        }
+    const std::vector<Polygon> footprint{Polygon{{{0, 0}, {36, 0}, {36, 36}, {0, 36}}, {}}};
+    Lod2Options o;
+    const Lod2Result r = reconstruct_lod2(footprint, pts, 0.0, 9.0, o);
+    INFO(r.fallback_reason);
+    CHECK(r.fallback);
+    CHECK(r.fallback_reason.find("roof too complex") != std::string::npos);
+    REQUIRE(r.solids.size() == 1);
+    CHECK(validate_solid(r.solids[0]).empty());
+    // The same roof with the limit lifted is attempted (and is no longer refused for its complexity).
+    o.max_partition_lines = 100000;
+    o.retry_alternatives = false;
+    const Lod2Result all = reconstruct_lod2(footprint, pts, 0.0, 9.0, o);
+    CHECK(all.fallback_reason.find("roof too complex") == std::string::npos);
+}
