@@ -7,13 +7,13 @@
 #include <filesystem>
 #include <fstream>
 #include <nlohmann/json.hpp>
+#include <tbb/parallel_for.h>
 #include <unistd.h>
 
 #include "core/atomic_file.hpp"
 #include "core/error.hpp"
 #include "core/memory.hpp"
 #include "core/log.hpp"
-#include "core/parallel.hpp"
 #include "core/version.hpp"
 #include "crs/crs.hpp"
 #include "io/gltf_writer.hpp"
@@ -242,7 +242,8 @@ Tiles3dWriteReport write_3dtiles(const std::string& dir, const CityModel& model,
     std::vector<std::size_t> triangles(leaves.size());
     try {
         ensure_directory(tmp / "content");
-        parallel_for_each_index(leaves.size(), [&](std::size_t li) {
+        // One tile per task (a tile is heavy: meshing, its atlas' PNG, the file); each writes only its own leaf.
+        tbb::parallel_for(std::size_t(0), leaves.size(), [&](std::size_t li) {
             Node& n = *leaves[li];
             std::vector<std::array<double, 3>> pts;
             for (std::size_t i : n.items)
