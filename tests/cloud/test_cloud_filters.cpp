@@ -5,6 +5,7 @@
 #include "cloud/cloud_filters.hpp"
 #include "cloud/kd_tree.hpp"
 #include "cloud/las.hpp"
+#include "core/morphology.hpp"
 #include "core/random.hpp"
 #include "synth/synth.hpp"
 #include "synth_fixture.hpp"
@@ -118,5 +119,69 @@ TEST_CASE("Outlier filter on grid neighbourhoods flags exactly the points of a w
         for (std::size_t i = c.size() - 3; i < c.size(); ++i) CHECK_FALSE(r.keep[i]);
         tbb::global_control one_thread(tbb::global_control::max_allowed_parallelism, 1);
         CHECK(filter_outliers(c, o).keep == r.keep);
+    }
+}
+
+namespace {
+// morphology_square as it was: for every cell the (2r+1)-wide window scanned
+// cell by cell, rows then columns (the oracle for the running extrema).
+template <typename T>
+std::vector<T> naive_morphology(const std::vector<T>& in, int w, int h, int r, bool erode, std::optional<T> outside) {
+    auto pick = [erode](T a, T b) { return erode ? std::min(a, b) : std::max(a, b); };
+    std::vector<T> tmp(in.size()), out(in.size());
+    for (int y = 0; y < h; ++y)
+        for (int x = 0; x < w; ++x) {
+            T v = in[static_cast<std::size_t>(y) * w + x];
+            for (int d = -r; d <= r; ++d) {
+                if (x + d < 0 || x + d >= w) {
+                    if (outside) v = pick(v, *outside);
+                    continue;
+                }
+                v = pick(v, in[static_cast<std::size_t>(y) * w + x + d]);
+            }
+            tmp[static_cast<std::size_t>(y) * w + x] = v;
+        }
+    for (int y = 0; y < h; ++y)
+        for (int x = 0; x < w; ++x) {
+            T v = tmp[static_cast<std::size_t>(y) * w + x];
+            for (int d = -r; d <= r; ++d) {
+                if (y + d < 0 || y + d >= h) {
+                    if (outside) v = pick(v, *outside);
+                    continue;
+                }
+                v = pick(v, tmp[static_cast<std::size_t>(y + d) * w + x]);
+            }
+            out[static_cast<std::size_t>(y) * w + x] = v;
+        }
+    return out;
+}
+// Equal cell by cell, NaN equal to NaN.
+bool same_cells(const std::vector<double>& a, const std::vector<double>& b) {
+    if (a.size() != b.size()) return false;
+    for (std::size_t i = 0; i < a.size(); ++i)
+        if (!(a[i] == b[i] || (std::isnan(a[i]) && std::isnan(b[i])))) return false;
+    return true;
+}
+}  // namespace
+
+TEST_CASE("Square morphology (running extrema) equals the cell-by-cell window scan, NaN cells and grid edges included", "[cloud][ground][morphology]") {
+    Rng rng(7);
+    for (const auto& [w, h] : {std::pair{1, 1}, std::pair{1, 9}, std::pair{13, 1}, std::pair{37, 23}, std::pair{130, 71}}) {
+        std::vector<double> grid(static_cast<std::size_t>(w) * h);
+        std::vector<uint8_t> mask(grid.size());
+        for (std::size_t i = 0; i < grid.size(); ++i) {
+            grid[i] = std::floor(rng.uniform(-20.0, 20.0)) * 0.5;  // ties on purpose
+            if (rng.uniform(0.0, 1.0) < 0.1) grid[i] = NAN;
+            mask[i] = rng.uniform(0.0, 1.0) < 0.6 ? 1 : 0;
+        }
+        for (const int r : {0, 1, 2, 3, 7, 18, 80})
+            for (const bool erode : {true, false}) {
+                INFO("w " << w << " h " << h << " r " << r << " erode " << erode);
+                CHECK(same_cells(morphology_square(grid, w, h, r, erode), naive_morphology<double>(grid, w, h, r, erode, std::nullopt)));
+                CHECK(same_cells(morphology_square(grid, w, h, r, erode, std::optional<double>(3.0)),
+                                 naive_morphology<double>(grid, w, h, r, erode, 3.0)));
+                CHECK(morphology_square(mask, w, h, r, erode) == naive_morphology<uint8_t>(mask, w, h, r, erode, std::nullopt));
+                CHECK(morphology_square<uint8_t>(mask, w, h, r, erode, uint8_t(0)) == naive_morphology<uint8_t>(mask, w, h, r, erode, uint8_t(0)));
+            }
     }
 }
