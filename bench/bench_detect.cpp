@@ -1,7 +1,7 @@
 // Learned building detection benchmark: applies a detector model (default:
 // the shipped RGB model) to a 4000 x 4000 px RGB tile (a synthetic town at
 // 0.5 m, 2000 m a side) and prints the time of each step: reading and
-// normalising, segmentation (watershed + merging at the model's scales),
+// normalising, the pixel stage (models that have one), segmentation (watershed + merging at the model's scales),
 // features, classification and outlines (components).
 //
 //   build/bin/bench_detect [model.cfdet] [size_px]
@@ -37,10 +37,16 @@ int main(int argc, char** argv) try {
     const DetectionImage img = read_detection_image(ortho.string());
     const double t_read = now() - t;
     t = now();
-    const detect::SceneSegments seg = detect::segment_scene(img.normalised, img.valid, model.options.segmentation);
+    std::vector<float> pix;
+    if (model.options.pixel.enabled)
+        pix = detect::pixel_probability(model.pixel_booster, img.normalised, img.valid, img.layout, img.gsd_m, model.options.pixel);
+    const double t_pix = now() - t;
+    t = now();
+    const detect::SceneSegments seg = detect::segment_scene(img.normalised, img.valid, model.options.segmentation, {}, img.gsd_m);
     const double t_seg = now() - t;
     t = now();
-    const detect::FeatureMatrix f = detect::segment_features(img.normalised, img.valid, seg, img.layout, img.gsd_m);
+    const detect::FeatureMatrix f =
+        detect::segment_features(img.normalised, img.valid, seg, img.layout, img.gsd_m, model.options.pixel.enabled ? &pix : nullptr);
     const double t_feat = now() - t;
     t = now();
     const std::vector<float> p = detect::segment_probabilities(model, f);
@@ -50,6 +56,8 @@ int main(int argc, char** argv) try {
     const double t_all = now() - t;
     std::printf("bench_detect: %d x %d px RGB (%s), model %s\n", img.grid.width, img.grid.height, ortho.string().c_str(), model_path.c_str());
     std::printf("  read + normalise      %7.2f s\n", t_read);
+    if (model.options.pixel.enabled)
+        std::printf("  pixel stage           %7.2f s  (filter bank on %g m cells + boosted trees)\n", t_pix, model.options.pixel.cell_m);
     std::printf("  segmentation          %7.2f s  (%u segments, scales", t_seg, seg.count);
     for (double s : model.options.segmentation.scales) std::printf(" %g", s);
     std::printf(")\n  features              %7.2f s  (%zu per segment)\n", t_feat, f.cols);

@@ -46,6 +46,10 @@ void add_train_command(CLI::App& parent, const GlobalFlags& g, CommandList& out)
     cmd->add_option("--split-level", d.object_split_level, "Object split level when there is no cross-validation")->capture_default_str();
     cmd->add_option("--threshold", d.threshold, "Probability threshold when there is no cross-validation")->capture_default_str();
     cmd->add_option("--scales", d.segmentation.scales, "Merging scales: classified segments first, then context levels")->delimiter(',');
+    cmd->add_option("--reference-gsd-m", d.segmentation.reference_gsd_m,
+                    "The merging scales hold at this GSD and are scaled by it / the image's GSD (segments of the same ground size at any "
+                    "resolution); 0 = the scales as given")
+        ->capture_default_str();
     cmd->add_option("--h-minima", d.segmentation.watershed.h_minima, "Watershed dynamics threshold (normalised gradient units)")->capture_default_str();
     cmd->add_option("--rounds", d.booster.rounds, "Boosting rounds (trees)")->capture_default_str();
     cmd->add_option("--max-depth", d.booster.max_depth, "Depth of each tree")->capture_default_str();
@@ -54,6 +58,14 @@ void add_train_command(CLI::App& parent, const GlobalFlags& g, CommandList& out)
         ->capture_default_str();
     cmd->add_option("--min-label-share", d.min_label_share, "A segment is building when this share of its pixels is labelled")->capture_default_str();
     cmd->add_option("--min-area-m2", d.min_area_m2, "Smallest building kept when applied, square metres")->capture_default_str();
+    cmd->add_flag("!--no-pixel-stage", d.pixel.enabled,
+                  "Segment features only, without the pixel stage (a per-pixel filter bank + boosted trees whose building-probability map "
+                  "adds segment features)");
+    cmd->add_option("--pixel-cell-m", d.pixel.cell_m, "Pixel stage: working cell, metres (the image is box-averaged to about this)")
+        ->capture_default_str();
+    cmd->add_option("--pixel-sigmas-m", d.pixel.sigmas_m, "Pixel stage: filter scales, metres (increasing)")->delimiter(',');
+    cmd->add_option("--pixel-samples", d.pixel.samples_per_image, "Pixel stage: training cells per image")->capture_default_str();
+    cmd->add_option("--pixel-rounds", d.pixel.booster.rounds, "Pixel stage: boosting rounds")->capture_default_str();
     out.push_back({cmd, [s, &g]() {
                        remove_stale_temporaries_beside(s->out);
                        const TrainReport r = run_train(s->out, s->options, s->overwrite, make_progress(g));

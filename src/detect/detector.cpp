@@ -39,11 +39,14 @@ std::string hex64(uint64_t v) {
 void DetectorOptions::validate(int bands) const {
     segmentation.validate(bands);
     booster.validate();
+    if (pixel.enabled) pixel.validate();
     if (!(min_label_share > 0.0 && min_label_share < 1.0)) throw Error("min_label_share", "must be in (0, 1)");
     if (!(threshold > 0.0 && threshold < 1.0)) throw Error("threshold", "must be in (0, 1)");
     if (object_split_level < 0 || object_split_level >= int(segmentation.scales.size()))
         throw Error("object_split_level", "must be 0 or a context scale (1.." + std::to_string(segmentation.scales.size() - 1) + ")");
     if (!(min_area_m2 >= 0.0)) throw Error("min_area_m2", "must be >= 0");
+    if (!(pixel_object_threshold >= 0.0 && pixel_object_threshold < 1.0)) throw Error("pixel_object_threshold", "must be in [0, 1) (0 = off)");
+    if (pixel_object_threshold > 0.0 && !pixel.enabled) throw Error("pixel_object_threshold", "needs the pixel stage");
     if (!(min_hole_m2 >= 0.0)) throw Error("min_hole_m2", "must be >= 0");
 }
 
@@ -64,13 +67,23 @@ nlohmann::json to_json(const DetectorOptions& o) {
     const auto& b = o.booster;
     return {{"segmentation",
              {{"h_minima", s.watershed.h_minima}, {"smoothing_sigma_px", s.watershed.smoothing_sigma_px},
-              {"band_weights", s.watershed.band_weights}, {"scales", s.scales}, {"color_weight", s.color_weight}}},
+              {"band_weights", s.watershed.band_weights}, {"scales", s.scales}, {"color_weight", s.color_weight}, {"reference_gsd_m", s.reference_gsd_m}}},
             {"booster",
              {{"rounds", b.rounds}, {"max_depth", b.max_depth}, {"learning_rate", b.learning_rate}, {"subsample", b.subsample},
               {"colsample", b.colsample}, {"min_child_weight", b.min_child_weight}, {"lambda", b.lambda}, {"seed", b.seed}}},
+            {"pixel",
+             {{"enabled", o.pixel.enabled},
+              {"cell_m", o.pixel.cell_m},
+              {"sigmas_m", o.pixel.sigmas_m},
+              {"samples_per_image", o.pixel.samples_per_image},
+              {"booster",
+               {{"rounds", o.pixel.booster.rounds}, {"max_depth", o.pixel.booster.max_depth}, {"learning_rate", o.pixel.booster.learning_rate},
+                {"subsample", o.pixel.booster.subsample}, {"colsample", o.pixel.booster.colsample},
+                {"min_child_weight", o.pixel.booster.min_child_weight}, {"lambda", o.pixel.booster.lambda}, {"seed", o.pixel.booster.seed}}}}},
             {"min_label_share", o.min_label_share},
             {"threshold", o.threshold},
             {"object_split_level", o.object_split_level},
+            {"pixel_object_threshold", o.pixel_object_threshold},
             {"min_area_m2", o.min_area_m2},
             {"min_hole_m2", o.min_hole_m2}};
 }
@@ -83,6 +96,7 @@ DetectorOptions detector_options_from_json(const nlohmann::json& j) {
     o.segmentation.watershed.band_weights = s.at("band_weights").get<std::vector<double>>();
     o.segmentation.scales = s.at("scales").get<std::vector<double>>();
     o.segmentation.color_weight = s.at("color_weight").get<double>();
+    o.segmentation.reference_gsd_m = s.value("reference_gsd_m", 0.0);
     const auto& b = j.at("booster");
     o.booster.rounds = b.at("rounds").get<int>();
     o.booster.max_depth = b.at("max_depth").get<int>();
@@ -92,8 +106,27 @@ DetectorOptions detector_options_from_json(const nlohmann::json& j) {
     o.booster.min_child_weight = b.at("min_child_weight").get<double>();
     o.booster.lambda = b.at("lambda").get<double>();
     o.booster.seed = b.at("seed").get<uint64_t>();
+    if (j.contains("pixel")) {
+        const auto& p = j.at("pixel");
+        o.pixel.enabled = p.at("enabled").get<bool>();
+        o.pixel.cell_m = p.at("cell_m").get<double>();
+        o.pixel.sigmas_m = p.at("sigmas_m").get<std::vector<double>>();
+        o.pixel.samples_per_image = p.at("samples_per_image").get<std::size_t>();
+        const auto& pb = p.at("booster");
+        o.pixel.booster.rounds = pb.at("rounds").get<int>();
+        o.pixel.booster.max_depth = pb.at("max_depth").get<int>();
+        o.pixel.booster.learning_rate = pb.at("learning_rate").get<double>();
+        o.pixel.booster.subsample = pb.at("subsample").get<double>();
+        o.pixel.booster.colsample = pb.at("colsample").get<double>();
+        o.pixel.booster.min_child_weight = pb.at("min_child_weight").get<double>();
+        o.pixel.booster.lambda = pb.at("lambda").get<double>();
+        o.pixel.booster.seed = pb.at("seed").get<uint64_t>();
+    } else {
+        o.pixel.enabled = false;  // models from before the pixel stage
+    }
     o.min_label_share = j.at("min_label_share").get<double>();
     o.object_split_level = j.value("object_split_level", 0);
+    o.pixel_object_threshold = j.value("pixel_object_threshold", 0.0);
     o.threshold = j.at("threshold").get<double>();
     o.min_area_m2 = j.at("min_area_m2").get<double>();
     o.min_hole_m2 = j.at("min_hole_m2").get<double>();
@@ -101,8 +134,10 @@ DetectorOptions detector_options_from_json(const nlohmann::json& j) {
 }
 
 std::vector<uint8_t> serialize_model(const DetectorModel& m) {
+    const bool pixel = m.options.pixel.enabled;
+    if (pixel && m.pixel_booster.empty()) throw Error("detector model", "internal: pixel stage without its booster");
     nlohmann::json header = {{"format", "cityforge-detector"},
-                                   {"format_version", 1},
+                                   {"format_version", pixel ? 2 : 1},
                                    {"classifier", "xgboost gbtree (binary:logistic, hist)"},
                                    {"bands", describe_bands(m.layout)},
                                    {"band_count", m.layout.bands},
@@ -118,6 +153,10 @@ std::vector<uint8_t> serialize_model(const DetectorModel& m) {
     out.insert(out.end(), text.begin(), text.end());
     put_u64(out, m.booster.size());
     out.insert(out.end(), m.booster.begin(), m.booster.end());
+    if (pixel) {
+        put_u64(out, m.pixel_booster.size());
+        out.insert(out.end(), m.pixel_booster.begin(), m.pixel_booster.end());
+    }
     put_u64(out, fnv1a64(out.data(), out.size()));
     return out;
 }
@@ -129,13 +168,24 @@ DetectorModel parse_model(const std::vector<uint8_t>& in, const std::string& sub
     const uint64_t hlen = get_u64(in, kMagicLen);
     if (hlen > n - kMagicLen - 24) throw Error(subject, "truncated detector model (header)");
     const std::size_t bat = kMagicLen + 8 + hlen;
-    const uint64_t blen = get_u64(in, bat);
-    if (blen != n - bat - 16) throw Error(subject, "truncated or padded detector model (expected " + std::to_string(bat + 16 + blen) + " bytes, found " + std::to_string(n) + ")");
+    // Length-prefixed blobs (booster, then the pixel booster of format 2) up to the checksum.
+    std::vector<std::pair<std::size_t, std::size_t>> blobs;  // offset, length
+    for (std::size_t at = bat; at < n - 8;) {
+        if (at + 8 > n - 8) throw Error(subject, "truncated detector model (blob length)");
+        const uint64_t len = get_u64(in, at);
+        if (len > n - 8 - (at + 8)) throw Error(subject, "truncated or padded detector model (a block runs past the end: " + std::to_string(n) + " bytes)");
+        blobs.emplace_back(at + 8, std::size_t(len));
+        at += 8 + len;
+        if (blobs.size() > 2) throw Error(subject, "corrupt detector model (too many blocks)");
+    }
+    if (blobs.empty()) throw Error(subject, "truncated detector model (no booster)");
     if (get_u64(in, n - 8) != fnv1a64(in.data(), n - 8)) throw Error(subject, "corrupt detector model (checksum mismatch)");
     DetectorModel m;
+    int version = 1;
     try {
         const auto header = nlohmann::json::parse(in.begin() + kMagicLen + 8, in.begin() + static_cast<std::ptrdiff_t>(bat));
-        if (header.at("format").get<std::string>() != "cityforge-detector" || header.at("format_version").get<int>() != 1)
+        version = header.at("format_version").get<int>();
+        if (header.at("format").get<std::string>() != "cityforge-detector" || (version != 1 && version != 2))
             throw Error(subject, "unsupported detector model format");
         m.layout.bands = header.at("band_count").get<int>();
         m.layout.nir_band = header.at("nir_band").get<int>();
@@ -148,9 +198,15 @@ DetectorModel parse_model(const std::vector<uint8_t>& in, const std::string& sub
         throw Error(subject, std::string("invalid detector model header: ") + e.what());
     }
     m.options.validate(m.layout.bands);
-    if (m.features != feature_names(m.layout, int(m.options.segmentation.scales.size()) - 1))
+    if (blobs.size() != (m.options.pixel.enabled ? 2u : 1u) || (version == 2) != m.options.pixel.enabled)
+        throw Error(subject, "corrupt detector model (block count does not match the header)");
+    if (m.features != feature_names(m.layout, int(m.options.segmentation.scales.size()) - 1, m.options.pixel.enabled))
         throw Error(subject, "the model's feature list is not the one this version of cityforge computes");
-    m.booster.assign(in.begin() + static_cast<std::ptrdiff_t>(bat + 8), in.end() - 8);
+    auto blob = [&](std::size_t k) {
+        return std::vector<uint8_t>(in.begin() + std::ptrdiff_t(blobs[k].first), in.begin() + std::ptrdiff_t(blobs[k].first + blobs[k].second));
+    };
+    m.booster = blob(0);
+    if (m.options.pixel.enabled) m.pixel_booster = blob(1);
     return m;
 }
 
@@ -185,10 +241,14 @@ std::vector<float> segment_probabilities(const DetectorModel& model, const Featu
     return out;
 }
 
-std::vector<uint8_t> building_pixels(const SceneSegments& s, const std::vector<float>& probability, double threshold, int split_level) {
+std::vector<uint8_t> building_pixels(const SceneSegments& s, const std::vector<float>& probability, double threshold, int split_level,
+                                     const std::vector<float>* pixel_probability, double pixel_threshold) {
     std::vector<uint8_t> b(s.labels.data.size(), 0);
+    const bool px = pixel_probability && pixel_threshold > 0.0;
+    if (px && pixel_probability->size() != b.size()) throw Error("building pixels", "internal: pixel probability map size");
     for (std::size_t i = 0; i < b.size(); ++i)
-        if (const uint32_t a = s.labels.data[i]) b[i] = probability[a] >= threshold ? 1 : 0;
+        if (const uint32_t a = s.labels.data[i])
+            b[i] = probability[a] >= threshold || (px && (*pixel_probability)[i] >= pixel_threshold) ? 1 : 0;
     if (split_level <= 0) return b;
     if (split_level > int(s.context.size())) throw Error("object_split_level", "exceeds the number of context scales");
     // A pixel whose right or lower neighbour is building in another context
@@ -210,11 +270,17 @@ std::vector<uint8_t> building_pixels(const SceneSegments& s, const std::vector<f
 Detection detect_buildings(const DetectorModel& model, const Image<float>& normalised, const std::vector<uint8_t>& valid, double gsd_m,
                            int threads, const Progress& progress) {
     Detection d;
-    d.segments = segment_scene(normalised, valid, model.options.segmentation, progress.sub(0.0, 0.8));
-    const FeatureMatrix f = segment_features(normalised, valid, d.segments, model.layout, gsd_m);
+    const bool pixel = model.options.pixel.enabled;
+    if (pixel) {
+        d.pixel_probability = pixel_probability(model.pixel_booster, normalised, valid, model.layout, gsd_m, model.options.pixel, threads);
+        progress(0.3, "pixel probability");
+    }
+    d.segments = segment_scene(normalised, valid, model.options.segmentation, progress.sub(pixel ? 0.3 : 0.0, 0.8), gsd_m);
+    const FeatureMatrix f = segment_features(normalised, valid, d.segments, model.layout, gsd_m, pixel ? &d.pixel_probability : nullptr);
     progress(0.9, "features");
     d.probability = segment_probabilities(model, f, threads);
-    d.building = building_pixels(d.segments, d.probability, model.options.threshold, model.options.object_split_level);
+    d.building = building_pixels(d.segments, d.probability, model.options.threshold, model.options.object_split_level,
+                                 pixel ? &d.pixel_probability : nullptr, model.options.pixel_object_threshold);
     progress(1.0, "classified");
     return d;
 }

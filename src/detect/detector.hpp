@@ -12,6 +12,7 @@
 
 #include "core/progress.hpp"
 #include "detect/booster.hpp"
+#include "detect/pixel_classifier.hpp"
 #include "detect/segment_features.hpp"
 
 namespace cityforge::detect {
@@ -20,6 +21,9 @@ namespace cityforge::detect {
 struct DetectorOptions {
     DetectorSegmentationOptions segmentation;
     BoosterOptions booster;
+    /// The pixel stage whose building-probability map adds segment features
+    /// (models without it, e.g. older files, have enabled = false).
+    PixelClassifierOptions pixel;
     /// A training segment is "building" when at least this share of its
     /// pixels lies inside the labels.
     double min_label_share = 0.5;
@@ -32,6 +36,11 @@ struct DetectorOptions {
     /// touching roofs the merging saw as different objects stay separate
     /// (the training command picks it by cross-validation).
     int object_split_level = 0;
+    /// Small or dark buildings the segments miss: pixels whose pixel-stage
+    /// building probability reaches this join the building pixels (in
+    /// segments below `threshold`); 0 = off (the training command picks it
+    /// by cross-validation when the model has a pixel stage).
+    double pixel_object_threshold = 0.0;
     double min_area_m2 = 8.0;  ///< building components smaller than this are dropped
     double min_hole_m2 = 6.0;  ///< holes smaller than this are filled
     void validate(int bands) const;
@@ -48,10 +57,12 @@ struct DetectorModel {
     std::string fingerprint;            ///< hash of the training images, labels and options (hex)
     nlohmann::json training;            ///< sources, sample counts, per-fold figures (free form, recorded as given)
     std::vector<uint8_t> booster;       ///< XGBoost UBJSON model
+    std::vector<uint8_t> pixel_booster; ///< XGBoost UBJSON pixel model (options.pixel.enabled), else empty
 };
 
-/// The model's bytes: "CFDET1\n", then header JSON, booster and an FNV-1a
-/// checksum, each length-prefixed; the same model gives the same bytes.
+/// The model's bytes: "CFDET1\n", then header JSON, booster, the pixel
+/// booster when the model has a pixel stage (format_version 2) and an
+/// FNV-1a checksum, each length-prefixed; the same model gives the same bytes.
 std::vector<uint8_t> serialize_model(const DetectorModel& model);
 /// Parses bytes from serialize_model. Throws Error naming `subject` when the
 /// magic, a length or the checksum is wrong (truncated or corrupt file) or
@@ -72,14 +83,18 @@ std::vector<float> segment_probabilities(const DetectorModel& model, const Featu
 /// model's threshold (w x h of the labels); with `split_level` >= 1 the
 /// pixels where two regions of context scale `split_level` meet are left
 /// out (see DetectorOptions::object_split_level).
+/// With `pixel_probability` (per pixel, or null) and `pixel_threshold` > 0,
+/// pixels of the other segments whose pixel probability reaches it are
+/// building too (DetectorOptions::pixel_object_threshold).
 std::vector<uint8_t> building_pixels(const SceneSegments& segments, const std::vector<float>& probability, double threshold,
-                                     int split_level = 0);
+                                     int split_level = 0, const std::vector<float>* pixel_probability = nullptr, double pixel_threshold = 0.0);
 
 /// The whole detection on one image: segmentation with the model's options,
 /// features, probabilities and building pixels. `normalised` = bands scaled
 /// 0..255 (normalize_bands) in the model's band order.
 struct Detection {
     SceneSegments segments;
+    std::vector<float> pixel_probability;  ///< per pixel, 0..1 (models with a pixel stage; else empty)
     std::vector<float> probability;  ///< per segment (index = label)
     std::vector<uint8_t> building;   ///< per pixel
 };

@@ -17,11 +17,13 @@ void DetectorSegmentationOptions::validate(int bands) const {
         if (i > 0 && !(scales[i] > scales[i - 1])) throw Error("segmentation.scales", "must be strictly increasing");
     }
     if (!(color_weight >= 0.0 && color_weight <= 1.0)) throw Error("segmentation.color_weight", "must be in [0, 1]");
+    if (!(reference_gsd_m >= 0.0 && reference_gsd_m <= 100.0)) throw Error("segmentation.reference_gsd_m", "must be in [0, 100] metres (0 = off)");
 }
 
 SceneSegments segment_scene(const Image<float>& normalised, const std::vector<uint8_t>& valid, const DetectorSegmentationOptions& o,
-                            const Progress& progress) {
+                            const Progress& progress, double gsd_m) {
     o.validate(normalised.bands);
+    if (o.reference_gsd_m > 0.0 && !(gsd_m > 0.0)) throw Error("segmentation", "internal: scales relative to a GSD need the image's GSD");
     SceneSegments s;
     const Oversegmentation over = watershed_oversegment(normalised, valid, o.watershed, progress.sub(0.0, 0.5));
     const std::size_t levels = o.scales.size();
@@ -35,6 +37,8 @@ SceneSegments segment_scene(const Image<float>& normalised, const std::vector<ui
     }
     RegionMergingOptions rmo;
     rmo.scales = o.scales;
+    if (o.reference_gsd_m > 0.0)
+        for (double& v : rmo.scales) v *= o.reference_gsd_m / gsd_m;
     rmo.band_weights = o.watershed.band_weights;
     rmo.color_weight = o.color_weight;
     const RegionMergingResult m = merge_regions(normalised, over.labels, over.region_count, rmo, progress.sub(0.5, 1.0));
@@ -51,7 +55,7 @@ SceneSegments segment_scene(const Image<float>& normalised, const std::vector<ui
     return s;
 }
 
-std::vector<std::string> feature_names(const BandLayout& layout, int context_levels) {
+std::vector<std::string> feature_names(const BandLayout& layout, int context_levels, bool pixel_map) {
     std::vector<std::string> f;
     for (int b = 0; b < layout.bands; ++b) {
         const std::string name = b == layout.ndsm_band ? "ndsm" : "band" + std::to_string(b + 1);
@@ -76,6 +80,12 @@ std::vector<std::string> feature_names(const BandLayout& layout, int context_lev
         const std::string p = "ctx" + std::to_string(l + 1) + "_";
         for (const char* n : {"log_area_m2", "share", "rectangularity", "compactness", "elongation", "bright_mean", "bright_std", "bright_diff"})
             f.push_back(p + n);
+    }
+    if (pixel_map) {
+        for (const char* n : {"pix_mean", "pix_std", "pix_p10", "pix_p50", "pix_p90", "pix_share_05", "pix_boundary", "pix_nb_diff_mean",
+                              "pix_nb_max"})
+            f.emplace_back(n);
+        for (int l = 0; l < context_levels; ++l) f.push_back("ctx" + std::to_string(l + 1) + "_pix_mean");
     }
     return f;
 }
@@ -158,7 +168,7 @@ double safe_log(double v) { return std::log(std::max(v, 1e-6)); }
 }  // namespace
 
 FeatureMatrix segment_features(const Image<float>& img, const std::vector<uint8_t>& valid, const SceneSegments& seg,
-                               const BandLayout& layout, double gsd_m) {
+                               const BandLayout& layout, double gsd_m, const std::vector<float>* pixel_probability) {
     if (img.bands != layout.bands) throw Error("segment features", "image has " + std::to_string(img.bands) + " bands, layout " + std::to_string(layout.bands));
     if (!(gsd_m > 0.0)) throw Error("segment features", "GSD must be > 0");
     const int w = img.width, h = img.height;
@@ -260,9 +270,49 @@ FeatureMatrix segment_features(const Image<float>& img, const std::vector<uint8_
         region_mean_std(bright.data(), seg.context_labels[l], seg.context_counts[l], cmean[l], csd[l]);
     }
 
+    // Pixel building-probability map: per segment mean, spread, a 20-bin
+    // histogram (percentiles, share >= 0.5), its boundary pixels and the
+    // neighbours' means; per context region the mean.
+    const bool pix = pixel_probability != nullptr;
+    std::vector<double> pmean, psd, pbound(count + 1, 0.0), pbn(count + 1, 0.0), pnb(count + 1, 0.0), pnbmax(count + 1, 0.0);
+    std::vector<uint32_t> phist;
+    std::vector<std::vector<double>> cpmean(levels);
+    if (pix) {
+        if (pixel_probability->size() != np) throw Error("segment features", "internal: pixel probability map size");
+        const float* P = pixel_probability->data();
+        region_mean_std(P, labels, count, pmean, psd);
+        phist.assign(std::size_t(count + 1) * 20, 0);
+        for (int y = 0; y < h; ++y)
+            for (int x = 0; x < w; ++x) {
+                const std::size_t i = std::size_t(y) * w + x;
+                const uint32_t a = L[i];
+                if (!a) continue;
+                ++phist[std::size_t(a) * 20 + std::clamp(int(P[i] * 20.0f), 0, 19)];
+                const bool boundary = (x > 0 && L[i - 1] != a) || (x < w - 1 && L[i + 1] != a) || (y > 0 && L[i - w] != a) || (y < h - 1 && L[i + w] != a);
+                if (boundary) pbound[a] += P[i], pbn[a] += 1.0;
+            }
+        for (int y = 0; y < h; ++y)
+            for (int x = 0; x < w; ++x) {
+                const std::size_t i = std::size_t(y) * w + x;
+                const uint32_t a = L[i];
+                if (!a) continue;
+                auto nb = [&](uint32_t b) {
+                    if (!b || b == a) return;
+                    pnb[a] += pmean[b] - pmean[a], pnb[b] += pmean[a] - pmean[b];
+                    pnbmax[a] = std::max(pnbmax[a], pmean[b]), pnbmax[b] = std::max(pnbmax[b], pmean[a]);
+                };
+                if (x < w - 1) nb(L[i + 1]);
+                if (y < h - 1) nb(L[i + w]);
+            }
+        for (std::size_t l = 0; l < levels; ++l) {
+            std::vector<double> sd;
+            region_mean_std(P, seg.context_labels[l], seg.context_counts[l], cpmean[l], sd);
+        }
+    }
+
     FeatureMatrix fm;
     fm.rows = count;
-    fm.cols = feature_names(layout, int(levels)).size();
+    fm.cols = feature_names(layout, int(levels), pix).size();
     fm.values.assign(fm.rows * fm.cols, NAN);
     fm.centroid_col.assign(count, 0.0), fm.centroid_row.assign(count, 0.0), fm.pixel_count.assign(count, 0);
     const double px_m2 = gsd_m * gsd_m;
@@ -333,6 +383,27 @@ FeatureMatrix segment_features(const Image<float>& img, const std::vector<uint8_
             const double ca = cn * px_m2, cp = cs.perimeter[p] * gsd_m;
             put(safe_log(ca)), put(n / cn), put(cn / (cs.length[p] * cs.width[p])), put(4.0 * M_PI * ca / (cp * cp)),
                 put(cs.length[p] / cs.width[p]), put(cmean[l][p]), put(csd[l][p]), put(brmean[k] - cmean[l][p]);
+        }
+        if (pix) {
+            const uint32_t* hk = phist.data() + std::size_t(k) * 20;
+            auto pct = [&](double q) {
+                const double target = q * n;
+                double acc = 0.0;
+                for (int bin = 0; bin < 20; ++bin) {
+                    acc += hk[bin];
+                    if (acc >= target) return (bin + 0.5) / 20.0;
+                }
+                return 0.975;
+            };
+            double above = 0.0;
+            for (int bin = 10; bin < 20; ++bin) above += hk[bin];
+            put(pmean[k]), put(psd[k]), put(pct(0.1)), put(pct(0.5)), put(pct(0.9)), put(above / n);
+            put(pbn[k] > 0 ? pbound[k] / pbn[k] : pmean[k]);
+            put(ne > 0 ? pnb[k] / ne : 0.0), put(pnbmax[k]);
+            for (std::size_t l = 0; l < levels; ++l) {
+                const uint32_t p = seg.context[l][k];
+                put(p && p < cpmean[l].size() ? cpmean[l][p] : NAN);
+            }
         }
         if (c != fm.cols) throw Error("segment features", "internal: feature count mismatch");
     }

@@ -26,6 +26,11 @@ struct DetectorSegmentationOptions {
     WatershedOptions watershed;                 ///< over-segmentation (h_minima in normalised gradient units)
     std::vector<double> scales{30.0, 60.0, 120.0};  ///< strictly increasing, > 0
     double color_weight = 0.9;                  ///< Baatz–Schäpe colour weight (shape = 1 - this)
+    /// > 0: the scales hold at this GSD (metres) and are scaled by
+    /// reference_gsd_m / gsd for an image of another GSD, so segments keep
+    /// their ground size (a merge cost grows with the pixel count); 0 = the
+    /// scales as given at any GSD.
+    double reference_gsd_m = 0.0;
     void validate(int bands) const;
 };
 
@@ -41,9 +46,10 @@ struct SceneSegments {
 };
 
 /// Watershed over-segmentation of `normalised` (bands scaled 0..255),
-/// then one merge sequence through every scale.
+/// then one merge sequence through every scale. `gsd_m` = the image's
+/// ground sample distance, metres (used with options.reference_gsd_m).
 SceneSegments segment_scene(const Image<float>& normalised, const std::vector<uint8_t>& valid,
-                            const DetectorSegmentationOptions& options, const Progress& progress = {});
+                            const DetectorSegmentationOptions& options, const Progress& progress = {}, double gsd_m = 0.0);
 
 /// Which bands the image holds: colour bands first (R, G, B when 3+), then
 /// optional near infrared; `nir_band` is its 0-based index or -1. An nDSM
@@ -59,8 +65,11 @@ struct BandLayout {
 /// 0..255 on a fixed scale of 0..`full_scale_m` (the same for every image).
 constexpr double kNdsmFullScaleM = 20.0;
 
-/// Feature names in column order for a layout and a number of context scales.
-std::vector<std::string> feature_names(const BandLayout& layout, int context_levels);
+/// Feature names in column order for a layout and a number of context
+/// scales; `pixel_map` adds the features of a pixel building-probability map
+/// (pixel_classifier.hpp): its mean, spread and percentiles per segment, the
+/// neighbours' contrast and the context regions' means.
+std::vector<std::string> feature_names(const BandLayout& layout, int context_levels, bool pixel_map = false);
 
 /// Row-major features: row k-1 = segment k.
 struct FeatureMatrix {
@@ -73,8 +82,9 @@ struct FeatureMatrix {
 /// Features of every segment. `normalised` = the bands scaled 0..255 (as
 /// segmented); `gsd_m` = ground size of a pixel, metres (areas and lengths
 /// are computed in metres so a model carries across resolutions).
+/// `pixel_probability` (w x h, 0..1, or null) adds the pixel-map features.
 FeatureMatrix segment_features(const Image<float>& normalised, const std::vector<uint8_t>& valid, const SceneSegments& segments,
-                               const BandLayout& layout, double gsd_m);
+                               const BandLayout& layout, double gsd_m, const std::vector<float>* pixel_probability = nullptr);
 
 /// Share of each segment's pixels that are building in `truth` (1 = building,
 /// same size as the labels); index 0 unused.

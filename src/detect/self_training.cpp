@@ -78,7 +78,7 @@ SelfTrainingResult self_train_and_detect(const Image<float>& normalised, const s
         r.reason = "the heights cover the ortho";
         return r;
     }
-    const SceneSegments s = segment_scene(normalised, valid, o.segmentation, progress.sub(0.0, 0.6));
+    const SceneSegments s = segment_scene(normalised, valid, o.segmentation, progress.sub(0.0, 0.6), gsd_m);
     const FeatureMatrix f = segment_features(normalised, valid, s, layout, gsd_m);
     progress(0.7, "features");
     const std::vector<float> cover = building_share(s, covered);

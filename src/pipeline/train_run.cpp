@@ -138,13 +138,13 @@ void add_ndsm_band(DetectionImage& image, const Image<float>& heights_m) {
 namespace {
 
 BuildingMask mask_from_probabilities(const detect::SceneSegments& segments, const std::vector<float>& probability, double threshold,
-                                     double gsd_m, const detect::DetectorOptions& o) {
+                                     double gsd_m, const detect::DetectorOptions& o, const std::vector<float>* pixel_map) {
     BuildingMaskOptions mo;
     mo.gsd_m = gsd_m;
     mo.min_area_m2 = o.min_area_m2;
     mo.min_hole_m2 = o.min_hole_m2;
-    return label_buildings(detect::building_pixels(segments, probability, threshold, o.object_split_level), segments.labels.width,
-                           segments.labels.height, mo);
+    return label_buildings(detect::building_pixels(segments, probability, threshold, o.object_split_level, pixel_map, o.pixel_object_threshold),
+                           segments.labels.width, segments.labels.height, mo);
 }
 
 // Labelled data of one training image, in its pixel space.
@@ -236,6 +236,21 @@ std::vector<std::vector<Polygon>> predicted_footprints(const BuildingMask& mask,
     return out;
 }
 
+// The pixel stage on every training image: the model, and per image the
+// map its segment features are computed from (out-of-fold with folds, else
+// the model's own map). Nothing when the pixel stage is off.
+detect::PixelStage train_pixel_map_stage(const std::vector<LabelledImage>& data, const detect::BandLayout& layout, const TrainOptions& o,
+                                         const detect::FoldBlocks* folds) {
+    if (!o.detector.pixel.enabled) return {};
+    std::vector<detect::PixelTrainingImage> px;
+    for (const LabelledImage& li : data) px.push_back({&li.image.normalised, &li.image.valid, &li.truth, li.image.gsd_m});
+    detect::PixelStage s = detect::train_pixel_stage(px, layout, o.detector.pixel, folds, o.folds);
+    if (!folds)
+        for (const LabelledImage& li : data)
+            s.out_of_fold.push_back(detect::pixel_probability(s.model, li.image.normalised, li.image.valid, layout, li.image.gsd_m, o.detector.pixel));
+    return s;
+}
+
 int fold_of(const detect::FoldBlocks& folds, std::size_t image, const std::vector<Polygon>& parts) {
     const Extent e = parts_extent(parts);
     return folds.fold_at(image, 0.5 * (e.min_x + e.max_x), -0.5 * (e.min_y + e.max_y));
@@ -246,7 +261,8 @@ int fold_of(const detect::FoldBlocks& folds, std::size_t image, const std::vecto
 BuildingMask detect_building_mask(const detect::DetectorModel& model, const DetectionImage& image, int threads, const Progress& progress) {
     detect::check_bands(model, image.layout, image.path);
     const detect::Detection d = detect::detect_buildings(model, image.normalised, image.valid, image.gsd_m, threads, progress);
-    return mask_from_probabilities(d.segments, d.probability, model.options.threshold, image.gsd_m, model.options);
+    return mask_from_probabilities(d.segments, d.probability, model.options.threshold, image.gsd_m, model.options,
+                                   d.pixel_probability.empty() ? nullptr : &d.pixel_probability);
 }
 
 std::string default_model_path(const detect::BandLayout& layout) {
@@ -306,8 +322,7 @@ TrainReport run_train(const std::string& out_path, const TrainOptions& o, bool o
                                          detect::describe_bands(data[0].image.layout) + ": one model is trained on one band set");
         if (i == 0) o.detector.validate(li.image.layout.bands);
         load_labels(li, o.labels.size() == 1 ? o.labels[0] : o.labels[i], o.label_layer);
-        li.segments = detect::segment_scene(li.image.normalised, li.image.valid, o.detector.segmentation);
-        li.features = detect::segment_features(li.image.normalised, li.image.valid, li.segments, li.image.layout, li.image.gsd_m);
+        li.segments = detect::segment_scene(li.image.normalised, li.image.valid, o.detector.segmentation, {}, li.image.gsd_m);
         li.share = detect::building_share(li.segments, li.truth);
         fp = detect::fnv1a64(li.image.normalised.data.data(), li.image.normalised.data.size() * sizeof(float), fp);
         fp = detect::fnv1a64(li.truth.data(), li.truth.size(), fp);
@@ -318,7 +333,17 @@ TrainReport run_train(const std::string& out_path, const TrainOptions& o, bool o
     }
     if (rep.building_segments == 0) throw Error(o.labels[0], "no training segment is a building (labels and images do not overlap?)");
     const detect::BandLayout layout = data[0].image.layout;
-    const std::vector<std::string> names = detect::feature_names(layout, int(o.detector.segmentation.scales.size()) - 1);
+    std::vector<int> ws, hs, bs;
+    for (const LabelledImage& li : data)
+        ws.push_back(li.image.grid.width), hs.push_back(li.image.grid.height),
+            bs.push_back(std::max(1, static_cast<int>(std::lround(o.fold_block_m / li.image.gsd_m))));
+    const detect::FoldBlocks folds = o.folds >= 2 ? detect::make_folds(ws, hs, bs, o.folds, o.detector.booster.seed) : detect::FoldBlocks{};
+    // The pixel stage (src/detect/pixel_classifier): its out-of-fold maps give the segment features.
+    const detect::PixelStage pixel = train_pixel_map_stage(data, layout, o, o.folds >= 2 ? &folds : nullptr);
+    for (std::size_t i = 0; i < data.size(); ++i)
+        data[i].features = detect::segment_features(data[i].image.normalised, data[i].image.valid, data[i].segments, layout, data[i].image.gsd_m,
+                                                    o.detector.pixel.enabled ? &pixel.out_of_fold[i] : nullptr);
+    const std::vector<std::string> names = detect::feature_names(layout, int(o.detector.segmentation.scales.size()) - 1, o.detector.pixel.enabled);
     rep.images = data.size();
     rep.features = names.size();
     rep.bands = detect::describe_bands(layout);
@@ -342,11 +367,6 @@ TrainReport run_train(const std::string& out_path, const TrainOptions& o, bool o
 
     detect::DetectorOptions chosen = o.detector;
     if (o.folds >= 2) {
-        std::vector<int> ws, hs, bs;
-        for (const LabelledImage& li : data)
-            ws.push_back(li.image.grid.width), hs.push_back(li.image.grid.height),
-                bs.push_back(std::max(1, static_cast<int>(std::lround(o.fold_block_m / li.image.gsd_m))));
-        const detect::FoldBlocks folds = detect::make_folds(ws, hs, bs, o.folds, o.detector.booster.seed);
         for (std::size_t i = 0; i < data.size(); ++i) {
             LabelledImage& li = data[i];
             li.fold.resize(li.segments.count);
@@ -388,7 +408,8 @@ TrainReport run_train(const std::string& out_path, const TrainOptions& o, bool o
             DetectionScores pooled;
             for (std::size_t i = 0; i < data.size(); ++i) {
                 const LabelledImage& li = data[i];
-                const BuildingMask mask = mask_from_probabilities(li.segments, cv[i], threshold, li.image.gsd_m, opts);
+                const BuildingMask mask =
+                    mask_from_probabilities(li.segments, cv[i], threshold, li.image.gsd_m, opts, opts.pixel.enabled ? &pixel.out_of_fold[i] : nullptr);
                 const auto pred = predicted_footprints(mask, li.image.gsd_m);
                 DetectionScores img;
                 for (int f = 0; f < o.folds; ++f) {
@@ -436,6 +457,22 @@ TrainReport run_train(const std::string& out_path, const TrainOptions& o, bool o
                 if (s.f1 > best_f1 + 1e-12) best_f1 = s.f1, chosen.threshold = t, chosen.object_split_level = level;
             }
         }
+        // Then pixels of the pixel map joining the buildings (0 = off), and the threshold again.
+        if (o.detector.pixel.enabled) {
+            for (const double pt : {0.6, 0.7, 0.8, 0.9}) {
+                detect::DetectorOptions cand = chosen;
+                cand.pixel_object_threshold = pt;
+                const DetectionScores s = evaluate(cand, nullptr, nullptr);
+                if (s.f1 > best_f1 + 1e-12) best_f1 = s.f1, chosen.pixel_object_threshold = pt;
+            }
+            if (chosen.pixel_object_threshold > 0.0)
+                for (const double t : o.thresholds) {
+                    detect::DetectorOptions cand = chosen;
+                    cand.threshold = t;
+                    const DetectionScores s = evaluate(cand, nullptr, nullptr);
+                    if (s.f1 > best_f1 + 1e-12) best_f1 = s.f1, chosen.threshold = t;
+                }
+        }
         std::vector<DetectionScores> per_image;
         rep.pooled_objects = evaluate(chosen, &rep.folds, &per_image);
         for (FoldReport& f : rep.folds) {
@@ -457,6 +494,7 @@ TrainReport run_train(const std::string& out_path, const TrainOptions& o, bool o
     model.features = names;
     model.options = chosen;
     model.booster = detect::train_booster(X, y.size(), names.size(), y, wt, o.detector.booster);
+    model.pixel_booster = pixel.model;
     const std::string opts = detect::to_json(o.detector).dump();
     fp = detect::fnv1a64(opts.data(), opts.size(), fp);
     model.fingerprint = detect::hex64(fp);
@@ -478,12 +516,12 @@ TrainReport run_train(const std::string& out_path, const TrainOptions& o, bool o
     };
     nlohmann::json cvj = nullptr;
     if (o.folds >= 2) {
-        nlohmann::json folds = nlohmann::json::array();
+        nlohmann::json fold_json = nlohmann::json::array();
         for (const FoldReport& f : rep.folds)
-            folds.push_back({{"fold", f.fold}, {"objects_iou_0.5", scores_json(f.objects)}, {"segment_pixels", scores_json(f.segments)}});
+            fold_json.push_back({{"fold", f.fold}, {"objects_iou_0.5", scores_json(f.objects)}, {"segment_pixels", scores_json(f.segments)}});
         nlohmann::json images = nlohmann::json::array();
         for (const auto& [name, s] : rep.per_image) images.push_back({{"ortho", fs::path(name).filename().string()}, {"objects_iou_0.5", scores_json(s)}});
-        cvj = {{"folds", o.folds}, {"fold_block_m", o.fold_block_m}, {"threshold", chosen.threshold}, {"object_split_level", chosen.object_split_level}, {"per_fold", folds}, {"per_image", images},
+        cvj = {{"folds", o.folds}, {"fold_block_m", o.fold_block_m}, {"threshold", chosen.threshold}, {"object_split_level", chosen.object_split_level}, {"per_fold", fold_json}, {"per_image", images},
                {"pooled_objects_iou_0.5", scores_json(rep.pooled_objects)}, {"pooled_segment_pixels", scores_json(rep.pooled_segments)}};
     }
     model.training = {{"sources", sources}, {"segments", rep.segments}, {"building_segments", rep.building_segments},

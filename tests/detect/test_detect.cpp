@@ -229,3 +229,50 @@ TEST_CASE("cityforge train and footprints --model from the command line - bad in
     CHECK(test::count_lines(cut.err) == 1);
     CHECK_FALSE(std::filesystem::exists(dir / "fp2.geojson"));
 }
+
+TEST_CASE("The pixel stage: a filter bank per cell and boosted trees find another town's roofs, the same values for 1 and 2 threads", "[detect][synth]") {
+    ScratchDir a_dir("detect_pixel_a"), b_dir("detect_pixel_b");
+    const SynthResult a = make_town(a_dir, 200, 31, 0);
+    const SynthResult b = make_town(b_dir, 200, 32, 0);
+    auto labelled = [](const SynthResult& s, std::vector<uint8_t>& truth) {
+        DetectionImage img = read_detection_image(s.ortho_path);
+        std::vector<Polygon> polys;
+        const GeoTransform& t = img.grid.transform;
+        for (const auto& f : read_polygon_layer(s.truth_path).features)
+            for (Polygon p : f.geometry) {
+                for (MapPoint& q : p.outer) {
+                    const PixelPoint pp = t.map_to_pixel(q);
+                    q = {pp.col, pp.row};
+                }
+                polys.push_back(p);
+            }
+        truth = detect::rasterize_polygons(polys, img.grid.width, img.grid.height);
+        return img;
+    };
+    std::vector<uint8_t> ta, tb;
+    const DetectionImage ia = labelled(a, ta), ib = labelled(b, tb);
+    detect::PixelClassifierOptions po;
+    po.samples_per_image = 8000;
+    po.booster.rounds = 30;
+    const detect::PixelStage st = detect::train_pixel_stage({{&ia.normalised, &ia.valid, &ta, ia.gsd_m}}, ia.layout, po, nullptr, 0);
+    REQUIRE_FALSE(st.model.empty());
+    CHECK(detect::pixel_feature_stack(ib.normalised, ib.valid, ib.layout, ib.gsd_m, po).bands == int(detect::pixel_feature_names(ib.layout, po).size()));
+    std::vector<float> p1, p2;
+    {
+        tbb::global_control one(tbb::global_control::max_allowed_parallelism, 1);
+        p1 = detect::pixel_probability(st.model, ib.normalised, ib.valid, ib.layout, ib.gsd_m, po, 1);
+    }
+    {
+        tbb::global_control two(tbb::global_control::max_allowed_parallelism, 2);
+        p2 = detect::pixel_probability(st.model, ib.normalised, ib.valid, ib.layout, ib.gsd_m, po, 2);
+    }
+    CHECK(p1 == p2);
+    double tp = 0, pr = 0, rf = 0;
+    for (std::size_t i = 0; i < p1.size(); ++i) {
+        const bool p = p1[i] >= 0.5f, t = tb[i] != 0;
+        tp += p && t, pr += p, rf += t;
+    }
+    const double f1 = 2.0 * tp / (pr + rf);
+    std::printf("detect pixel stage: town A -> town B pixel F1 %.3f\n", f1);
+    CHECK(f1 >= 0.8);
+}

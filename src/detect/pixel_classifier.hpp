@@ -1,0 +1,77 @@
+#pragma once
+// Pixel-level building probability (ilastik-style): a filter bank per pixel
+// (Gaussian smoothings per band, gradient magnitude, Hessian and
+// structure-tensor eigenvalues and local standard deviation of brightness
+// at several scales in metres, colour ratios) on a working grid of cells
+// (the image box-averaged to about `cell_m`), classified by gradient-boosted
+// trees trained on sampled cells. The map (upsampled to the image grid)
+// becomes per-segment features (segment_features.hpp), so buildings smaller
+// or darker than the segment statistics show are still seen. Pure
+// algorithm; no GDAL.
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include "core/image.hpp"
+#include "core/progress.hpp"
+#include "detect/booster.hpp"
+#include "detect/label_raster.hpp"
+#include "detect/segment_features.hpp"
+
+namespace cityforge::detect {
+
+/// How the pixel stage is computed and trained.
+struct PixelClassifierOptions {
+    bool enabled = true;
+    /// Working cell, metres: the image is box-averaged by an integer factor
+    /// max(1, round(cell_m / gsd)) before filtering (the map is upsampled
+    /// back), so a model carries across resolutions and 4000 x 4000 px
+    /// tiles stay fast.
+    double cell_m = 0.6;
+    std::vector<double> sigmas_m{0.7, 1.5, 3.0};  ///< filter scales, metres (strictly increasing, > 0)
+    std::size_t samples_per_image = 30000;         ///< training cells per image (half building where there are enough)
+    BoosterOptions booster{60, 6, 0.2, 0.8, 0.8, 1.0, 1.0, 1};
+    void validate() const;
+};
+
+/// Box-averaging factor of an image of ground sample distance `gsd_m`.
+int pixel_cell_factor(double gsd_m, const PixelClassifierOptions& options);
+
+/// Filter names in column order.
+std::vector<std::string> pixel_feature_names(const BandLayout& layout, const PixelClassifierOptions& options);
+
+/// The filter bank on the working grid: one band per pixel_feature_names
+/// entry, ceil(w / f) x ceil(h / f) cells (f = pixel_cell_factor);
+/// `cell_valid` (out, optional) = 1 where the cell holds a valid pixel.
+/// `normalised` = bands scaled 0..255 (normalize_bands).
+Image<float> pixel_feature_stack(const Image<float>& normalised, const std::vector<uint8_t>& valid, const BandLayout& layout, double gsd_m,
+                                 const PixelClassifierOptions& options, std::vector<uint8_t>* cell_valid = nullptr);
+
+/// Building probability per image pixel (w x h, row-major; 0 outside
+/// `valid`) from a pixel model (XGBoost UBJSON). Any thread count gives the
+/// same values.
+std::vector<float> pixel_probability(const std::vector<uint8_t>& model, const Image<float>& normalised, const std::vector<uint8_t>& valid,
+                                     const BandLayout& layout, double gsd_m, const PixelClassifierOptions& options, int threads = 0);
+
+/// One labelled training image of the pixel stage.
+struct PixelTrainingImage {
+    const Image<float>* normalised = nullptr;  ///< bands scaled 0..255
+    const std::vector<uint8_t>* valid = nullptr;
+    const std::vector<uint8_t>* truth = nullptr;  ///< 1 = building pixel
+    double gsd_m = 0.0;
+};
+
+/// The trained pixel stage: the model on every sample, and (with folds) the
+/// out-of-fold probability of every pixel of every image (each pixel
+/// predicted by the model trained without its fold's blocks).
+struct PixelStage {
+    std::vector<uint8_t> model;
+    std::vector<std::vector<float>> out_of_fold;  ///< per image, w x h (empty without folds)
+};
+/// `folds` = the cross-validation blocks (pixel units of each image) or
+/// null; `fold_count` their number. Training runs on one thread (same bytes
+/// for any thread count); prediction may use `threads`.
+PixelStage train_pixel_stage(const std::vector<PixelTrainingImage>& images, const BandLayout& layout, const PixelClassifierOptions& options,
+                             const FoldBlocks* folds, int fold_count, int threads = 0, const Progress& progress = {});
+
+}  // namespace cityforge::detect
