@@ -135,12 +135,12 @@ int raster_mode(int argc, char** argv) {
         over.region_count = compact_labels(over.labels);
         std::printf("seeds from %s: %u regions\n", seeds_in.c_str(), over.region_count);
     } else {
-        const double t = now();
+        const double t = now(), c = cpu_now();
         over = watershed_oversegment(img, {}, wo);
-        const double t_ws = now() - t;
-        std::printf("watershed (h-minima %g, smoothing %g px): %u regions in %.3f s (%.1f Mpx/s)\n", wo.h_minima,
-                    wo.smoothing_sigma_px, over.region_count, t_ws, double(img.pixel_count()) / t_ws / 1e6);
-        report["watershed"] = {{"regions", over.region_count}, {"seconds", t_ws}};
+        const double t_ws = now() - t, c_ws = cpu_now() - c;
+        std::printf("watershed (h-minima %g, smoothing %g px): %u regions in %.3f s wall, %.3f s CPU (%.1f Mpx/s)\n", wo.h_minima,
+                    wo.smoothing_sigma_px, over.region_count, t_ws, c_ws, double(img.pixel_count()) / t_ws / 1e6);
+        report["watershed"] = {{"regions", over.region_count}, {"seconds", t_ws}, {"cpu_seconds", c_ws}};
     }
     if (!seeds_out.empty()) {
         GeoTiffWriteOptions wopt;
@@ -157,14 +157,15 @@ int raster_mode(int argc, char** argv) {
         const double t = now(), c = cpu_now();
         const auto res = merge_regions(img, over.labels, over.region_count, mo);
         const double total = now() - t, cpu = cpu_now() - c;
-        std::printf("%-8s %-7s %10s %10s %10s %10s %12s %10s\n", "strategy", "scale", "regions", "merges", "wall_s", "cpu_s",
-                    "merges/cpu_s", "max_degree");
+        std::printf("%-8s %-7s %10s %10s %10s %10s %12s %10s %10s\n", "strategy", "scale", "regions", "merges", "wall_s", "cpu_s",
+                    "merges/cpu_s", "max_degree", "pushes");
         uint64_t merges = 0;
         double merging = 0.0, merging_cpu = 0.0;
         for (const auto& l : res.levels) {
-            std::printf("%-8s %-7g %10u %10llu %10.3f %10.3f %12.0f %10u\n", to_string(s).c_str(), l.scale, l.regions_after,
+            std::printf("%-8s %-7g %10u %10llu %10.3f %10.3f %12.0f %10u %10llu\n", to_string(s).c_str(), l.scale, l.regions_after,
                         static_cast<unsigned long long>(l.merges), l.seconds, l.cpu_seconds,
-                        double(l.merges) / std::max(l.cpu_seconds, 1e-9), l.max_degree);
+                        double(l.merges) / std::max(l.cpu_seconds, 1e-9), l.max_degree,
+                        static_cast<unsigned long long>(l.queue_pushes));
             merges += l.merges, merging += l.seconds, merging_cpu += l.cpu_seconds;
         }
         const auto& last = res.levels.back().label_of_input;

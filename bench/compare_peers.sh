@@ -11,22 +11,30 @@
 # Prints wall and CPU seconds of each side and the ratios (peer / cityforge).
 # The machine may be shared: CPU seconds are the fairer figure; both are printed.
 #
-#   bash bench/compare_peers.sh [--raster FILE] [--window col,row,w,h] [--synth SIZE_M]
-#                               [--grass-threshold T]
+#   bash bench/compare_peers.sh [--raster FILE] [--window col,row,w,h | --centre w,h]
+#                               [--synth SIZE_M] [--grass-threshold T] [--install]
 # Default: the Autzen ortho (shared data), 2000 x 2000 px around its centre,
-# native 1 ft resolution. --synth SIZE_M uses a synthetic town instead.
-# Needs build/bin/bench_segment (and build/bin/cityforge for --synth), GDAL
-# tools, python3-skimage and grass-core (Debian packages).
+# native 1 ft resolution (--centre 4000,4000: the 16 MP window, clipped to the
+# raster). Any GDAL raster with 3 or more bands works (the first 3 are used).
+# --synth SIZE_M uses a synthetic town instead.
+# Needs build/bin/bench_segment (and build/bin/cityforge for --synth) and the
+# GDAL tools. The peers are Debian packages: python3-skimage and grass-core;
+# --install installs the missing ones with apt-get (about a minute, needs
+# root); otherwise a missing peer is skipped with a message.
 set -euo pipefail
 here="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 raster="$here/../shared/data/autzen_oregon/autzen_ortho_1ft_epsg2994.tif"
 window="624,1192,2000,2000"
 synth=""
 grass_threshold="0.1"
+centre=""
+install=0
 while [ $# -gt 0 ]; do
   case "$1" in
     --raster) raster="$2"; shift 2 ;;
     --window) window="$2"; shift 2 ;;
+    --centre) centre="$2"; shift 2 ;;
+    --install) install=1; shift ;;
     --synth) synth="$2"; window=""; shift 2 ;;
     --grass-threshold) grass_threshold="$2"; shift 2 ;;
     *) echo "compare_peers.sh: unknown argument $1" >&2; exit 2 ;;
@@ -35,8 +43,17 @@ done
 bench="$here/build/bin/bench_segment"
 py=/usr/bin/python3
 [ -x "$bench" ] || { echo "compare_peers.sh: build bench_segment first (cmake --build build --target bench_segment)" >&2; exit 1; }
-"$py" -c 'import skimage' 2>/dev/null || { echo "compare_peers.sh: python3-skimage is not installed" >&2; exit 1; }
-command -v grass >/dev/null || { echo "compare_peers.sh: grass-core is not installed" >&2; exit 1; }
+[ -r "$raster" ] || [ -n "$synth" ] || { echo "compare_peers.sh: cannot read $raster" >&2; exit 1; }
+have_sk() { "$py" -c 'import skimage' 2>/dev/null; }
+have_grass() { command -v grass >/dev/null; }
+if [ "$install" = 1 ] && { ! have_sk || ! have_grass; }; then
+  echo "installing the peers (python3-skimage grass-core) with apt-get"
+  DEBIAN_FRONTEND=noninteractive apt-get install -y -q --no-install-recommends python3-skimage grass-core >/dev/null 2>&1 \
+    || echo "compare_peers.sh: apt-get install failed; missing peers are skipped" >&2
+fi
+run_sk=1; run_grass=1
+have_sk || { run_sk=0; echo "scikit-image not installed (Debian: python3-skimage; or pass --install): watershed comparison skipped"; }
+have_grass || { run_grass=0; echo "GRASS GIS not installed (Debian: grass-core; or pass --install): merging comparison skipped"; }
 work="$(mktemp -d /tmp/cityforge_peers.XXXXXX)"
 trap 'rm -rf "$work"' EXIT
 if [ -n "$synth" ]; then
@@ -44,6 +61,12 @@ if [ -n "$synth" ]; then
   raster="$work/scene/ortho.tif"
 fi
 # The window as a plain 3-band GeoTIFF that every tool reads alike.
+if [ -n "$centre" ] && [ -z "$synth" ]; then
+  IFS=, read -r cw ch <<< "$centre"
+  read -r rw rh < <(gdalinfo "$raster" | sed -n 's/^Size is \(.*\), \(.*\)/\1 \2/p')
+  cw=$(( cw < rw ? cw : rw )); ch=$(( ch < rh ? ch : rh ))
+  window="$(( (rw - cw) / 2 )),$(( (rh - ch) / 2 )),$cw,$ch"
+fi
 if [ -n "$window" ]; then
   IFS=, read -r c r w h <<< "$window"
   gdal_translate -q -of GTiff -co COMPRESS=NONE -b 1 -b 2 -b 3 -srcwin "$c" "$r" "$w" "$h" "$raster" "$work/ortho.tif"
@@ -62,20 +85,27 @@ echo "== cityforge watershed (--h-minima 0, no smoothing)"
   --seeds-out "$work/seeds.tif" --json "$work/cf_ws.json" > "$work/cf_ws.txt"
 cf_regions=$(json "$work/cf_ws.json" 'd["watershed"]["regions"]')
 cf_ws=$(json "$work/cf_ws.json" 'd["watershed"]["seconds"]')
-echo "watershed: $cf_regions regions in $cf_ws s"
+cf_ws_cpu=$(json "$work/cf_ws.json" 'd["watershed"]["cpu_seconds"]')
+echo "watershed: $cf_regions regions in $cf_ws s wall, $cf_ws_cpu s CPU (reading the image excluded)"
 
+sk_regions=nan; sk_ws=nan; sk_cpu=nan
+if [ "$run_sk" = 1 ]; then
 echo "== scikit-image $("$py" -c 'import skimage; print(skimage.__version__)') watershed(sobel(rgb2gray))"
 /usr/bin/time -f "%e %U %S" -o "$work/sk.time" "$py" - "$ortho" > "$work/sk.txt" <<'PY'
 import sys, time, numpy as np
 from skimage import io, filters, segmentation, color
 img = io.imread(sys.argv[1])
 t = time.perf_counter()
-ws = segmentation.watershed(filters.sobel(color.rgb2gray(img)))
-print(int(ws.max()), time.perf_counter() - t)
+c = time.process_time()
+ws = segmentation.watershed(filters.sobel(color.rgb2gray(img[..., :3])))
+print(int(ws.max()), time.perf_counter() - t, time.process_time() - c)
 PY
-read -r sk_regions sk_ws < "$work/sk.txt"
-echo "watershed: $sk_regions regions in $sk_ws s"
+read -r sk_regions sk_ws sk_cpu < "$work/sk.txt"
+echo "watershed: $sk_regions regions in $sk_ws s wall, $sk_cpu s CPU (reading the image excluded)"
+fi
 
+grass_regions=""; g_wall=nan; g_cpu=nan; cf_final=nan; cf_merge=nan; cf_merge_cpu=nan
+if [ "$run_grass" = 1 ]; then
 echo "== GRASS GIS $(grass --version 2>&1 | head -1 | awk '{print $3}') i.segment seeds=<our $cf_regions regions> threshold=$grass_threshold"
 cat > "$work/grass.sh" <<SH
 set -e
@@ -99,6 +129,9 @@ cf_final=$(json "$work/cf_merge.json" 'd["merging"]["mutual"]["regions"]')
 cf_merge=$(json "$work/cf_merge.json" 'd["merging"]["mutual"]["seconds"]')
 cf_merge_cpu=$(json "$work/cf_merge.json" 'd["merging"]["mutual"]["cpu_seconds"]')
 echo "merging: $cf_regions -> $cf_final regions in $cf_merge s wall, $cf_merge_cpu s CPU (region graph included)"
+g_wall=$(wall_of "$work/grass.time"); g_cpu=$(cpu_of "$work/grass.time")
+[ "$cf_final" = "$grass_regions" ] || echo "WARNING: final region counts differ (GRASS $grass_regions, cityforge $cf_final)"
+fi
 
 otb_s=""
 if command -v otbcli_Segmentation >/dev/null; then
@@ -108,15 +141,22 @@ if command -v otbcli_Segmentation >/dev/null; then
   [ -n "$otb_s" ] && echo "otbcli_Segmentation watershed: $otb_s s"
 fi
 
-echo "== ratios (peer / cityforge)"
-"$py" - "$cf_ws" "$cf_regions" "$sk_ws" "$sk_regions" "$(wall_of "$work/grass.time")" "$(cpu_of "$work/grass.time")" \
-  "$grass_regions" "$cf_merge" "$cf_merge_cpu" "$cf_final" "${otb_s:-nan}" <<'PY'
+echo "== ratios (peer / cityforge); load average now: $(cut -d' ' -f1-3 /proc/loadavg)"
+"$py" - "$cf_ws" "$cf_ws_cpu" "$cf_regions" "$sk_ws" "$sk_cpu" "$sk_regions" "$g_wall" "$g_cpu" \
+  "${grass_regions:-nan}" "$cf_merge" "$cf_merge_cpu" "$cf_final" "${otb_s:-nan}" <<'PY'
 import sys
-cf_ws, cf_n, sk_ws, sk_n, g_wall, g_cpu, g_n, cf_m, cf_m_cpu, cf_final, otb = map(float, sys.argv[1:])
-print(f"watershed: scikit-image {sk_ws:.2f} s ({sk_n:.0f} regions) / cityforge {cf_ws:.2f} s ({cf_n:.0f} regions) = {sk_ws / cf_ws:.1f}x")
+cf_ws, cf_ws_cpu, cf_n, sk_ws, sk_cpu, sk_n, g_wall, g_cpu, g_n, cf_m, cf_m_cpu, cf_final, otb = map(float, sys.argv[1:])
+if sk_ws == sk_ws:
+    print(f"watershed: scikit-image {sk_ws:.2f} s wall, {sk_cpu:.2f} s CPU ({sk_n:.0f} regions) / cityforge {cf_ws:.2f} s wall, "
+          f"{cf_ws_cpu:.2f} s CPU ({cf_n:.0f} regions, {cf_n / sk_n:.2f} x as many) = {sk_ws / cf_ws:.1f}x wall, {sk_cpu / cf_ws_cpu:.1f}x CPU")
+else:
+    print("watershed: scikit-image skipped")
 if otb == otb:
     print(f"watershed: OTB {otb:.2f} s / cityforge {cf_ws:.2f} s = {otb / cf_ws:.1f}x")
-print(f"merging {cf_n:.0f} seeds -> {g_n:.0f} (GRASS) / {cf_final:.0f} (cityforge) regions: "
-      f"GRASS i.segment {g_wall:.2f} s wall / cityforge {cf_m:.3f} s wall = {g_wall / cf_m:.0f}x; "
-      f"CPU {g_cpu:.2f} s / {cf_m_cpu:.3f} s = {g_cpu / cf_m_cpu:.0f}x")
+if g_wall == g_wall:
+    print(f"merging the same {cf_n:.0f} seeds -> {g_n:.0f} (GRASS) / {cf_final:.0f} (cityforge) regions: "
+          f"GRASS i.segment {g_wall:.2f} s wall / cityforge {cf_m:.3f} s wall = {g_wall / cf_m:.0f}x; "
+          f"CPU {g_cpu:.2f} s / {cf_m_cpu:.3f} s = {g_cpu / cf_m_cpu:.0f}x")
+else:
+    print("merging: GRASS skipped")
 PY

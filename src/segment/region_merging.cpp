@@ -7,10 +7,8 @@
 #include <cstdlib>
 #include <ctime>
 #include <new>
-#include <queue>
 #include <tbb/enumerable_thread_specific.h>
 #include <tbb/parallel_reduce.h>
-#include <tbb/parallel_sort.h>
 #include <tbb/parallel_for.h>
 
 #include "core/error.hpp"
@@ -62,6 +60,7 @@ Image<uint32_t> relabel(const Image<uint32_t>& labels, const std::vector<uint32_
 }
 
 namespace {
+
 
 double thread_cpu_seconds() {
     timespec ts{};
@@ -133,6 +132,7 @@ struct NeighbourSpan {
 
 class RegionGraph {
     struct alignas(64) Line {
+        Line() {}  // left uninitialised: every record is constructed in place below
         std::byte bytes[64];
     };
 
@@ -149,20 +149,28 @@ public:
         lines_ = (fixed_bytes + 10 * sizeof(Neighbour) + sizeof(Line) - 1) / sizeof(Line);
         inline_capacity_ = static_cast<uint32_t>((lines_ * sizeof(Line) - fixed_bytes) / sizeof(Neighbour));
         storage_.resize(static_cast<std::size_t>(n_) * lines_);
-        for (uint32_t r = 0; r < n_; ++r) {
-            NodeHead* h = new (head_ptr(r)) NodeHead();
-            new (sums_ptr(r)) double[2 * static_cast<std::size_t>(bands_)]();
-            h->list = new (sums_ptr(r) + 2 * sizeof(double) * bands_) Neighbour[inline_capacity_];
-            h->capacity = inline_capacity_;
-        }
+        tbb::parallel_for(tbb::blocked_range<uint32_t>(0, n_, 1 << 14), [&](const tbb::blocked_range<uint32_t>& rr) {
+            for (uint32_t r = rr.begin(); r != rr.end(); ++r) {
+                NodeHead* h = new (head_ptr(r)) NodeHead();
+                new (sums_ptr(r)) double[2 * static_cast<std::size_t>(bands_)]();
+                h->list = new (sums_ptr(r) + 2 * sizeof(double) * bands_) Neighbour[inline_capacity_];
+                h->capacity = inline_capacity_;
+            }
+        });
         build(image, labels);
-        for (uint32_t r = 1; r < n_; ++r) {
-            NodeHead& R = head(r);
-            R.key = r;
-            R.alive = R.n > 0;
-            alive_count_ += R.alive;
-            derive(r);
-        }
+        alive_count_ = tbb::parallel_reduce(
+            tbb::blocked_range<uint32_t>(1, std::max<uint32_t>(n_, 1), 1 << 14), uint32_t(0),
+            [&](const tbb::blocked_range<uint32_t>& rr, uint32_t alive) {
+                for (uint32_t r = rr.begin(); r != rr.end(); ++r) {
+                    NodeHead& R = head(r);
+                    R.key = r;
+                    R.alive = R.n > 0;
+                    alive += R.alive;
+                    derive(r);
+                }
+                return alive;
+            },
+            [](uint32_t a, uint32_t b) { return a + b; });
     }
 
     // Region statistics and adjacency from the label raster, in parallel over
@@ -184,9 +192,9 @@ public:
         while (max_abs * fixed > 16777216.0) fixed *= 0.5;
         const std::size_t nb = static_cast<std::size_t>(n_) * bands_;
         struct Partial {
-            std::vector<int64_t> area, perimeter, sum;
-            std::vector<int128> sumsq;
-            std::vector<int> x0, y0, x1, y1;
+            LargeVector<int64_t> area, perimeter, sum;
+            LargeVector<int128> sumsq;
+            LargeVector<int> x0, y0, x1, y1;
             std::vector<std::pair<uint64_t, uint32_t>> pairs;  // (pair key, shared edges)
         };
         tbb::enumerable_thread_specific<Partial> partials([&] {
@@ -228,53 +236,87 @@ public:
                 }
             }
         });
-        std::vector<int64_t> area(n_, 0), perimeter(n_, 0), sum(nb, 0);
-        std::vector<int128> sumsq(nb, 0);
-        std::vector<int> x0(n_, INT32_MAX), y0(n_, INT32_MAX), x1(n_, -1), y1(n_, -1);
-        std::vector<std::pair<uint64_t, uint32_t>> pairs;
-        std::size_t pair_count = 0;
-        for (Partial& P : partials) pair_count += P.pairs.size();
-        pairs.reserve(pair_count);
-        for (Partial& P : partials) {
-            for (uint32_t r = 0; r < n_; ++r) {
-                area[r] += P.area[r], perimeter[r] += P.perimeter[r];
-                x0[r] = std::min(x0[r], P.x0[r]), x1[r] = std::max(x1[r], P.x1[r]);
-                y0[r] = std::min(y0[r], P.y0[r]), y1[r] = std::max(y1[r], P.y1[r]);
+        // Totals per region: exact integer sums of the per-thread partials, in
+        // parallel over regions, straight into the node records.
+        std::vector<Partial*> parts;
+        for (Partial& P : partials) parts.push_back(&P);
+        tbb::parallel_for(tbb::blocked_range<uint32_t>(0, n_, 1 << 14), [&](const tbb::blocked_range<uint32_t>& rr) {
+            std::vector<int64_t> sum(bands_);
+            std::vector<int128> sumsq(bands_);
+            for (uint32_t r = rr.begin(); r != rr.end(); ++r) {
+                int64_t area = 0, perimeter = 0;
+                int x0 = INT32_MAX, y0 = INT32_MAX, x1 = -1, y1 = -1;
+                std::fill(sum.begin(), sum.end(), 0);
+                std::fill(sumsq.begin(), sumsq.end(), 0);
+                for (const Partial* P : parts) {
+                    if (!P->area[r]) continue;
+                    area += P->area[r], perimeter += P->perimeter[r];
+                    x0 = std::min(x0, P->x0[r]), x1 = std::max(x1, P->x1[r]);
+                    y0 = std::min(y0, P->y0[r]), y1 = std::max(y1, P->y1[r]);
+                    for (int b = 0; b < bands_; ++b)
+                        sum[b] += P->sum[std::size_t(r) * bands_ + b], sumsq[b] += P->sumsq[std::size_t(r) * bands_ + b];
+                }
+                NodeHead& R = head(r);
+                double* S = sums(r);
+                R.n = static_cast<double>(area), R.l = static_cast<double>(perimeter);
+                R.x0 = x0, R.y0 = y0, R.x1 = x1, R.y1 = y1;
+                for (int b = 0; b < bands_; ++b) {
+                    S[2 * b] = static_cast<double>(sum[b]) / fixed;
+                    S[2 * b + 1] = static_cast<double>(sumsq[b]) / (fixed * fixed);
+                }
             }
-            for (std::size_t k = 0; k < nb; ++k) sum[k] += P.sum[k], sumsq[k] += P.sumsq[k];
-            pairs.insert(pairs.end(), P.pairs.begin(), P.pairs.end());
-            std::vector<std::pair<uint64_t, uint32_t>>().swap(P.pairs);
+        });
+        // Boundary pairs bucketed by their lower region (counting sort, no
+        // comparison sort of all pairs), then each bucket sorted by the
+        // higher region with its duplicate pairs summed: the result does not
+        // depend on how rows were split between threads.
+        struct Upper {
+            uint32_t id, shared;
+        };
+        LargeVector<uint64_t> start(std::size_t(n_) + 1, 0);
+        for (const Partial* P : parts)
+            for (const auto& q : P->pairs) ++start[(q.first >> 32) + 1];
+        for (uint32_t r = 0; r < n_; ++r) start[r + 1] += start[r];
+        LargeVector<Upper> upper(start[n_]);
+        {
+            LargeVector<uint64_t> fill(start.begin(), start.end() - 1);
+            for (Partial* P : parts) {
+                for (const auto& q : P->pairs) upper[fill[q.first >> 32]++] = {static_cast<uint32_t>(q.first & 0xFFFFFFFFu), q.second};
+                std::vector<std::pair<uint64_t, uint32_t>>().swap(P->pairs);
+            }
         }
+        std::vector<uint32_t> unique(n_, 0), degree(n_, 0);
+        tbb::parallel_for(tbb::blocked_range<uint32_t>(0, n_, 1 << 12), [&](const tbb::blocked_range<uint32_t>& rr) {
+            for (uint32_t r = rr.begin(); r != rr.end(); ++r) {
+                Upper* first = upper.data() + start[r];
+                Upper* last = upper.data() + start[r + 1];
+                if (last - first > 32) std::sort(first, last, [](const Upper& p, const Upper& q) { return p.id < q.id; });
+                else  // most buckets hold a handful of pairs
+                    for (Upper* i = first + 1; i < last; ++i)
+                        for (Upper* j = i; j > first && (j - 1)->id > j->id; --j) std::swap(*j, *(j - 1));
+                Upper* out = first;
+                for (Upper* i = first; i < last; ++i) {
+                    if (out != first && (out - 1)->id == i->id) (out - 1)->shared += i->shared;
+                    else *out++ = *i;
+                }
+                unique[r] = static_cast<uint32_t>(out - first);
+            }
+        });
         partials.clear();
         for (uint32_t r = 0; r < n_; ++r) {
-            NodeHead& R = head(r);
-            double* S = sums(r);
-            R.n = static_cast<double>(area[r]), R.l = static_cast<double>(perimeter[r]);
-            R.x0 = x0[r], R.y0 = y0[r], R.x1 = x1[r], R.y1 = y1[r];
-            for (int b = 0; b < bands_; ++b) {
-                S[2 * b] = static_cast<double>(sum[std::size_t(r) * bands_ + b]) / fixed;
-                S[2 * b + 1] = static_cast<double>(sumsq[std::size_t(r) * bands_ + b]) / (fixed * fixed);
-            }
+            degree[r] += unique[r];
+            for (const Upper* i = upper.data() + start[r]; i != upper.data() + start[r] + unique[r]; ++i) ++degree[i->id];
         }
-        tbb::parallel_sort(pairs.begin(), pairs.end());
-        // Pairs are sorted by (lower, higher): appending in that order keeps
-        // every list sorted (a node's lower neighbours come first, from pairs
-        // whose lower end is below it, then its higher ones).
-        std::vector<uint32_t> degree(n_, 0);
-        for (std::size_t k = 0; k < pairs.size(); ++k)
-            if (k == 0 || pairs[k].first != pairs[k - 1].first)
-                ++degree[pairs[k].first >> 32], ++degree[pairs[k].first & 0xFFFFFFFFu];
         for (uint32_t r = 0; r < n_; ++r) reserve(r, degree[r]);
-        for (std::size_t k = 0; k < pairs.size();) {
-            std::size_t e = k;
-            uint32_t shared = 0;
-            while (e < pairs.size() && pairs[e].first == pairs[k].first) shared += pairs[e++].second;
-            const auto a = static_cast<uint32_t>(pairs[k].first >> 32), b = static_cast<uint32_t>(pairs[k].first & 0xFFFFFFFFu);
+        // In ascending lower region: every list comes out sorted (a node's
+        // lower neighbours first, appended in ascending order, then its higher ones).
+        for (uint32_t a = 0; a < n_; ++a) {
             NodeHead& A = head(a);
-            NodeHead& B = head(b);
-            A.list[A.degree++] = {b, shared};
-            B.list[B.degree++] = {a, shared};
-            k = e;
+            for (const Upper* i = upper.data() + start[a]; i != upper.data() + start[a] + unique[a]; ++i) {
+                NodeHead& B = head(i->id);
+                A.list[A.degree++] = {i->id, i->shared};
+                B.list[B.degree++] = {a, i->shared};
+            }
         }
     }
 
@@ -288,6 +330,10 @@ public:
     uint32_t key_of(uint32_t r) const { return head(r).key; }
     NeighbourSpan neighbours(uint32_t r) const { return {head(r).list, head(r).list + head(r).degree}; }
     // Starts loading the records of r's neighbours (they are about to be read).
+    void prefetch_node(uint32_t r, int lines) const {
+        const std::byte* p = storage_[static_cast<std::size_t>(r) * lines_].bytes;
+        for (int l = 0; l < lines; ++l) __builtin_prefetch(p + l * sizeof(Line));
+    }
     void prefetch_neighbours(uint32_t r, int lines) const {
         for (const Neighbour& k : neighbours(r)) {
             const std::byte* p = storage_[static_cast<std::size_t>(k.id) * lines_].bytes;
@@ -548,13 +594,63 @@ private:
     double wc_, wcmp_;
     std::vector<double> weights_;
     std::size_t lines_ = 1;        // cache lines per node record
-    std::vector<Line> storage_;    // node records
+    LargeVector<Line> storage_;    // node records (huge pages: the merge loop reads them at random)
     uint32_t inline_capacity_ = 0;
     std::vector<Neighbour> scratch_;
     uint32_t alive_count_ = 0;
 };
 
-using Heap = std::priority_queue<QueueEntry, std::vector<QueueEntry>, std::greater<QueueEntry>>;
+// Min-queue of candidate merges: a 4-ary heap (half the depth of a binary
+// heap, the four children of an entry in two cache lines), lowest entry first.
+// Its first entries can be looked at, to prefetch what the next merges touch.
+class MergeQueue {
+public:
+    explicit MergeQueue(std::vector<QueueEntry> entries) : h_(std::move(entries)) {
+        for (std::size_t i = h_.size() / 4 + 1; i-- > 0;)
+            if (i < h_.size()) sift_down(i);
+    }
+    bool empty() const { return h_.empty(); }
+    std::size_t size() const { return h_.size(); }
+    const QueueEntry& top() const { return h_.front(); }
+    const QueueEntry& entry(std::size_t i) const { return h_[i]; }
+    void push(const QueueEntry& e) {
+        std::size_t i = h_.size();
+        h_.push_back(e);
+        while (i > 0) {
+            const std::size_t parent = (i - 1) / 4;
+            if (!(h_[parent] > e)) break;
+            h_[i] = h_[parent];
+            i = parent;
+        }
+        h_[i] = e;
+    }
+    void pop() {
+        const QueueEntry last = h_.back();
+        h_.pop_back();
+        if (h_.empty()) return;
+        h_[0] = last;
+        sift_down(0);
+    }
+
+private:
+    void sift_down(std::size_t i) {
+        const QueueEntry e = h_[i];
+        const std::size_t n = h_.size();
+        for (;;) {
+            const std::size_t first = 4 * i + 1;
+            if (first >= n) break;
+            std::size_t best = first;
+            const std::size_t end = std::min(first + 4, n);
+            for (std::size_t c = first + 1; c < end; ++c)
+                if (h_[best] > h_[c]) best = c;
+            if (!(e > h_[best])) break;
+            h_[i] = h_[best];
+            i = best;
+        }
+        h_[i] = e;
+    }
+    std::vector<QueueEntry> h_;
+};
 
 }  // namespace
 
@@ -617,7 +713,7 @@ RegionMergingResult merge_regions(const Image<float>& image, const Image<uint32_
         }
         level.initial_queue_length = initial.size();
         level.queue_pushes = initial.size();
-        Heap heap(std::greater<QueueEntry>(), std::move(initial));
+        MergeQueue heap(std::move(initial));
         auto push_pair = [&](uint32_t a, uint32_t b, double c) {
             heap.push(entry(a, b, c));
             ++level.queue_pushes;
@@ -628,6 +724,16 @@ RegionMergingResult merge_regions(const Image<float>& image, const Image<uint32_
         while (!heap.empty() && g.alive_count() > o.min_regions) {
             const QueueEntry e = heap.top();
             heap.pop();
+            // The next pops are most likely the next merges: start loading
+            // their records (and their neighbours') while this one is done.
+            if (!heap.empty()) {
+                g.prefetch_neighbours(heap.entry(0).a, 2);
+                g.prefetch_neighbours(heap.entry(0).b, 2);
+            }
+            for (std::size_t i = 1; i < 3 && i < heap.size(); ++i) {
+                g.prefetch_node(heap.entry(i).a, 5);
+                g.prefetch_node(heap.entry(i).b, 5);
+            }
             if (!g.alive(e.a) || !g.alive(e.b) || g.version(e.a) != e.va || g.version(e.b) != e.vb) continue;
             if (!(e.cost < threshold)) break;  // rag holds every pair: the cheapest is too dear
             const uint32_t m = g.merge(e.a, e.b);
