@@ -8,7 +8,6 @@
 #include <utility>
 #include <tbb/parallel_for.h>
 #include <tbb/parallel_reduce.h>
-#include <tbb/parallel_sort.h>
 
 #include "core/error.hpp"
 #include "core/grid_fill.hpp"
@@ -45,30 +44,53 @@ void canonical_order(PointCloud& c) {
     bool sorted = true;
     for (std::size_t i = 1; i < n && sorted; ++i) sorted = !(key(i) < key(i - 1));
     if (sorted) return;
-    // Sorted on a compact copy of (x, y) with the index, in parallel: the whole
-    // key (through the index) only breaks ties of x and y. Points equal in every
-    // attribute are interchangeable, so the result does not depend on the
-    // thread count. (An indirect sort on the full key missed the cache on
-    // every comparison: 28 % of a `heights` run.)
+    // Sorted on a compact copy of (x, y) with the index: the whole key (through
+    // the index) only breaks ties of x and y. (An indirect sort on the full
+    // key missed the cache on every comparison: 28 % of a `heights` run.)
+    // The copy is first spread into buckets of ~1024 points by x (a
+    // non-decreasing function of x, so every bucket holds a range of the
+    // final order), then the buckets are sorted in parallel, each in cache.
+    // Points equal in every attribute are interchangeable, so the result does
+    // not depend on the thread count.
     struct XY {
         double x, y;
         std::size_t i;
     };
-    std::vector<XY> xy(n);
-    for (std::size_t i = 0; i < n; ++i) xy[i] = {c.x[i], c.y[i], i};
-    tbb::parallel_sort(xy.begin(), xy.end(), [&](const XY& a, const XY& b) {
+    auto less = [&](const XY& a, const XY& b) {
         if (a.x < b.x) return true;
         if (b.x < a.x) return false;
         if (a.y < b.y) return true;
         if (b.y < a.y) return false;
         return key(a.i) < key(b.i);
+    };
+    double minx = INFINITY, maxx = -INFINITY;
+    for (std::size_t i = 0; i < n; ++i) minx = std::min(minx, c.x[i]), maxx = std::max(maxx, c.x[i]);
+    std::size_t buckets = std::clamp<std::size_t>(n / 1024, 1, std::size_t(1) << 22);
+    const double scale = double(buckets) / (maxx - minx);
+    if (!std::isfinite(scale) || !(scale > 0)) buckets = 1;
+    auto bucket_of = [&](double x) -> std::size_t {
+        const double v = (x - minx) * scale;  // non-decreasing in x
+        return buckets == 1 || !(v >= 0) ? 0 : v >= double(buckets - 1) ? buckets - 1 : static_cast<std::size_t>(v);
+    };
+    std::vector<std::size_t> first(buckets + 1, 0);
+    for (std::size_t i = 0; i < n; ++i) ++first[bucket_of(c.x[i]) + 1];
+    for (std::size_t b = 0; b < buckets; ++b) first[b + 1] += first[b];
+    std::vector<XY> xy(n);
+    {
+        std::vector<std::size_t> fill(first.begin(), first.end() - 1);
+        for (std::size_t i = 0; i < n; ++i) xy[fill[bucket_of(c.x[i])]++] = {c.x[i], c.y[i], i};
+    }
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, buckets, 16), [&](const tbb::blocked_range<std::size_t>& r) {
+        for (std::size_t b = r.begin(); b != r.end(); ++b) std::sort(xy.begin() + first[b], xy.begin() + first[b + 1], less);
     });
     for (std::size_t i = 0; i < n; ++i) order[i] = xy[i].i;
     std::vector<XY>().swap(xy);
     auto permute = [&](auto& v) {
         if (v.empty()) return;
         std::remove_reference_t<decltype(v)> out(n);
-        for (std::size_t i = 0; i < n; ++i) out[i] = v[order[i]];
+        tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, 1u << 16), [&](const tbb::blocked_range<std::size_t>& r) {
+            for (std::size_t i = r.begin(); i != r.end(); ++i) out[i] = v[order[i]];
+        });
         v.swap(out);
     };
     permute(c.x), permute(c.y), permute(c.z), permute(c.gps_time), permute(c.intensity), permute(c.classification);
@@ -76,6 +98,25 @@ void canonical_order(PointCloud& c) {
 }
 
 namespace {
+
+struct XYBounds {
+    double minx = INFINITY, miny = INFINITY, maxx = -INFINITY, maxy = -INFINITY;
+};
+// The x / y extent of the points with kept(i), in parallel blocks (minima and
+// maxima: the same whatever the thread count). minx == INFINITY: no point.
+template <class Kept>
+XYBounds kept_bounds(const PointCloud& c, Kept&& kept) {
+    return tbb::parallel_reduce(
+        tbb::blocked_range<std::size_t>(0, c.size(), 1u << 16), XYBounds{},
+        [&](const tbb::blocked_range<std::size_t>& r, XYBounds b) {
+            for (std::size_t i = r.begin(); i != r.end(); ++i)
+                if (kept(i)) b.minx = std::min(b.minx, c.x[i]), b.maxx = std::max(b.maxx, c.x[i]), b.miny = std::min(b.miny, c.y[i]), b.maxy = std::max(b.maxy, c.y[i]);
+            return b;
+        },
+        [](XYBounds a, const XYBounds& b) {
+            return XYBounds{std::min(a.minx, b.minx), std::min(a.miny, b.miny), std::max(a.maxx, b.maxx), std::max(a.maxy, b.maxy)};
+        });
+}
 
 // Exact k nearest neighbours (3-D, Euclidean, ties by point index) of every
 // point, from a 2-D grid of columns: the points of each cell and of its 8
@@ -96,19 +137,7 @@ template <class Visit>
 void grid_knn(const PointCloud& c, std::size_t k, Visit&& visit) {
     const std::size_t n = c.size();
     if (n == 0) return;
-    struct Box {
-        double minx = INFINITY, miny = INFINITY, maxx = -INFINITY, maxy = -INFINITY;
-    };
-    const Box bb = tbb::parallel_reduce(
-        tbb::blocked_range<std::size_t>(0, n, 1u << 16), Box{},
-        [&](const tbb::blocked_range<std::size_t>& r, Box b) {
-            for (std::size_t i = r.begin(); i != r.end(); ++i)
-                b.minx = std::min(b.minx, c.x[i]), b.maxx = std::max(b.maxx, c.x[i]), b.miny = std::min(b.miny, c.y[i]), b.maxy = std::max(b.maxy, c.y[i]);
-            return b;
-        },
-        [](Box a, const Box& b) {
-            return Box{std::min(a.minx, b.minx), std::min(a.miny, b.miny), std::max(a.maxx, b.maxx), std::max(a.maxy, b.maxy)};
-        });
+    const XYBounds bb = kept_bounds(c, [](std::size_t) { return true; });
     const double minx = bb.minx, miny = bb.miny, maxx = bb.maxx, maxy = bb.maxy;
     // About 0.3 k points per cell on average (the 3 x 3 block holds ~2.7 k;
     // 0.5 k and 0.2 k measured 10-15 % slower on an 8 pts/m² town).
@@ -304,9 +333,9 @@ void smrf_grid(const PointCloud& c, Kept&& kept, const GroundFilterOptions& o, G
     // SMRF: minimum surface on a grid, holes filled from neighbours, then
     // progressive openings with growing windows; cells whose height drops by
     // more than slope * window * cell are non-ground.
-    double minx = INFINITY, miny = INFINITY, maxx = -INFINITY, maxy = -INFINITY;
-    for (std::size_t i = 0; i < n; ++i)
-        if (kept(i)) minx = std::min(minx, c.x[i]), maxx = std::max(maxx, c.x[i]), miny = std::min(miny, c.y[i]), maxy = std::max(maxy, c.y[i]);
+    const XYBounds bb = kept_bounds(c, kept);
+    double minx = bb.minx, miny = bb.miny;
+    const double maxx = bb.maxx, maxy = bb.maxy;
     if (minx == INFINITY) return;  // no kept point
     // Cells anchored at multiples of the cell size: every window of a cloud
     // uses the same cells, so its ground does not depend on where it starts.
@@ -317,13 +346,22 @@ void smrf_grid(const PointCloud& c, Kept&& kept, const GroundFilterOptions& o, G
     const GridSize size = checked_grid_size(minx, miny, maxx, maxy, o.cell, kBytesPerCell, "ground filter", 4e8);
     const int w = size.width, h = size.height;
     std::vector<double> zmin(static_cast<std::size_t>(w) * h, INFINITY);
-    auto cell_of = [&](std::size_t i) {
-        const int cx = std::min(w - 1, static_cast<int>((c.x[i] - minx) / o.cell));
-        const int cy = std::min(h - 1, static_cast<int>((c.y[i] - miny) / o.cell));
-        return static_cast<std::size_t>(cy) * w + cx;
-    };
+    // Each kept point's cell, in parallel (w * h <= 4e8 fits 32 bits).
+    constexpr uint32_t kNoCell = std::numeric_limits<uint32_t>::max();
+    std::vector<uint32_t> cell_of(n);
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, 1u << 16), [&](const tbb::blocked_range<std::size_t>& r) {
+        for (std::size_t i = r.begin(); i != r.end(); ++i) {
+            if (!kept(i)) {
+                cell_of[i] = kNoCell;
+                continue;
+            }
+            const int cx = std::min(w - 1, static_cast<int>((c.x[i] - minx) / o.cell));
+            const int cy = std::min(h - 1, static_cast<int>((c.y[i] - miny) / o.cell));
+            cell_of[i] = static_cast<uint32_t>(static_cast<std::size_t>(cy) * w + cx);
+        }
+    });
     for (std::size_t i = 0; i < n; ++i)
-        if (kept(i)) zmin[cell_of(i)] = std::min(zmin[cell_of(i)], c.z[i]);
+        if (cell_of[i] != kNoCell) zmin[cell_of[i]] = std::min(zmin[cell_of[i]], c.z[i]);
     for (double& v : zmin)
         if (!std::isfinite(v)) v = NAN;
     fill_gaps(zmin, w, h, gap_fill_reach_cells(o.cell));  // local: windows of a cloud agree
@@ -343,15 +381,21 @@ void smrf_grid(const PointCloud& c, Kept&& kept, const GroundFilterOptions& o, G
         if (object[k]) dtm[k] = NAN;
     fill_gaps(dtm, w, h, gap_fill_reach_cells(o.cell));
     // Local slope of the DTM scales the threshold (steep terrain tolerates more).
-    for (std::size_t i = 0; i < n; ++i) {
-        if (!kept(i)) continue;
-        const std::size_t k = cell_of(i);
-        const int x = static_cast<int>(k % static_cast<std::size_t>(w)), y = static_cast<int>(k / static_cast<std::size_t>(w));
-        const double gx = (dtm[static_cast<std::size_t>(y) * w + std::min(w - 1, x + 1)] - dtm[static_cast<std::size_t>(y) * w + std::max(0, x - 1)]) / (2 * o.cell);
-        const double gy = (dtm[static_cast<std::size_t>(std::min(h - 1, y + 1)) * w + x] - dtm[static_cast<std::size_t>(std::max(0, y - 1)) * w + x]) / (2 * o.cell);
-        const double threshold = o.elevation_threshold + o.elevation_scalar * std::sqrt(gx * gx + gy * gy);
-        if (std::isfinite(dtm[k]) && std::abs(c.z[i] - dtm[k]) <= threshold) g.is_ground[i] = 1, ++g.ground_points;
-    }
+    g.ground_points += tbb::parallel_reduce(
+        tbb::blocked_range<std::size_t>(0, n, 1u << 16), std::size_t(0),
+        [&](const tbb::blocked_range<std::size_t>& r, std::size_t ground) {
+            for (std::size_t i = r.begin(); i != r.end(); ++i) {
+                if (cell_of[i] == kNoCell) continue;
+                const std::size_t k = cell_of[i];
+                const int x = static_cast<int>(k % static_cast<std::size_t>(w)), y = static_cast<int>(k / static_cast<std::size_t>(w));
+                const double gx = (dtm[static_cast<std::size_t>(y) * w + std::min(w - 1, x + 1)] - dtm[static_cast<std::size_t>(y) * w + std::max(0, x - 1)]) / (2 * o.cell);
+                const double gy = (dtm[static_cast<std::size_t>(std::min(h - 1, y + 1)) * w + x] - dtm[static_cast<std::size_t>(std::max(0, y - 1)) * w + x]) / (2 * o.cell);
+                const double threshold = o.elevation_threshold + o.elevation_scalar * std::sqrt(gx * gx + gy * gy);
+                if (std::isfinite(dtm[k]) && std::abs(c.z[i] - dtm[k]) <= threshold) g.is_ground[i] = 1, ++ground;
+            }
+            return ground;
+        },
+        [](std::size_t a, std::size_t b) { return a + b; });
 }
 
 // Groups of kept points (ids 0, 1, ...; kNoGroup for a point not kept) whose
@@ -449,9 +493,9 @@ GroundResult classify_ground(const PointCloud& c, const std::vector<uint8_t>& ke
     // One grid over every kept point, unless that grid is large: then kept
     // points kilometres apart get a grid each (split_ground_groups). Clouds
     // of up to 4 x 4 km at 1 m cells always take the single grid.
-    double minx = INFINITY, miny = INFINITY, maxx = -INFINITY, maxy = -INFINITY;
-    for (std::size_t i = 0; i < n; ++i)
-        if (kept(i)) minx = std::min(minx, c.x[i]), maxx = std::max(maxx, c.x[i]), miny = std::min(miny, c.y[i]), maxy = std::max(maxy, c.y[i]);
+    const XYBounds bb = kept_bounds(c, kept);
+    double minx = bb.minx, miny = bb.miny;
+    const double maxx = bb.maxx, maxy = bb.maxy;
     if (minx == INFINITY) return g;  // no kept point
     minx = std::floor(minx / o.cell) * o.cell, miny = std::floor(miny / o.cell) * o.cell;
     require_finite_extent(minx, miny, maxx, maxy, "ground filter");

@@ -41,6 +41,7 @@ public:
         if (reader_.laz_source()) copc_ = read_copc_hierarchy(path, reader_.header());
     }
     std::size_t read_chunk(PointCloud& out, std::size_t max_points) override { return reader_.read_chunk(out, max_points); }
+    std::size_t reserve_hint() const override { return reader_.reserve_hint(); }
     void restrict_to_box(double min_x, double min_y, double max_x, double max_y) override {
         LazPointSource* laz = reader_.laz_source();
         if (!laz) return;
@@ -389,6 +390,7 @@ CloudReader::CloudReader(const std::string& path) : path_(path) {
         crs_records_ = las->reader_.header().crs;
         announced_ = las->reader_.header().point_count;
         copc_ = las->copc_.has_value();
+        color_ = las->reader_.header().has_color(), gps_ = las->reader_.header().has_gps_time();
         format_ = CloudFormat::las;
         impl_ = std::move(las);
     } else if (std::memcmp(magic, "ply", 3) == 0 || ext == ".ply") {
@@ -417,11 +419,16 @@ std::size_t CloudReader::read_chunk(PointCloud& out, std::size_t max_points) {
             return 0;
         }
         seen_ += n;
-        const std::size_t dropped = out.remove_from(
-            base, [&](std::size_t i) { return !std::isfinite(out.x[i]) || !std::isfinite(out.y[i]) || !std::isfinite(out.z[i]); });
+        auto non_finite = [&](std::size_t i) { return !std::isfinite(out.x[i]) || !std::isfinite(out.y[i]) || !std::isfinite(out.z[i]); };
+        if (!any_point(base, out.size(), non_finite)) return n;  // the usual case: no compaction pass
+        const std::size_t dropped = out.remove_from(base, non_finite);
         dropped_non_finite_ += dropped;
         if (dropped < n) return n - dropped;  // else: read on, 0 means the end
     }
+}
+
+void CloudReader::reserve_for_all(PointCloud& cloud) const {
+    if (const std::size_t n = impl_->reserve_hint()) cloud.reserve(n, color_, gps_);
 }
 
 CloudReader::~CloudReader() = default;
@@ -431,6 +438,7 @@ CloudReader& CloudReader::operator=(CloudReader&&) noexcept = default;
 PointCloud read_point_cloud(const std::string& path) {
     CloudReader reader(path);
     PointCloud cloud;
+    reader.reserve_for_all(cloud);
     while (reader.read_chunk(cloud, 1u << 20) > 0) {
     }
     if (cloud.size() == 0) throw Error(path, "point cloud is empty");
@@ -441,11 +449,25 @@ PointCloud read_point_cloud_in(const std::string& path, double min_x, double min
     CloudReader reader(path);
     reader.restrict_to_box(min_x, min_y, max_x, max_y);
     PointCloud out, chunk;
+    std::vector<uint32_t> in_box;
     while (true) {
         chunk.clear();
         if (reader.read_chunk(chunk, 1u << 20) == 0) break;
+        in_box.clear();
         for (std::size_t i = 0; i < chunk.size(); ++i)
-            if (chunk.x[i] >= min_x && chunk.x[i] < max_x && chunk.y[i] >= min_y && chunk.y[i] < max_y) out.append(chunk, i);
+            if (chunk.x[i] >= min_x && chunk.x[i] < max_x && chunk.y[i] >= min_y && chunk.y[i] < max_y) in_box.push_back(static_cast<uint32_t>(i));
+        // Attribute by attribute (not point by point): one tight loop each.
+        out.reserve(out.size() + in_box.size(), chunk.has_color(), chunk.has_gps_time());
+        auto take = [&](auto& to, const auto& from) {
+            if (from.empty()) return;
+            const std::size_t base = to.size();
+            to.resize(base + in_box.size());
+            for (std::size_t t = 0; t < in_box.size(); ++t) to[base + t] = from[in_box[t]];
+        };
+        take(out.x, chunk.x), take(out.y, chunk.y), take(out.z, chunk.z), take(out.intensity, chunk.intensity);
+        take(out.classification, chunk.classification), take(out.return_number, chunk.return_number);
+        take(out.number_of_returns, chunk.number_of_returns), take(out.gps_time, chunk.gps_time);
+        take(out.red, chunk.red), take(out.green, chunk.green), take(out.blue, chunk.blue);
     }
     return out;
 }

@@ -21,6 +21,8 @@ public:
     virtual ~CloudFormatReader() = default;
     /// Appends up to `max_points` points to `out`; returns how many (0 = end).
     virtual std::size_t read_chunk(PointCloud& out, std::size_t max_points) = 0;
+    /// Points worth reserving before reading everything (0 = unknown).
+    virtual std::size_t reserve_hint() const { return 0; }
     /// See CloudReader::restrict_to_box; the default reads everything.
     virtual void restrict_to_box(double /*min_x*/, double /*min_y*/, double /*max_x*/, double /*max_y*/) {}
 };
@@ -58,6 +60,10 @@ public:
     /// (point formats 6-8) only the chunks whose XY layer has a point in it;
     /// other formats still hand out every point (the caller filters).
     void restrict_to_box(double min_x, double min_y, double max_x, double max_y) { impl_->restrict_to_box(min_x, min_y, max_x, max_y); }
+    /// Before reading everything into `cloud`: reserves room for the points
+    /// the file certainly holds (an uncompressed LAS: all of them), so the
+    /// cloud is not copied as it grows.
+    void reserve_for_all(PointCloud& cloud) const;
 
 private:
     std::string path_;
@@ -65,6 +71,7 @@ private:
     LasCrsRecords crs_records_;
     uint64_t announced_ = 0;
     bool copc_ = false;
+    bool color_ = false, gps_ = false;  ///< LAS: the point format holds colour / GPS time
     bool end_reported_ = false;
     uint64_t dropped_non_finite_ = 0, seen_ = 0;
     std::unique_ptr<CloudFormatReader> impl_;

@@ -214,6 +214,13 @@ LasReader::LasReader(const std::string& path) : path_(path) {
     in_.seekg(h.offset_to_points);
 }
 
+std::size_t LasReader::reserve_hint() const {
+    // An uncompressed file holds its records (checked on open); a LAZ header
+    // may claim any count, so it is only trusted up to 2^24 points.
+    const uint64_t left = points_remaining();
+    return static_cast<std::size_t>(laz_ ? std::min<uint64_t>(left, 1u << 24) : left);
+}
+
 std::size_t LasReader::read_records(std::vector<char>& buf, std::size_t max_points) {
     if (laz_ && read_ == 0 && &buf != &buffer_) laz_->set_point_fields_only(false);
     const auto n = static_cast<std::size_t>(std::min<uint64_t>(max_points, points_remaining()));
@@ -253,12 +260,15 @@ std::size_t LasReader::read_chunk(PointCloud& out, std::size_t max_points) {
         }
         screened_ += n;
         if (!screen_bounds_) return n;
-        const std::size_t dropped = out.remove_from(base, [&](std::size_t i) {
+        auto outside = [&](std::size_t i) {
             const double v[3] = {out.x[i], out.y[i], out.z[i]};
             for (int k = 0; k < 3; ++k)
                 if (v[k] < h.min[k] - bounds_tolerance_[k] || v[k] > h.max[k] + bounds_tolerance_[k]) return true;
             return false;
-        });
+        };
+        // Checked in parallel first: the (serial) compaction only when a point is out.
+        if (!any_point(base, out.size(), outside)) return n;
+        const std::size_t dropped = out.remove_from(base, outside);
         dropped_outside_ += dropped;
         if (dropped < n) return n - dropped;  // else: read on, 0 means the end
     }
@@ -316,9 +326,7 @@ PointCloud read_las(const std::string& path, LasHeader* header) {
     LasReader reader(path);
     if (header) *header = reader.header();
     PointCloud cloud;
-    // The announced count only as a hint (a LAZ header may claim any count).
-    cloud.reserve(static_cast<std::size_t>(std::min<uint64_t>(reader.header().point_count, 1u << 24)), reader.header().has_color(),
-                  reader.header().has_gps_time());
+    cloud.reserve(reader.reserve_hint(), reader.header().has_color(), reader.header().has_gps_time());
     while (reader.read_chunk(cloud, 1u << 20) > 0) {
     }
     return cloud;

@@ -9,6 +9,8 @@
 #include <optional>
 #include <string>
 #include <vector>
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_reduce.h>
 
 #include "cloud/laz_decoder.hpp"
 #include "cloud/point_cloud.hpp"
@@ -57,6 +59,20 @@ struct LasHeader {
     bool has_gps_time() const;
 };
 
+/// True when `pred(i)` holds for some i in [begin, end): the screens of the
+/// readers (points out of bounds, NaN coordinates) check a chunk in parallel
+/// blocks and compact it only when one holds.
+template <class Pred>
+bool any_point(std::size_t begin, std::size_t end, Pred&& pred) {
+    return tbb::parallel_reduce(
+        tbb::blocked_range<std::size_t>(begin, end, 1u << 15), false,
+        [&](const tbb::blocked_range<std::size_t>& r, bool found) {
+            for (std::size_t i = r.begin(); i != r.end() && !found; ++i) found = pred(i);
+            return found;
+        },
+        [](bool a, bool b) { return a || b; });
+}
+
 /// Minimum record length of LAS point format `format` (0..10); throws otherwise.
 int las_min_record_length(int format);
 
@@ -79,6 +95,10 @@ public:
     /// decoded for LAZ); returns how many (0 at the end).
     std::size_t read_records(std::vector<char>& records, std::size_t max_points);
     uint64_t points_remaining() const { return total_ - read_; }
+    /// Points worth reserving before reading the rest: points_remaining() for
+    /// an uncompressed file (its size was checked against the count on open),
+    /// at most 2^24 for LAZ (whose header may claim any count).
+    std::size_t reserve_hint() const;
     /// LAZ only: the chunk decoder (chunk table, chunk selection); null for LAS.
     LazPointSource* laz_source() { return laz_.get(); }
     /// LAZ only, before the first read: decode only the chunks with keep[i].
