@@ -747,6 +747,10 @@ RegionMergingResult merge_regions(const Image<float>& image, const Image<uint32_
             changed.clear(), rescan.clear();
             g.score_merged(m, e.a, e.b, changed, rescan);
             for (uint32_t k : rescan) g.rescan_nn(k);
+            if (o.strategy == QueueStrategy::mutual) {  // the offers read the nearest neighbours' records: load them together
+                for (uint32_t k : rescan) g.prefetch_node(g.nn(k), 1);
+                for (uint32_t k : changed) g.prefetch_node(g.nn(k), 1);
+            }
             offer_nn(m);
             for (uint32_t k : rescan) offer_nn(k);
             for (uint32_t k : changed) offer_nn(k);
