@@ -194,26 +194,55 @@ void grid_knn(const PointCloud& c, std::size_t k, Visit&& visit) {
     tbb::parallel_for(tbb::blocked_range<int>(0, nx, 1), [&](const tbb::blocked_range<int>& columns) {
         // The 3 x 3 block of a cell, structure of arrays: the cell's own
         // points first (its nearest candidates fill the k best early).
-        std::vector<double> bx, by, bz, dd;
-        std::vector<uint32_t> bi;
+        // A block of candidates, structure of arrays, gathered from runs of
+        // the cell-ordered arrays.
+        struct Block {
+            std::vector<double> x, y, z;  // capacity; the first `size` hold the candidates
+            std::vector<uint32_t> i;
+            std::size_t size = 0;
+            void clear() { size = 0; }
+        };
+        const auto gather = [&](Block& b, uint32_t from, uint32_t to) {
+            if (from >= to) return;
+            const std::size_t at = b.size, len = to - from;
+            if (at + len > b.x.size()) {  // grows rarely: blocks hold a few dozen points
+                const std::size_t cap = std::max(2 * b.x.size(), at + len);
+                b.x.resize(cap), b.y.resize(cap), b.z.resize(cap), b.i.resize(cap);
+            }
+            for (std::size_t t = 0; t < len; ++t)
+                b.x[at + t] = px[from + t], b.y[at + t] = py[from + t], b.z[at + t] = pz[from + t], b.i[at + t] = order[from + t];
+            b.size = at + len;
+        };
+        // block: the 3 x 3 cells, the own cell first (its nearest candidates
+        // fill the k best early); ring2: the 16 cells around them, gathered
+        // for the first point of the cell that needs them.
+        Block block, ring2;
+        std::vector<double> dd;
         std::vector<Best> best(k + 1);
         for (int cx = columns.begin(); cx != columns.end(); ++cx)
             for (int cy = 0; cy < ny; ++cy) {
                 const std::size_t q = cell_index(cx, cy);
                 if (start[q] == start[q + 1]) continue;
-                bx.clear(), by.clear(), bz.clear(), bi.clear();
-                auto gather = [&](uint32_t from, uint32_t to) {
-                    for (uint32_t j = from; j < to; ++j) bx.push_back(px[j]), by.push_back(py[j]), bz.push_back(pz[j]), bi.push_back(order[j]);
-                };
-                gather(start[q], start[q + 1]);
+                block.clear();
+                gather(block, start[q], start[q + 1]);
                 const int ylo = std::max(0, cy - 1), yhi = std::min(ny - 1, cy + 1);
                 for (int xx = std::max(0, cx - 1); xx <= std::min(nx - 1, cx + 1); ++xx) {
                     const uint32_t from = start[cell_index(xx, ylo)], to = start[cell_index(xx, yhi) + 1];
-                    if (xx != cx) gather(from, to);
-                    else gather(from, start[q]), gather(start[q + 1], to);  // the rows around the own cell
+                    if (xx != cx) gather(block, from, to);
+                    else gather(block, from, start[q]), gather(block, start[q + 1], to);  // the rows around the own cell
                 }
-                const std::size_t m = bx.size();
-                dd.resize(m);
+                bool ring2_gathered = false;
+                auto gather_ring2 = [&] {
+                    ring2.clear();
+                    for (int xx = std::max(0, cx - 2); xx <= std::min(nx - 1, cx + 2); ++xx)
+                        if (xx == cx - 2 || xx == cx + 2) {  // a whole column of the ring
+                            gather(ring2, start[cell_index(xx, std::max(0, cy - 2))], start[cell_index(xx, std::min(ny - 1, cy + 2)) + 1]);
+                        } else {  // its top and bottom cells
+                            if (cy - 2 >= 0) gather(ring2, start[cell_index(xx, cy - 2)], start[cell_index(xx, cy - 2) + 1]);
+                            if (cy + 2 < ny) gather(ring2, start[cell_index(xx, cy + 2)], start[cell_index(xx, cy + 2) + 1]);
+                        }
+                    ring2_gathered = true;
+                };
                 const double x0 = minx + cx * cx_size, y0 = miny + cy * cy_size;
                 for (uint32_t jp = start[q]; jp < start[q + 1]; ++jp) {
                     const double x = px[jp], y = py[jp], z = pz[jp];
@@ -227,18 +256,25 @@ void grid_knn(const PointCloud& c, std::size_t k, Visit&& visit) {
                         }
                         best[pos] = {d2, i};
                     };
-                    const double* bxp = bx.data();
-                    const double* byp = by.data();
-                    const double* bzp = bz.data();
-                    double* ddp = dd.data();
-                    for (std::size_t t = 0; t < m; ++t) {  // vectorised
-                        const double dx = bxp[t] - x, dy = byp[t] - y, dz = bzp[t] - z;
-                        ddp[t] = dx * dx + dy * dy + dz * dz;
-                    }
-                    std::size_t t = 0;
-                    for (; t < m && count < k; ++t) offer(ddp[t], bi[t]);
-                    for (double worst = count == k ? best[k - 1].d2 : INFINITY; t < m; ++t)
-                        if (ddp[t] <= worst) offer(ddp[t], bi[t]), worst = best[k - 1].d2;
+                    // Every candidate of a block: squared distances in one
+                    // vectorised loop, then only those not beyond the k-th offered.
+                    auto scan = [&](const Block& b) {
+                        const std::size_t m = b.size;
+                        if (dd.size() < m) dd.resize(std::max(m, 2 * dd.size()));
+                        const double* bxp = b.x.data();
+                        const double* byp = b.y.data();
+                        const double* bzp = b.z.data();
+                        double* ddp = dd.data();
+                        for (std::size_t t = 0; t < m; ++t) {
+                            const double dx = bxp[t] - x, dy = byp[t] - y, dz = bzp[t] - z;
+                            ddp[t] = dx * dx + dy * dy + dz * dz;
+                        }
+                        std::size_t t = 0;
+                        for (; t < m && count < k; ++t) offer(ddp[t], b.i[t]);
+                        for (double worst = count == k ? best[k - 1].d2 : INFINITY; t < m; ++t)
+                            if (ddp[t] <= worst) offer(ddp[t], b.i[t]), worst = best[k - 1].d2;
+                    };
+                    scan(block);
                     // Distance from the point to the edge of the scanned block of
                     // rings 0..r: any unseen point is at least that far away. An
                     // axis of one cell has no unseen cells, so it does not bound
@@ -250,6 +286,11 @@ void grid_knn(const PointCloud& c, std::size_t k, Visit&& visit) {
                         const double reach = (r - 1) * step + std::max(0.0, edge);
                         if (count == k && best[k - 1].d2 <= reach * reach) break;
                         if (cx - r < 0 && cy - r < 0 && cx + r >= nx && cy + r >= ny) break;  // every cell seen
+                        if (r == 2) {  // ring 2 whole (pruning cells only skips points that cannot enter)
+                            if (!ring2_gathered) gather_ring2();
+                            scan(ring2);
+                            continue;
+                        }
                         // Only the ring's cells inside the grid are visited: its
                         // left and right columns whole, the rows cy - r and
                         // cy + r of the columns between.
