@@ -286,6 +286,7 @@ async function showGlb() {
   return gltf.scene;
 }
 
+let lastTileFrame = 0;
 async function showTiles(generation) {
   const T = window.CITYFORGE_TILES, m = T.to_page;
   // Content is y-up ECEF (3D Tiles' glTF convention); to_page maps it to the page's frame.
@@ -315,7 +316,9 @@ async function showTiles(generation) {
     addMeshes(gltf.scene, rowsOf(bytes));
     state.tilesLoaded += 1;
     sceneLabel();
-    render3d();
+    // Redraw while tiles stream in, but not after every tile: a frame of many tiles costs
+    // as much as loading one in a software renderer (showSource draws the last frame).
+    if (performance.now() - lastTileFrame > 1000) render3d(), (lastTileFrame = performance.now());
   }
   return holder;
 }
