@@ -27,7 +27,7 @@ struct PixelClassifierOptions {
     /// max(1, round(cell_m / gsd)) before filtering (the map is upsampled
     /// back), so a model carries across resolutions and 4000 x 4000 px
     /// tiles stay fast.
-    double cell_m = 0.6;
+    double cell_m = 0.8;
     std::vector<double> sigmas_m{0.7, 1.5, 3.0};  ///< filter scales, metres (strictly increasing, > 0)
     std::size_t samples_per_image = 30000;         ///< training cells per image (half building where there are enough)
     BoosterOptions booster{60, 6, 0.2, 0.8, 0.8, 1.0, 1.0, 1};
