@@ -166,7 +166,7 @@ bool same_cells(const std::vector<double>& a, const std::vector<double>& b) {
 
 TEST_CASE("Square morphology (running extrema) equals the cell-by-cell window scan, NaN cells and grid edges included", "[cloud][ground][morphology]") {
     Rng rng(7);
-    for (const auto& [w, h] : {std::pair{1, 1}, std::pair{1, 9}, std::pair{13, 1}, std::pair{37, 23}, std::pair{130, 71}}) {
+    for (const auto& [w, h] : {std::pair{1, 1}, std::pair{1, 9}, std::pair{13, 1}, std::pair{37, 23}, std::pair{130, 71}, std::pair{530, 9}}) {  // 530: three column strips
         std::vector<double> grid(static_cast<std::size_t>(w) * h);
         std::vector<uint8_t> mask(grid.size());
         for (std::size_t i = 0; i < grid.size(); ++i) {
