@@ -42,12 +42,13 @@ std::vector<T> morphology_square(const std::vector<T>& in, int w, int h, int r, 
         g.resize(padded * lanes), hh.resize(padded * lanes);
         for (std::size_t j = 0; j < padded; ++j) line(j, &g[j * lanes]);
         std::copy(g.begin(), g.end(), hh.begin());
-        for (std::size_t j = 0; j < padded; ++j)
-            if (j % win != 0)
+        for (std::size_t b = 0; b < padded; b += win) {
+            const std::size_t e = std::min(padded, b + win);
+            for (std::size_t j = b + 1; j < e; ++j)
                 for (std::size_t l = 0; l < lanes; ++l) g[j * lanes + l] = pick(g[(j - 1) * lanes + l], g[j * lanes + l]);
-        for (std::size_t j = padded - 1; j-- > 0;)
-            if ((j + 1) % win != 0)
+            for (std::size_t j = e - 1; j-- > b;)
                 for (std::size_t l = 0; l < lanes; ++l) hh[j * lanes + l] = pick(hh[j * lanes + l], hh[(j + 1) * lanes + l]);
+        }
     };
     const auto W = static_cast<std::size_t>(w), H = static_cast<std::size_t>(h), R = static_cast<std::size_t>(r);
     std::vector<T> tmp(in.size()), out(in.size());
@@ -60,8 +61,9 @@ std::vector<T> morphology_square(const std::vector<T>& in, int w, int h, int r, 
             for (std::size_t x = 0; x < W; ++x) tmp[y * W + x] = is_nan(src[x]) ? src[x] : pick(hh[x], g[x + win - 1]);
         }
     });
-    // Columns: strips of up to 64 columns, each padded row of the strip a line.
-    constexpr std::size_t kStrip = 64;
+    // Columns: strips of up to 256 columns, each padded row of the strip a line
+    // (2 kB read per row and page: 16 columns measured 1.5 x slower).
+    constexpr std::size_t kStrip = 256;
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, (W + kStrip - 1) / kStrip, 1), [&](const tbb::blocked_range<std::size_t>& strips) {
         std::vector<T> g, hh;
         for (std::size_t s = strips.begin(); s != strips.end(); ++s) {
