@@ -176,14 +176,6 @@ Oversegmentation watershed_oversegment(const Image<float>& image, const std::vec
         }
         return r;
     };
-    // Band values interleaved per pixel: the flooding visits pixels in level
-    // order, all over the image, and reads every band of a pixel at once
-    // (one cache line instead of one per band).
-    const int bands = image.bands;
-    LargeVector<float> colour(n * static_cast<std::size_t>(bands));
-    parallel_for_each_index(n, [&](std::size_t i) {
-        for (int b = 0; b < bands; ++b) colour[i * bands + b] = image.band_data(b)[i];
-    });
     // count[l] is now the end of level l's run in `order` (the start of l + 1's).
     uint32_t lp = 0;
     for (uint32_t k = 0; k < n_valid; ++k) {
@@ -218,12 +210,10 @@ Oversegmentation watershed_oversegment(const Image<float>& image, const std::vec
         // region borders follow the colour edge rather than the flooding order.
         uint32_t closest_root = roots[0];
         float closest = INFINITY;
-        const float* cp = colour.data() + std::size_t(p) * bands;
         for (int i = 0; i < nr; ++i) {
             float d = 0.0f;
-            const float* cq = colour.data() + std::size_t(via[i]) * bands;
-            for (int b = 0; b < bands; ++b) {
-                const float diff = cp[b] - cq[b];
+            for (int b = 0; b < image.bands; ++b) {
+                const float diff = image.band_data(b)[p] - image.band_data(b)[via[i]];
                 d += diff * diff;
             }
             if (d < closest) closest = d, closest_root = roots[i];
