@@ -92,10 +92,35 @@ std::optional<double> face_z_at(const Face& f, double x, double y) {
     return cz - (n[0] * (x - cx) + n[1] * (y - cy)) / n[2];
 }
 
-double distance_to_face(const Face& f, const Point3& p) {
-    if (f.outer.size() < 3) return INFINITY;
+SolidsDistance::PreparedFace::PreparedFace(const Face& f) : face(&f) {
+    if (f.outer.size() < 3) return;
     const auto n = newell(f.outer);
     const double len = norm(n);
+    min[0] = min[1] = min[2] = INFINITY, max[0] = max[1] = max[2] = -INFINITY;
+    auto grow = [&](const Ring3& r) {
+        for (const Point3& q : r) {
+            min[0] = std::min(min[0], q.x), min[1] = std::min(min[1], q.y), min[2] = std::min(min[2], q.z);
+            max[0] = std::max(max[0], q.x), max[1] = std::max(max[1], q.y), max[2] = std::max(max[2], q.z);
+        }
+    };
+    grow(f.outer);
+    for (const Ring3& h : f.holes) grow(h);
+    if (!(len > 0)) return;
+    has_plane = true;
+    nx = n[0] / len, ny = n[1] / len, nz = n[2] / len;
+    // Inside test in the plane of the two axes the normal is least along.
+    drop = std::abs(nx) >= std::abs(ny) && std::abs(nx) >= std::abs(nz) ? 0 : std::abs(ny) >= std::abs(nz) ? 1 : 2;
+    auto uv = [&](const Point3& q) { return drop == 0 ? MapPoint{q.y, q.z} : drop == 1 ? MapPoint{q.z, q.x} : MapPoint{q.x, q.y}; };
+    for (const Point3& q : f.outer) plan.outer.push_back(uv(q));
+    for (const Ring3& h : f.holes) {
+        plan.holes.emplace_back();
+        for (const Point3& q : h) plan.holes.back().push_back(uv(q));
+    }
+}
+
+double SolidsDistance::PreparedFace::distance(const Point3& p) const {
+    const Face& f = *face;
+    if (f.outer.size() < 3) return INFINITY;
     auto segment = [&](const Point3& a, const Point3& b) {
         const double ux = b.x - a.x, uy = b.y - a.y, uz = b.z - a.z;
         const double l2 = ux * ux + uy * uy + uz * uz;
@@ -104,21 +129,11 @@ double distance_to_face(const Face& f, const Point3& p) {
         const double dx = p.x - (a.x + t * ux), dy = p.y - (a.y + t * uy), dz = p.z - (a.z + t * uz);
         return std::sqrt(dx * dx + dy * dy + dz * dz);
     };
-    if (len > 0) {
-        const double nx = n[0] / len, ny = n[1] / len, nz = n[2] / len;
+    if (has_plane) {
         const Point3& o = f.outer[0];
         const double d = (p.x - o.x) * nx + (p.y - o.y) * ny + (p.z - o.z) * nz;
-        // Inside test in the plane of the two axes the normal is least along.
-        const int drop = std::abs(nx) >= std::abs(ny) && std::abs(nx) >= std::abs(nz) ? 0 : std::abs(ny) >= std::abs(nz) ? 1 : 2;
-        auto uv = [&](const Point3& q) { return drop == 0 ? MapPoint{q.y, q.z} : drop == 1 ? MapPoint{q.z, q.x} : MapPoint{q.x, q.y}; };
-        Polygon plan;
-        for (const Point3& q : f.outer) plan.outer.push_back(uv(q));
-        for (const Ring3& h : f.holes) {
-            plan.holes.emplace_back();
-            for (const Point3& q : h) plan.holes.back().push_back(uv(q));
-        }
         const Point3 proj{p.x - d * nx, p.y - d * ny, p.z - d * nz};
-        const MapPoint pp = uv(proj);
+        const MapPoint pp = drop == 0 ? MapPoint{proj.y, proj.z} : drop == 1 ? MapPoint{proj.z, proj.x} : MapPoint{proj.x, proj.y};
         if (point_in_polygon(plan, pp.x, pp.y)) return std::abs(d);
     }
     double best = INFINITY;
@@ -129,6 +144,38 @@ double distance_to_face(const Face& f, const Point3& p) {
     for (const Ring3& h : f.holes) ring(h);
     return best;
 }
+
+double SolidsDistance::PreparedFace::lower_bound(const Point3& p) const {
+    if (face->outer.size() < 3) return INFINITY;
+    const double bx = std::max({min[0] - p.x, 0.0, p.x - max[0]});
+    const double by = std::max({min[1] - p.y, 0.0, p.y - max[1]});
+    const double bz = std::max({min[2] - p.z, 0.0, p.z - max[2]});
+    double lb = std::sqrt(bx * bx + by * by + bz * bz);
+    if (has_plane) {
+        const Point3& o = face->outer[0];
+        lb = std::max(lb, std::abs((p.x - o.x) * nx + (p.y - o.y) * ny + (p.z - o.z) * nz));
+    }
+    return lb;
+}
+
+SolidsDistance::SolidsDistance(const std::vector<Solid>& solids) {
+    for (const Solid& s : solids)
+        for (const Face& f : s.faces) faces_.emplace_back(f);
+}
+
+double SolidsDistance::operator()(const Point3& p) const {
+    double best = INFINITY;
+    for (const PreparedFace& f : faces_) {
+        // The bound and the distance round differently: a face is skipped only
+        // when its bound clears the best by far more than rounding, so the
+        // minimum is the one every face would give.
+        if (f.lower_bound(p) > best + 1e-6 * (1.0 + best)) continue;
+        best = std::min(best, f.distance(p));
+    }
+    return best;
+}
+
+double distance_to_face(const Face& f, const Point3& p) { return SolidsDistance::PreparedFace(f).distance(p); }
 
 double distance_to_solid(const Solid& s, const Point3& p) {
     double best = INFINITY;

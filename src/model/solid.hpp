@@ -56,6 +56,34 @@ double distance_to_face(const Face& face, const Point3& p);
 /// Smallest distance_to_face over the solid's faces (roofs, walls, ground).
 double distance_to_solid(const Solid& solid, const Point3& p);
 
+/// distance_to_solid for many points against the same solids: each face's
+/// plane and rings are prepared once, and a face whose plane or bounding box
+/// is already farther than the best distance so far is skipped. Gives the
+/// same values as the smallest distance_to_solid over `solids`.
+class SolidsDistance {
+public:
+    explicit SolidsDistance(const std::vector<Solid>& solids);
+    /// INFINITY when there is no face.
+    double operator()(const Point3& p) const;
+
+    /// One face, prepared (public for distance_to_face, which uses the same arithmetic).
+    struct PreparedFace {
+        const Face* face = nullptr;
+        bool has_plane = false;
+        double nx = 0, ny = 0, nz = 0;  ///< unit normal (Newell)
+        int drop = 2;                   ///< axis dropped for the inside test (the normal's largest)
+        Polygon plan;                   ///< rings on the two kept axes
+        double min[3] = {0, 0, 0}, max[3] = {0, 0, 0};  ///< bounding box of the rings
+        explicit PreparedFace(const Face& f);
+        double distance(const Point3& p) const;
+        /// A lower bound of distance(p): the larger of the distance to the plane and to the box.
+        double lower_bound(const Point3& p) const;
+    };
+
+private:
+    std::vector<PreparedFace> faces_;
+};
+
 /// Area of a planar face (holes subtracted), CRS units².
 double face_area(const Face& face);
 

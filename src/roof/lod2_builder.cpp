@@ -576,11 +576,10 @@ double rmse_to_solids(const std::vector<Solid>& solids, const std::vector<std::a
             to_local(f.outer);
             for (Ring3& h : f.holes) to_local(h);
         }
+    const SolidsDistance distance(local);
     double s2 = 0;
     for (const auto& q : pts) {
-        const Point3 p{(q[0] - ox) * o.unit_m, (q[1] - oy) * o.unit_m, (q[2] - oz) * o.z_unit_m};
-        double d = INFINITY;
-        for (const Solid& s : local) d = std::min(d, distance_to_solid(s, p));
+        const double d = distance({(q[0] - ox) * o.unit_m, (q[1] - oy) * o.unit_m, (q[2] - oz) * o.z_unit_m});
         if (std::isfinite(d)) s2 += d * d;
     }
     return std::sqrt(s2 / double(pts.size()));
