@@ -80,17 +80,27 @@ Polygon face_plan(const Face& f) {
     return p;
 }
 
-std::optional<double> face_z_at(const Face& f, double x, double y) {
-    if (f.outer.size() < 3) return std::nullopt;
-    const auto n = newell(f.outer);
-    if (std::abs(n[2]) < 1e-12 * (std::abs(n[0]) + std::abs(n[1]) + 1.0)) return std::nullopt;
-    if (!point_in_polygon(face_plan(f), x, y)) return std::nullopt;
-    double cx = 0, cy = 0, cz = 0;
-    for (const Point3& v : f.outer) cx += v.x, cy += v.y, cz += v.z;
+FaceHeight::FaceHeight(const Face& f) {
+    if (f.outer.size() < 3) return;
+    n_ = newell(f.outer);
+    if (std::abs(n_[2]) < 1e-12 * (std::abs(n_[0]) + std::abs(n_[1]) + 1.0)) return;
+    usable_ = true;
+    plan_ = face_plan(f);
+    for (const Point3& v : f.outer) cx_ += v.x, cy_ += v.y, cz_ += v.z;
     const double k = double(f.outer.size());
-    cx /= k, cy /= k, cz /= k;
-    return cz - (n[0] * (x - cx) + n[1] * (y - cy)) / n[2];
+    cx_ /= k, cy_ /= k, cz_ /= k;
+    min_x_ = max_x_ = f.outer[0].x, min_y_ = max_y_ = f.outer[0].y;
+    for (const Point3& v : f.outer)
+        min_x_ = std::min(min_x_, v.x), max_x_ = std::max(max_x_, v.x), min_y_ = std::min(min_y_, v.y), max_y_ = std::max(max_y_, v.y);
 }
+
+std::optional<double> FaceHeight::operator()(double x, double y) const {
+    if (!usable_ || x < min_x_ || x > max_x_ || y < min_y_ || y > max_y_) return std::nullopt;
+    if (!point_in_polygon(plan_, x, y)) return std::nullopt;
+    return cz_ - (n_[0] * (x - cx_) + n_[1] * (y - cy_)) / n_[2];
+}
+
+std::optional<double> face_z_at(const Face& f, double x, double y) { return FaceHeight(f)(x, y); }
 
 SolidsDistance::PreparedFace::PreparedFace(const Face& f) : face(&f) {
     if (f.outer.size() < 3) return;

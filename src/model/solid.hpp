@@ -3,6 +3,7 @@
 // polygons with semantics) and their validity checks. Coordinates are in the
 // model's CRS: x, y in the horizontal CRS units, z in the vertical CRS units.
 // No GDAL.
+#include <array>
 #include <optional>
 #include <string>
 #include <vector>
@@ -47,6 +48,21 @@ Polygon face_plan(const Face& face);
 /// z of the face's plane at (x, y) when (x, y) lies inside the face's plan;
 /// nullopt outside it or for vertical faces.
 std::optional<double> face_z_at(const Face& face, double x, double y);
+
+/// face_z_at for many points on one face: its plane, plan and plan extent
+/// prepared once (same values as face_z_at).
+class FaceHeight {
+public:
+    explicit FaceHeight(const Face& face);
+    std::optional<double> operator()(double x, double y) const;
+
+private:
+    bool usable_ = false;
+    std::array<double, 3> n_{0, 0, 0};
+    double cx_ = 0, cy_ = 0, cz_ = 0;
+    Polygon plan_;
+    double min_x_ = 0, min_y_ = 0, max_x_ = 0, max_y_ = 0;
+};
 
 /// Euclidean 3-D distance from p to a planar face (holes excluded): to its
 /// plane where p projects inside it, else to its nearest edge. Same units as

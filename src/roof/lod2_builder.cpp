@@ -691,16 +691,17 @@ Lod2Result reconstruct_once(const std::vector<Polygon>& footprint, const std::ve
     r.roof_slope_deg = main.slope_deg, r.roof_azimuth_deg = main.azimuth_deg;
     // Median residual: each point against the roof surface above it (the first roof face containing it in plan).
     std::vector<double> residuals;
-    for (const Solid& s : r.solids)
-        for (const auto& q : roof_points) {
-            for (const Face& f : s.faces) {
-                if (f.type != SurfaceType::roof) continue;
-                const std::optional<double> zf = face_z_at(f, q[0], q[1]);
-                if (!zf) continue;
-                residuals.push_back(std::abs(q[2] - *zf));
-                break;
-            }
-        }
+    for (const Solid& s : r.solids) {
+        std::vector<FaceHeight> roofs;
+        for (const Face& f : s.faces)
+            if (f.type == SurfaceType::roof) roofs.emplace_back(f);
+        for (const auto& q : roof_points)
+            for (const FaceHeight& roof : roofs)
+                if (const std::optional<double> zf = roof(q[0], q[1])) {
+                    residuals.push_back(std::abs(q[2] - *zf));
+                    break;
+                }
+    }
     // RMSE: 3-D distance of every roof point to the model (facade points lie on its walls), as roofer reports it.
     r.rmse_m = rmse_to_solids(r.solids, roof_points, ox, oy, ground_z, o);
     if (!residuals.empty()) {
