@@ -54,6 +54,14 @@ SynthResult varied_town(const ScratchDir& dir, uint64_t seed, double density, bo
     return write_synthetic_town(dir.path.string(), o);
 }
 
+// LOD2 of the town's true footprints from its cloud, as `cityforge roofs` builds it.
+CityModel lod2_on_truth(const SynthResult& s, RoofsRunReport& rep) {
+    RoofsRunOptions ro;
+    ro.heights.heights.keep_roof_points = true;
+    const HeightsStage st = compute_heights_stage(s.truth_path, s.cloud_path, ro.heights);
+    return build_lod2_model(st, st.table.crs, ro, s.truth_path, rep);
+}
+
 }  // namespace
 
 TEST_CASE("Ground plane of the ring - unbiased on a slope, robust to outliers, median when the ring is a line", "[heights]") {
@@ -144,11 +152,8 @@ TEST_CASE("Varied town with every roof family - roof types >= 0.95 - valid LOD2 
     ScratchDir dir("varied_roofs");
     const SynthResult s = varied_town(dir, 63, 8.0, true, 400, 0.1);
     const PolygonLayer truth = read_polygon_layer(s.truth_path, "");
-    RoofsRunOptions ro;
-    ro.heights.heights.keep_roof_points = true;
-    const HeightsStage st = compute_heights_stage(s.truth_path, s.cloud_path, ro.heights);
     RoofsRunReport rep;
-    const CityModel model = build_lod2_model(st, st.table.crs, ro, s.truth_path, rep);
+    const CityModel model = lod2_on_truth(s, rep);
     std::map<std::string, std::pair<int, int>> per;
     int correct = 0, valid = 0;
     for (std::size_t i = 0; i < model.buildings.size(); ++i) {
@@ -175,11 +180,8 @@ TEST_CASE("Hip roofs with a corner cut at an oblique angle stay hips (eaves all 
     ScratchDir dir("oblique_roofs");
     const SynthResult s = varied_town(dir, 71, 8.0, true, 300, 0.0, 0.5);
     const PolygonLayer truth = read_polygon_layer(s.truth_path, "");
-    RoofsRunOptions ro;
-    ro.heights.heights.keep_roof_points = true;
-    const HeightsStage st = compute_heights_stage(s.truth_path, s.cloud_path, ro.heights);
     RoofsRunReport rep;
-    const CityModel model = build_lod2_model(st, st.table.crs, ro, s.truth_path, rep);
+    const CityModel model = lod2_on_truth(s, rep);
     int correct = 0, cut_hips = 0, cut_hips_right = 0, cut_gables = 0, cut_gables_right = 0;
     for (std::size_t i = 0; i < model.buildings.size(); ++i) {
         const Building& b = model.buildings[i];
