@@ -165,6 +165,18 @@ void region_mean_std(const float* channel, const Image<uint32_t>& labels, uint32
 
 double safe_log(double v) { return std::log(std::max(v, 1e-6)); }
 
+// The bin of a histogram (`bins` counts summing to n) where the cumulative
+// count first reaches q * n; `bins` when it never does (rounding).
+int percentile_bin(const uint32_t* hist, int bins, double n, double q) {
+    const double target = q * n;
+    double acc = 0.0;
+    for (int bin = 0; bin < bins; ++bin) {
+        acc += hist[bin];
+        if (acc >= target) return bin;
+    }
+    return bins;
+}
+
 }  // namespace
 
 FeatureMatrix segment_features(const Image<float>& img, const std::vector<uint8_t>& valid, const SceneSegments& seg,
@@ -327,15 +339,7 @@ FeatureMatrix segment_features(const Image<float>& img, const std::vector<uint8_
         put(brmean[k]), put(brsd[k]);
         {
             const uint32_t* hk = hist.data() + std::size_t(k) * 32;
-            auto pct = [&](double q) {
-                const double target = q * n;
-                double acc = 0.0;
-                for (int bin = 0; bin < 32; ++bin) {
-                    acc += hk[bin];
-                    if (acc >= target) return bin * 8.0 + 4.0;
-                }
-                return 252.0;
-            };
+            auto pct = [&](double q) { return std::min(percentile_bin(hk, 32, n, q), 31) * 8.0 + 4.0; };  // bin centres, 0..255
             put(pct(0.1)), put(pct(0.5)), put(pct(0.9));
         }
         if (image_bands >= 3) {
@@ -386,15 +390,7 @@ FeatureMatrix segment_features(const Image<float>& img, const std::vector<uint8_
         }
         if (pix) {
             const uint32_t* hk = phist.data() + std::size_t(k) * 20;
-            auto pct = [&](double q) {
-                const double target = q * n;
-                double acc = 0.0;
-                for (int bin = 0; bin < 20; ++bin) {
-                    acc += hk[bin];
-                    if (acc >= target) return (bin + 0.5) / 20.0;
-                }
-                return 0.975;
-            };
+            auto pct = [&](double q) { return (std::min(percentile_bin(hk, 20, n, q), 19) + 0.5) / 20.0; };  // bin centres, 0..1
             double above = 0.0;
             for (int bin = 10; bin < 20; ++bin) above += hk[bin];
             put(pmean[k]), put(psd[k]), put(pct(0.1)), put(pct(0.5)), put(pct(0.9)), put(above / n);
