@@ -98,3 +98,43 @@ TEST_CASE("complete_building - heights make a valid LOD1 - missing heights say w
     crs.compound_epsg = 7415;
     CHECK(crs.cityjson_reference_system() == "https://www.opengis.net/def/crs/EPSG/0/7415");
 }
+
+TEST_CASE("SolidsDistance and FaceHeight give the values of distance_to_solid and face_z_at, faster", "[model]") {
+    // Two prisms (one with a courtyard) and points around, inside, above and far away.
+    Polygon court = rect(20, 0, 40, 20);
+    court.holes.push_back({{25, 5}, {25, 15}, {35, 15}, {35, 5}});
+    const std::vector<Solid> solids{extrude_prism(rect(0, 0, 10, 10), 0.0, 5.0), extrude_prism(court, 1.0, 9.0)};
+    const SolidsDistance distance(solids);
+    int n = 0;
+    for (double x = -7.3; x < 48; x += 1.7)
+        for (double y = -6.1; y < 27; y += 2.3)
+            for (double z = -3.9; z < 14; z += 2.9) {
+                const Point3 p{x, y, z};
+                double want = INFINITY;
+                for (const Solid& s : solids) want = std::min(want, distance_to_solid(s, p));
+                CHECK(distance(p) == want);  // the same arithmetic: equal, not approximately
+                ++n;
+            }
+    CHECK(n > 1000);
+    CHECK(SolidsDistance({})(Point3{0, 0, 0}) == INFINITY);
+    // Heights: the courtyard prism's roof is at 9 m (its ground at 1 m) over its ring, nothing
+    // over the courtyard; walls (vertical) have no height anywhere.
+    int roofs = 0;
+    for (const Face& f : solids[1].faces) {
+        const FaceHeight height(f);
+        if (f.type == SurfaceType::wall) {
+            CHECK_FALSE(height(22.0, 2.0).has_value());
+            continue;
+        }
+        if (f.type == SurfaceType::ground) {
+            CHECK(height(22.0, 2.0).value_or(-1.0) == Approx(1.0));
+            continue;
+        }
+        ++roofs;
+        REQUIRE(height(22.0, 2.0).has_value());
+        CHECK(*height(22.0, 2.0) == Approx(9.0));
+        CHECK_FALSE(height(30.0, 10.0).has_value());  // the courtyard
+        CHECK_FALSE(height(45.0, 10.0).has_value());  // beyond the ring
+    }
+    CHECK(roofs == 1);
+}
