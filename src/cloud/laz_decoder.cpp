@@ -793,46 +793,59 @@ private:
     IntegerDecompressor ic_;
 };
 
-// WAVEPACKET13 v1 (point formats 4 and 5, 29 bytes): the descriptor index
-// (a byte), then the 64-bit offset to the waveform data, coded as "same",
+// The wave packet descriptor coder shared by WAVEPACKET13 v1 (point formats
+// 4 and 5) and WAVEPACKET14 v3/v4 (formats 9 and 10, one set per scanner
+// channel). An item is 29 bytes: the descriptor index (a byte, coded as a
+// symbol), the 64-bit offset to the waveform data, coded as "same",
 // "previous offset + previous packet size", "previous + a 32-bit difference"
-// or raw; the packet size, return point location and x(t), y(t), z(t) (the
-// floats' bit patterns) as integer differences from the previous point.
-class WavePacket13V1 final : public ItemV2 {
-public:
-    explicit WavePacket13V1(const uint8_t* first) { std::memcpy(last_, first + 1, 28); }
-    void read(ArithDecoder& dec, uint8_t* item) override {
-        item[0] = static_cast<uint8_t>(dec.decode_symbol(packet_index_));
+// or raw; then the packet size, return point location and x(t), y(t), z(t)
+// (the floats' bit patterns) as integer differences from the previous item.
+struct WavePacketCoder {
+    // Decodes one item predicted from `last` (29 bytes) into `item` (29 bytes).
+    void read(ArithDecoder& dec, const uint8_t* last, uint8_t* item) {
+        item[0] = static_cast<uint8_t>(dec.decode_symbol(packet_index));
+        const uint8_t* prev = last + 1;
         uint8_t* cur = item + 1;
-        const uint64_t last_offset = bytes::get<uint64_t>(last_);
-        const uint32_t last_size = bytes::get<uint32_t>(last_ + 8);
-        sym_last_offset_diff_ = dec.decode_symbol(offset_diff_[sym_last_offset_diff_]);
+        const uint64_t last_offset = bytes::get<uint64_t>(prev);
+        const uint32_t last_size = bytes::get<uint32_t>(prev + 8);
+        sym_last_offset_diff = dec.decode_symbol(offset_diff[sym_last_offset_diff]);
         uint64_t offset;
-        if (sym_last_offset_diff_ == 0) {
+        if (sym_last_offset_diff == 0) {
             offset = last_offset;
-        } else if (sym_last_offset_diff_ == 1) {
+        } else if (sym_last_offset_diff == 1) {
             offset = last_offset + last_size;
-        } else if (sym_last_offset_diff_ == 2) {
-            last_diff_32_ = ic_offset_diff_.decompress(dec, last_diff_32_);
-            offset = last_offset + static_cast<uint64_t>(static_cast<int64_t>(last_diff_32_));
+        } else if (sym_last_offset_diff == 2) {
+            last_diff_32 = ic_offset_diff.decompress(dec, last_diff_32);
+            offset = last_offset + static_cast<uint64_t>(static_cast<int64_t>(last_diff_32));
         } else {
             const uint64_t low = dec.read_int();
             offset = (static_cast<uint64_t>(dec.read_int()) << 32) | low;
         }
         bytes::store<uint64_t>(cur, offset);
-        bytes::store<uint32_t>(cur + 8, static_cast<uint32_t>(ic_packet_size_.decompress(dec, bytes::get<int32_t>(last_ + 8))));
-        bytes::store<int32_t>(cur + 12, ic_return_point_.decompress(dec, bytes::get<int32_t>(last_ + 12)));
-        for (uint32_t c = 0; c < 3; ++c) bytes::store<int32_t>(cur + 16 + 4 * c, ic_xyz_.decompress(dec, bytes::get<int32_t>(last_ + 16 + 4 * c), c));
-        std::memcpy(last_, cur, 28);
+        bytes::store<uint32_t>(cur + 8, static_cast<uint32_t>(ic_packet_size.decompress(dec, bytes::get<int32_t>(prev + 8))));
+        bytes::store<int32_t>(cur + 12, ic_return_point.decompress(dec, bytes::get<int32_t>(prev + 12)));
+        for (uint32_t c = 0; c < 3; ++c)
+            bytes::store<int32_t>(cur + 16 + 4 * c, ic_xyz.decompress(dec, bytes::get<int32_t>(prev + 16 + 4 * c), c));
+    }
+    int32_t last_diff_32 = 0;
+    uint32_t sym_last_offset_diff = 0;
+    SymbolModel packet_index{256};
+    std::array<SymbolModel, 4> offset_diff{SymbolModel(4), SymbolModel(4), SymbolModel(4), SymbolModel(4)};
+    IntegerDecompressor ic_offset_diff{32, 1}, ic_packet_size{32, 1}, ic_return_point{32, 1}, ic_xyz{32, 3};
+};
+
+// WAVEPACKET13 v1 (point formats 4 and 5, 29 bytes; pointwise).
+class WavePacket13V1 final : public ItemV2 {
+public:
+    explicit WavePacket13V1(const uint8_t* first) { std::memcpy(last_, first, 29); }
+    void read(ArithDecoder& dec, uint8_t* item) override {
+        coder_.read(dec, last_, item);
+        std::memcpy(last_, item, 29);
     }
 
 private:
-    uint8_t last_[28];
-    int32_t last_diff_32_ = 0;
-    uint32_t sym_last_offset_diff_ = 0;
-    SymbolModel packet_index_{256};
-    std::array<SymbolModel, 4> offset_diff_{SymbolModel(4), SymbolModel(4), SymbolModel(4), SymbolModel(4)};
-    IntegerDecompressor ic_offset_diff_{32, 1}, ic_packet_size_{32, 1}, ic_return_point_{32, 1}, ic_xyz_{32, 3};
+    uint8_t last_[29];
+    WavePacketCoder coder_;
 };
 
 // POINT10 [+ GPSTIME11] [+ RGB12], in that order, nothing else.
@@ -1180,6 +1193,52 @@ private:
     std::array<std::unique_ptr<Ctx>, 4> contexts_;
 };
 
+// WAVEPACKET14 v3/v4 (point formats 9 and 10): the WAVEPACKET13 coder with
+// one set of models and last item per scanner channel, in a layer of its own
+// (an empty layer: every point keeps the chunk's first descriptor). Same
+// channel-switch rule as Rgb14V3; a new channel starts from the previous
+// channel's last item with fresh models and counters.
+class WavePacket14V3 {
+public:
+    WavePacket14V3(const uint8_t* first, uint32_t context, Layer& layer, bool v4) : v4_(v4), layer_(layer), current_(context) {
+        contexts_[context] = std::make_unique<Ctx>(first);
+    }
+    void read(uint8_t* item, uint32_t context) {
+        uint8_t* last = contexts_[current_]->last;
+        if (context != current_) {
+            current_ = context;
+            if (!contexts_[context]) {
+                contexts_[context] = std::make_unique<Ctx>(last);
+                last = contexts_[context]->last;
+            } else if (v4_) {
+                last = contexts_[context]->last;
+            }
+        }
+        if (layer_.present) {
+            contexts_[current_]->coder.read(layer_.dec, last, item);
+            std::memcpy(last, item, 29);
+        } else {
+            std::memcpy(item, last, 29);
+        }
+    }
+
+private:
+    struct Ctx {
+        explicit Ctx(const uint8_t* seed) { std::memcpy(last, seed, 29); }
+        uint8_t last[29];
+        WavePacketCoder coder;
+    };
+    bool v4_;
+    Layer& layer_;
+    uint32_t current_;
+    std::array<std::unique_ptr<Ctx>, 4> contexts_;
+};
+
+// Layers of a layered item: POINT14 9, RGB14 1, RGBNIR14 2, WAVEPACKET14 1, BYTE14 one per byte.
+std::size_t layer_count(const LazItem& it) {
+    return it.type == 10 ? 9 : it.type == 11 || it.type == 13 ? 1 : it.type == 12 ? 2 : it.size;
+}
+
 // layers: 0 every layer, 1 the PointCloud fields, 2 the XY layer only.
 std::size_t decode_layered(const LazInfo& info, int rl, const uint8_t* data, std::size_t size, uint64_t count, char* out_chars,
                            int layers_wanted) {
@@ -1199,7 +1258,7 @@ std::size_t decode_layered(const LazInfo& info, int rl, const uint8_t* data, std
     if (stored_count != count) throw Corrupt{"chunk point count disagrees with the chunk table"};
     // Layer sizes, in item order.
     std::size_t n_layers = 0;
-    for (const LazItem& it : info.items) n_layers += it.type == 10 ? 9 : it.type == 11 ? 1 : it.type == 12 ? 2 : it.size;
+    for (const LazItem& it : info.items) n_layers += layer_count(it);
     need(4 * n_layers, "truncated chunk (layer sizes)");
     std::vector<uint32_t> sizes(n_layers);
     for (std::size_t i = 0; i < n_layers; ++i, pos += 4) sizes[i] = bytes::get<uint32_t>(data + pos);
@@ -1208,7 +1267,7 @@ std::size_t decode_layered(const LazInfo& info, int rl, const uint8_t* data, std
     std::size_t li = 0;
     std::vector<Layer*> item_layers;  // first layer of each item
     for (const LazItem& it : info.items) {
-        const std::size_t nl = it.type == 10 ? 9 : it.type == 11 ? 1 : it.type == 12 ? 2 : it.size;
+        const std::size_t nl = layer_count(it);
         for (std::size_t j = 0; j < nl; ++j, ++li) {
             need(sizes[li], "truncated chunk (layer runs past the chunk)");
             Layer& layer = it.type == 10 ? point_layers[j] : layers[li];
@@ -1217,7 +1276,7 @@ std::size_t decode_layered(const LazInfo& info, int rl, const uint8_t* data, std
             // independent of the others and are skipped (fields keep the chunk's
             // first value).
             const bool skip = (point_fields_only && ((it.type == 10 && (j == 3 || j == 5 || j == 6 || j == 7)) ||
-                                                     (it.type == 12 && j == 1) || it.type == 14)) ||
+                                                     (it.type == 12 && j == 1) || it.type == 13 || it.type == 14)) ||
                               (xy_only && (it.type != 10 || j != 0));
             layer.open(data + pos, skip ? 0 : sizes[li]);
             pos += sizes[li];
@@ -1229,8 +1288,9 @@ std::size_t decode_layered(const LazInfo& info, int rl, const uint8_t* data, std
     Point14V3 point(out, point_layers, v4);
     std::vector<std::unique_ptr<Rgb14V3>> rgbs;
     std::vector<std::unique_ptr<Byte14V3>> bytes;
+    std::vector<std::unique_ptr<WavePacket14V3>> waves;
     struct Slot {
-        int kind;  // 0 point, 1 rgb, 2 byte
+        int kind;  // 0 point, 1 rgb, 2 byte, 3 wave packet
         std::size_t index, offset;
     };
     std::vector<Slot> slots;
@@ -1243,6 +1303,9 @@ std::size_t decode_layered(const LazInfo& info, int rl, const uint8_t* data, std
             rgbs.push_back(std::make_unique<Rgb14V3>(out + off, it.type == 12, point.context(), item_layers[i][0],
                                                      it.type == 12 ? &item_layers[i][1] : nullptr, v4));
             slots.push_back({1, rgbs.size() - 1, off});
+        } else if (it.type == 13) {
+            waves.push_back(std::make_unique<WavePacket14V3>(out + off, point.context(), item_layers[i][0], v4));
+            slots.push_back({3, waves.size() - 1, off});
         } else {
             bytes.push_back(std::make_unique<Byte14V3>(out + off, it.size, point.context(), item_layers[i], v4));
             slots.push_back({2, bytes.size() - 1, off});
@@ -1260,7 +1323,8 @@ std::size_t decode_layered(const LazInfo& info, int rl, const uint8_t* data, std
         for (const Slot& s : slots) {
             if (s.kind == 0) point.read(rec + s.offset);
             else if (s.kind == 1) rgbs[s.index]->read(rec + s.offset, point.context());
-            else bytes[s.index]->read(rec + s.offset, point.context());
+            else if (s.kind == 2) bytes[s.index]->read(rec + s.offset, point.context());
+            else waves[s.index]->read(rec + s.offset, point.context());
         }
     }
     return pos;
@@ -1352,7 +1416,7 @@ void check_laz_supported(const LazInfo& info, int point_format, int record_lengt
         } else {
             ok = (it.version == 3 || it.version == 4) && it.version == info.items[0].version &&
                  ((it.type == 10 && it.size == 30 && i == 0) || (it.type == 11 && it.size == 6) || (it.type == 12 && it.size == 8) ||
-                  (it.type == 14 && it.size > 0));
+                  (it.type == 13 && it.size == 29) || (it.type == 14 && it.size > 0));
         }
         if (!ok)
             throw Error(path, "LAZ item " + to_string(it) + " (" + std::to_string(it.size) + " bytes, position " + std::to_string(i) +
@@ -1362,7 +1426,7 @@ void check_laz_supported(const LazInfo& info, int point_format, int record_lengt
         throw Error(path, "LAZ items " + items() + " cover " + std::to_string(total) + " bytes but the point record is " +
                               std::to_string(record_length));
     const bool legacy = point_format <= 5;
-    if ((info.compressor <= 2) != legacy || point_format > 8)
+    if ((info.compressor <= 2) != legacy || point_format > 10)
         throw Error(path, "LAZ compressor " + info.compressor_name() + " with point format " + std::to_string(point_format) +
                               " is not supported");
 }

@@ -5,12 +5,12 @@
 // chunked compressors: 2 = pointwise (item versions 1 and 2: POINT10,
 // GPSTIME11, RGB12, BYTE extra bytes; WAVEPACKET13 version 1) for point
 // formats 0-5, and 3 = layered (item versions 3 and 4: POINT14, RGB14,
-// RGBNIR14, BYTE14 extra bytes) for point formats 6-8; fixed and variable
-// chunk sizes, with or without a chunk table. Decoded records are
-// byte-identical to LASzip / laz-perf output (tested against the corpus
-// oracle and LAS twins). Everything else (WAVEPACKET14 of formats 9/10,
-// other versions, unknown compressors) is refused with a one-line Error
-// naming the file.
+// RGBNIR14, WAVEPACKET14, BYTE14 extra bytes) for point formats 6-10; fixed
+// and variable chunk sizes, with or without a chunk table. Decoded records
+// are byte-identical to LASzip / laz-perf output (tested against the corpus
+// oracle and LAS twins written by LASzip). Everything else (other versions,
+// unknown items or compressors) is refused with a one-line Error naming the
+// file.
 #include <cstddef>
 #include <cstdint>
 #include <fstream>
