@@ -336,7 +336,10 @@ ViewReport write_view(const std::string& run_dir, const ViewOptions& o) {
     page.reserve(tmpl.size() + glb.size() * 4 / 3 + 1024);
     page.append(tmpl.substr(0, at));
     page += "<script type=\"application/json\" id=\"cityforge-data\">" + script_safe(data.dump()) + "</script>\n";
-    page += "<script type=\"application/octet-stream\" id=\"cityforge-glb\">" + base64(glb) + "</script>\n";
+    // The glb as a string in a script (base64 holds no quote, backslash or '<'):
+    // Chromium reads a large inline script about 5x faster than the same text in
+    // a non-script data block (10,171 LOD1 buildings, 14.5 MB: 0.4 s against 2.2 s).
+    page += "<script id=\"cityforge-glb\">window.CITYFORGE_GLB_BASE64 = \"" + base64(glb) + "\";</script>\n";
     // The tileset, bundled as a script beside the page.
     const std::string tileset = o.tileset.empty() ? (dir / "3dtiles" / "tileset.json").string() : o.tileset;
     if (!o.tileset.empty() && !fs::exists(tileset)) throw Error(o.tileset, "does not exist");
@@ -345,7 +348,8 @@ ViewReport write_view(const std::string& run_dir, const ViewOptions& o) {
         ensure_directory(bundle.parent_path());
         write_text_file(bundle, tiles_bundle(tileset, layer.crs, origin, rep.tiles));
         rep.tiles_bundle = bundle.string();
-        page += "<script src=\"tiles.js\"></script>\n";
+        // Named, not loaded: the page loads it when the tileset is first shown.
+        page += "<script>window.CITYFORGE_TILES_SRC = \"tiles.js\";</script>\n";
     }
     page.append(tmpl.substr(at + placeholder.size()));
     ensure_directory(fs::path(out).parent_path());
