@@ -84,16 +84,31 @@ struct BitModel {
 // and searches the rest by bisection with a multiplication per step). The
 // table has about 4 entries per symbol (at most 1024), so the search after
 // the look-up is almost always empty; the symbol found is the same.
+// table_[i] = 2 i: see SymbolModel::bind_store.
+constexpr std::array<uint32_t, 260> kUnreadyTable = [] {
+    std::array<uint32_t, 260> a{};
+    for (uint32_t i = 0; i < a.size(); ++i) a[i] = 2 * i;
+    return a;
+}();
+
 class SymbolModel {
 public:
-    explicit SymbolModel(uint32_t symbols) : symbols_(symbols), last_symbol_(symbols - 1) {
+    // Cheap: the buffers are built on the model's first use (init), so the
+    // many models a chunk never touches (high corrector classes, contexts
+    // and channels that do not occur) cost nothing. A fresh model equals one
+    // initialised later, so the stream decodes the same.
+    explicit SymbolModel(uint32_t symbols) : symbols_(symbols), last_symbol_(symbols - 1) { bind_store(); }
+    bool ready() const { return distribution_ != nullptr; }
+    [[gnu::noinline]] void init() {
+        const uint32_t symbols = symbols_;
         uint32_t bits = 2;
         while (bits < 8 && (1u << bits) < 4 * symbols) ++bits;
         table_size_ = 1u << bits;
         table_shift_ = kSymShift - bits;
         // One allocation: distribution (symbols + 1, the last entry
-        // kSymMaxCount as a sentinel), counts (symbols), table (size + 2).
-        store_.assign(2 * static_cast<std::size_t>(symbols) + 1 + table_size_ + 2, 0);
+        // kSymMaxCount as a sentinel), counts (symbols), table (size + 2, and
+        // 8 of slack for update's block stores).
+        store_.assign(2 * static_cast<std::size_t>(symbols) + 1 + table_size_ + 2 + 8, 0);
         bind_store();
         for (uint32_t n = 0; n < symbols; ++n) count_[n] = 1;
         distribution_[symbols] = std::numeric_limits<uint32_t>::max();  // sentinel above any dv (<= kSymMaxCount)
@@ -117,16 +132,26 @@ public:
             total_count_ = 0;
             for (uint32_t n = 0; n < symbols_; ++n) total_count_ += (count_[n] = (count_[n] + 1) >> 1);
         }
-        uint32_t sum = 0, s = 0;
+        // table_[j] = the last symbol k with (distribution_[k] >> table_shift_) < j
+        // (0 for j = 0): symbol k - 1 fills the entries from the end of the
+        // previous run to its start w, in blocks of 8 (the excess is
+        // overwritten by the next symbols or the tail; the buffer has 8
+        // entries of slack), so the loop count hardly depends on the data.
+        uint32_t sum = 0;
         const uint32_t scale = 0x80000000u / total_count_;
+        uint32_t s = 1;  // next entry to fill
         for (uint32_t k = 0; k < symbols_; ++k) {
-            distribution_[k] = (scale * sum) >> (31 - kSymShift);
+            const uint32_t d = (scale * sum) >> (31 - kSymShift);
+            distribution_[k] = d;
             sum += count_[k];
-            const uint32_t w = distribution_[k] >> table_shift_;
-            while (s < w) table_[++s] = k - 1;
+            const uint32_t w = d >> table_shift_;
+            for (uint32_t j = s; j <= w; j += 8)
+                for (uint32_t q = 0; q < 8; ++q) table_[j + q] = k - 1;
+            s = std::max(s, w + 1);
         }
         table_[0] = 0;
-        while (s <= table_size_) table_[++s] = symbols_ - 1;
+        for (; s <= table_size_ + 1; s += 8)
+            for (uint32_t q = 0; q < 8; ++q) table_[s + q] = symbols_ - 1;
         update_cycle_ = std::min((5 * update_cycle_) >> 2, (symbols_ + 6) << 3);
         until_update_ = update_cycle_;
     }
@@ -141,6 +166,14 @@ public:
 private:
     // The pointers into store_ (distribution, then counts, then the table).
     void bind_store() {
+        if (store_.empty()) {
+            // Not initialised: a table that sends every look-up to the slow
+            // search (table_[t + 1] > table_[t] + 1), which initialises.
+            distribution_ = count_ = nullptr;
+            table_ = const_cast<uint32_t*>(kUnreadyTable.data());
+            table_shift_ = kSymShift - 8;  // t <= 2^8 + 1 (see decode_symbol)
+            return;
+        }
         distribution_ = store_.data();
         count_ = distribution_ + symbols_ + 1;
         table_ = count_ + symbols_;
@@ -161,15 +194,17 @@ private:
     std::vector<uint32_t> store_;
 };
 
+// The decoder holds its byte input by value: a copy of it in a local
+// variable (see the item loops) then lives in registers.
 class ArithDecoder {
 public:
-    void init(ByteIn* in) {
-        in_ = in;
+    void init(const uint8_t* p, std::size_t n) {
+        in_ = ByteIn(p, n);
         length_ = kMaxLength;
-        value_ = in_->get() << 24;
-        value_ |= in_->get() << 16;
-        value_ |= in_->get() << 8;
-        value_ |= in_->get();
+        value_ = in_.get() << 24;
+        value_ |= in_.get() << 16;
+        value_ |= in_.get() << 8;
+        value_ |= in_.get();
         // An encoder's first word is below the initial length; the decoder
         // keeps value_ < length_ from here on, which bounds every table index.
         if (value_ == kMaxLength) throw Corrupt{"arithmetic-coded stream starts with an impossible value"};
@@ -194,14 +229,27 @@ public:
         const uint32_t t = dv >> m.table_shift_;
         uint32_t sym = m.table_[t];
         const uint32_t n = m.table_[t + 1] + 1;
+        uint32_t lo, hi;  // the interval of the symbol found
         if (n > sym + 2) [[unlikely]] {
-            bisect(m, dv, sym, n);
+            // Several candidates, or a model not yet initialised (its table
+            // always lands here).
+            sym = slow_search(m, dv);
+            lo = m.distribution_[sym];
+            hi = m.distribution_[sym + 1];
         } else {
-            // sym or sym + 1 (distribution_[symbols] is a sentinel above any dv).
-            sym += m.distribution_[sym + 1] <= dv;
+            // sym or sym + 1 (distribution_[symbols] is a sentinel above any
+            // dv). The three bounds are loaded before the choice, off the
+            // decoder's dependency chain; sym + 2 <= symbols + 1 stays inside
+            // the model's buffer (its value is used only when sym + 1 is not
+            // the last symbol).
+            const uint32_t d0 = m.distribution_[sym], d1 = m.distribution_[sym + 1], d2 = m.distribution_[sym + 2];
+            const bool up = d1 <= dv;
+            sym += up;
+            lo = up ? d1 : d0;
+            hi = up ? d2 : d1;
         }
-        const uint32_t x = m.distribution_[sym] * length_;
-        const uint32_t y = sym != m.last_symbol_ ? m.distribution_[sym + 1] * length_ : y0;
+        const uint32_t x = lo * length_;
+        const uint32_t y = sym != m.last_symbol_ ? hi * length_ : y0;
         value_ -= x;
         length_ = y - x;
         renorm();
@@ -234,35 +282,47 @@ public:
         const uint32_t low = read_short();
         return (read_short() << 16) | low;
     }
+    /// Bytes of the stream consumed so far.
+    std::size_t pos() const { return in_.pos(); }
 
 private:
-    [[gnu::noinline]] static void bisect(const SymbolModel& m, uint32_t dv, uint32_t& sym, uint32_t n) {
+    // The symbol of dv by bisection between the table's bounds; first
+    // initialises a model never used before.
+    [[gnu::noinline]] static uint32_t slow_search(SymbolModel& m, uint32_t dv) {
+        if (!m.ready()) m.init();
+        const uint32_t t = dv >> m.table_shift_;
+        uint32_t sym = m.table_[t];
+        uint32_t n = m.table_[t + 1] + 1;
         while (n > sym + 1) {
             const uint32_t k = (sym + n) >> 1;
             if (m.distribution_[k] > dv) n = k;
             else sym = k;
         }
+        return sym;
     }
     // Shifts in whole bytes until length_ >= kMinLength: the byte count is
     // the leading zero bytes of length_ (length_ > 0 always), read as one
     // big-endian word while 4 bytes remain.
     [[gnu::always_inline]] void renorm() {
-        if (in_->has4()) [[likely]] {
+        if (in_.has4()) [[likely]] {
             const uint32_t sh = static_cast<uint32_t>(__builtin_clz(length_)) & 24u;
-            const uint64_t w = in_->peek32();
+            const uint64_t w = in_.peek32();
             value_ = static_cast<uint32_t>((static_cast<uint64_t>(value_) << sh) | (w >> (32 - sh)));
             length_ <<= sh;
-            in_->skip(sh >> 3);
+            in_.skip(sh >> 3);
         } else if (length_ < kMinLength) {
-            renorm_tail();
+            *this = renorm_tail(*this);
         }
     }
-    [[gnu::noinline]] void renorm_tail() {
+    // The last bytes of the stream, one at a time. By value, so that no
+    // pointer to the decoder escapes the hot loops.
+    [[gnu::noinline]] static ArithDecoder renorm_tail(ArithDecoder d) {
         do {
-            value_ = (value_ << 8) | in_->get();
-        } while ((length_ <<= 8) < kMinLength);
+            d.value_ = (d.value_ << 8) | d.in_.get();
+        } while ((d.length_ <<= 8) < kMinLength);
+        return d;
     }
-    ByteIn* in_ = nullptr;
+    ByteIn in_;
     uint32_t value_ = 0, length_ = kMaxLength;
 };
 
@@ -294,7 +354,7 @@ public:
     uint32_t k() const { return k_; }
 
 private:
-    int32_t read_corrector(ArithDecoder& dec, SymbolModel& model) {
+    [[gnu::always_inline]] int32_t read_corrector(ArithDecoder& dec, SymbolModel& model) {
         k_ = dec.decode_symbol(model);
         if (k_ == 0) return static_cast<int32_t>(dec.decode_bit(bit_));
         if (k_ >= 32) return corr_min_;
@@ -328,56 +388,23 @@ struct LazyModel {
 uint8_t fold(int32_t v) { return static_cast<uint8_t>(v & 0xFF); }
 int32_t clamp_u8(int32_t v) { return v < 0 ? 0 : (v > 255 ? 255 : v); }
 
+// LASzip's streaming median of the last five values: five sorted values
+// and a flag; a new value replaces the largest (flag set) or the smallest
+// (flag clear) and the flag flips when the value lands on the other side of
+// the middle. Written as a branch-free sorted insertion (the values are
+// data, their order unpredictable): the same five values in the same order.
 class Median5 {
 public:
-    void add(int32_t v) {
-        if (high_) {
-            if (v < values_[2]) {
-                values_[4] = values_[3];
-                values_[3] = values_[2];
-                if (v < values_[0]) {
-                    values_[2] = values_[1];
-                    values_[1] = values_[0];
-                    values_[0] = v;
-                } else if (v < values_[1]) {
-                    values_[2] = values_[1];
-                    values_[1] = v;
-                } else {
-                    values_[2] = v;
-                }
-            } else {
-                if (v < values_[3]) {
-                    values_[4] = values_[3];
-                    values_[3] = v;
-                } else {
-                    values_[4] = v;
-                }
-                high_ = false;
-            }
-        } else {
-            if (values_[2] < v) {
-                values_[0] = values_[1];
-                values_[1] = values_[2];
-                if (values_[4] < v) {
-                    values_[2] = values_[3];
-                    values_[3] = values_[4];
-                    values_[4] = v;
-                } else if (values_[3] < v) {
-                    values_[2] = values_[3];
-                    values_[3] = v;
-                } else {
-                    values_[2] = v;
-                }
-            } else {
-                if (values_[1] < v) {
-                    values_[0] = values_[1];
-                    values_[1] = v;
-                } else {
-                    values_[0] = v;
-                }
-                high_ = true;
-            }
-        }
+    [[gnu::always_inline]] void add(int32_t v) {
+        const int32_t* a = values_.data() + (high_ ? 0 : 1);  // the four that stay
+        const int32_t a0 = a[0], a1 = a[1], a2 = a[2], a3 = a[3];
+        const int32_t mid = values_[2];
+        values_[0] = std::min(a0, v);
+        values_[1] = std::min(a1, std::max(a0, v));
+        values_[2] = std::min(a2, std::max(a1, v));
+        values_[3] = std::min(a3, std::max(a2, v));
+        values_[4] = std::max(a3, v);
+        high_ = v < mid || (!high_ && v == mid);
     }
     int32_t get() const { return values_[2]; }
 
@@ -417,7 +444,7 @@ struct GpsTimeState {
         time = {first, 0, 0, 0};
     }
     // Decodes the next time into time[last]; v2 may signal "unchanged".
-    void read(ArithDecoder& dec) {
+    [[gnu::always_inline]] void read(ArithDecoder& dec) {
         const uint32_t code_full = v3 ? 511 : 512;
         for (int guard = 0; guard < 8; ++guard) {
             if (diff[last] == 0) {
@@ -501,7 +528,7 @@ struct RgbModels {
     SymbolModel used{128};
     std::array<SymbolModel, 6> diff{SymbolModel(256), SymbolModel(256), SymbolModel(256),
                                     SymbolModel(256), SymbolModel(256), SymbolModel(256)};
-    void read(ArithDecoder& dec, const uint16_t* last, uint16_t* out) {
+    [[gnu::always_inline]] void read(ArithDecoder& dec, const uint16_t* last, uint16_t* out) {
         const uint32_t sym = dec.decode_symbol(used);
         auto lo = [](uint16_t v) { return static_cast<int32_t>(v & 0xFF); };
         auto hi = [](uint16_t v) { return static_cast<int32_t>(v >> 8); };
@@ -545,7 +572,8 @@ public:
         std::memcpy(last_, first, 20);
         last_[12] = last_[13] = 0;  // intensity predicted from zero
     }
-    void read(ArithDecoder& dec, uint8_t* item) override {
+    void read(ArithDecoder& dec, uint8_t* item) override { read_inline(dec, item); }
+    [[gnu::always_inline]] void read_inline(ArithDecoder& dec, uint8_t* item) {
         const uint32_t changed = dec.decode_symbol(changed_values_);
         uint32_t r, n, m, l;
         if (changed) {
@@ -606,7 +634,8 @@ private:
 class GpsTime11V2 final : public ItemV2 {
 public:
     explicit GpsTime11V2(const uint8_t* first) : state_(false) { state_.reset(bytes::get<uint64_t>(first)); }
-    void read(ArithDecoder& dec, uint8_t* item) override {
+    void read(ArithDecoder& dec, uint8_t* item) override { read_inline(dec, item); }
+    [[gnu::always_inline]] void read_inline(ArithDecoder& dec, uint8_t* item) {
         state_.read(dec);
         bytes::store<uint64_t>(item, state_.time[state_.last]);
     }
@@ -618,7 +647,8 @@ private:
 class Rgb12V2 final : public ItemV2 {
 public:
     explicit Rgb12V2(const uint8_t* first) { std::memcpy(last_, first, 6); }
-    void read(ArithDecoder& dec, uint8_t* item) override {
+    void read(ArithDecoder& dec, uint8_t* item) override { read_inline(dec, item); }
+    [[gnu::always_inline]] void read_inline(ArithDecoder& dec, uint8_t* item) {
         uint16_t out[3];
         models_.read(dec, last_, out);
         std::memcpy(last_, out, 6);
@@ -854,12 +884,16 @@ void decode_fused(ArithDecoder& dec, const std::vector<std::unique_ptr<ItemV2>>&
     auto& point = static_cast<Point10V2&>(*items[0]);
     GpsTime11V2* gps = Gps ? static_cast<GpsTime11V2*>(items[1].get()) : nullptr;
     Rgb12V2* rgb = Rgb ? static_cast<Rgb12V2*>(items[Gps ? 2 : 1].get()) : nullptr;
+    // A local copy of the decoder, its address never taken: its state stays
+    // in registers through the record stores (which may alias anything).
+    ArithDecoder d = dec;
     for (uint64_t i = 1; i < count; ++i) {
         uint8_t* rec = out + i * static_cast<std::size_t>(rl);
-        point.Point10V2::read(dec, rec);
-        if constexpr (Gps) gps->GpsTime11V2::read(dec, rec + 20);
-        if constexpr (Rgb) rgb->Rgb12V2::read(dec, rec + (Gps ? 28 : 20));
+        point.read_inline(d, rec);
+        if constexpr (Gps) gps->read_inline(d, rec + 20);
+        if constexpr (Rgb) rgb->read_inline(d, rec + (Gps ? 28 : 20));
     }
+    dec = d;
 }
 
 std::size_t decode_pointwise(const LazInfo& info, int rl, const uint8_t* data, std::size_t size, uint64_t count, char* out_chars) {
@@ -883,9 +917,8 @@ std::size_t decode_pointwise(const LazInfo& info, int rl, const uint8_t* data, s
         offsets.push_back(off);
         off += it.size;
     }
-    ByteIn in(data + rl, size - rl);
     ArithDecoder dec;
-    dec.init(&in);
+    dec.init(data + rl, size - rl);
     // The layouts of point formats 0-3 without extra bytes (nearly all
     // pointwise files) get a loop with the item calls resolved at compile
     // time; anything else goes through the item list.
@@ -906,7 +939,7 @@ std::size_t decode_pointwise(const LazInfo& info, int rl, const uint8_t* data, s
             uint8_t* rec = out + i * rl;
             for (std::size_t k = 0; k < items.size(); ++k) items[k]->read(dec, rec + offsets[k]);
         }
-    return rl + in.pos();
+    return rl + dec.pos();
 }
 
 // ============================================================ layered v3 / v4
@@ -914,13 +947,11 @@ std::size_t decode_pointwise(const LazInfo& info, int rl, const uint8_t* data, s
 // channel is always handed on; a switch always predicts from the new channel).
 // One arithmetic-coded layer of a chunk.
 struct Layer {
-    ByteIn in;
     ArithDecoder dec;
     bool present = false;  // non-empty: the field changes within the chunk
     void open(const uint8_t* p, std::size_t n) {
-        in = ByteIn(p, n);
         present = n > 0;
-        if (present) dec.init(&in);
+        if (present) dec.init(p, n);
     }
 };
 
@@ -999,7 +1030,8 @@ public:
     /// and laz-perf pass it only on change; the format depends on that).
     uint32_t context() const { return v4_ ? current_ : item_context_; }  // v4 always passes the channel
     void read(uint8_t* item) {
-        ArithDecoder& xy = layers_[0].dec;
+        // A local copy of the XY layer's decoder (registers, see decode_fused).
+        ArithDecoder xy = layers_[0].dec;
         item_context_ = 0;
         Point14Context* c = contexts_[current_].get();
         {
@@ -1051,6 +1083,7 @@ public:
         const int32_t dy = c->ic_dy.decompress(xy, c->median_y[mi].get(), (n == 1) + (k < 20 ? (k & ~1u) : 20));
         last.y = static_cast<int32_t>(static_cast<uint32_t>(last.y) + static_cast<uint32_t>(dy));
         c->median_y[mi].add(dy);
+        layers_[0].dec = xy;
         if (layers_[1].present) {
             k = (c->ic_dx.k() + c->ic_dy.k()) / 2;
             last.z = c->ic_z.decompress(layers_[1].dec, c->last_z[l], (n == 1) + (k < 18 ? (k & ~1u) : 18));
@@ -1515,9 +1548,8 @@ LazPointSource::LazPointSource(const std::string& path, const LazInfo& info, uin
         std::vector<uint8_t> table(static_cast<std::size_t>(std::min<uint64_t>(avail, 16ull * n + 64)));
         read_at(static_cast<uint64_t>(table_pos) + 8, table.data(), table.size());
         try {
-            ByteIn bin(table.data(), table.size());
             ArithDecoder dec;
-            dec.init(&bin);
+            dec.init(table.data(), table.size());
             IntegerDecompressor ic(32, 2);
             uint64_t offset = chunks_start, first = 0;
             uint32_t last_count = 0, last_bytes = 0;
