@@ -1129,27 +1129,51 @@ private:
 };
 
 // RGB14 / RGBNIR14 v3: per scanner channel contexts, RGB and NIR layers.
+// The per-scanner-channel contexts of the layered items after POINT14
+// (RGB14, RGBNIR14, WAVEPACKET14, BYTE14): up to four, each created on its
+// channel's first point from the then-current context's last values. As in
+// LASzip v3 (and laz-perf): on a switch to a channel seen before in this
+// chunk, the models are the new channel's but the prediction (and its
+// update) still uses the previous channel's last values; v4 fixed that.
+// Part of the format.
+template <typename Ctx>
+class ChannelContexts {
+public:
+    ChannelContexts(uint32_t context, bool v4, std::unique_ptr<Ctx> first) : v4_(v4), current_(context) {
+        slots_[context] = std::move(first);
+    }
+    // Switches to `context`; returns the context whose models decode this
+    // point and sets `last` to the one whose last values predict it (and take
+    // its values). `make(prev)` creates a channel's context from `prev`.
+    template <typename Make>
+    Ctx& select(uint32_t context, Ctx*& last, Make&& make) {
+        last = slots_[current_].get();
+        if (context != current_) {
+            current_ = context;
+            if (!slots_[context]) {
+                slots_[context] = make(*last);
+                last = slots_[context].get();
+            } else if (v4_) {
+                last = slots_[context].get();
+            }
+        }
+        return *slots_[current_];
+    }
+
+private:
+    bool v4_;
+    uint32_t current_;
+    std::array<std::unique_ptr<Ctx>, 4> slots_;
+};
+
 class Rgb14V3 {
 public:
     Rgb14V3(const uint8_t* first, bool nir, uint32_t context, Layer& rgb, Layer* nir_layer, bool v4)
-        : nir_(nir), v4_(v4), rgb_(rgb), nir_layer_(nir_layer), current_(context) {
-        contexts_[context] = std::make_unique<Ctx>(first, nir ? 8 : 6);
-    }
-    // As in LASzip v3 (and laz-perf): on a switch to a channel seen before in
-    // this chunk, the models are the new channel's but the prediction (and its
-    // update) still uses the previous channel's last value. Part of the format.
+        : nir_(nir), rgb_(rgb), nir_layer_(nir_layer), contexts_(context, v4, std::make_unique<Ctx>(first, nir ? 8 : 6)) {}
     void read(uint8_t* item, uint32_t context) {
-        uint16_t* last = contexts_[current_]->last;
-        if (context != current_) {
-            current_ = context;
-            if (!contexts_[context]) {
-                contexts_[context] = std::make_unique<Ctx>(reinterpret_cast<const uint8_t*>(last), 8);
-                last = contexts_[context]->last;
-            } else if (v4_) {
-                last = contexts_[context]->last;  // v4 fixed the stale prediction
-            }
-        }
-        Ctx& c = *contexts_[current_];
+        Ctx* prev = nullptr;
+        Ctx& c = contexts_.select(context, prev, [](const Ctx& p) { return std::make_unique<Ctx>(reinterpret_cast<const uint8_t*>(p.last), 8); });
+        uint16_t* last = prev->last;
         uint16_t out[4];
         if (rgb_.present) {
             c.rgb.read(rgb_.dec, last, out);
@@ -1177,33 +1201,21 @@ private:
         SymbolModel nir_used{4};
         std::array<SymbolModel, 2> nir_diff{SymbolModel(256), SymbolModel(256)};
     };
-    bool nir_, v4_;
+    bool nir_;
     Layer& rgb_;
     Layer* nir_layer_;
-    uint32_t current_;
-    std::array<std::unique_ptr<Ctx>, 4> contexts_;
+    ChannelContexts<Ctx> contexts_;
 };
 
 // BYTE14 v3: one layer per extra byte.
 class Byte14V3 {
 public:
     Byte14V3(const uint8_t* first, std::size_t n, uint32_t context, Layer* layers, bool v4)
-        : n_(n), v4_(v4), layers_(layers), current_(context) {
-        contexts_[context] = std::make_unique<Ctx>(first, n);
-    }
-    // Same channel-switch rule as Rgb14V3.
+        : n_(n), layers_(layers), contexts_(context, v4, std::make_unique<Ctx>(first, n)) {}
     void read(uint8_t* item, uint32_t context) {
-        uint8_t* last = contexts_[current_]->last.data();
-        if (context != current_) {
-            current_ = context;
-            if (!contexts_[context]) {
-                contexts_[context] = std::make_unique<Ctx>(last, n_);
-                last = contexts_[context]->last.data();
-            } else if (v4_) {
-                last = contexts_[context]->last.data();
-            }
-        }
-        Ctx& c = *contexts_[current_];
+        Ctx* prev = nullptr;
+        Ctx& c = contexts_.select(context, prev, [this](const Ctx& p) { return std::make_unique<Ctx>(p.last.data(), n_); });
+        uint8_t* last = prev->last.data();
         for (std::size_t i = 0; i < n_; ++i) {
             if (layers_[i].present)
                 last[i] = fold(static_cast<int32_t>(last[i]) + static_cast<int32_t>(layers_[i].dec.decode_symbol(c.models[i])));
@@ -1220,35 +1232,25 @@ private:
         std::vector<SymbolModel> models;
     };
     std::size_t n_;
-    bool v4_;
     Layer* layers_;
-    uint32_t current_;
-    std::array<std::unique_ptr<Ctx>, 4> contexts_;
+    ChannelContexts<Ctx> contexts_;
 };
 
 // WAVEPACKET14 v3/v4 (point formats 9 and 10): the WAVEPACKET13 coder with
 // one set of models and last item per scanner channel, in a layer of its own
-// (an empty layer: every point keeps the chunk's first descriptor). Same
-// channel-switch rule as Rgb14V3; a new channel starts from the previous
-// channel's last item with fresh models and counters.
+// (an empty layer: every point keeps the chunk's first descriptor); a new
+// channel starts from the previous channel's last item with fresh models and
+// counters.
 class WavePacket14V3 {
 public:
-    WavePacket14V3(const uint8_t* first, uint32_t context, Layer& layer, bool v4) : v4_(v4), layer_(layer), current_(context) {
-        contexts_[context] = std::make_unique<Ctx>(first);
-    }
+    WavePacket14V3(const uint8_t* first, uint32_t context, Layer& layer, bool v4)
+        : layer_(layer), contexts_(context, v4, std::make_unique<Ctx>(first)) {}
     void read(uint8_t* item, uint32_t context) {
-        uint8_t* last = contexts_[current_]->last;
-        if (context != current_) {
-            current_ = context;
-            if (!contexts_[context]) {
-                contexts_[context] = std::make_unique<Ctx>(last);
-                last = contexts_[context]->last;
-            } else if (v4_) {
-                last = contexts_[context]->last;
-            }
-        }
+        Ctx* prev = nullptr;
+        Ctx& c = contexts_.select(context, prev, [](const Ctx& p) { return std::make_unique<Ctx>(p.last); });
+        uint8_t* last = prev->last;
         if (layer_.present) {
-            contexts_[current_]->coder.read(layer_.dec, last, item);
+            c.coder.read(layer_.dec, last, item);
             std::memcpy(last, item, 29);
         } else {
             std::memcpy(item, last, 29);
@@ -1261,10 +1263,8 @@ private:
         uint8_t last[29];
         WavePacketCoder coder;
     };
-    bool v4_;
     Layer& layer_;
-    uint32_t current_;
-    std::array<std::unique_ptr<Ctx>, 4> contexts_;
+    ChannelContexts<Ctx> contexts_;
 };
 
 // Layers of a layered item: POINT14 9, RGB14 1, RGBNIR14 2, WAVEPACKET14 1, BYTE14 one per byte.
