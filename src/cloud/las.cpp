@@ -226,11 +226,23 @@ std::size_t LasReader::read_records(std::vector<char>& buf, std::size_t max_poin
     const auto n = static_cast<std::size_t>(std::min<uint64_t>(max_points, points_remaining()));
     buf.resize(n * static_cast<std::size_t>(header_.point_record_length));
     if (n == 0) return 0;
+    return read_into(buf.data(), n);
+}
+
+std::size_t LasReader::read_records(char* out, std::size_t max_points) {
+    if (laz_ && read_ == 0) laz_->set_point_fields_only(false);
+    const auto n = static_cast<std::size_t>(std::min<uint64_t>(max_points, points_remaining()));
+    if (n == 0) return 0;
+    return read_into(out, n);
+}
+
+std::size_t LasReader::read_into(char* out, std::size_t n) {
     if (laz_) {
-        if (laz_->read(buf.data(), n) != n) throw Error(path_, "LAZ chunks hold fewer points than the header announces");
+        if (laz_->read(out, n) != n) throw Error(path_, "LAZ chunks hold fewer points than the header announces");
     } else {
-        in_.read(buf.data(), static_cast<std::streamsize>(buf.size()));
-        if (static_cast<std::size_t>(in_.gcount()) != buf.size()) throw Error(path_, "truncated point records");
+        const auto bytes = static_cast<std::streamsize>(n * static_cast<std::size_t>(header_.point_record_length));
+        in_.read(out, bytes);
+        if (in_.gcount() != bytes) throw Error(path_, "truncated point records");
     }
     read_ += n;
     return n;

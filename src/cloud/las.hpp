@@ -94,6 +94,10 @@ public:
     /// (point_record_length bytes each, as stored in an uncompressed LAS,
     /// decoded for LAZ); returns how many (0 at the end).
     std::size_t read_records(std::vector<char>& records, std::size_t max_points);
+    /// The same into the caller's memory (room for max_points x
+    /// point_record_length bytes): a reused buffer costs no zero-filling,
+    /// page faults or copy.
+    std::size_t read_records(char* out, std::size_t max_points);
     uint64_t points_remaining() const { return total_ - read_; }
     /// Points worth reserving before reading the rest: points_remaining() for
     /// an uncompressed file (its size was checked against the count on open),
@@ -112,6 +116,8 @@ public:
 
 private:
     std::size_t read_chunk_unscreened(PointCloud& out, std::size_t max_points);
+    /// n records (n <= points_remaining()) into `out`.
+    std::size_t read_into(char* out, std::size_t n);
     std::string path_;
     std::ifstream in_;
     LasHeader header_;

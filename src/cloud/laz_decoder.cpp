@@ -1029,7 +1029,58 @@ public:
     /// the first point and on points where it changes, 0 otherwise (LASzip v3
     /// and laz-perf pass it only on change; the format depends on that).
     uint32_t context() const { return v4_ ? current_ : item_context_; }  // v4 always passes the channel
-    void read(uint8_t* item) {
+    /// What the other layers of a point need of its XY layer (see decode_layered's split).
+    struct Side {
+        uint8_t changed, channel, nr, k;
+    };
+    /// The item context of a point from its Side (as context()).
+    uint32_t context(const Side& s) const { return v4_ || (s.changed & (1 << 6)) ? s.channel : 0u; }
+    enum Mode {
+        kAll,   // every present layer; the whole record
+        kXY,    // the XY layer only: x and y written, the point's Side recorded
+        kRest,  // the other layers, the XY layer's part replayed from the Side: record bytes 8..29 written
+    };
+    void read(uint8_t* item) { read_mode<kAll>(item, nullptr); }
+    template <Mode M>
+    [[gnu::always_inline]] void read_mode(uint8_t* item, Side* side) {
+        uint32_t n, r, k;
+        Point14Context* c;
+        if constexpr (M == kRest) {
+            const Side sd = *side;
+            item_context_ = 0;
+            c = contexts_[current_].get();
+            if (sd.changed & (1 << 6)) {
+                const uint32_t channel = sd.channel;
+                if (!contexts_[channel]) contexts_[channel] = std::make_unique<Point14Context>(c->last);
+                current_ = channel;
+                item_context_ = channel;
+                c = contexts_[current_].get();
+                c->last.channel = channel;
+            }
+            changed_ = sd.changed;
+            n = sd.nr & 15u;
+            r = sd.nr >> 4;
+            k = sd.k;
+            c->last.number_of_returns = n;
+            c->last.return_number = r;
+        } else {
+            read_xy(c, n, r, k);
+            if constexpr (M == kXY) {
+                *side = {static_cast<uint8_t>(changed_), static_cast<uint8_t>(current_), static_cast<uint8_t>(n | (r << 4)),
+                         static_cast<uint8_t>(k)};
+                bytes::store<int32_t>(item, c->last.x);
+                bytes::store<int32_t>(item + 4, c->last.y);
+                c->last.gps_time_change = (changed_ & (1 << 4)) != 0;
+                return;
+            }
+        }
+        rest(c, n, r, k, item, M == kRest);
+    }
+
+private:
+    // The XY layer of a point: changed flags, scanner channel, returns, x, y;
+    // n, r and the z context's k for the other layers.
+    [[gnu::always_inline]] void read_xy(Point14Context*& c_out, uint32_t& n_out, uint32_t& r_out, uint32_t& k_out) {
         // A local copy of the XY layer's decoder (registers, see decode_fused).
         ArithDecoder xy = layers_[0].dec;
         item_context_ = 0;
@@ -1052,9 +1103,7 @@ public:
         }
         Point14& last = c->last;
         const uint32_t changed = changed_;
-        const bool source_change = changed & (1 << 5);
         const bool gps_change = changed & (1 << 4);
-        const bool angle_change = changed & (1 << 3);
         const uint32_t last_n = last.number_of_returns, last_r = last.return_number;
         uint32_t n = last_n;
         if (changed & (1 << 2)) {
@@ -1073,19 +1122,31 @@ public:
         }
         last.return_number = r;
         const uint32_t m = kReturnMap6[n][r];
-        const uint32_t l = return_level(n, r, 7);
-        const uint32_t cpr = (r == 1 ? 2u : 0u) + (r >= n ? 1u : 0u);
         const uint32_t mi = (m << 1) | (gps_change ? 1u : 0u);
         const int32_t dx = c->ic_dx.decompress(xy, c->median_x[mi].get(), n == 1);
         last.x = static_cast<int32_t>(static_cast<uint32_t>(last.x) + static_cast<uint32_t>(dx));
         c->median_x[mi].add(dx);
-        uint32_t k = c->ic_dx.k();
-        const int32_t dy = c->ic_dy.decompress(xy, c->median_y[mi].get(), (n == 1) + (k < 20 ? (k & ~1u) : 20));
+        const uint32_t kx = c->ic_dx.k();
+        const int32_t dy = c->ic_dy.decompress(xy, c->median_y[mi].get(), (n == 1) + (kx < 20 ? (kx & ~1u) : 20));
         last.y = static_cast<int32_t>(static_cast<uint32_t>(last.y) + static_cast<uint32_t>(dy));
         c->median_y[mi].add(dy);
         layers_[0].dec = xy;
+        c_out = c;
+        n_out = n;
+        r_out = r;
+        k_out = (c->ic_dx.k() + c->ic_dy.k()) / 2;
+    }
+    // Layers 1-8 of a point (those present), then the record: all of it, or
+    // with `rest_only` bytes 8..29 (x and y are the XY pass's).
+    [[gnu::always_inline]] void rest(Point14Context* c, uint32_t n, uint32_t r, uint32_t k, uint8_t* item, bool rest_only) {
+        Point14& last = c->last;
+        const uint32_t changed = changed_;
+        const bool source_change = changed & (1 << 5);
+        const bool gps_change = changed & (1 << 4);
+        const bool angle_change = changed & (1 << 3);
+        const uint32_t l = return_level(n, r, 7);
+        const uint32_t cpr = (r == 1 ? 2u : 0u) + (r >= n ? 1u : 0u);
         if (layers_[1].present) {
-            k = (c->ic_dx.k() + c->ic_dy.k()) / 2;
             last.z = c->ic_z.decompress(layers_[1].dec, c->last_z[l], (n == 1) + (k < 18 ? (k & ~1u) : 18));
             c->last_z[l] = last.z;
         }
@@ -1115,11 +1176,16 @@ public:
             c->gps.read(layers_[8].dec);
             last.gps_time = c->gps.time[c->gps.last];
         }
-        last.pack(item);
+        if (rest_only) {
+            uint8_t rec[30];
+            last.pack(rec);
+            std::memcpy(item + 8, rec + 8, 22);
+        } else {
+            last.pack(item);
+        }
         last.gps_time_change = gps_change;
     }
 
-private:
     std::array<Layer, kLayers>& layers_;
     bool v4_;
     std::array<std::unique_ptr<Point14Context>, 4> contexts_;
@@ -1273,8 +1339,10 @@ std::size_t layer_count(const LazItem& it) {
 }
 
 // layers: 0 every layer, 1 the PointCloud fields, 2 the XY layer only.
+// `split` (layers 0 and 1): the XY layer first, then the other layers as
+// parallel tasks (see below); the same bytes.
 std::size_t decode_layered(const LazInfo& info, int rl, const uint8_t* data, std::size_t size, uint64_t count, char* out_chars,
-                           int layers_wanted) {
+                           int layers_wanted, bool split = false) {
     const bool point_fields_only = layers_wanted == 1, xy_only = layers_wanted == 2;
     if (count == 0) return 0;
     auto* out = reinterpret_cast<uint8_t*>(out_chars);
@@ -1350,6 +1418,49 @@ std::size_t decode_layered(const LazInfo& info, int rl, const uint8_t* data, std
         // the scanner channel) are exact, every other field is stale.
         for (uint64_t i = 1; i < count; ++i) point.read(out + i * rl);
         return pos;
+    }
+    if (split && count > 1) {
+        // Every layer but the XY layer depends only on the XY layer (its
+        // changed flags, returns, scanner channel, z context): decode that
+        // first, keeping per point what the others need (a Side), then the
+        // POINT14 layers 1-8 and each further item as tasks that other
+        // threads may take (a chunk then need not keep one core busy while the
+        // other idles). Each task writes its own bytes of the records. A
+        // corrupt chunk is decoded again in one piece, so that its error is
+        // the same as without the split.
+        try {
+            std::array<Layer, Point14V3::kLayers> xy_layers;
+            xy_layers[0] = point_layers[0];
+            std::vector<Point14V3::Side> side(count);
+            {
+                Point14V3 xy(out, xy_layers, v4);
+                for (uint64_t i = 1; i < count; ++i) xy.read_mode<Point14V3::kXY>(out + i * rl, &side[i]);
+            }
+            std::vector<char> failed(slots.size(), 0);
+            tbb::parallel_for(
+                tbb::blocked_range<std::size_t>(0, slots.size(), 1),
+                [&](const tbb::blocked_range<std::size_t>& range) {
+                    for (std::size_t t = range.begin(); t != range.end(); ++t) {
+                        const Slot& sl = slots[t];
+                        try {
+                            for (uint64_t i = 1; i < count; ++i) {
+                                uint8_t* rec = out + i * rl + sl.offset;
+                                if (sl.kind == 0) point.read_mode<Point14V3::kRest>(rec, &side[i]);
+                                else if (sl.kind == 1) rgbs[sl.index]->read(rec, point.context(side[i]));
+                                else if (sl.kind == 2) bytes[sl.index]->read(rec, point.context(side[i]));
+                                else waves[sl.index]->read(rec, point.context(side[i]));
+                            }
+                        } catch (...) {
+                            failed[t] = 1;
+                        }
+                    }
+                },
+                tbb::simple_partitioner());
+            if (std::find(failed.begin(), failed.end(), 1) == failed.end()) return pos;
+        } catch (const Corrupt&) {
+        }
+        decode_layered(info, rl, data, size, count, out_chars, layers_wanted, false);
+        throw Corrupt{"layers disagree (corrupt chunk)"};  // not reached: the one-piece decode throws
     }
     for (uint64_t i = 1; i < count; ++i) {
         uint8_t* rec = out + i * rl;
@@ -1465,9 +1576,10 @@ void check_laz_supported(const LazInfo& info, int point_format, int record_lengt
 }
 
 std::size_t decode_laz_chunk(const LazInfo& info, int record_length, const uint8_t* data, std::size_t size, uint64_t count,
-                             char* out, const std::string& path, std::size_t chunk_index, bool point_fields_only) {
+                             char* out, const std::string& path, std::size_t chunk_index, bool point_fields_only, bool split_layers) {
     try {
-        if (info.compressor == 3) return decode_layered(info, record_length, data, size, count, out, point_fields_only ? 1 : 0);
+        if (info.compressor == 3)
+            return decode_layered(info, record_length, data, size, count, out, point_fields_only ? 1 : 0, split_layers);
         return decode_pointwise(info, record_length, data, size, count, out);
     } catch (const Corrupt& c) {
         throw Error(path, "chunk " + std::to_string(chunk_index) + ": " + c.what);
@@ -1584,6 +1696,14 @@ LazPointSource::LazPointSource(const std::string& path, const LazInfo& info, uin
 
 LazPointSource::~LazPointSource() = default;
 
+bool LazPointSource::split_layers(const LazChunk& c) const {
+    // Layered chunks of some size hand their layers after the XY layer to
+    // idle threads (a file of 2 chunks then keeps 2 cores busy to its end);
+    // it costs about nothing when every thread has a chunk of its own, and
+    // the bytes are the same either way.
+    return info_.compressor == 3 && c.point_count >= 4096;
+}
+
 void LazPointSource::select_chunks(const std::vector<bool>& keep) {
     order_.clear();
     selected_points_ = 0;
@@ -1643,7 +1763,7 @@ void LazPointSource::fill() {
     tbb::parallel_for(std::size_t(0), end - next_, [&](std::size_t k) {
         const LazChunk& c = chunks_[order_[base + k]];
         decode_laz_chunk(info_, record_length_, raw[k].data(), raw[k].size(), c.point_count, decoded_[k].data(), path_, order_[base + k],
-                         point_fields_only_);
+                         point_fields_only_, split_layers(c));
     });
     next_ = end;
 }
@@ -1722,7 +1842,7 @@ std::size_t LazPointSource::decode_direct(char* out, std::size_t max_points) {
         for (std::size_t k = r.begin(); k < r.end(); ++k) {
             const LazChunk& c = chunks_[order_[base + k]];
             decode_laz_chunk(info_, record_length_, raw[k].data(), raw[k].size(), c.point_count, out + first[k] * rl, path_,
-                             order_[base + k], point_fields_only_);
+                             order_[base + k], point_fields_only_, split_layers(c));
         }
     });
     next_ = end;

@@ -63,9 +63,13 @@ struct LazChunk {
 /// never reads outside `data` or writes outside `out`. With
 /// `point_fields_only`, layered chunks skip the layers a PointCloud does not
 /// use (flags, scan angle, user data, point source, NIR, extra bytes): those
-/// bytes of the records then hold the chunk's first value.
+/// bytes of the records then hold the chunk's first value. With
+/// `split_layers`, a layered chunk decodes its XY layer first and then its
+/// other layers as TBB tasks that idle threads may take (for batches with
+/// fewer chunks than threads can share); the same bytes either way.
 std::size_t decode_laz_chunk(const LazInfo& info, int record_length, const uint8_t* data, std::size_t size, uint64_t count,
-                             char* out, const std::string& path, std::size_t chunk_index, bool point_fields_only = false);
+                             char* out, const std::string& path, std::size_t chunk_index, bool point_fields_only = false,
+                             bool split_layers = false);
 
 /// Decodes only the XY layer of a layered (compressor 3) chunk: the records'
 /// X and Y (and return numbers, scanner channel) are exact, every other field
@@ -122,6 +126,8 @@ private:
     std::size_t decode_direct(char* out, std::size_t max_points);
     /// Reads chunk `chunk`'s compressed bytes (chunk table known) into `raw`.
     void read_raw(std::size_t chunk, std::vector<uint8_t>& raw);
+    /// Whether chunk `c` is decoded with split_layers (see decode_laz_chunk).
+    bool split_layers(const LazChunk& c) const;
     std::string path_;
     LazInfo info_;
     int record_length_;
