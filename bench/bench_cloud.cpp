@@ -14,6 +14,7 @@
 #include <filesystem>
 #include <string>
 #include <vector>
+#include <sys/resource.h>
 
 #include "cloud/cloud_filters.hpp"
 #include "cloud/las.hpp"
@@ -28,9 +29,24 @@ double cpu_now() {
     clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &ts);
     return double(ts.tv_sec) + 1e-9 * double(ts.tv_nsec);
 }
+// System CPU seconds and minor page faults of the process so far.
+struct SysUsage {
+    double sys_s = 0;
+    long faults = 0;
+};
+SysUsage sys_now() {
+    rusage u{};
+    getrusage(RUSAGE_SELF, &u);
+    return {double(u.ru_stime.tv_sec) + 1e-6 * double(u.ru_stime.tv_usec), u.ru_minflt};
+}
+SysUsage sys_start;
+// One line per step: wall and CPU seconds (user + system), points per second
+// of both, and of the CPU the system's share and the page faults (fresh
+// memory costs here).
 void report(const char* what, std::size_t n, double wall, double cpu) {
-    std::printf("%-22s %12zu points %8.3f s wall %8.3f s CPU %8.2f M points/s wall %8.2f M points/CPU s\n", what, n, wall, cpu,
-                double(n) / wall / 1e6, double(n) / cpu / 1e6);
+    const SysUsage s = sys_now();
+    std::printf("%-22s %12zu points %8.3f s wall %8.3f s CPU %8.2f M points/s wall %8.2f M points/CPU s  (sys %.2f s, %.2f M page faults)\n", what, n,
+                wall, cpu, double(n) / wall / 1e6, double(n) / cpu / 1e6, s.sys_s - sys_start.sys_s, double(s.faults - sys_start.faults) / 1e6);
 }
 uint64_t digest(const std::vector<uint8_t>& v) {
     uint64_t h = 1469598103934665603ull;
@@ -55,19 +71,20 @@ int main(int argc, char** argv) {
         path = (dir / "cloud.las").string();
     }
     double t = now(), c = cpu_now();
+    sys_start = sys_now();
     PointCloud cloud = read_las(path);
     report("read_las", cloud.size(), now() - t, cpu_now() - c);
-    t = now(), c = cpu_now();
+    t = now(), c = cpu_now(), sys_start = sys_now();
     canonical_order(cloud);  // as every command does before the filters
     report("canonical_order", cloud.size(), now() - t, cpu_now() - c);
-    t = now(), c = cpu_now();
+    t = now(), c = cpu_now(), sys_start = sys_now();
     const OutlierFilterResult out = filter_outliers(cloud, OutlierFilterOptions{});
     report("filter_outliers", cloud.size(), now() - t, cpu_now() - c);
     std::printf("  removed %zu statistical, %zu isolated (limit %.6f), keep digest %016llx\n", out.removed_statistical, out.removed_isolated,
                 out.limit, static_cast<unsigned long long>(digest(out.keep)));
     GroundFilterOptions go;
     go.trust_classification = false;
-    t = now(), c = cpu_now();
+    t = now(), c = cpu_now(), sys_start = sys_now();
     const GroundResult g = classify_ground(cloud, out.keep, go);
     report("classify_ground (SMRF)", cloud.size(), now() - t, cpu_now() - c);
     std::printf("  %zu ground points, ground digest %016llx\n", g.ground_points, static_cast<unsigned long long>(digest(g.is_ground)));

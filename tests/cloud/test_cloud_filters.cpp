@@ -109,16 +109,24 @@ TEST_CASE("Outlier filter on grid neighbourhoods flags exactly the points of a w
             one.z[0] += dz;
             c.append(one, 0);
         }
-        OutlierFilterOptions o;
-        const std::vector<uint8_t> oracle = kd_tree_outlier_keep(c, o);
-        const OutlierFilterResult r = filter_outliers(c, o);
-        std::size_t differ = 0, removed = 0;
-        for (std::size_t i = 0; i < c.size(); ++i) differ += r.keep[i] != oracle[i], removed += !r.keep[i];
-        CHECK(differ == 0);
-        CHECK(removed >= 3);
-        for (std::size_t i = c.size() - 3; i < c.size(); ++i) CHECK_FALSE(r.keep[i]);
-        tbb::global_control one_thread(tbb::global_control::max_allowed_parallelism, 1);
-        CHECK(filter_outliers(c, o).keep == r.keep);
+        // The defaults (k = 8 + the point: the compile-time path) and, on the
+        // smaller cloud, other counts (any k).
+        const bool small = c.size() < 300000;
+        for (const auto& [k_neighbours, isolated_min] : {std::pair{8, 2}, std::pair{5, 7}}) {
+            if (k_neighbours != 8 && !small) continue;
+            INFO("k " << k_neighbours << ", isolated min " << isolated_min);
+            OutlierFilterOptions o;
+            o.k_neighbours = k_neighbours, o.isolated_min_neighbours = isolated_min;
+            const std::vector<uint8_t> oracle = kd_tree_outlier_keep(c, o);
+            const OutlierFilterResult r = filter_outliers(c, o);
+            std::size_t differ = 0, removed = 0;
+            for (std::size_t i = 0; i < c.size(); ++i) differ += r.keep[i] != oracle[i], removed += !r.keep[i];
+            CHECK(differ == 0);
+            CHECK(removed >= 3);
+            for (std::size_t i = c.size() - 3; i < c.size(); ++i) CHECK_FALSE(r.keep[i]);
+            tbb::global_control one_thread(tbb::global_control::max_allowed_parallelism, 1);
+            CHECK(filter_outliers(c, o).keep == r.keep);
+        }
     }
 }
 
