@@ -1040,8 +1040,10 @@ public:
         kXY,    // the XY layer only: x and y written, the point's Side recorded
         kRest,  // the other layers, the XY layer's part replayed from the Side: record bytes 8..29 written
     };
+    /// Layers 1-8 as bits 1 << layer: which a kRest pass decodes.
+    static constexpr uint32_t kRestLayers = 0x1FE;
     void read(uint8_t* item) { read_mode<kAll>(item, nullptr); }
-    template <Mode M>
+    template <Mode M, uint32_t Layers = kRestLayers>
     [[gnu::always_inline]] void read_mode(uint8_t* item, Side* side) {
         uint32_t n, r, k;
         Point14Context* c;
@@ -1074,7 +1076,7 @@ public:
                 return;
             }
         }
-        rest(c, n, r, k, item, M == kRest);
+        rest<Layers>(c, n, r, k, item, M == kRest);
     }
 
 private:
@@ -1136,8 +1138,11 @@ private:
         r_out = r;
         k_out = (c->ic_dx.k() + c->ic_dy.k()) / 2;
     }
-    // Layers 1-8 of a point (those present), then the record: all of it, or
-    // with `rest_only` bytes 8..29 (x and y are the XY pass's).
+    // Layers 1-8 of a point (those present and in Layers), then the record:
+    // all of it, or with `rest_only` the bytes of those layers (Layers =
+    // kRestLayers: bytes 8..29; x and y are the XY pass's; the flags layer
+    // also writes the returns and the scanner channel).
+    template <uint32_t Layers>
     [[gnu::always_inline]] void rest(Point14Context* c, uint32_t n, uint32_t r, uint32_t k, uint8_t* item, bool rest_only) {
         Point14& last = c->last;
         const uint32_t changed = changed_;
@@ -1146,42 +1151,53 @@ private:
         const bool angle_change = changed & (1 << 3);
         const uint32_t l = return_level(n, r, 7);
         const uint32_t cpr = (r == 1 ? 2u : 0u) + (r >= n ? 1u : 0u);
-        if (layers_[1].present) {
+        if ((Layers & (1u << 1)) && layers_[1].present) {
             last.z = c->ic_z.decompress(layers_[1].dec, c->last_z[l], (n == 1) + (k < 18 ? (k & ~1u) : 18));
             c->last_z[l] = last.z;
         }
-        if (layers_[2].present) {
+        if ((Layers & (1u << 2)) && layers_[2].present) {
             const uint32_t ccc = ((last.classification & 0x1F) << 1) + (cpr == 3 ? 1u : 0u);
             last.classification = layers_[2].dec.decode_symbol(c->classification[ccc].get(256));
         }
-        if (layers_[3].present) {
+        if ((Layers & (1u << 3)) && layers_[3].present) {
             const uint32_t lf = (last.edge << 5) | (last.scan_dir << 4) | last.class_flags;
             const uint32_t f = layers_[3].dec.decode_symbol(c->flags[lf].get(64));
             last.edge = (f >> 5) & 1;
             last.scan_dir = (f >> 4) & 1;
             last.class_flags = f & 15;
         }
-        if (layers_[4].present) {
+        if ((Layers & (1u << 4)) && layers_[4].present) {
             const uint32_t ii = (cpr << 1) | (gps_change ? 1u : 0u);
             const auto v = static_cast<uint16_t>(c->ic_intensity.decompress(layers_[4].dec, c->last_intensity[ii], cpr));
             c->last_intensity[ii] = v;
             last.intensity = v;
         }
-        if (layers_[5].present && angle_change)
+        if ((Layers & (1u << 5)) && layers_[5].present && angle_change)
             last.scan_angle = static_cast<int16_t>(c->ic_scan_angle.decompress(layers_[5].dec, last.scan_angle, gps_change ? 1 : 0));
-        if (layers_[6].present) last.user_data = layers_[6].dec.decode_symbol(c->user_data[last.user_data / 4].get(256));
-        if (layers_[7].present && source_change)
+        if ((Layers & (1u << 6)) && layers_[6].present) last.user_data = layers_[6].dec.decode_symbol(c->user_data[last.user_data / 4].get(256));
+        if ((Layers & (1u << 7)) && layers_[7].present && source_change)
             last.point_source = static_cast<uint16_t>(c->ic_point_source.decompress(layers_[7].dec, last.point_source));
-        if (layers_[8].present && gps_change) {
+        if ((Layers & (1u << 8)) && layers_[8].present && gps_change) {
             c->gps.read(layers_[8].dec);
             last.gps_time = c->gps.time[c->gps.last];
         }
-        if (rest_only) {
+        if (!rest_only) {
+            last.pack(item);
+        } else if constexpr (Layers == kRestLayers) {
             uint8_t rec[30];
             last.pack(rec);
             std::memcpy(item + 8, rec + 8, 22);
         } else {
-            last.pack(item);
+            uint8_t rec[30];
+            last.pack(rec);
+            if (Layers & (1u << 1)) std::memcpy(item + 8, rec + 8, 4);    // z
+            if (Layers & (1u << 4)) std::memcpy(item + 12, rec + 12, 2);  // intensity
+            if (Layers & (1u << 3)) std::memcpy(item + 14, rec + 14, 2);  // returns, flags, channel
+            if (Layers & (1u << 2)) item[16] = rec[16];                   // classification
+            if (Layers & (1u << 6)) item[17] = rec[17];                   // user data
+            if (Layers & (1u << 5)) std::memcpy(item + 18, rec + 18, 2);  // scan angle
+            if (Layers & (1u << 7)) std::memcpy(item + 20, rec + 20, 2);  // point source
+            if (Layers & (1u << 8)) std::memcpy(item + 22, rec + 22, 8);  // gps time
         }
         last.gps_time_change = gps_change;
     }
@@ -1436,17 +1452,52 @@ std::size_t decode_layered(const LazInfo& info, int rl, const uint8_t* data, std
                 Point14V3 xy(out, xy_layers, v4);
                 for (uint64_t i = 1; i < count; ++i) xy.read_mode<Point14V3::kXY>(out + i * rl, &side[i]);
             }
-            std::vector<char> failed(slots.size(), 0);
+            // POINT14's layers 1-8 in four groups of about equal work, each
+            // with its own predictor state (the groups' layers are disjoint),
+            // then one task per further item.
+            constexpr uint32_t kGroups[4] = {1u << 1, (1u << 2) | (1u << 3) | (1u << 6), (1u << 4) | (1u << 5) | (1u << 7), 1u << 8};
+            struct Task {
+                const Slot* slot;
+                std::unique_ptr<Point14V3> point;  // kind 0: this group's own
+                int group;
+            };
+            std::vector<Task> tasks;
+            for (const Slot& sl : slots) {
+                if (sl.kind != 0) {
+                    tasks.push_back({&sl, nullptr, 0});
+                    continue;
+                }
+                for (int g = 0; g < 4; ++g) {
+                    bool any = false;
+                    for (int L = 1; L <= 8; ++L) any |= ((kGroups[g] >> L) & 1u) && point_layers[L].present;
+                    // Group 1 writes the returns and the scanner channel, whatever its layers.
+                    if (any || g == 1) tasks.push_back({&sl, std::make_unique<Point14V3>(out, point_layers, v4), g});
+                }
+            }
+            std::vector<char> failed(tasks.size(), 0);
             tbb::parallel_for(
-                tbb::blocked_range<std::size_t>(0, slots.size(), 1),
+                tbb::blocked_range<std::size_t>(0, tasks.size(), 1),
                 [&](const tbb::blocked_range<std::size_t>& range) {
                     for (std::size_t t = range.begin(); t != range.end(); ++t) {
-                        const Slot& sl = slots[t];
+                        const Slot& sl = *tasks[t].slot;
+                        Point14V3* p = tasks[t].point.get();
+                        uint8_t* const base = out + sl.offset;
+                        auto rest = [&]<uint32_t G>() {
+                            for (uint64_t i = 1; i < count; ++i) p->read_mode<Point14V3::kRest, G>(base + i * rl, &side[i]);
+                        };
                         try {
+                            if (sl.kind == 0) {
+                                switch (tasks[t].group) {
+                                    case 0: rest.template operator()<kGroups[0]>(); break;
+                                    case 1: rest.template operator()<kGroups[1]>(); break;
+                                    case 2: rest.template operator()<kGroups[2]>(); break;
+                                    default: rest.template operator()<kGroups[3]>(); break;
+                                }
+                                continue;
+                            }
                             for (uint64_t i = 1; i < count; ++i) {
-                                uint8_t* rec = out + i * rl + sl.offset;
-                                if (sl.kind == 0) point.read_mode<Point14V3::kRest>(rec, &side[i]);
-                                else if (sl.kind == 1) rgbs[sl.index]->read(rec, point.context(side[i]));
+                                uint8_t* rec = base + i * rl;
+                                if (sl.kind == 1) rgbs[sl.index]->read(rec, point.context(side[i]));
                                 else if (sl.kind == 2) bytes[sl.index]->read(rec, point.context(side[i]));
                                 else waves[sl.index]->read(rec, point.context(side[i]));
                             }
