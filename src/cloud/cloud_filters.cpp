@@ -1,6 +1,7 @@
 #include "cloud/cloud_filters.hpp"
 
 #include <algorithm>
+#include <atomic>
 #include <cmath>
 #include <limits>
 #include <numeric>
@@ -438,58 +439,92 @@ void smrf_grid(const PointCloud& c, Kept&& kept, const GroundFilterOptions& o, G
     // Cells anchored at multiples of the cell size: every window of a cloud
     // uses the same cells, so its ground does not depend on where it starts.
     minx = std::floor(minx / o.cell) * o.cell, miny = std::floor(miny / o.cell) * o.cell;
-    // Peak bytes a cell: zmin, surface, dtm (double), object (uint8), the two
-    // nested openings (2 x 2 doubles) and fill_gaps (num, den, last value, last distance).
-    constexpr double kBytesPerCell = 8 + 8 + 8 + 1 + 32 + 28;
+    // Peak bytes a cell: during the openings zmin, surface, the eroded and the
+    // opened grid, the morphology's row pass (double) and object (uint8); the
+    // gap fills, the DTM and each cell's band take less.
+    constexpr double kBytesPerCell = 5 * 8 + 1;
     const GridSize size = checked_grid_size(minx, miny, maxx, maxy, o.cell, kBytesPerCell, "ground filter", 4e8);
     const int w = size.width, h = size.height;
-    std::vector<double> zmin(static_cast<std::size_t>(w) * h, INFINITY);
-    // Each kept point's cell, in parallel (w * h <= 4e8 fits 32 bits).
-    constexpr uint32_t kNoCell = std::numeric_limits<uint32_t>::max();
-    std::vector<uint32_t> cell_of(n);
-    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, 1u << 16), [&](const tbb::blocked_range<std::size_t>& r) {
-        for (std::size_t i = r.begin(); i != r.end(); ++i) {
-            if (!kept(i)) {
-                cell_of[i] = kNoCell;
-                continue;
+    const std::size_t cells = static_cast<std::size_t>(w) * h;
+    constexpr std::size_t kGrain = 1u << 16;
+    auto cell_x = [&](std::size_t i) { return std::min(w - 1, static_cast<int>((c.x[i] - minx) / o.cell)); };
+    auto cell_y = [&](std::size_t i) { return std::min(h - 1, static_cast<int>((c.y[i] - miny) / o.cell)); };
+    // Minimum z of each cell, in parallel (a minimum does not depend on the
+    // order points come in), on a column-major grid (points in canonical
+    // order, sorted by x, then walk it almost in order), turned row-major
+    // with NaN for empty cells.
+    std::vector<double> zmin(cells);
+    {
+        std::vector<double> by_column(cells, INFINITY);
+        tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, kGrain), [&](const tbb::blocked_range<std::size_t>& r) {
+            for (std::size_t i = r.begin(); i != r.end(); ++i) {
+                if (!kept(i)) continue;
+                const double z = c.z[i];
+                std::atomic_ref<double> cell(by_column[static_cast<std::size_t>(cell_x(i)) * h + cell_y(i)]);
+                double now = cell.load(std::memory_order_relaxed);
+                while (z < now && !cell.compare_exchange_weak(now, z, std::memory_order_relaxed)) {
+                }
             }
-            const int cx = std::min(w - 1, static_cast<int>((c.x[i] - minx) / o.cell));
-            const int cy = std::min(h - 1, static_cast<int>((c.y[i] - miny) / o.cell));
-            cell_of[i] = static_cast<uint32_t>(static_cast<std::size_t>(cy) * w + cx);
-        }
-    });
-    for (std::size_t i = 0; i < n; ++i)
-        if (cell_of[i] != kNoCell) zmin[cell_of[i]] = std::min(zmin[cell_of[i]], c.z[i]);
-    for (double& v : zmin)
-        if (!std::isfinite(v)) v = NAN;
+        });
+        tbb::parallel_for(tbb::blocked_range<int>(0, h, 64), [&](const tbb::blocked_range<int>& rows) {
+            for (int x0 = 0; x0 < w; x0 += 64)
+                for (int y = rows.begin(); y != rows.end(); ++y)
+                    for (int x = x0; x < std::min(w, x0 + 64); ++x) {
+                        const double v = by_column[static_cast<std::size_t>(x) * h + y];
+                        zmin[static_cast<std::size_t>(y) * w + x] = std::isfinite(v) ? v : NAN;
+                    }
+        });
+    }
     fill_gaps(zmin, w, h, gap_fill_reach_cells(o.cell));  // local: windows of a cloud agree
-    std::vector<uint8_t> object(zmin.size(), 0);
-    std::vector<double> surface = zmin;
+    // Buffers kept across the openings: no new memory (page faults) per window.
+    std::vector<uint8_t> object(cells, 0);
+    std::vector<double> surface = zmin, eroded, opened, scratch;
     const int max_r = std::max(1, static_cast<int>(std::ceil(o.window / o.cell)));
     for (int r = 1; r <= max_r; ++r) {
-        const std::vector<double> opened = morphology_square(morphology_square(surface, w, h, r, true), w, h, r, false);
+        morphology_square(surface, w, h, r, true, eroded, scratch);
+        morphology_square(eroded, w, h, r, false, opened, scratch);
         const double threshold = o.slope * r * o.cell;
-        for (std::size_t k = 0; k < surface.size(); ++k)
-            if (surface[k] - opened[k] > threshold) object[k] = 1;
-        surface = opened;
+        tbb::parallel_for(tbb::blocked_range<std::size_t>(0, cells, kGrain), [&](const tbb::blocked_range<std::size_t>& b) {
+            for (std::size_t k = b.begin(); k != b.end(); ++k)
+                if (surface[k] - opened[k] > threshold) object[k] = 1;
+        });
+        surface.swap(opened);
     }
+    std::vector<double>().swap(eroded), std::vector<double>().swap(opened), std::vector<double>().swap(scratch);
     // Provisional DTM: minimum surface at ground cells, object cells inpainted.
-    std::vector<double> dtm = zmin;
-    for (std::size_t k = 0; k < dtm.size(); ++k)
-        if (object[k]) dtm[k] = NAN;
+    std::vector<double> dtm = std::move(surface);
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, cells, kGrain), [&](const tbb::blocked_range<std::size_t>& b) {
+        for (std::size_t k = b.begin(); k != b.end(); ++k) dtm[k] = object[k] ? NAN : zmin[k];
+    });
+    std::vector<double>().swap(zmin), std::vector<uint8_t>().swap(object);
     fill_gaps(dtm, w, h, gap_fill_reach_cells(o.cell));
-    // Local slope of the DTM scales the threshold (steep terrain tolerates more).
+    // Each cell's DTM height and how far from it a ground point may lie: the
+    // threshold scaled by the DTM's local slope (steep terrain tolerates
+    // more). Column-major, as the minimum z above.
+    struct Band {
+        double z, tolerance;
+    };
+    std::vector<Band> band(cells);
+    tbb::parallel_for(tbb::blocked_range<int>(0, w, 64), [&](const tbb::blocked_range<int>& columns) {
+        for (int y = 0; y < h; ++y) {
+            const double* row = dtm.data() + static_cast<std::size_t>(y) * w;
+            const double* up = dtm.data() + static_cast<std::size_t>(std::min(h - 1, y + 1)) * w;
+            const double* down = dtm.data() + static_cast<std::size_t>(std::max(0, y - 1)) * w;
+            for (int x = columns.begin(); x != columns.end(); ++x) {
+                const double gx = (row[std::min(w - 1, x + 1)] - row[std::max(0, x - 1)]) / (2 * o.cell);
+                const double gy = (up[x] - down[x]) / (2 * o.cell);
+                band[static_cast<std::size_t>(x) * h + y] = {row[x], o.elevation_threshold + o.elevation_scalar * std::sqrt(gx * gx + gy * gy)};
+            }
+        }
+    });
+    std::vector<double>().swap(dtm);
     g.ground_points += tbb::parallel_reduce(
-        tbb::blocked_range<std::size_t>(0, n, 1u << 16), std::size_t(0),
+        tbb::blocked_range<std::size_t>(0, n, kGrain), std::size_t(0),
         [&](const tbb::blocked_range<std::size_t>& r, std::size_t ground) {
             for (std::size_t i = r.begin(); i != r.end(); ++i) {
-                if (cell_of[i] == kNoCell) continue;
-                const std::size_t k = cell_of[i];
-                const int x = static_cast<int>(k % static_cast<std::size_t>(w)), y = static_cast<int>(k / static_cast<std::size_t>(w));
-                const double gx = (dtm[static_cast<std::size_t>(y) * w + std::min(w - 1, x + 1)] - dtm[static_cast<std::size_t>(y) * w + std::max(0, x - 1)]) / (2 * o.cell);
-                const double gy = (dtm[static_cast<std::size_t>(std::min(h - 1, y + 1)) * w + x] - dtm[static_cast<std::size_t>(std::max(0, y - 1)) * w + x]) / (2 * o.cell);
-                const double threshold = o.elevation_threshold + o.elevation_scalar * std::sqrt(gx * gx + gy * gy);
-                if (std::isfinite(dtm[k]) && std::abs(c.z[i] - dtm[k]) <= threshold) g.is_ground[i] = 1, ++ground;
+                if (!kept(i)) continue;
+                const Band& b = band[static_cast<std::size_t>(cell_x(i)) * h + cell_y(i)];
+                if (std::isfinite(b.z) && std::abs(c.z[i] - b.z) <= b.tolerance) g.is_ground[i] = 1, ++ground;
             }
             return ground;
         },

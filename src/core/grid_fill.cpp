@@ -4,6 +4,8 @@
 #include <array>
 #include <cmath>
 #include <cstdint>
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
 
 namespace cityforge {
 
@@ -15,42 +17,63 @@ namespace cityforge {
 // gap's extent; with a reach, farther than the reach (unless no valid cell lies
 // within it on any ray): what tiled processing needs.
 namespace {
-// One pass of the 8 directional sweeps: adds 1/d^2-weighted values of the nearest
-// valid cell along each ray (within `limit` cells when > 0) to num/den.
+// The 8 directional sweeps: adds 1/d^2-weighted values of the nearest valid
+// cell along each ray (within `limit` cells when > 0) to num/den, direction
+// by direction in a fixed order. With a limit, a cell's nearest valid cell on
+// a ray lies at most `limit` rows back, so strips of rows are swept in
+// parallel, each starting `limit` rows before its first row (the same values
+// as one sweep over the whole grid, whatever the thread count); without a
+// limit the grid is one strip.
 void sweep(const std::vector<double>& g, int w, int h, int limit, std::vector<double>& num, std::vector<double>& den) {
-    const std::size_t cells = static_cast<std::size_t>(w) * h;
     static const std::array<std::array<int, 2>, 8> dirs{{{1, 0}, {-1, 0}, {0, 1}, {0, -1}, {1, 1}, {-1, -1}, {1, -1}, {-1, 1}}};
-    // Last valid value and its position seen when walking against the direction.
-    std::vector<double> last_v(cells);
-    std::vector<int32_t> last_d(cells);
-    for (const auto& d : dirs) {
-        const int dx = d[0], dy = d[1];
-        const double step = (dx && dy) ? std::sqrt(2.0) : 1.0;
-        // Visit cells so that (x - dx, y - dy) comes before (x, y).
-        const int y0 = dy >= 0 ? 0 : h - 1, y1 = dy >= 0 ? h : -1, ys = dy >= 0 ? 1 : -1;
-        const int x0 = dx >= 0 ? 0 : w - 1, x1 = dx >= 0 ? w : -1, xs = dx >= 0 ? 1 : -1;
-        for (int y = y0; y != y1; y += ys)
-            for (int x = x0; x != x1; x += xs) {
-                const std::size_t k = static_cast<std::size_t>(y) * w + x;
-                if (!std::isnan(g[k])) {
-                    last_v[k] = g[k], last_d[k] = 0;
-                    continue;
+    const int strip = limit > 0 ? std::max(256, 4 * limit) : h;
+    const int strips = (h + strip - 1) / strip;
+    tbb::parallel_for(tbb::blocked_range<int>(0, strips, 1), [&](const tbb::blocked_range<int>& range) {
+        // Last valid value and its distance (cells; -1 = none within reach)
+        // seen when walking against the direction: the previous row's and
+        // this row's.
+        std::vector<double> prev_v(static_cast<std::size_t>(w)), cur_v(static_cast<std::size_t>(w));
+        std::vector<int32_t> prev_d(static_cast<std::size_t>(w)), cur_d(static_cast<std::size_t>(w));
+        for (int s = range.begin(); s != range.end(); ++s) {
+            const int ya = s * strip, yb = std::min(h, ya + strip);  // rows of this strip
+            for (const auto& d : dirs) {
+                const int dx = d[0], dy = d[1];
+                const double step = (dx && dy) ? std::sqrt(2.0) : 1.0;
+                // Visit cells so that (x - dx, y - dy) comes before (x, y),
+                // starting `limit` rows before the strip along the ray.
+                const int y_first = dy == 0 ? ya : dy > 0 ? std::max(0, ya - limit) : std::min(h, yb + limit) - 1;
+                const int y_end = dy >= 0 ? yb : ya - 1, ys = dy >= 0 ? 1 : -1;
+                const int x0 = dx >= 0 ? 0 : w - 1, x1 = dx >= 0 ? w : -1, xs = dx >= 0 ? 1 : -1;
+                for (int y = y_first; y != y_end; y += ys) {
+                    const bool first_row = y == y_first;  // the row before counts as outside the grid
+                    const bool accumulate = y >= ya && y < yb;
+                    const double* row = g.data() + static_cast<std::size_t>(y) * w;
+                    for (int x = x0; x != x1; x += xs) {
+                        if (!std::isnan(row[x])) {
+                            cur_v[x] = row[x], cur_d[x] = 0;
+                            continue;
+                        }
+                        const int px = x - dx;
+                        if (px < 0 || px >= w || (dy != 0 && first_row)) {
+                            cur_d[x] = -1;
+                            continue;
+                        }
+                        const int32_t pd = dy != 0 ? prev_d[px] : cur_d[px];
+                        if (pd < 0 || (limit > 0 && pd + 1 > limit)) {
+                            cur_d[x] = -1;
+                            continue;
+                        }
+                        cur_d[x] = pd + 1, cur_v[x] = dy != 0 ? prev_v[px] : cur_v[px];
+                        if (!accumulate) continue;
+                        const std::size_t k = static_cast<std::size_t>(y) * w + x;
+                        const double dist = cur_d[x] * step, wgt = 1.0 / (dist * dist);
+                        num[k] += wgt * cur_v[x], den[k] += wgt;
+                    }
+                    prev_v.swap(cur_v), prev_d.swap(cur_d);
                 }
-                const int px = x - dx, py = y - dy;
-                if (px < 0 || py < 0 || px >= w || py >= h) {
-                    last_d[k] = -1;
-                    continue;
-                }
-                const std::size_t pk = static_cast<std::size_t>(py) * w + px;
-                if (last_d[pk] < 0 || (limit > 0 && last_d[pk] + 1 > limit)) {
-                    last_d[k] = -1;
-                    continue;
-                }
-                last_d[k] = last_d[pk] + 1, last_v[k] = last_v[pk];
-                const double dist = last_d[k] * step, wgt = 1.0 / (dist * dist);
-                num[k] += wgt * last_v[k], den[k] += wgt;
             }
-    }
+        }
+    });
 }
 }  // namespace
 
@@ -80,8 +103,10 @@ void fill_gaps(std::vector<double>& g, int w, int h, int max_ray_cells) {
         }
     }
     const double mean = sum / double(n_valid);
-    for (std::size_t k = 0; k < cells; ++k)
-        if (std::isnan(g[k])) g[k] = den[k] > 0 ? num[k] / den[k] : mean;  // enclosed on all 8 rays: the mean ground
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, cells, 1u << 16), [&](const tbb::blocked_range<std::size_t>& r) {
+        for (std::size_t k = r.begin(); k != r.end(); ++k)
+            if (std::isnan(g[k])) g[k] = den[k] > 0 ? num[k] / den[k] : mean;  // enclosed on all 8 rays: the mean ground
+    });
 }
 
 }  // namespace cityforge

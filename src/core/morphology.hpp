@@ -15,14 +15,22 @@
 namespace cityforge {
 
 /// Erodes (`erode` = true) or dilates a row-major w x h grid with a square of
-/// radius r. Cells outside the grid take `outside` when given; otherwise the
-/// window is clipped to the grid (edge cells are not penalised). A NaN cell
-/// stays NaN; NaN cells around a valid one are ignored. O(1) per cell
-/// whatever r (van Herk / Gil-Werman running extrema), rows and column strips
-/// in parallel; the result does not depend on the thread count.
+/// radius r (cells) into `out` (resized to w * h; not `in`), using `scratch`
+/// (resized to w * h) for the pass along rows: a caller that keeps both
+/// buffers across calls pays no new memory (page faults) for them. Cells
+/// outside the grid take `outside` when given; otherwise the window is clipped
+/// to the grid (edge cells are not penalised). A NaN cell stays NaN; NaN cells
+/// around a valid one are ignored. O(1) per cell whatever r (van Herk /
+/// Gil-Werman running extrema, streamed block by block so each strip's
+/// extrema stay in cache), rows and column strips in parallel; the result does
+/// not depend on the thread count.
 template <typename T>
-std::vector<T> morphology_square(const std::vector<T>& in, int w, int h, int r, bool erode, std::optional<T> outside = std::nullopt) {
-    if (r <= 0 || w <= 0 || h <= 0) return in;
+void morphology_square(const std::vector<T>& in, int w, int h, int r, bool erode, std::vector<T>& out, std::vector<T>& scratch,
+                       std::optional<T> outside = std::nullopt) {
+    if (r <= 0 || w <= 0 || h <= 0) {
+        out = in;
+        return;
+    }
     auto pick = [erode](T a, T b) { return erode ? std::min(a, b) : std::max(a, b); };
     auto is_nan = [](T v) {
         if constexpr (std::is_floating_point_v<T>) return std::isnan(v);
@@ -34,38 +42,54 @@ std::vector<T> morphology_square(const std::vector<T>& in, int w, int h, int r, 
     else identity = erode ? std::numeric_limits<T>::max() : std::numeric_limits<T>::lowest();
     const T pad = outside && !is_nan(*outside) ? *outside : identity;
     const std::size_t win = 2 * static_cast<std::size_t>(r) + 1;
-    // Running extrema over blocks of `win` lines of `lanes` values each: g from
-    // each block's start, hh from its end; the window starting at line i is
-    // pick(hh[i], g[i + win - 1]). `line(j, v)` loads padded line j into v.
-    auto run = [&](std::size_t lines, std::size_t lanes, auto&& line, std::vector<T>& g, std::vector<T>& hh) {
-        const std::size_t padded = lines + win - 1;
-        g.resize(padded * lanes), hh.resize(padded * lanes);
-        for (std::size_t j = 0; j < padded; ++j) line(j, &g[j * lanes]);
-        std::copy(g.begin(), g.end(), hh.begin());
-        for (std::size_t b = 0; b < padded; b += win) {
-            const std::size_t e = std::min(padded, b + win);
-            for (std::size_t j = b + 1; j < e; ++j)
+    // Running extrema along `lines` output lines of `lanes` values each, over
+    // the padded lines 0 .. lines + win - 2 cut into blocks of `win`: g from
+    // each block's start, hh from its end; output line y (the window of padded
+    // lines y .. y + win - 1) is pick(hh[y], g[y + win - 1]), which lie in the
+    // same or adjacent blocks, so two blocks are held at a time.
+    // `line(j, v)` loads padded line j into v; `emit(y, hh_y, g_y)` gets the
+    // two halves of output line y.
+    auto run = [&](std::size_t lines, std::size_t lanes, auto&& line, auto&& emit, std::vector<T>& buf) {
+        const std::size_t padded = lines + win - 1, block = win * lanes;
+        buf.resize(4 * block);
+        for (std::size_t b = 0, k = 0; b < padded; b += win, ++k) {
+            T* g = buf.data() + (k & 1) * block;
+            T* hh = buf.data() + (2 + (k & 1)) * block;
+            const T* hh_before = buf.data() + (2 + ((k + 1) & 1)) * block;  // the previous block's
+            const std::size_t len = std::min(padded, b + win) - b;
+            for (std::size_t j = 0; j < len; ++j) line(b + j, g + j * lanes);
+            std::copy(g, g + len * lanes, hh);
+            for (std::size_t j = 1; j < len; ++j)
                 for (std::size_t l = 0; l < lanes; ++l) g[j * lanes + l] = pick(g[(j - 1) * lanes + l], g[j * lanes + l]);
-            for (std::size_t j = e - 1; j-- > b;)
+            for (std::size_t j = len - 1; j-- > 0;)
                 for (std::size_t l = 0; l < lanes; ++l) hh[j * lanes + l] = pick(hh[j * lanes + l], hh[(j + 1) * lanes + l]);
+            // Output lines whose window ends in this block: y + win - 1 in [b, b + len).
+            const std::size_t y0 = b + 1 >= win ? b + 1 - win : 0, y1 = std::min(lines, b + len + 1 - std::min(win, b + len + 1));
+            for (std::size_t y = y0; y < y1; ++y) {
+                const T* hy = y >= b ? hh + (y - b) * lanes : hh_before + (y + win - b) * lanes;
+                emit(y, hy, g + (y + win - 1 - b) * lanes);
+            }
         }
     };
     const auto W = static_cast<std::size_t>(w), H = static_cast<std::size_t>(h), R = static_cast<std::size_t>(r);
-    std::vector<T> tmp(in.size()), out(in.size());
+    scratch.resize(in.size()), out.resize(in.size());
+    T* tmp = scratch.data();
+    T* dst = out.data();
     // Rows: each row is one line of single values.
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, H, 16), [&](const tbb::blocked_range<std::size_t>& rows) {
-        std::vector<T> g, hh;
+        std::vector<T> buf;
         for (std::size_t y = rows.begin(); y != rows.end(); ++y) {
             const T* src = in.data() + y * W;
-            run(W, 1, [&](std::size_t j, T* v) { *v = j < R || j >= W + R ? pad : is_nan(src[j - R]) ? identity : src[j - R]; }, g, hh);
-            for (std::size_t x = 0; x < W; ++x) tmp[y * W + x] = is_nan(src[x]) ? src[x] : pick(hh[x], g[x + win - 1]);
+            T* row = tmp + y * W;
+            run(W, 1, [&](std::size_t j, T* v) { *v = j < R || j >= W + R ? pad : is_nan(src[j - R]) ? identity : src[j - R]; },
+                [&](std::size_t x, const T* hy, const T* gy) { row[x] = is_nan(src[x]) ? src[x] : pick(*hy, *gy); }, buf);
         }
     });
     // Columns: strips of up to 256 columns, each padded row of the strip a line
     // (2 kB read per row and page: 16 columns measured 1.5 x slower).
     constexpr std::size_t kStrip = 256;
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, (W + kStrip - 1) / kStrip, 1), [&](const tbb::blocked_range<std::size_t>& strips) {
-        std::vector<T> g, hh;
+        std::vector<T> buf;
         for (std::size_t s = strips.begin(); s != strips.end(); ++s) {
             const std::size_t x0 = s * kStrip, lanes = std::min(kStrip, W - x0);
             run(H, lanes, [&](std::size_t j, T* v) {
@@ -73,14 +97,20 @@ std::vector<T> morphology_square(const std::vector<T>& in, int w, int h, int r, 
                     const T t = j < R || j >= H + R ? pad : tmp[(j - R) * W + x0 + l];
                     v[l] = is_nan(t) ? identity : t;
                 }
-            }, g, hh);
-            for (std::size_t y = 0; y < H; ++y)
-                for (std::size_t l = 0; l < lanes; ++l) {
-                    const T c = tmp[y * W + x0 + l];
-                    out[y * W + x0 + l] = is_nan(c) ? c : pick(hh[y * lanes + l], g[(y + win - 1) * lanes + l]);
-                }
+            }, [&](std::size_t y, const T* hy, const T* gy) {
+                const T* c = tmp + y * W + x0;
+                T* o = dst + y * W + x0;
+                for (std::size_t l = 0; l < lanes; ++l) o[l] = is_nan(c[l]) ? c[l] : pick(hy[l], gy[l]);
+            }, buf);
         }
     });
+}
+
+/// morphology_square into a new grid (see above).
+template <typename T>
+std::vector<T> morphology_square(const std::vector<T>& in, int w, int h, int r, bool erode, std::optional<T> outside = std::nullopt) {
+    std::vector<T> out, scratch;
+    morphology_square(in, w, h, r, erode, out, scratch, outside);
     return out;
 }
 

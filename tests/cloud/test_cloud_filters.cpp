@@ -5,6 +5,7 @@
 #include "cloud/cloud_filters.hpp"
 #include "cloud/kd_tree.hpp"
 #include "cloud/las.hpp"
+#include "core/grid_fill.hpp"
 #include "core/morphology.hpp"
 #include "core/random.hpp"
 #include "synth/synth.hpp"
@@ -174,6 +175,7 @@ bool same_cells(const std::vector<double>& a, const std::vector<double>& b) {
 
 TEST_CASE("Square morphology (running extrema) equals the cell-by-cell window scan, NaN cells and grid edges included", "[cloud][ground][morphology]") {
     Rng rng(7);
+    std::vector<double> reused_out, reused_scratch;
     for (const auto& [w, h] : {std::pair{1, 1}, std::pair{1, 9}, std::pair{13, 1}, std::pair{37, 23}, std::pair{130, 71}, std::pair{530, 9}}) {  // 530: three column strips
         std::vector<double> grid(static_cast<std::size_t>(w) * h);
         std::vector<uint8_t> mask(grid.size());
@@ -186,10 +188,83 @@ TEST_CASE("Square morphology (running extrema) equals the cell-by-cell window sc
             for (const bool erode : {true, false}) {
                 INFO("w " << w << " h " << h << " r " << r << " erode " << erode);
                 CHECK(same_cells(morphology_square(grid, w, h, r, erode), naive_morphology<double>(grid, w, h, r, erode, std::nullopt)));
+                morphology_square(grid, w, h, r, erode, reused_out, reused_scratch);  // buffers of earlier calls (other sizes)
+                CHECK(same_cells(reused_out, naive_morphology<double>(grid, w, h, r, erode, std::nullopt)));
                 CHECK(same_cells(morphology_square(grid, w, h, r, erode, std::optional<double>(3.0)),
                                  naive_morphology<double>(grid, w, h, r, erode, 3.0)));
                 CHECK(morphology_square(mask, w, h, r, erode) == naive_morphology<uint8_t>(mask, w, h, r, erode, std::nullopt));
                 CHECK(morphology_square<uint8_t>(mask, w, h, r, erode, uint8_t(0)) == naive_morphology<uint8_t>(mask, w, h, r, erode, uint8_t(0)));
             }
+    }
+}
+
+namespace {
+// fill_gaps as it was: the 8 directional sweeps over the whole grid, one
+// after the other (the oracle for the sweeps by strips of rows).
+void naive_fill_gaps(std::vector<double>& g, int w, int h, int limit) {
+    const std::size_t cells = static_cast<std::size_t>(w) * h;
+    auto sweep = [&](int lim, std::vector<double>& num, std::vector<double>& den) {
+        const int dirs[8][2] = {{1, 0}, {-1, 0}, {0, 1}, {0, -1}, {1, 1}, {-1, -1}, {1, -1}, {-1, 1}};
+        std::vector<double> last_v(cells);
+        std::vector<int> last_d(cells);
+        for (const auto& d : dirs) {
+            const int dx = d[0], dy = d[1];
+            const double step = (dx && dy) ? std::sqrt(2.0) : 1.0;
+            for (int y = dy >= 0 ? 0 : h - 1; y != (dy >= 0 ? h : -1); y += dy >= 0 ? 1 : -1)
+                for (int x = dx >= 0 ? 0 : w - 1; x != (dx >= 0 ? w : -1); x += dx >= 0 ? 1 : -1) {
+                    const std::size_t k = static_cast<std::size_t>(y) * w + x;
+                    if (!std::isnan(g[k])) {
+                        last_v[k] = g[k], last_d[k] = 0;
+                        continue;
+                    }
+                    const int px = x - dx, py = y - dy;
+                    if (px < 0 || py < 0 || px >= w || py >= h) {
+                        last_d[k] = -1;
+                        continue;
+                    }
+                    const std::size_t pk = static_cast<std::size_t>(py) * w + px;
+                    if (last_d[pk] < 0 || (lim > 0 && last_d[pk] + 1 > lim)) {
+                        last_d[k] = -1;
+                        continue;
+                    }
+                    last_d[k] = last_d[pk] + 1, last_v[k] = last_v[pk];
+                    const double dist = last_d[k] * step, wgt = 1.0 / (dist * dist);
+                    num[k] += wgt * last_v[k], den[k] += wgt;
+                }
+        }
+    };
+    double sum = 0.0;
+    std::size_t valid = 0;
+    for (double v : g)
+        if (!std::isnan(v)) sum += v, ++valid;
+    if (valid == 0 || valid == cells) return;
+    std::vector<double> num(cells, 0.0), den(cells, 0.0), num_all(cells, 0.0), den_all(cells, 0.0);
+    sweep(limit, num, den);
+    sweep(0, num_all, den_all);
+    for (std::size_t k = 0; k < cells; ++k)
+        if (std::isnan(g[k]) && !(den[k] > 0)) num[k] = num_all[k], den[k] = den_all[k];
+    for (std::size_t k = 0; k < cells; ++k)
+        if (std::isnan(g[k])) g[k] = den[k] > 0 ? num[k] / den[k] : sum / double(valid);
+}
+}  // namespace
+
+TEST_CASE("Gap fill by strips of rows equals the sweeps over the whole grid, for any thread count", "[cloud][ground][fill]") {
+    Rng rng(11);
+    // 700 rows: several strips of 256 rows (and of 4 x the reach) with their lead-in rows.
+    for (const auto& [w, h] : {std::pair{1, 1}, std::pair{3, 700}, std::pair{90, 700}, std::pair{301, 1100}}) {
+        std::vector<double> grid(static_cast<std::size_t>(w) * h);
+        for (std::size_t i = 0; i < grid.size(); ++i) grid[i] = rng.uniform(0.0, 1.0) < 0.3 ? rng.uniform(-5.0, 5.0) : NAN;
+        for (int y = 100; y < std::min(h, 480); ++y)  // a large gap: rays beyond every reach
+            for (int x = 0; x < w; ++x) grid[static_cast<std::size_t>(y) * w + x] = NAN;
+        for (const int limit : {0, 2, 40, 90}) {
+            INFO("w " << w << " h " << h << " limit " << limit);
+            std::vector<double> expected = grid, filled = grid, one_thread = grid;
+            naive_fill_gaps(expected, w, h, limit);
+            fill_gaps(filled, w, h, limit);
+            CHECK(same_cells(filled, expected));
+            tbb::global_control one(tbb::global_control::max_allowed_parallelism, 1);
+            fill_gaps(one_thread, w, h, limit);
+            CHECK(same_cells(one_thread, expected));
+        }
     }
 }
