@@ -8,6 +8,7 @@
 #include "core/geometry.hpp"
 
 #include "cloud/cloud_reader.hpp"
+#include "cloud/surface_support.hpp"
 #include "core/error.hpp"
 #include "core/grid_size.hpp"
 #include "core/log.hpp"
@@ -24,7 +25,19 @@ void clean_prepared(PreparedCloud& p, const OutlierFilterOptions& outliers, cons
     OutlierFilterOptions oo = outliers;
     oo.isolated_radius /= unit;
     oo.max_mean_distance /= unit;
-    const OutlierFilterResult cleaned = filter_outliers(p.cloud, oo);
+    OutlierFilterResult cleaned = filter_outliers(p.cloud, oo);
+    if (outliers.enabled) {
+        // Sparse surfaces (dark roofs, low densities) back in: see surface_support.hpp.
+        SurfaceSupportOptions so;
+        so.min_support = std::max(so.min_support, oo.isolated_min_neighbours + 1);  // a restored point is never an isolated one
+        if (oo.isolated_radius > 0) so.radius = oo.isolated_radius;
+        else so.radius /= unit;
+        so.z_tolerance /= p.source_crs.z_unit_m;
+        so.max_slope *= unit / p.source_crs.z_unit_m;  // z units per horizontal unit
+        const std::size_t restored = restore_surface_points(p.cloud, cleaned.keep, so);
+        cleaned.removed_statistical -= restored;
+        p.restored_surface = restored;
+    }
     p.keep = cleaned.keep;
     p.removed_statistical = cleaned.removed_statistical;
     p.removed_isolated = cleaned.removed_isolated;

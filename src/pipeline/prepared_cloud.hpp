@@ -20,6 +20,9 @@ struct PreparedCloud {
     std::vector<uint8_t> is_ground;
     bool reprojected = false;
     std::size_t removed_statistical = 0, removed_isolated = 0, ground_points = 0;
+    /// Points the statistical test removed that continue a sparse surface and
+    /// were put back (restore_surface_points); not counted in removed_statistical.
+    std::size_t restored_surface = 0;
     bool ground_from_classification = false;
     double outlier_limit_m = 0.0;  ///< mean kNN distance limit the outlier filter used, metres
 };

@@ -742,7 +742,9 @@ Lod2Result reconstruct_lod2(const std::vector<Polygon>& footprint, const std::ve
         bool unused = false;
         Lod2Result r = reconstruct_once(footprint, roof_points, ground_z, fallback_roof_z, ao, unused);
         if (r.fallback) continue;
-        if (best.fallback || r.rmse_m < best.rmse_m) {
+        // Against a fallback too: a model farther from the points than the
+        // flat roof it would replace is no better than that roof.
+        if (r.rmse_m < best.rmse_m) {
             best = std::move(r);
             best.attempt = name;
         }
