@@ -156,6 +156,7 @@ int main(int argc, char** argv) try {
         fo.ortho = s.ortho_path;
         fo.cloud = s.cloud_path;
         fo.seams.enabled = num("seams", 0) != 0;  // terraces split at roof seams (opt-in)
+        fo.outliers.enabled = num("outliers", 1) != 0;
         const std::string out = dir + "/footprints.gpkg";
         const FootprintsReport fr = run_footprints(out, fo);
         FootprintAuditOptions ao;
@@ -166,8 +167,11 @@ int main(int argc, char** argv) try {
         // The worst matches: which truth buildings fail.
         std::vector<FootprintMatch> m = sc.matches;
         std::sort(m.begin(), m.end(), [](const FootprintMatch& a, const FootprintMatch& b) { return a.iou < b.iou; });
+        double bias = 0.0;
+        for (const FootprintMatch& x : m) bias += x.area_error_pct;
+        std::printf("  mean signed area error %+.2f %% over %zu matches\n", m.empty() ? 0.0 : bias / double(m.size()), m.size());
         std::printf("  worst:");
-        for (std::size_t k = 0; k < std::min<std::size_t>(6, m.size()); ++k)
+        for (std::size_t k = 0; k < std::min<std::size_t>(kv.count("worst") ? std::size_t(num("worst", 6)) : 6, m.size()); ++k)
             std::printf(" id %lld %s/%s IoU %.2f err %+.1f%%;", (long long)field(truth, m[k].reference, "id"), text(truth, m[k].reference, "shape").c_str(),
                         text(truth, m[k].reference, "roof_type").c_str(), m[k].iou, m[k].area_error_pct);
         std::printf("\n");

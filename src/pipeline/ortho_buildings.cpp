@@ -102,8 +102,11 @@ void refine_buildings_with_ortho(BuildingMask& mask, const BuildingCells& cells,
         Image<uint32_t> seg = crop_segments(b, colours, valid, ndsm, full_scale, segments, o, count, crop_colours);
         if (o.refine_passes > 0 && count > 0) refine_segment_boundaries(crop_colours, crop_colours.bands, seg, count, o.refine_passes);
         auto global = [&](int x, int y) { return static_cast<std::size_t>(b.y0 + y) * w + b.x0 + x; };
-        // Votes of the cells with their own evidence.
-        std::vector<uint32_t> seen(count + 1, 0), yes(count + 1, 0), size(count + 1, 0), green(count + 1, 0);
+        // Votes of the cells: a segment with cells of their own evidence is
+        // decided by all its cells, measured or inferred from their neighbours
+        // (a sparse roof -- dark, or at a few points per m2 -- has most cells
+        // inferred, and its measured cells may lie all along its edge).
+        std::vector<uint32_t> seen(count + 1, 0), votes(count + 1, 0), yes(count + 1, 0), size(count + 1, 0), green(count + 1, 0);
         std::vector<uint8_t> vetoed(count + 1, 0);
         for (int y = 0; y < ch; ++y)
             for (int x = 0; x < cw; ++x) {
@@ -112,7 +115,8 @@ void refine_buildings_with_ortho(BuildingMask& mask, const BuildingCells& cells,
                 const std::size_t k = global(x, y);
                 ++size[s];
                 if (!vegetation.empty()) green[s] += vegetation[k];
-                if (cells.evidence[k]) ++seen[s], yes[s] += cells.cells[k];
+                seen[s] += cells.evidence[k];
+                ++votes[s], yes[s] += cells.cells[k];
                 // A segment reaching the crop's edge (inside the grid) runs on
                 // beyond the building: ground, or roof merged with ground.
                 if ((x == 0 && b.x0 > 0) || (y == 0 && b.y0 > 0) || (x == cw - 1 && b.x1 < w - 1) || (y == ch - 1 && b.y1 < h - 1)) vetoed[s] = 1;
@@ -126,7 +130,7 @@ void refine_buildings_with_ortho(BuildingMask& mask, const BuildingCells& cells,
                 const std::size_t k = global(x, y);
                 if (!s || (old[k] && old[k] != l)) continue;  // never another building's cells
                 voted[static_cast<std::size_t>(y) * cw + x] =
-                    !vetoed[s] && (seen[s] ? static_cast<double>(yes[s]) >= o.min_segment_building_share * seen[s] : old[k] == l);
+                    !vetoed[s] && (seen[s] ? static_cast<double>(yes[s]) >= o.min_segment_building_share * votes[s] : old[k] == l);
             }
         if (cells.used_classes && o.cloud_edges) {
             // Outline pixels with evidence keep the classified cloud's decision.

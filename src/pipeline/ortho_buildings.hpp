@@ -18,7 +18,7 @@ struct OrthoRefineOptions {
     double segment_scale = 30.0;          ///< merging scale of each crop (cost < scale^2)
     int refine_passes = 2;                ///< boundary pixels moved to the closest-colour segment
     double ndsm_band_weight = 2.0;        ///< weight of the nDSM band (0..20 m -> 0..255)
-    double min_segment_building_share = 0.5;  ///< share of a segment's evidenced cells that must be building
+    double min_segment_building_share = 0.5;  ///< share of a segment's cells (measured or inferred) that must be building, when some are measured
     /// With a classified cloud rasterised on the ortho's own pixels, outline
     /// pixels keep the cloud's decision; off when the cloud cells are coarser.
     bool cloud_edges = true;
