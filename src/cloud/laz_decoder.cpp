@@ -1036,50 +1036,67 @@ public:
     /// The item context of a point from its Side (as context()).
     uint32_t context(const Side& s) const { return v4_ || (s.changed & (1 << 6)) ? s.channel : 0u; }
     enum Mode {
-        kAll,   // every present layer; the whole record
-        kXY,    // the XY layer only: x and y written, the point's Side recorded
-        kRest,  // the other layers, the XY layer's part replayed from the Side: record bytes 8..29 written
+        kAll,  // every present layer; the whole record
+        kXY,   // the XY layer only: x and y written, the point's Side recorded
     };
-    /// Layers 1-8 as bits 1 << layer: which a kRest pass decodes.
+    /// Layers 1-8 as bits 1 << layer (see rest_loop).
     static constexpr uint32_t kRestLayers = 0x1FE;
     void read(uint8_t* item) { read_mode<kAll>(item, nullptr); }
-    template <Mode M, uint32_t Layers = kRestLayers>
+    template <Mode M>
     [[gnu::always_inline]] void read_mode(uint8_t* item, Side* side) {
         uint32_t n, r, k;
         Point14Context* c;
-        if constexpr (M == kRest) {
-            const Side sd = *side;
-            item_context_ = 0;
-            c = contexts_[current_].get();
-            if (sd.changed & (1 << 6)) {
-                const uint32_t channel = sd.channel;
-                if (!contexts_[channel]) contexts_[channel] = std::make_unique<Point14Context>(c->last);
-                current_ = channel;
-                item_context_ = channel;
-                c = contexts_[current_].get();
-                c->last.channel = channel;
-            }
-            changed_ = sd.changed;
-            n = sd.nr & 15u;
-            r = sd.nr >> 4;
-            k = sd.k;
-            c->last.number_of_returns = n;
-            c->last.return_number = r;
-        } else {
-            read_xy(c, n, r, k);
-            if constexpr (M == kXY) {
-                *side = {static_cast<uint8_t>(changed_), static_cast<uint8_t>(current_), static_cast<uint8_t>(n | (r << 4)),
-                         static_cast<uint8_t>(k)};
-                bytes::store<int32_t>(item, c->last.x);
-                bytes::store<int32_t>(item + 4, c->last.y);
-                c->last.gps_time_change = (changed_ & (1 << 4)) != 0;
-                return;
-            }
+        read_xy(c, n, r, k);
+        if constexpr (M == kXY) {
+            *side = {static_cast<uint8_t>(changed_), static_cast<uint8_t>(current_), static_cast<uint8_t>(n | (r << 4)),
+                     static_cast<uint8_t>(k)};
+            bytes::store<int32_t>(item, c->last.x);
+            bytes::store<int32_t>(item + 4, c->last.y);
+            c->last.gps_time_change = (changed_ & (1 << 4)) != 0;
+            return;
         }
-        rest<Layers>(c, n, r, k, item, M == kRest);
+        rest<kRestLayers>(c, n, r, k, item, false, [this](int L) -> ArithDecoder& { return layers_[L].dec; });
+    }
+    /// The layers of `Layers` (a subset of kRestLayers) over points
+    /// 1..count-1 of a chunk (records at base + i * rl), the XY layer's part
+    /// replayed from each point's Side; only those layers' record bytes are
+    /// written. The group's decoders are held in locals (registers) throughout.
+    template <uint32_t Layers>
+    void rest_loop(uint8_t* base, std::size_t rl, const Side* side, uint64_t count) {
+        std::array<ArithDecoder, kLayers> d;
+        for (int L = 1; L < kLayers; ++L)
+            if ((Layers >> L) & 1u) d[L] = layers_[L].dec;
+        for (uint64_t i = 1; i < count; ++i) {
+            uint32_t n, r, k;
+            Point14Context* c;
+            replay(side[i], c, n, r, k);
+            rest<Layers>(c, n, r, k, base + i * rl, true, [&d](int L) -> ArithDecoder& { return d[L]; });
+        }
+        for (int L = 1; L < kLayers; ++L)
+            if ((Layers >> L) & 1u) layers_[L].dec = d[L];
     }
 
 private:
+    // The XY layer's part of a point from its Side: the scanner channel
+    // switch (a new channel's context seeded as by read_xy), n, r, k.
+    [[gnu::always_inline]] void replay(const Side& sd, Point14Context*& c, uint32_t& n, uint32_t& r, uint32_t& k) {
+        item_context_ = 0;
+        c = contexts_[current_].get();
+        if (sd.changed & (1 << 6)) {
+            const uint32_t channel = sd.channel;
+            if (!contexts_[channel]) contexts_[channel] = std::make_unique<Point14Context>(c->last);
+            current_ = channel;
+            item_context_ = channel;
+            c = contexts_[current_].get();
+            c->last.channel = channel;
+        }
+        changed_ = sd.changed;
+        n = sd.nr & 15u;
+        r = sd.nr >> 4;
+        k = sd.k;
+        c->last.number_of_returns = n;
+        c->last.return_number = r;
+    }
     // The XY layer of a point: changed flags, scanner channel, returns, x, y;
     // n, r and the z context's k for the other layers.
     [[gnu::always_inline]] void read_xy(Point14Context*& c_out, uint32_t& n_out, uint32_t& r_out, uint32_t& k_out) {
@@ -1139,11 +1156,10 @@ private:
         k_out = (c->ic_dx.k() + c->ic_dy.k()) / 2;
     }
     // Layers 1-8 of a point (those present and in Layers), then the record:
-    // all of it, or with `rest_only` the bytes of those layers (Layers =
-    // kRestLayers: bytes 8..29; x and y are the XY pass's; the flags layer
-    // also writes the returns and the scanner channel).
-    template <uint32_t Layers>
-    [[gnu::always_inline]] void rest(Point14Context* c, uint32_t n, uint32_t r, uint32_t k, uint8_t* item, bool rest_only) {
+    // all of it, or with `rest_only` the bytes of those layers (the flags
+    // layer also writes the returns and the scanner channel).
+    template <uint32_t Layers, typename Dec>
+    [[gnu::always_inline]] void rest(Point14Context* c, uint32_t n, uint32_t r, uint32_t k, uint8_t* item, bool rest_only, Dec&& dec) {
         Point14& last = c->last;
         const uint32_t changed = changed_;
         const bool source_change = changed & (1 << 5);
@@ -1152,52 +1168,50 @@ private:
         const uint32_t l = return_level(n, r, 7);
         const uint32_t cpr = (r == 1 ? 2u : 0u) + (r >= n ? 1u : 0u);
         if ((Layers & (1u << 1)) && layers_[1].present) {
-            last.z = c->ic_z.decompress(layers_[1].dec, c->last_z[l], (n == 1) + (k < 18 ? (k & ~1u) : 18));
+            last.z = c->ic_z.decompress(dec(1), c->last_z[l], (n == 1) + (k < 18 ? (k & ~1u) : 18));
             c->last_z[l] = last.z;
         }
         if ((Layers & (1u << 2)) && layers_[2].present) {
             const uint32_t ccc = ((last.classification & 0x1F) << 1) + (cpr == 3 ? 1u : 0u);
-            last.classification = layers_[2].dec.decode_symbol(c->classification[ccc].get(256));
+            last.classification = dec(2).decode_symbol(c->classification[ccc].get(256));
         }
         if ((Layers & (1u << 3)) && layers_[3].present) {
             const uint32_t lf = (last.edge << 5) | (last.scan_dir << 4) | last.class_flags;
-            const uint32_t f = layers_[3].dec.decode_symbol(c->flags[lf].get(64));
+            const uint32_t f = dec(3).decode_symbol(c->flags[lf].get(64));
             last.edge = (f >> 5) & 1;
             last.scan_dir = (f >> 4) & 1;
             last.class_flags = f & 15;
         }
         if ((Layers & (1u << 4)) && layers_[4].present) {
             const uint32_t ii = (cpr << 1) | (gps_change ? 1u : 0u);
-            const auto v = static_cast<uint16_t>(c->ic_intensity.decompress(layers_[4].dec, c->last_intensity[ii], cpr));
+            const auto v = static_cast<uint16_t>(c->ic_intensity.decompress(dec(4), c->last_intensity[ii], cpr));
             c->last_intensity[ii] = v;
             last.intensity = v;
         }
         if ((Layers & (1u << 5)) && layers_[5].present && angle_change)
-            last.scan_angle = static_cast<int16_t>(c->ic_scan_angle.decompress(layers_[5].dec, last.scan_angle, gps_change ? 1 : 0));
-        if ((Layers & (1u << 6)) && layers_[6].present) last.user_data = layers_[6].dec.decode_symbol(c->user_data[last.user_data / 4].get(256));
+            last.scan_angle = static_cast<int16_t>(c->ic_scan_angle.decompress(dec(5), last.scan_angle, gps_change ? 1 : 0));
+        if ((Layers & (1u << 6)) && layers_[6].present) last.user_data = dec(6).decode_symbol(c->user_data[last.user_data / 4].get(256));
         if ((Layers & (1u << 7)) && layers_[7].present && source_change)
-            last.point_source = static_cast<uint16_t>(c->ic_point_source.decompress(layers_[7].dec, last.point_source));
+            last.point_source = static_cast<uint16_t>(c->ic_point_source.decompress(dec(7), last.point_source));
         if ((Layers & (1u << 8)) && layers_[8].present && gps_change) {
-            c->gps.read(layers_[8].dec);
+            c->gps.read(dec(8));
             last.gps_time = c->gps.time[c->gps.last];
         }
         if (!rest_only) {
             last.pack(item);
-        } else if constexpr (Layers == kRestLayers) {
-            uint8_t rec[30];
-            last.pack(rec);
-            std::memcpy(item + 8, rec + 8, 22);
         } else {
-            uint8_t rec[30];
-            last.pack(rec);
-            if (Layers & (1u << 1)) std::memcpy(item + 8, rec + 8, 4);    // z
-            if (Layers & (1u << 4)) std::memcpy(item + 12, rec + 12, 2);  // intensity
-            if (Layers & (1u << 3)) std::memcpy(item + 14, rec + 14, 2);  // returns, flags, channel
-            if (Layers & (1u << 2)) item[16] = rec[16];                   // classification
-            if (Layers & (1u << 6)) item[17] = rec[17];                   // user data
-            if (Layers & (1u << 5)) std::memcpy(item + 18, rec + 18, 2);  // scan angle
-            if (Layers & (1u << 7)) std::memcpy(item + 20, rec + 20, 2);  // point source
-            if (Layers & (1u << 8)) std::memcpy(item + 22, rec + 22, 8);  // gps time
+            // The group's own fields (as Point14::pack).
+            if (Layers & (1u << 1)) bytes::store<int32_t>(item + 8, last.z);
+            if (Layers & (1u << 4)) bytes::store<uint16_t>(item + 12, last.intensity);
+            if (Layers & (1u << 3)) {  // returns, flags, channel
+                item[14] = static_cast<uint8_t>(last.return_number | (last.number_of_returns << 4));
+                item[15] = static_cast<uint8_t>(last.class_flags | (last.channel << 4) | (last.scan_dir << 6) | (last.edge << 7));
+            }
+            if (Layers & (1u << 2)) item[16] = static_cast<uint8_t>(last.classification);
+            if (Layers & (1u << 6)) item[17] = static_cast<uint8_t>(last.user_data);
+            if (Layers & (1u << 5)) bytes::store<int16_t>(item + 18, last.scan_angle);
+            if (Layers & (1u << 7)) bytes::store<uint16_t>(item + 20, last.point_source);
+            if (Layers & (1u << 8)) bytes::store<uint64_t>(item + 22, last.gps_time);
         }
         last.gps_time_change = gps_change;
     }
@@ -1482,9 +1496,7 @@ std::size_t decode_layered(const LazInfo& info, int rl, const uint8_t* data, std
                         const Slot& sl = *tasks[t].slot;
                         Point14V3* p = tasks[t].point.get();
                         uint8_t* const base = out + sl.offset;
-                        auto rest = [&]<uint32_t G>() {
-                            for (uint64_t i = 1; i < count; ++i) p->read_mode<Point14V3::kRest, G>(base + i * rl, &side[i]);
-                        };
+                        auto rest = [&]<uint32_t G>() { p->rest_loop<G>(base, rl, side.data(), count); };
                         try {
                             if (sl.kind == 0) {
                                 switch (tasks[t].group) {
