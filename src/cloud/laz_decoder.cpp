@@ -1044,9 +1044,23 @@ public:
     void read(uint8_t* item) { read_mode<kAll>(item, nullptr); }
     template <Mode M>
     [[gnu::always_inline]] void read_mode(uint8_t* item, Side* side) {
+        // A local copy of the XY layer's decoder (registers, see decode_fused).
+        ArithDecoder xy = layers_[0].dec;
+        read_mode<M>(xy, item, side);
+        layers_[0].dec = xy;
+    }
+    /// The XY layer (kXY) over points 1..count-1 of a chunk, its decoder in
+    /// a local throughout.
+    void xy_loop(uint8_t* out, std::size_t rl, Side* side, uint64_t count) {
+        ArithDecoder xy = layers_[0].dec;
+        for (uint64_t i = 1; i < count; ++i) read_mode<kXY>(xy, out + i * rl, side + i);
+        layers_[0].dec = xy;
+    }
+    template <Mode M>
+    [[gnu::always_inline]] void read_mode(ArithDecoder& xy, uint8_t* item, Side* side) {
         uint32_t n, r, k;
         Point14Context* c;
-        read_xy(c, n, r, k);
+        read_xy(xy, c, n, r, k);
         if constexpr (M == kXY) {
             *side = {static_cast<uint8_t>(changed_), static_cast<uint8_t>(current_), static_cast<uint8_t>(n | (r << 4)),
                      static_cast<uint8_t>(k)};
@@ -1099,9 +1113,7 @@ private:
     }
     // The XY layer of a point: changed flags, scanner channel, returns, x, y;
     // n, r and the z context's k for the other layers.
-    [[gnu::always_inline]] void read_xy(Point14Context*& c_out, uint32_t& n_out, uint32_t& r_out, uint32_t& k_out) {
-        // A local copy of the XY layer's decoder (registers, see decode_fused).
-        ArithDecoder xy = layers_[0].dec;
+    [[gnu::always_inline]] void read_xy(ArithDecoder& xy, Point14Context*& c_out, uint32_t& n_out, uint32_t& r_out, uint32_t& k_out) {
         item_context_ = 0;
         Point14Context* c = contexts_[current_].get();
         {
@@ -1149,7 +1161,6 @@ private:
         const int32_t dy = c->ic_dy.decompress(xy, c->median_y[mi].get(), (n == 1) + (kx < 20 ? (kx & ~1u) : 20));
         last.y = static_cast<int32_t>(static_cast<uint32_t>(last.y) + static_cast<uint32_t>(dy));
         c->median_y[mi].add(dy);
-        layers_[0].dec = xy;
         c_out = c;
         n_out = n;
         r_out = r;
@@ -1266,19 +1277,31 @@ class Rgb14V3 {
 public:
     Rgb14V3(const uint8_t* first, bool nir, uint32_t context, Layer& rgb, Layer* nir_layer, bool v4)
         : nir_(nir), rgb_(rgb), nir_layer_(nir_layer), contexts_(context, v4, std::make_unique<Ctx>(first, nir ? 8 : 6)) {}
-    void read(uint8_t* item, uint32_t context) {
+    void read(uint8_t* item, uint32_t context) { read_with(rgb_.dec, nir_layer_ ? nir_layer_->dec : rgb_.dec, item, context); }
+    /// Points 1..count-1 of a chunk (records at base + i * rl, item contexts
+    /// context_of(i)), the decoders in locals throughout.
+    template <typename ContextOf>
+    void read_loop(uint8_t* base, std::size_t rl, uint64_t count, ContextOf&& context_of) {
+        ArithDecoder rgb = rgb_.dec, nir = nir_layer_ ? nir_layer_->dec : ArithDecoder{};
+        for (uint64_t i = 1; i < count; ++i) read_with(rgb, nir, base + i * rl, context_of(i));
+        rgb_.dec = rgb;
+        if (nir_layer_) nir_layer_->dec = nir;
+    }
+
+private:
+    [[gnu::always_inline]] void read_with(ArithDecoder& rgb_dec, ArithDecoder& nir_dec, uint8_t* item, uint32_t context) {
         Ctx* prev = nullptr;
         Ctx& c = contexts_.select(context, prev, [](const Ctx& p) { return std::make_unique<Ctx>(reinterpret_cast<const uint8_t*>(p.last), 8); });
         uint16_t* last = prev->last;
         uint16_t out[4];
         if (rgb_.present) {
-            c.rgb.read(rgb_.dec, last, out);
+            c.rgb.read(rgb_dec, last, out);
             std::memcpy(last, out, 6);
         }
         std::memcpy(item, last, 6);
         if (nir_) {
             if (nir_layer_->present) {
-                ArithDecoder& d = nir_layer_->dec;
+                ArithDecoder& d = nir_dec;
                 const uint32_t sym = d.decode_symbol(c.nir_used);
                 int32_t lo = last[3] & 0xFF, hi = last[3] >> 8;
                 if (sym & 1) lo = fold(static_cast<int32_t>(d.decode_symbol(c.nir_diff[0])) + lo);
@@ -1464,7 +1487,7 @@ std::size_t decode_layered(const LazInfo& info, int rl, const uint8_t* data, std
             std::vector<Point14V3::Side> side(count);
             {
                 Point14V3 xy(out, xy_layers, v4);
-                for (uint64_t i = 1; i < count; ++i) xy.read_mode<Point14V3::kXY>(out + i * rl, &side[i]);
+                xy.xy_loop(out, rl, side.data(), count);
             }
             // POINT14's layers 1-8 in four groups of about equal work, each
             // with its own predictor state (the groups' layers are disjoint),
@@ -1507,10 +1530,13 @@ std::size_t decode_layered(const LazInfo& info, int rl, const uint8_t* data, std
                                 }
                                 continue;
                             }
+                            if (sl.kind == 1) {
+                                rgbs[sl.index]->read_loop(base, rl, count, [&](uint64_t i) { return point.context(side[i]); });
+                                continue;
+                            }
                             for (uint64_t i = 1; i < count; ++i) {
                                 uint8_t* rec = base + i * rl;
-                                if (sl.kind == 1) rgbs[sl.index]->read(rec, point.context(side[i]));
-                                else if (sl.kind == 2) bytes[sl.index]->read(rec, point.context(side[i]));
+                                if (sl.kind == 2) bytes[sl.index]->read(rec, point.context(side[i]));
                                 else waves[sl.index]->read(rec, point.context(side[i]));
                             }
                         } catch (...) {
