@@ -114,6 +114,8 @@ public:
     void select_chunks(const std::vector<bool>& keep);
     /// Before the first read: decode only what a PointCloud holds (see decode_laz_chunk).
     void set_point_fields_only(bool on) { point_fields_only_ = on; }
+    /// Whether chunk `c` is decoded with split_layers (see decode_laz_chunk).
+    bool split_layers(const LazChunk& c) const;
     /// Points that the selected chunks hold.
     uint64_t selected_points() const { return selected_points_; }
     /// Writes up to `max_points` records to `out` (room for max_points ×
@@ -126,8 +128,6 @@ private:
     std::size_t decode_direct(char* out, std::size_t max_points);
     /// Reads chunk `chunk`'s compressed bytes (chunk table known) into `raw`.
     void read_raw(std::size_t chunk, std::vector<uint8_t>& raw);
-    /// Whether chunk `c` is decoded with split_layers (see decode_laz_chunk).
-    bool split_layers(const LazChunk& c) const;
     std::string path_;
     LazInfo info_;
     int record_length_;
