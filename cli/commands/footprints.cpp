@@ -90,6 +90,8 @@ void add_footprints_command(CLI::App& parent, const GlobalFlags& g, CommandList&
                                         r.height_source.empty() ? "" : ", heights from ", r.height_source.c_str(),
                                         r.crs.c_str(), r.used_classes ? "used" : "absent", r.width, r.height, r.seconds,
                                         r.mean_abs_fit_area_error_pct, s->out.c_str());
+                       if (!g.quiet && r.hidden_completed_cells > 0)
+                           std::fprintf(stderr, "cityforge: %zu unmeasured roof cells completed (dark roofs, crowns over roofs)\n", r.hidden_completed_cells);
                        if (!g.quiet && !r.self_training.empty())
                            std::fprintf(stderr, "cityforge: %zu from the heights, %zu from the image; %.0f %% of the ortho outside the heights; %s\n",
                                         r.from_heights, r.from_image, r.uncovered_share * 100.0, r.self_training.c_str());

@@ -2,12 +2,15 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <map>
 #include <set>
 #include <vector>
 
 #include "core/error.hpp"
 #include "core/morphology.hpp"
+#include "footprint/rectangle_fit.hpp"
+#include "footprint/vectorize.hpp"
 
 namespace cityforge {
 
@@ -19,6 +22,7 @@ void BuildingMaskOptions::validate() const {
     if (!(split_step_m >= 0.0)) throw Error("--split-step-m", "must be >= 0");
     if (!(min_split_part_m2 >= 0.0)) throw Error("--min-split-part-m2", "must be >= 0");
     if (fill_passes < 0 || fill_passes > 50) throw Error("fill passes", "must be between 0 and 50");
+    if (!(hidden_completion_max_share >= 0.0 && hidden_completion_max_share <= 1.0)) throw Error("hidden_completion_max_share", "must be in [0, 1]");
     if (opening_radius_px < 0 || opening_radius_px > 10) throw Error("--opening-px", "must be between 0 and 10");
     if (use_classes < -1 || use_classes > 1) throw Error("use_point_classes", "must be auto, yes or no");
 }
@@ -359,6 +363,117 @@ BuildingMask label_buildings(std::vector<uint8_t> mask, int w, int h, const Buil
     out.labels = Image<uint32_t>(w, h, 1, 0u);
     for (std::size_t k = 0; k < n; ++k) out.labels.data[k] = keep[label[k]];
     return out;
+}
+
+namespace {
+// Whether the cells `own` and `add` (indices on a grid `w` wide) still trace
+// one valid polygon: an addition must not pinch the outline (rings touching
+// at a vertex) nor split it.
+bool stays_one_valid_polygon(const std::vector<std::size_t>& own, const std::vector<std::size_t>& add, int w) {
+    int x0 = w, y0 = std::numeric_limits<int>::max(), x1 = -1, y1 = -1;
+    for (const auto* v : {&own, &add})
+        for (const std::size_t k : *v) {
+            const int x = static_cast<int>(k % static_cast<std::size_t>(w)), y = static_cast<int>(k / static_cast<std::size_t>(w));
+            x0 = std::min(x0, x), x1 = std::max(x1, x), y0 = std::min(y0, y), y1 = std::max(y1, y);
+        }
+    Image<uint32_t> crop(x1 - x0 + 3, y1 - y0 + 3, 1, 0u);
+    for (const auto* v : {&own, &add})
+        for (const std::size_t k : *v)
+            crop.at(0, static_cast<int>(k % static_cast<std::size_t>(w)) - x0 + 1, static_cast<int>(k / static_cast<std::size_t>(w)) - y0 + 1) = 1;
+    const std::vector<Polygon> parts = vectorize_region(crop, 1, GeoTransform{0.0, 1.0, 0.0, -1.0});
+    return parts.size() == 1 && polygon_is_valid(parts[0]);
+}
+}  // namespace
+
+std::size_t complete_hidden_roofs(BuildingMask& mask, const BuildingCells& cells, double max_growth_share) {
+    const int w = mask.labels.width, h = mask.labels.height;
+    const std::size_t n = mask.labels.pixel_count();
+    if (mask.count == 0) return 0;
+    if (cells.evidence.size() != n || cells.cells.size() != n) throw Error("building completion", "cells differ in size from the mask");
+
+    auto& labels = mask.labels.data;
+    std::vector<std::vector<std::size_t>> pixels(mask.count + 1);
+    for (std::size_t k = 0; k < n; ++k)
+        if (labels[k]) pixels[labels[k]].push_back(k);
+    // Cells that may hold a roof: not measured as something else.
+    auto hidden = [&](std::size_t k) { return !cells.evidence[k] || cells.cells[k]; };
+    // Each building's claim against the labels as they are (no building sees
+    // another's claim).
+    std::vector<std::vector<std::size_t>> claims(mask.count + 1);
+    std::vector<uint8_t> claimed(n, 0);  // 0, 1, 2 = more than one
+    std::vector<uint8_t> seen(n, 0);
+    std::vector<std::size_t> stack;
+    for (uint32_t l = 1; l <= mask.count; ++l) {
+        const std::vector<std::size_t>& own = pixels[l];
+        // Touches a free cell that may hold a roof at all?
+        bool near = false;
+        for (const std::size_t k : own) {
+            const int x = static_cast<int>(k % static_cast<std::size_t>(w)), y = static_cast<int>(k / static_cast<std::size_t>(w));
+            auto free_hidden = [&](std::size_t q) { return !labels[q] && hidden(q); };
+            if ((x > 0 && free_hidden(k - 1)) || (x + 1 < w && free_hidden(k + 1)) || (y > 0 && free_hidden(k - w)) || (y + 1 < h && free_hidden(k + w))) {
+                near = true;
+                break;
+            }
+        }
+        if (!near) continue;
+        // The cells' corners (pixel units): their hull's minimum-area rectangle.
+        std::vector<MapPoint> corners;
+        corners.reserve(own.size() * 4);
+        for (const std::size_t k : own) {
+            const double x = static_cast<double>(k % static_cast<std::size_t>(w)), y = static_cast<double>(k / static_cast<std::size_t>(w));
+            corners.push_back({x, y}), corners.push_back({x + 1, y}), corners.push_back({x, y + 1}), corners.push_back({x + 1, y + 1});
+        }
+        // Its rectangle: the hull's box along the hull's dominant edge
+        // direction (length-weighted mean of 4 x the edge angles), not the
+        // minimum-area rectangle, which a cut-off corner can turn.
+        const Ring hull = convex_hull(corners);
+        if (hull.size() < 3) continue;
+        double sx = 0.0, sy = 0.0;
+        for (std::size_t i = 0; i < hull.size(); ++i) {
+            const MapPoint& p0 = hull[i];
+            const MapPoint& p1 = hull[(i + 1) % hull.size()];
+            const double len = std::hypot(p1.x - p0.x, p1.y - p0.y), angle = std::atan2(p1.y - p0.y, p1.x - p0.x);
+            sx += len * std::cos(4.0 * angle), sy += len * std::sin(4.0 * angle);
+        }
+        const double a = 0.25 * std::atan2(sy, sx), ux = std::cos(a), uy = std::sin(a);
+        double u0 = INFINITY, u1 = -INFINITY, v0 = INFINITY, v1 = -INFINITY;
+        for (const MapPoint& q : hull) {
+            const double u = q.x * ux + q.y * uy, v = -q.x * uy + q.y * ux;
+            u0 = std::min(u0, u), u1 = std::max(u1, u), v0 = std::min(v0, v), v1 = std::max(v1, v);
+        }
+        auto inside = [&](int x, int y) {  // the cell's centre in the rectangle
+            const double u = (x + 0.5) * ux + (y + 0.5) * uy, v = -(x + 0.5) * uy + (y + 0.5) * ux;
+            return u >= u0 && u <= u1 && v >= v0 && v <= v1;
+        };
+        std::vector<std::size_t>& add = claims[l];
+        stack.assign(own.begin(), own.end());
+        while (!stack.empty()) {
+            const std::size_t p = stack.back();
+            stack.pop_back();
+            const int x = static_cast<int>(p % static_cast<std::size_t>(w)), y = static_cast<int>(p / static_cast<std::size_t>(w));
+            const int nx[4] = {x - 1, x + 1, x, x}, ny[4] = {y, y, y - 1, y + 1};
+            for (int i = 0; i < 4; ++i) {
+                if (nx[i] < 0 || ny[i] < 0 || nx[i] >= w || ny[i] >= h) continue;
+                const std::size_t q = static_cast<std::size_t>(ny[i]) * w + nx[i];
+                if (labels[q] || seen[q] || !hidden(q) || !inside(nx[i], ny[i])) continue;
+                seen[q] = 1;
+                add.push_back(q);
+                stack.push_back(q);
+            }
+        }
+        for (const std::size_t q : add) seen[q] = 0;
+        if (static_cast<double>(add.size()) > max_growth_share * static_cast<double>(own.size())) add.clear();
+        if (!add.empty() && !stays_one_valid_polygon(own, add, w)) add.clear();
+        for (const std::size_t q : add) claimed[q] = static_cast<uint8_t>(std::min(2, claimed[q] + 1));
+    }
+    // A claim that meets another building's is dropped whole (what is added
+    // stays connected to its building).
+    std::size_t added = 0;
+    for (uint32_t l = 1; l <= mask.count; ++l) {
+        if (std::any_of(claims[l].begin(), claims[l].end(), [&](std::size_t q) { return claimed[q] > 1; })) continue;
+        for (const std::size_t q : claims[l]) labels[q] = l, ++added;
+    }
+    return added;
 }
 
 }  // namespace cityforge

@@ -26,6 +26,10 @@ struct BuildingMaskOptions {
     /// Parts smaller than this, or not touching the building's outline
     /// (dormers, chimneys, roof superstructures), stay with their neighbour.
     double min_split_part_m2 = 15.0;
+    /// Unmeasured cells (dark roofs, crowns over roofs) completed inside a
+    /// building's rectangle when that grows it by at most this share of its
+    /// area (complete_hidden_roofs); 0 = never.
+    double hidden_completion_max_share = 0.25;
     int opening_radius_px = 0;          ///< morphological opening removing thin artefacts (0 = none; 1 shrinks outlines ~2 %)
     /// Position of the rasters' first cell in the run's global grid (in cells
     /// of these rasters): position-dependent choices (the checkerboard of
@@ -81,6 +85,20 @@ BuildingCells building_cells(const Image<float>& ndsm, const Image<float>& dsm, 
 /// Buildings from decided cells: components (label_buildings), then split at
 /// height steps of `cells.step_dsm` (split_at_height_steps); w x h = the grid.
 BuildingMask buildings_from_cells(const BuildingCells& cells, int w, int h, const BuildingMaskOptions& options);
+
+/// Roofs the data hides, completed. An outline stops where nothing is
+/// measured: a dark roof returns a fifth of the pulses or none, a tree crown
+/// covers a roof's edge or corner (the image sees the crown, few pulses reach
+/// the roof), and the image's segments there take the colour of what hides
+/// the roof. For each building, the cells inside its rectangle (the box of
+/// its cells' hull along the hull's dominant edge direction) that no building
+/// holds and that are not measured as something else (no own evidence, or
+/// own evidence of a roof) join it when they connect to it through such
+/// cells -- unless they would grow it by more than `max_growth_share` of its
+/// area (then the rectangle is no model of it). A claim that meets another
+/// building's is dropped. Each building's result depends only on the cells
+/// within its rectangle, not on label order. Returns the cells added.
+std::size_t complete_hidden_roofs(BuildingMask& mask, const BuildingCells& cells, double max_growth_share = 0.25);
 
 /// Splits every building of `mask` into parts whose roofs are separated by
 /// height steps of the DSM (see BuildingMaskOptions::split_step_m); parts are

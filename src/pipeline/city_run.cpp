@@ -690,6 +690,7 @@ WindowBuildings detect_on_window(const RunManifest& m, const PixelWindow& win, P
         ro.cloud_edges = o.extraction.cloud_cell_factor <= 1;
         refine_buildings_with_ortho(d.mask, cells, colours, valid, wc.rasters.ndsm, 20.0 / pc.crs.z_unit_m, {}, vegetation, ro);
     }
+    if (mo.hidden_completion_max_share > 0) complete_hidden_roofs(d.mask, cells, mo.hidden_completion_max_share);
     d.id.assign(d.mask.count + 1, 0);
     for (int r = 0; r < win.height; ++r)
         for (int c = 0; c < win.width; ++c) {

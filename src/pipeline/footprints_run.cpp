@@ -508,6 +508,7 @@ FootprintsReport run_footprints_unguarded(const std::string& output_path, const 
             so.gsd_m = mo.gsd_m, so.ridge_rise_m /= z_unit, so.valley_depth_m /= z_unit;
             rep.seam_splits = split_at_roof_seams(mask, img.image, img.valid, ndsm, so);
         }
+        if (mo.hidden_completion_max_share > 0) rep.hidden_completed_cells = complete_hidden_roofs(mask, cells, mo.hidden_completion_max_share);
     }
     // What found each building (the `source` field).
     const std::string first_source = mode == DetectionMode::ortho_only ? (rep.detector == "rules" ? "image_rules" : "image_model")

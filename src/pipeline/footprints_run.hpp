@@ -141,6 +141,7 @@ struct FootprintsReport {
     std::string working_crs;       ///< CRS the detection worked in (metres)
     std::size_t buildings = 0;
     int seam_splits = 0;           ///< ortho_cloud: seams cut between touching roofs (terraces)
+    std::size_t hidden_completed_cells = 0;  ///< unmeasured cells completed inside buildings' rectangles (complete_hidden_roofs)
     bool used_classes = false;
     int width = 0, height = 0;
     double seconds = 0.0;
