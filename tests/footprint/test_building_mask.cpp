@@ -106,3 +106,41 @@ TEST_CASE("A roof under an overhanging crown stays building", "[footprint][mask]
     CHECK(roof_cells >= 40 * 30 * 97 / 100);  // the roof under the crown is kept
     CHECK(outside <= 30 * 2);                  // at most a cell's width spills past the roof edge under the crown
 }
+
+TEST_CASE("Roofs the data hides are completed inside the building's rectangle, never over measured ground or another building", "[footprint][mask]") {
+    // A 20 x 12 building with its lower-right 4 x 4 corner unmeasured (a
+    // crown or a dark roof: no evidence), a measured-ground strip beyond it,
+    // and a neighbour whose unmeasured cells lie outside the rectangle.
+    const int w = 40, h = 24;
+    BuildingCells cells;
+    cells.cells.assign(static_cast<std::size_t>(w) * h, 0);
+    cells.evidence.assign(cells.cells.size(), 1);  // measured ground everywhere ...
+    BuildingMask mask;
+    mask.labels = Image<uint32_t>(w, h, 1, 0u);
+    mask.count = 2;
+    for (int y = 2; y < 14; ++y)
+        for (int x = 2; x < 22; ++x) {
+            const std::size_t k = static_cast<std::size_t>(y) * w + x;
+            const bool corner = x >= 18 && y >= 10;
+            if (corner) cells.evidence[k] = 0;  // ... but the hidden corner
+            else mask.labels.data[k] = 1, cells.cells[k] = 1;
+        }
+    // Unmeasured cells outside the rectangle (below the building) stay out.
+    for (int x = 2; x < 10; ++x) cells.evidence[static_cast<std::size_t>(15) * w + x] = 0;
+    // Building 2, an L whose concave corner is measured ground.
+    for (int y = 16; y < 22; ++y)
+        for (int x = 26; x < 38; ++x)
+            if (!(x >= 32 && y >= 19)) mask.labels.data[static_cast<std::size_t>(y) * w + x] = 2, cells.cells[static_cast<std::size_t>(y) * w + x] = 1;
+    const BuildingMask before = mask;
+    CHECK(complete_hidden_roofs(mask, cells, 0.25) == 16);
+    for (int y = 0; y < h; ++y)
+        for (int x = 0; x < w; ++x) {
+            const std::size_t k = static_cast<std::size_t>(y) * w + x;
+            const bool corner = x >= 18 && x < 22 && y >= 10 && y < 14;
+            CHECK(mask.labels.data[k] == (corner ? 1u : before.labels.data[k]));
+        }
+    // A growth beyond the share is refused (then the rectangle is no model of the building).
+    BuildingMask strict = before;
+    CHECK(complete_hidden_roofs(strict, cells, 0.05) == 0);
+    CHECK(strict.labels.data == before.labels.data);
+}
