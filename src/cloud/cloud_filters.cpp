@@ -1,7 +1,9 @@
 #include "cloud/cloud_filters.hpp"
 
 #include <algorithm>
+#include <array>
 #include <atomic>
+#include <bit>
 #include <cmath>
 #include <limits>
 #include <numeric>
@@ -119,19 +121,31 @@ XYBounds kept_bounds(const PointCloud& c, Kept&& kept) {
         });
 }
 
+// The largest float not above v (v as a float when that is exact, else the
+// float next below it): float bounds that enclose double values.
+float float_at_most(double v) {
+    float f = static_cast<float>(v);
+    if (double(f) > v) {  // step one float down (towards -inf)
+        const auto bits = std::bit_cast<uint32_t>(f);
+        f = f == 0.0f ? -std::numeric_limits<float>::denorm_min() : std::bit_cast<float>(f > 0.0f ? bits - 1 : bits + 1);
+    }
+    return f;
+}
+
 // The k smallest values offered so far, ascending (+inf while fewer were
 // offered). An insertion is branch-free: slot j takes min(b[j], max(b[j-1], d)),
 // which leaves the list unchanged for d >= its largest value. K > 0: k = K
-// known at compile time, held in pairs of doubles (registers); K == 0: any k.
+// known at compile time, held in pairs of doubles (registers when the object
+// stays local); K == 0: any k, in a caller's buffer of 2 (k + 1) doubles.
 template <std::size_t K>
 class SmallestK {
 public:
-    explicit SmallestK(std::size_t k) : k_(K > 0 ? K : k), buf_(K > 0 ? 0 : 2 * (k + 1), -INFINITY) { reset(); }
-    void reset() {
+    SmallestK(std::size_t k, double* buffer) : k_(K > 0 ? K : k), buf_(buffer) {
         if constexpr (K > 0) {
             for (V& v : b_) v = V{INFINITY, INFINITY};
         } else {
-            std::fill(cur() , cur() + k_, INFINITY);
+            buf_[0] = buf_[k_ + 1] = -INFINITY;
+            std::fill(buf_ + 1, buf_ + 1 + k_, INFINITY);
         }
     }
     double largest() const {
@@ -141,16 +155,14 @@ public:
     void insert(double d) {
         if constexpr (K > 0) {
             const V dv = {d, d};
-            V next[kPairs];
-            for (std::size_t r = 0; r < kPairs; ++r) {
+            for (std::size_t r = kPairs; r-- > 0;) {  // downwards: b[r - 1] is still the old one
                 const V before = r == 0 ? V{-INFINITY, b_[0][0]} : __builtin_shuffle(b_[r - 1], b_[r], M{1, 2});  // b[j - 1]
                 const V raised = before < dv ? dv : before;                                                  // max(b[j - 1], d)
-                next[r] = raised < b_[r] ? raised : b_[r];                                                   // min(b[j], ...)
+                b_[r] = raised < b_[r] ? raised : b_[r];                                                     // min(b[j], ...)
             }
-            for (std::size_t r = 0; r < kPairs; ++r) b_[r] = next[r];
         } else {
             const double* __restrict from = cur();
-            double* __restrict to = other();
+            double* __restrict to = flip_ ? buf_ + 1 : buf_ + k_ + 2;
             for (std::size_t j = 0; j < k_; ++j) to[j] = std::min(from[j], std::max(from[j - 1], d));
             flip_ = !flip_;
         }
@@ -168,12 +180,10 @@ private:
     using V = double __attribute__((vector_size(16)));
     using M = int64_t __attribute__((vector_size(16)));
     static constexpr std::size_t kPairs = (K + 1) / 2;
-    // K == 0: two buffers of 1 + k (entry 0 is -inf); an insertion writes the other one.
-    double* cur() { return buf_.data() + (flip_ ? k_ + 2 : 1); }
-    const double* cur() const { return buf_.data() + (flip_ ? k_ + 2 : 1); }
-    double* other() { return buf_.data() + (flip_ ? 1 : k_ + 2); }
+    // K == 0: two lists of 1 + k (entry 0 is -inf); an insertion writes the other one.
+    const double* cur() const { return buf_ + (flip_ ? k_ + 2 : 1); }
     std::size_t k_;
-    std::vector<double> buf_;
+    double* buf_;
     bool flip_ = false;
     V b_[K > 0 ? kPairs : 1];
 };
@@ -199,12 +209,12 @@ void grid_knn(const PointCloud& c, std::size_t k, Visit&& visit) {
     if (n == 0 || k == 0) return;
     const XYBounds bb = kept_bounds(c, [](std::size_t) { return true; });
     const double minx = bb.minx, miny = bb.miny, maxx = bb.maxx, maxy = bb.maxy;
-    // About 0.3 k points per cell on average (the 3 x 3 block holds ~2.7 k;
-    // 0.5 k and 0.2 k measured 10-15 % slower on an 8 pts/m² town, 0.45 k and
-    // 0.6 k 8-20 % slower with the branch-free insertion).
+    // About 0.4 k points per cell on average (the 3 x 3 block holds ~3.6 k;
+    // instructions in the search on a 400 m town at 8 pts/m²: 0.3 k +4 %,
+    // 0.5 k +7 %, 0.25 k +20 %, 0.2 k +46 %).
     require_finite_extent(minx, miny, maxx, maxy, "outlier filter");  // the grid itself is capped below
     const double area = std::max((maxx - minx) * (maxy - miny), 1e-12);
-    const double per_point = std::max(1.0, 0.3 * double(k)) / double(n);
+    const double per_point = std::max(1.0, 0.4 * double(k)) / double(n);
     double cell = std::isfinite(area) ? std::sqrt(area * per_point) : std::sqrt(maxx - minx) * std::sqrt(maxy - miny) * std::sqrt(per_point);
     // A cloud (nearly) without extent along one axis (every point on one row
     // or column) has a 1-D density: cells of the 2-D rule would be far smaller
@@ -234,90 +244,103 @@ void grid_knn(const PointCloud& c, std::size_t k, Visit&& visit) {
         std::vector<uint32_t> fill(start.begin(), start.end() - 1);
         for (std::size_t i = 0; i < n; ++i) order[fill[cell_of[i]]++] = static_cast<uint32_t>(i);  // ascending index per cell
     }
-    std::vector<float> zlo(cells, INFINITY), zhi(cells, -INFINITY);  // float bounds that enclose each cell's double z
-    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, cells, kGrain / 4), [&](const tbb::blocked_range<std::size_t>& r) {
-        for (std::size_t q = r.begin(); q != r.end(); ++q)
-            for (uint32_t j = start[q]; j < start[q + 1]; ++j) {
-                const double z = c.z[order[j]];
-                float lo = static_cast<float>(z), hi = lo;
-                if (double(lo) > z) lo = std::nextafter(lo, -INFINITY);
-                if (double(hi) < z) hi = std::nextafter(hi, INFINITY);
-                zlo[q] = std::min(zlo[q], lo), zhi[q] = std::max(zhi[q], hi);
-            }
-    });
     const double* cxp = c.x.data();
     const double* cyp = c.y.data();
     const double* czp = c.z.data();
-    tbb::parallel_for(tbb::blocked_range<int>(0, nx, 1), [&](const tbb::blocked_range<int>& columns) {
-        // A block of candidates, structure of arrays, gathered from runs of
-        // the cell order.
-        struct Block {
-            std::vector<double> x, y, z;  // capacity; the first `size` hold the candidates
-            std::size_t size = 0;
-            void clear() { size = 0; }
+    // Each cell's z range in floats that enclose its double z values (the
+    // float next below / above when rounding went the other way).
+    std::vector<float> zlo(cells), zhi(cells);
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, cells, kGrain / 4), [&](const tbb::blocked_range<std::size_t>& r) {
+        for (std::size_t q = r.begin(); q != r.end(); ++q) {
+            double lo = INFINITY, hi = -INFINITY;
+            for (uint32_t j = start[q]; j < start[q + 1]; ++j) lo = std::min(lo, czp[order[j]]), hi = std::max(hi, czp[order[j]]);
+            zlo[q] = float_at_most(lo), zhi[q] = -float_at_most(-hi);
+        }
+    });
+    // Consecutive cells of one column, structure of arrays.
+    struct Run {
+        const double *x, *y, *z;
+        std::size_t size;
+    };
+    tbb::parallel_for(tbb::blocked_range<int>(0, nx, 8), [&](const tbb::blocked_range<int>& columns) {
+        // The coordinates of columns cx - 2 .. cx + 2 in cell order, column xx
+        // in slot xx % 5: each point is copied once per column range, and
+        // every block of cells below is a run of one of them.
+        struct Column {
+            int xx = -1;
+            uint32_t first = 0;  // its first position in `order`
+            std::vector<double> x, y, z;
         };
-        const auto gather = [&](Block& b, uint32_t from, uint32_t to) {
-            if (from >= to) return;
-            const std::size_t at = b.size, len = to - from;
-            if (at + len > b.x.size()) {  // grows rarely: blocks hold a few dozen points
-                const std::size_t cap = std::max(2 * b.x.size(), at + len);
-                b.x.resize(cap), b.y.resize(cap), b.z.resize(cap);
+        std::array<Column, 5> slots;
+        const auto column = [&](int xx) -> const Column& {
+            Column& s = slots[static_cast<std::size_t>(xx) % slots.size()];
+            if (s.xx != xx) {
+                const uint32_t from = start[cell_index(xx, 0)], to = start[cell_index(xx, ny - 1) + 1];
+                s.xx = xx, s.first = from;
+                s.x.resize(to - from), s.y.resize(to - from), s.z.resize(to - from);
+                for (uint32_t j = from; j < to; ++j) {
+                    const uint32_t i = order[j];
+                    s.x[j - from] = cxp[i], s.y[j - from] = cyp[i], s.z[j - from] = czp[i];
+                }
             }
-            const uint32_t* o = order.data() + from;
-            for (std::size_t t = 0; t < len; ++t) b.x[at + t] = cxp[o[t]], b.y[at + t] = cyp[o[t]], b.z[at + t] = czp[o[t]];
-            b.size = at + len;
+            return s;
         };
-        // block: the 3 x 3 cells, the own cell first (its nearest candidates
-        // fill the k smallest early); ring2: the 16 cells around them, gathered
-        // for the first point of the cell that needs them.
-        Block block, ring2;
-        std::vector<double> dd, below, out(k);
-        SmallestK<K> best(k);
+        const auto run = [&](int xx, int y_lo, int y_hi) {  // cells y_lo .. y_hi of column xx
+            const Column& s = column(xx);
+            const std::size_t a = start[cell_index(xx, y_lo)] - s.first, b = start[cell_index(xx, y_hi) + 1] - s.first;
+            return Run{s.x.data() + a, s.y.data() + a, s.z.data() + a, b - a};
+        };
+        // The 3 x 3 cells around the current one copied into one block,
+        // structure of arrays, the own cell first (its nearest candidates fill
+        // the k smallest early).
+        std::vector<double> bx, by, bz;
+        std::size_t block_size = 0;
+        const auto append = [&](const Run& r) {
+            if (block_size + r.size > bx.size()) {  // grows rarely: blocks hold a few dozen points
+                const std::size_t cap = std::max(2 * bx.size(), block_size + r.size);
+                bx.resize(cap), by.resize(cap), bz.resize(cap);
+            }
+            std::copy(r.x, r.x + r.size, bx.data() + block_size);
+            std::copy(r.y, r.y + r.size, by.data() + block_size);
+            std::copy(r.z, r.z + r.size, bz.data() + block_size);
+            block_size += r.size;
+        };
+        std::vector<Run> ring2;
+        std::vector<double> dd, below, out(k), lists(K > 0 ? 0 : 2 * (k + 1));
+        const auto room = [&](std::size_t m) {
+            if (dd.size() < m) dd.resize(std::max(m, 2 * dd.size())), below.resize(dd.size());
+        };
+        // The previous point's k-th squared distance, widened by 1.5 (1.2
+        // measured 2 % more instructions, 2: 4 %, 3: 12 %): neighbours have
+        // similar densities.
+        double guess = INFINITY;
         for (int cx = columns.begin(); cx != columns.end(); ++cx)
             for (int cy = 0; cy < ny; ++cy) {
                 const std::size_t q = cell_index(cx, cy);
                 if (start[q] == start[q + 1]) continue;
-                block.clear();
-                gather(block, start[q], start[q + 1]);
+                block_size = 0;
+                const Run own = run(cx, cy, cy);
+                append(own);
                 const int ylo = std::max(0, cy - 1), yhi = std::min(ny - 1, cy + 1);
-                for (int xx = std::max(0, cx - 1); xx <= std::min(nx - 1, cx + 1); ++xx) {
-                    const uint32_t from = start[cell_index(xx, ylo)], to = start[cell_index(xx, yhi) + 1];
-                    if (xx != cx) gather(block, from, to);
-                    else gather(block, from, start[q]), gather(block, start[q + 1], to);  // the rows around the own cell
-                }
-                bool ring2_gathered = false;
-                auto gather_ring2 = [&] {
-                    ring2.clear();
-                    for (int xx = std::max(0, cx - 2); xx <= std::min(nx - 1, cx + 2); ++xx)
-                        if (xx == cx - 2 || xx == cx + 2) {  // a whole column of the ring
-                            gather(ring2, start[cell_index(xx, std::max(0, cy - 2))], start[cell_index(xx, std::min(ny - 1, cy + 2)) + 1]);
-                        } else {  // its top and bottom cells
-                            if (cy - 2 >= 0) gather(ring2, start[cell_index(xx, cy - 2)], start[cell_index(xx, cy - 2) + 1]);
-                            if (cy + 2 < ny) gather(ring2, start[cell_index(xx, cy + 2)], start[cell_index(xx, cy + 2) + 1]);
-                        }
-                    ring2_gathered = true;
-                };
+                for (int xx = std::max(0, cx - 1); xx <= std::min(nx - 1, cx + 1); ++xx)
+                    if (xx != cx) append(run(xx, ylo, yhi));
+                    else {
+                        if (ylo < cy) append(run(xx, ylo, cy - 1));
+                        if (yhi > cy) append(run(xx, cy + 1, yhi));
+                    }
+                room(block_size);
                 const double x0 = minx + cx * cx_size, y0 = miny + cy * cy_size;
-                const std::size_t own = start[q + 1] - start[q];
-                for (std::size_t jp = 0; jp < own; ++jp) {
-                    const double x = block.x[jp], y = block.y[jp], z = block.z[jp];
-                    best.reset();
-                    std::size_t count = 0;  // candidates offered
-                    // Every candidate of a block: squared distances in one
-                    // vectorised loop; the first ones until k are inserted,
+                for (std::size_t jp = 0; jp < own.size; ++jp) {
+                    const double x = bx[jp], y = by[jp], z = bz[jp];
+                    // The point itself is the nearest (distance 0, as a
+                    // duplicate would be): the k - 1 smallest of the others
+                    // follow it.
+                    SmallestK<K == 0 ? 0 : K - 1> best(k - 1, lists.data());
+                    std::size_t count = 1;  // candidates offered, the point included
+                    // Offers ddp[0 .. m): the first ones until k are inserted,
                     // then only those below the k-th so far (gathered without
                     // branches, then inserted).
-                    auto scan = [&](const Block& b) {
-                        const std::size_t m = b.size;
-                        if (dd.size() < m) dd.resize(std::max(m, 2 * dd.size())), below.resize(dd.size());
-                        const double* bxp = b.x.data();
-                        const double* byp = b.y.data();
-                        const double* bzp = b.z.data();
-                        double* ddp = dd.data();
-                        for (std::size_t t = 0; t < m; ++t) {
-                            const double dx = bxp[t] - x, dy = byp[t] - y, dz = bzp[t] - z;
-                            ddp[t] = dx * dx + dy * dy + dz * dz;
-                        }
+                    const auto offer = [&](const double* ddp, std::size_t m) __attribute__((always_inline)) {
                         std::size_t t = 0;
                         for (; t < m && count < k; ++t, ++count) best.insert(ddp[t]);
                         count += m - t;
@@ -327,7 +350,42 @@ void grid_knn(const PointCloud& c, std::size_t k, Visit&& visit) {
                         for (; t < m; ++t) bp[nb] = ddp[t], nb += ddp[t] < largest;
                         for (std::size_t u = 0; u < nb; ++u) best.insert(bp[u]);
                     };
-                    scan(block);
+                    // Whether cell (xx, yy) may hold a point closer than the
+                    // k-th so far (its box, z range included).
+                    const auto may_hold_closer = [&](int xx, int yy) __attribute__((always_inline)) {
+                        if (count < k) return true;
+                        const std::size_t qq = cell_index(xx, yy);
+                        const double bx0 = minx + xx * cx_size, by0 = miny + yy * cy_size;
+                        const double ddx = std::max({0.0, bx0 - x, x - (bx0 + cx_size)});
+                        const double ddy = std::max({0.0, by0 - y, y - (by0 + cy_size)});
+                        const double ddz = std::max({0.0, double(zlo[qq]) - z, z - double(zhi[qq])});
+                        return !(ddx * ddx + ddy * ddy + ddz * ddz > best.largest());
+                    };
+                    {  // the block: squared distances in one vectorised loop
+                        const double* bxp = bx.data();
+                        const double* byp = by.data();
+                        const double* bzp = bz.data();
+                        double* ddp = dd.data();
+                        for (std::size_t t = 0; t < block_size; ++t) {
+                            const double dx = bxp[t] - x, dy = byp[t] - y, dz = bzp[t] - z;
+                            ddp[t] = dx * dx + dy * dy + dz * dz;
+                        }
+                        ddp[jp] = ddp[0];  // the point itself left out: offered from 1
+                        // Those below a guess (the previous point's k-th
+                        // distance, widened): when they are k - 1 or more, the
+                        // k - 1 smallest are among them.
+                        const double* from = ddp + 1;
+                        const std::size_t m = block_size - 1;
+                        double* bp = below.data();
+                        std::size_t nb = 0;
+                        for (std::size_t t = 0; t < m; ++t) bp[nb] = from[t], nb += from[t] < guess;
+                        if (nb + 1 >= k) {
+                            for (std::size_t u = 0; u < nb; ++u) best.insert(bp[u]);
+                            count += m;
+                        } else {
+                            offer(from, m);
+                        }
+                    }
                     // Distance from the point to the edge of the scanned block of
                     // rings 0..r: any unseen point is at least that far away. An
                     // axis of one cell has no unseen cells, so it does not bound
@@ -339,14 +397,41 @@ void grid_knn(const PointCloud& c, std::size_t k, Visit&& visit) {
                         const double reach = (r - 1) * step + std::max(0.0, edge);
                         if (count >= k && best.largest() <= reach * reach) break;
                         if (cx - r < 0 && cy - r < 0 && cx + r >= nx && cy + r >= ny) break;  // every cell seen
-                        if (r == 2) {  // ring 2 whole (pruning cells only skips points that cannot enter)
-                            if (!ring2_gathered) gather_ring2();
-                            scan(ring2);
-                            continue;
-                        }
                         // Only the ring's cells inside the grid are visited: its
                         // left and right columns whole, the rows cy - r and
-                        // cy + r of the columns between.
+                        // cy + r of the columns between; cells that cannot hold
+                        // a closer point are skipped.
+                        if (r == 2) {  // its 16 cells from the columns held, offered at once
+                            // Squared distances from the point to columns cx - 2 .. cx + 2 and rows cy - 2 .. cy + 2.
+                            double col_d2[5], row_d2[5];
+                            for (int u = 0; u < 5; ++u) {
+                                const double bx0 = minx + (cx - 2 + u) * cx_size, by0 = miny + (cy - 2 + u) * cy_size;
+                                const double ex = std::max({0.0, bx0 - x, x - (bx0 + cx_size)}), ey = std::max({0.0, by0 - y, y - (by0 + cy_size)});
+                                col_d2[u] = ex * ex, row_d2[u] = ey * ey;
+                            }
+                            static constexpr int kRing2[16][2] = {{-2, -2}, {-2, -1}, {-2, 0}, {-2, 1}, {-2, 2}, {-1, -2}, {-1, 2}, {0, -2},
+                                                                  {0, 2},   {1, -2},  {1, 2},  {2, -2}, {2, -1}, {2, 0},  {2, 1},  {2, 2}};
+                            std::size_t m = 0;
+                            for (const auto& [ox, oy] : kRing2) {
+                                const int xx = cx + ox, yy = cy + oy;
+                                if (xx < 0 || yy < 0 || xx >= nx || yy >= ny) continue;
+                                const std::size_t qq = cell_index(xx, yy);
+                                if (start[qq] == start[qq + 1]) continue;
+                                if (count >= k) {  // the cell's box, z range included, beyond the k-th so far
+                                    const double ddz = std::max({0.0, double(zlo[qq]) - z, z - double(zhi[qq])});
+                                    if (col_d2[ox + 2] + row_d2[oy + 2] + ddz * ddz > best.largest()) continue;
+                                }
+                                const Run cr = run(xx, yy, yy);
+                                room(m + cr.size);
+                                for (std::size_t t = 0; t < cr.size; ++t) {
+                                    const double dx = cr.x[t] - x, dy = cr.y[t] - y, dz = cr.z[t] - z;
+                                    dd[m + t] = dx * dx + dy * dy + dz * dz;
+                                }
+                                m += cr.size;
+                            }
+                            offer(dd.data(), m);
+                            continue;
+                        }
                         for (int xx = std::max(0, cx - r); xx <= std::min(nx - 1, cx + r); ++xx) {
                             const bool edge_col = xx == cx - r || xx == cx + r;
                             const int step_y = edge_col ? 1 : 2 * r;
@@ -355,14 +440,7 @@ void grid_knn(const PointCloud& c, std::size_t k, Visit&& visit) {
                             for (; yy <= std::min(ny - 1, cy + r); yy += step_y) {
                                 if (yy < 0) continue;
                                 const std::size_t qq = cell_index(xx, yy);
-                                if (start[qq] == start[qq + 1]) continue;
-                                if (count >= k) {  // prune by the cell's box (z range included)
-                                    const double bx0 = minx + xx * cx_size, by0 = miny + yy * cy_size;
-                                    const double ddx = std::max({0.0, bx0 - x, x - (bx0 + cx_size)});
-                                    const double ddy = std::max({0.0, by0 - y, y - (by0 + cy_size)});
-                                    const double ddz = std::max({0.0, double(zlo[qq]) - z, z - double(zhi[qq])});
-                                    if (ddx * ddx + ddy * ddy + ddz * ddz > best.largest()) continue;
-                                }
+                                if (start[qq] == start[qq + 1] || !may_hold_closer(xx, yy)) continue;
                                 for (uint32_t j = start[qq]; j < start[qq + 1]; ++j, ++count) {
                                     const uint32_t i = order[j];
                                     const double dx = cxp[i] - x, dy = cyp[i] - y, dz = czp[i] - z;
@@ -372,7 +450,9 @@ void grid_knn(const PointCloud& c, std::size_t k, Visit&& visit) {
                             }
                         }
                     }
-                    best.write(out.data());
+                    out[0] = 0.0;
+                    best.write(out.data() + 1);
+                    guess = 1.5 * best.largest();
                     visit(order[start[q] + jp], static_cast<const double*>(out.data()), std::min(count, k));
                 }
             }
