@@ -5,7 +5,9 @@
 #include <atomic>
 #include <bit>
 #include <cmath>
+#include <functional>
 #include <limits>
+#include <memory>
 #include <numeric>
 #include <tuple>
 #include <utility>
@@ -37,15 +39,20 @@ void GroundFilterOptions::validate() const {
 
 void canonical_order(PointCloud& c) {
     const std::size_t n = c.size();
-    std::vector<std::size_t> order(n);
-    std::iota(order.begin(), order.end(), std::size_t(0));
     const bool gps = c.has_gps_time(), rgb = c.has_color();
     auto key = [&](std::size_t i) {
         return std::make_tuple(c.x[i], c.y[i], c.z[i], gps ? c.gps_time[i] : 0.0, c.intensity[i], c.classification[i], c.return_number[i],
                                c.number_of_returns[i], rgb ? c.red[i] : 0, rgb ? c.green[i] : 0, rgb ? c.blue[i] : 0);
     };
-    bool sorted = true;
-    for (std::size_t i = 1; i < n && sorted; ++i) sorted = !(key(i) < key(i - 1));
+    constexpr std::size_t kGrain = 1u << 16;
+    if (n < 2) return;
+    const bool sorted = tbb::parallel_reduce(
+        tbb::blocked_range<std::size_t>(1, n, kGrain), true,
+        [&](const tbb::blocked_range<std::size_t>& r, bool ok) {
+            for (std::size_t i = r.begin(); ok && i != r.end(); ++i) ok = !(key(i) < key(i - 1));
+            return ok;
+        },
+        [](bool a, bool b) { return a && b; });
     if (sorted) return;
     // Sorted on a compact copy of (x, y) with the index: the whole key (through
     // the index) only breaks ties of x and y. (An indirect sort on the full
@@ -66,8 +73,14 @@ void canonical_order(PointCloud& c) {
         if (b.y < a.y) return false;
         return key(a.i) < key(b.i);
     };
-    double minx = INFINITY, maxx = -INFINITY;
-    for (std::size_t i = 0; i < n; ++i) minx = std::min(minx, c.x[i]), maxx = std::max(maxx, c.x[i]);
+    using Range = std::pair<double, double>;
+    const auto [minx, maxx] = tbb::parallel_reduce(
+        tbb::blocked_range<std::size_t>(0, n, kGrain), Range{INFINITY, -INFINITY},
+        [&](const tbb::blocked_range<std::size_t>& r, Range v) {
+            for (std::size_t i = r.begin(); i != r.end(); ++i) v.first = std::min(v.first, c.x[i]), v.second = std::max(v.second, c.x[i]);
+            return v;
+        },
+        [](Range a, Range b) { return Range{std::min(a.first, b.first), std::max(a.second, b.second)}; });
     std::size_t buckets = std::clamp<std::size_t>(n / 1024, 1, std::size_t(1) << 22);
     const double scale = double(buckets) / (maxx - minx);
     if (!std::isfinite(scale) || !(scale > 0)) buckets = 1;
@@ -75,26 +88,42 @@ void canonical_order(PointCloud& c) {
         const double v = (x - minx) * scale;  // non-decreasing in x
         return buckets == 1 || !(v >= 0) ? 0 : v >= double(buckets - 1) ? buckets - 1 : static_cast<std::size_t>(v);
     };
-    std::vector<std::size_t> first(buckets + 1, 0);
-    for (std::size_t i = 0; i < n; ++i) ++first[bucket_of(c.x[i]) + 1];
-    for (std::size_t b = 0; b < buckets; ++b) first[b + 1] += first[b];
-    std::vector<XY> xy(n);
-    {
-        std::vector<std::size_t> fill(first.begin(), first.end() - 1);
-        for (std::size_t i = 0; i < n; ++i) xy[fill[bucket_of(c.x[i])]++] = {c.x[i], c.y[i], i};
-    }
-    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, buckets, 16), [&](const tbb::blocked_range<std::size_t>& r) {
-        for (std::size_t b = r.begin(); b != r.end(); ++b) std::sort(xy.begin() + first[b], xy.begin() + first[b + 1], less);
+    // Counting sort into the buckets by fixed chunks of points, in parallel:
+    // chunk j's points of bucket b follow those of chunks 0 .. j - 1, so every
+    // bucket lists its points by index, as one pass would.
+    const std::size_t chunks = std::min<std::size_t>(64, (n + kGrain - 1) / kGrain), chunk = (n + chunks - 1) / chunks;
+    std::vector<std::size_t> at(chunks * buckets, 0), first(buckets + 1, 0);  // at[j * buckets + b]
+    tbb::parallel_for(std::size_t(0), chunks, [&](std::size_t j) {
+        std::size_t* count = at.data() + j * buckets;
+        for (std::size_t i = j * chunk; i < std::min(n, (j + 1) * chunk); ++i) ++count[bucket_of(c.x[i])];
     });
-    for (std::size_t i = 0; i < n; ++i) order[i] = xy[i].i;
-    std::vector<XY>().swap(xy);
+    for (std::size_t b = 0, sum = 0; b < buckets; ++b) {
+        first[b] = sum;
+        for (std::size_t j = 0; j < chunks; ++j) sum += std::exchange(at[j * buckets + b], sum);
+        first[b + 1] = sum;
+    }
+    // Not zero-filled: every entry is written below.
+    const auto xy = std::make_unique_for_overwrite<XY[]>(n);
+    tbb::parallel_for(std::size_t(0), chunks, [&](std::size_t j) {
+        std::size_t* fill = at.data() + j * buckets;
+        for (std::size_t i = j * chunk; i < std::min(n, (j + 1) * chunk); ++i) xy[fill[bucket_of(c.x[i])]++] = {c.x[i], c.y[i], i};
+    });
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, buckets, 16), [&](const tbb::blocked_range<std::size_t>& r) {
+        for (std::size_t b = r.begin(); b != r.end(); ++b) std::sort(xy.get() + first[b], xy.get() + first[b + 1], less);
+    });
+    // Each attribute through one buffer of 8 bytes a point, reused (a new
+    // vector per attribute cost a page fault per 4 kB).
+    const auto scratch = std::make_unique_for_overwrite<std::byte[]>(n * sizeof(double));
     auto permute = [&](auto& v) {
+        using T = typename std::remove_reference_t<decltype(v)>::value_type;
         if (v.empty()) return;
-        std::remove_reference_t<decltype(v)> out(n);
-        tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, 1u << 16), [&](const tbb::blocked_range<std::size_t>& r) {
-            for (std::size_t i = r.begin(); i != r.end(); ++i) out[i] = v[order[i]];
+        T* out = reinterpret_cast<T*>(scratch.get());
+        tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, kGrain), [&](const tbb::blocked_range<std::size_t>& r) {
+            for (std::size_t i = r.begin(); i != r.end(); ++i) out[i] = v[xy[i].i];
         });
-        v.swap(out);
+        tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, kGrain), [&](const tbb::blocked_range<std::size_t>& r) {
+            std::copy(out + r.begin(), out + r.end(), v.begin() + static_cast<std::ptrdiff_t>(r.begin()));
+        });
     };
     permute(c.x), permute(c.y), permute(c.z), permute(c.gps_time), permute(c.intensity), permute(c.classification);
     permute(c.return_number), permute(c.number_of_returns), permute(c.red), permute(c.green), permute(c.blue);
@@ -465,14 +494,26 @@ OutlierFilterResult filter_outliers(const PointCloud& c, const OutlierFilterOpti
     o.validate();
     OutlierFilterResult r;
     const std::size_t n = c.size();
-    r.keep.assign(n, 1);
-    for (std::size_t i = 0; i < n; ++i)
-        if (c.classification[i] == las_class::low_noise || c.classification[i] == las_class::high_noise) r.keep[i] = 0, ++r.removed_statistical;
+    r.keep.resize(n);
+    constexpr std::size_t kGrain = 1u << 16;
+    using Counts = std::pair<std::size_t, std::size_t>;  // (statistical, isolated), added in any order
+    const auto add = [](Counts a, Counts b) { return Counts{a.first + b.first, a.second + b.second}; };
+    r.removed_statistical = tbb::parallel_reduce(
+        tbb::blocked_range<std::size_t>(0, n, kGrain), std::size_t(0),
+        [&](const tbb::blocked_range<std::size_t>& b, std::size_t noise) {
+            for (std::size_t i = b.begin(); i != b.end(); ++i) {
+                const bool is_noise = c.classification[i] == las_class::low_noise || c.classification[i] == las_class::high_noise;
+                r.keep[i] = !is_noise, noise += is_noise;
+            }
+            return noise;
+        },
+        std::plus<>());
     if (!o.enabled || n < static_cast<std::size_t>(o.k_neighbours) + 1) return r;
     // One k-nearest-neighbour pass serves both filters: the isolated-point test
     // only needs the distance to the m-th neighbour (m = isolated_min_neighbours).
-    // Ties go by point index: with points in canonical order (canonical_order)
-    // the neighbours do not depend on the window the cloud was cut to.
+    // Only distances count (which of several equidistant points is a
+    // neighbour changes none), so they do not depend on the window the cloud
+    // was cut to.
     const std::size_t k = static_cast<std::size_t>(std::max(o.k_neighbours, o.isolated_min_neighbours)) + 1;  // self first
     const auto m = static_cast<std::size_t>(o.isolated_min_neighbours);
     std::vector<double> mean_dist(n, 0.0);
@@ -494,10 +535,18 @@ OutlierFilterResult filter_outliers(const PointCloud& c, const OutlierFilterOpti
     const double sigma = std::sqrt(std::max(0.0, sum2 / static_cast<double>(n) - mean * mean));
     const double limit = o.max_mean_distance > 0 ? o.max_mean_distance : mean + o.std_multiplier * sigma;
     r.limit = limit;
-    for (std::size_t i = 0; i < n; ++i)
-        if (r.keep[i] && mean_dist[i] > limit) r.keep[i] = 0, ++r.removed_statistical;
-    for (std::size_t i = 0; i < n; ++i)
-        if (r.keep[i] && isolated[i]) r.keep[i] = 0, ++r.removed_isolated;
+    const Counts removed = tbb::parallel_reduce(
+        tbb::blocked_range<std::size_t>(0, n, kGrain), Counts{0, 0},
+        [&](const tbb::blocked_range<std::size_t>& b, Counts counts) {
+            for (std::size_t i = b.begin(); i != b.end(); ++i) {
+                if (!r.keep[i]) continue;
+                if (mean_dist[i] > limit) r.keep[i] = 0, ++counts.first;  // statistical first, as the noise classes
+                else if (isolated[i]) r.keep[i] = 0, ++counts.second;
+            }
+            return counts;
+        },
+        add);
+    r.removed_statistical += removed.first, r.removed_isolated = removed.second;
     return r;
 }
 

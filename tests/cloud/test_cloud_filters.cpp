@@ -268,3 +268,36 @@ TEST_CASE("Gap fill by strips of rows equals the sweeps over the whole grid, for
         }
     }
 }
+
+TEST_CASE("canonical_order sorts by the whole key, by chunks and buckets in parallel, for any thread count", "[cloud][filters]") {
+    // 300 k points (several chunks of the parallel counting sort), x and y on
+    // a coarse grid (many ties broken by z and the other attributes), GPS time
+    // and colour present.
+    Rng rng(3);
+    PointCloud c;
+    const std::size_t n = 300000;
+    for (std::size_t i = 0; i < n; ++i) {
+        c.x.push_back(std::floor(rng.uniform(0, 300)) * 0.5), c.y.push_back(std::floor(rng.uniform(0, 40)) * 0.25);
+        c.z.push_back(std::floor(rng.uniform(0, 4))), c.gps_time.push_back(std::floor(rng.uniform(0, 3)));
+        c.intensity.push_back(static_cast<uint16_t>(rng.uniform(0, 3))), c.classification.push_back(static_cast<uint8_t>(rng.uniform(0, 3)));
+        c.return_number.push_back(1), c.number_of_returns.push_back(1);
+        c.red.push_back(static_cast<uint16_t>(rng.uniform(0, 2))), c.green.push_back(0), c.blue.push_back(0);
+    }
+    using Key = std::tuple<double, double, double, double, uint16_t, uint8_t, uint16_t>;
+    auto keys = [](const PointCloud& p) {
+        std::vector<Key> k;
+        for (std::size_t i = 0; i < p.size(); ++i) k.emplace_back(p.x[i], p.y[i], p.z[i], p.gps_time[i], p.intensity[i], p.classification[i], p.red[i]);
+        return k;
+    };
+    std::vector<Key> expected = keys(c);
+    std::sort(expected.begin(), expected.end());
+    PointCloud sorted = c;
+    canonical_order(sorted);
+    CHECK(keys(sorted) == expected);
+    tbb::global_control one_thread(tbb::global_control::max_allowed_parallelism, 1);
+    PointCloud sorted_one = c;
+    canonical_order(sorted_one);
+    CHECK(keys(sorted_one) == expected);
+    canonical_order(sorted_one);  // already in order: unchanged
+    CHECK(keys(sorted_one) == expected);
+}
