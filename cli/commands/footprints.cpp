@@ -62,6 +62,9 @@ void add_footprints_command(CLI::App& parent, const GlobalFlags& g, CommandList&
     cmd->add_option("--min-area-m2", o.mask.min_area_m2, "Smallest building kept, square metres")->capture_default_str();
     cmd->add_option("--min-hole-m2", o.mask.min_hole_m2, "Smaller holes are filled, larger ones (courtyards) kept")->capture_default_str();
     cmd->add_option("--opening-px", o.mask.opening_radius_px, "Morphological opening radius removing slivers, pixels")->capture_default_str();
+    cmd->add_option("--hidden-completion-max-share", o.mask.hidden_completion_max_share,
+                    "Roofs the data hides (no point: dark roofs, crowns) completed inside each building's rectangle when that grows it by at most this share; 0 = never")
+        ->capture_default_str();
     cmd->add_option("--split-step-m", o.mask.split_step_m, "Split buildings along roof height steps larger than this, metres (0 = never)")
         ->capture_default_str();
     cmd->add_option("--min-split-part-m2", o.mask.min_split_part_m2, "Smallest part split off at a height step, square metres")

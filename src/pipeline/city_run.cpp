@@ -123,6 +123,7 @@ json to_json(const RunOptions& o) {
               {"min_area_m2", m.min_area_m2},
               {"min_hole_m2", m.min_hole_m2},
               {"opening_px", m.opening_radius_px},
+              {"hidden_completion_max_share", m.hidden_completion_max_share},
               {"mode", to_string(o.extraction.mode)},
               {"cloud_cell_px", o.extraction.cloud_cell_factor},
               {"use_point_classes", o.extraction.mask.use_classes < 0 ? "auto" : o.extraction.mask.use_classes ? "yes" : "no"},
@@ -168,9 +169,10 @@ RunOptions run_options_from_json(const json& j, const std::string& where, RunOpt
     if (j.contains("extraction")) {
         const json& x = j["extraction"];
         const std::string w = where + ": extraction";
-        check_keys(x, {"mode", "cloud_cell_px", "use_point_classes", "min_height_m", "min_area_m2", "min_hole_m2", "opening_px", "split_step_m", "min_split_part_m2", "fit", "fit_tolerance_pct", "simplify_m", "footprint_grid_m", "detector", "model"}, w);
+        check_keys(x, {"mode", "cloud_cell_px", "use_point_classes", "min_height_m", "min_area_m2", "min_hole_m2", "opening_px", "hidden_completion_max_share", "split_step_m", "min_split_part_m2", "fit", "fit_tolerance_pct", "simplify_m", "footprint_grid_m", "detector", "model"}, w);
         take(x, "min_height_m", o.extraction.mask.min_height_m, w), take(x, "min_area_m2", o.extraction.mask.min_area_m2, w);
         take(x, "min_hole_m2", o.extraction.mask.min_hole_m2, w), take(x, "opening_px", o.extraction.mask.opening_radius_px, w);
+        take(x, "hidden_completion_max_share", o.extraction.mask.hidden_completion_max_share, w);
         take(x, "cloud_cell_px", o.extraction.cloud_cell_factor, w);
         take(x, "split_step_m", o.extraction.mask.split_step_m, w), take(x, "min_split_part_m2", o.extraction.mask.min_split_part_m2, w);
         take(x, "fit_tolerance_pct", o.extraction.recursive.tolerance_pct, w), take(x, "simplify_m", o.extraction.simplify_m, w);
