@@ -260,3 +260,33 @@ TEST_CASE("Outlines from ortho + cloud with sparse dark roofs (40 %, 4 pts/m2), 
     CHECK(sc.mean_iou >= 0.95);
     CHECK(sc.mean_abs_area_error_pct <= 1.0);
 }
+
+TEST_CASE("Sparse dark roofs (40 %, a fifth of the pulses) with every roof family - roof types >= 0.95 - valid LOD2 solids",
+          "[roof][synth][variation]") {
+    // About 1.6 points per m2 on a dark roof: planes meeting at a hip lie more
+    // than the 0.5 m adjacency grid apart unless it follows the point spacing
+    // (0.839 before on seed 202; 0.980 on this seed, which was not looked at).
+    ScratchDir dir("dark_roofs");
+    SynthOptions o;
+    o.size_m = 300;
+    o.seed = 216;
+    o.cloud_density_m2 = 8.0;
+    o.variation.dark_roof_share = 0.4;
+    o.variation.all_roof_families = true;
+    o.variation.base_at_area_centroid = true;
+    const SynthResult s = write_synthetic_town(dir.path.string(), o);
+    const PolygonLayer truth = read_polygon_layer(s.truth_path, "");
+    RoofsRunReport rep;
+    const CityModel model = lod2_on_truth(s, rep);
+    int correct = 0, valid = 0;
+    for (std::size_t i = 0; i < model.buildings.size(); ++i) {
+        const Building& b = model.buildings[i];
+        correct += b.roof_type == text_field(truth, i, "roof_type");
+        valid += !b.lod2.empty() && b.lod2_errors.empty();
+    }
+    const double n = double(model.buildings.size());
+    INFO(correct << " of " << n << " roof types right, " << rep.fallbacks << " fallbacks");
+    CHECK(correct / n >= 0.95);
+    CHECK(valid == static_cast<int>(model.buildings.size()));
+    CHECK(rep.fallbacks <= 2);  // 0 when written
+}
