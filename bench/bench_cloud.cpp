@@ -17,6 +17,7 @@
 #include <sys/resource.h>
 
 #include "cloud/cloud_filters.hpp"
+#include "cloud/surface_support.hpp"
 #include "cloud/las.hpp"
 #include "synth/synth.hpp"
 
@@ -82,10 +83,16 @@ int main(int argc, char** argv) {
     report("filter_outliers", cloud.size(), now() - t, cpu_now() - c);
     std::printf("  removed %zu statistical, %zu isolated (limit %.6f), keep digest %016llx\n", out.removed_statistical, out.removed_isolated,
                 out.limit, static_cast<unsigned long long>(digest(out.keep)));
+    // Sparse surfaces back in, as every command does after the filter (prepared_cloud.cpp).
+    std::vector<uint8_t> keep = out.keep;
+    t = now(), c = cpu_now(), sys_start = sys_now();
+    const std::size_t restored = restore_surface_points(cloud, keep, SurfaceSupportOptions{});
+    report("restore_surface_points", cloud.size(), now() - t, cpu_now() - c);
+    std::printf("  restored %zu, keep digest %016llx\n", restored, static_cast<unsigned long long>(digest(keep)));
     GroundFilterOptions go;
     go.trust_classification = false;
     t = now(), c = cpu_now(), sys_start = sys_now();
-    const GroundResult g = classify_ground(cloud, out.keep, go);
+    const GroundResult g = classify_ground(cloud, keep, go);
     report("classify_ground (SMRF)", cloud.size(), now() - t, cpu_now() - c);
     std::printf("  %zu ground points, ground digest %016llx\n", g.ground_points, static_cast<unsigned long long>(digest(g.is_ground)));
     if (!dir.empty()) std::filesystem::remove_all(dir);
