@@ -88,9 +88,11 @@ TEST_CASE("roofs on Delft AHN3 - every solid valid - roof types found (regressio
     std::sort(rmse.begin(), rmse.end());
     const double median = 0.5 * (rmse[67] + rmse[67]);
     INFO("median LOD2 RMSE " << median << " m, p90 " << rmse[121] << " m");
-    CHECK(median <= 0.21);    // 0.192 m when written (0.198 before the alternatives; roofer on AHN4: 0.13-0.38 m per building on the 3DBAG sample)
-    CHECK(rmse[121] <= 0.40); // p90 0.338 m when written (0.458 m before the alternatives)
-    CHECK(rmse.back() <= 0.80); // max 0.653 m
+    // 0.192 / 0.338 / 0.653 m when written; 0.206 / 0.361 / 0.733 m since the outlier filter keeps the
+    // steep gables' points (4,557 class-6 points it removed before now count in the RMSE).
+    CHECK(median <= 0.21);    // (0.198 before the alternatives; roofer on AHN4: 0.13-0.38 m per building on the 3DBAG sample)
+    CHECK(rmse[121] <= 0.40); // p90 (0.458 m before the alternatives)
+    CHECK(rmse.back() <= 0.80); // max
     CHECK(geometric_fallbacks == 0);
     CHECK(retried >= 15);       // 30 of 135 models come from an alternative plane setting
     CHECK(retried <= 45);
