@@ -62,6 +62,30 @@ CityModel lod2_on_truth(const SynthResult& s, RoofsRunReport& rep) {
     return build_lod2_model(st, st.table.crs, ro, s.truth_path, rep);
 }
 
+// Roof types of a model against the truth's, per family (right, of), and valid LOD2 solids.
+struct RoofTypeScore {
+    int correct = 0, valid = 0, buildings = 0;
+    std::map<std::string, std::pair<int, int>> per;
+    std::string summary() const {
+        std::string out;
+        for (const auto& [t, p] : per) out += t + " " + std::to_string(p.first) + "/" + std::to_string(p.second) + " ";
+        return out;
+    }
+};
+RoofTypeScore score_roof_types(const CityModel& model, const PolygonLayer& truth) {
+    RoofTypeScore r;
+    for (std::size_t i = 0; i < model.buildings.size(); ++i) {
+        const Building& b = model.buildings[i];
+        const std::string t = text_field(truth, i, "roof_type");
+        ++r.per[t].second;
+        if (b.roof_type == t) ++r.correct, ++r.per[t].first;
+        r.valid += !b.lod2.empty() && b.lod2_errors.empty();
+    }
+    r.buildings = static_cast<int>(model.buildings.size());
+    for (const char* family : {"flat", "shed", "gable", "hip"}) r.per[family];  // every family listed
+    return r;
+}
+
 }  // namespace
 
 TEST_CASE("Ground plane of the ring - unbiased on a slope, robust to outliers, median when the ring is a line", "[heights]") {
@@ -154,22 +178,11 @@ TEST_CASE("Varied town with every roof family - roof types >= 0.95 - valid LOD2 
     const PolygonLayer truth = read_polygon_layer(s.truth_path, "");
     RoofsRunReport rep;
     const CityModel model = lod2_on_truth(s, rep);
-    std::map<std::string, std::pair<int, int>> per;
-    int correct = 0, valid = 0;
-    for (std::size_t i = 0; i < model.buildings.size(); ++i) {
-        const Building& b = model.buildings[i];
-        const std::string t = text_field(truth, i, "roof_type");
-        ++per[t].second;
-        if (b.roof_type == t) ++correct, ++per[t].first;
-        valid += !b.lod2.empty() && b.lod2_errors.empty();
-    }
-    std::string summary;
-    for (const auto& [t, p] : per) summary += t + " " + std::to_string(p.first) + "/" + std::to_string(p.second) + " ";
-    INFO(summary);
-    for (const char* family : {"flat", "shed", "gable", "hip"}) CHECK(per[family].second >= 5);
-    const double n = double(model.buildings.size());
-    CHECK(correct / n >= 0.95);
-    CHECK(valid == static_cast<int>(model.buildings.size()));
+    const RoofTypeScore score = score_roof_types(model, truth);
+    INFO(score.summary());
+    for (const char* family : {"flat", "shed", "gable", "hip"}) CHECK(score.per.at(family).second >= 5);
+    CHECK(score.correct / double(score.buildings) >= 0.95);
+    CHECK(score.valid == score.buildings);
     CHECK(rep.fallbacks <= 3);  // 2 when written: a sparse gable, a hip whose planes missed their points
 }
 
@@ -203,6 +216,26 @@ TEST_CASE("Hip roofs with a corner cut at an oblique angle stay hips (eaves all 
     CHECK(correct / double(model.buildings.size()) >= 0.95);
 }
 
+namespace {
+// Footprints from ortho + cloud on a town, scored against its truth: F1 >= 0.97,
+// mean IoU >= 0.95, mean |area error| <= 1 %. Returns the report.
+FootprintsReport check_outlines(const ScratchDir& dir, const SynthOptions& o) {
+    const SynthResult s = write_synthetic_town(dir.path.string(), o);
+    FootprintsRunOptions fo;
+    fo.ortho = s.ortho_path;
+    fo.cloud = s.cloud_path;
+    const FootprintsReport fr = run_footprints(dir / "fp.gpkg", fo);
+    CHECK(fr.mode == "ortho_cloud");
+    const FootprintAuditReport ar = audit_footprints(dir / "fp.gpkg", s.truth_path, dir / "audit", FootprintAuditOptions{});
+    const FootprintScores& sc = ar.scores;
+    INFO("F1 " << sc.f1 << ", mean IoU " << sc.mean_iou << ", mean |area error| " << sc.mean_abs_area_error_pct << " %");
+    CHECK(sc.f1 >= 0.97);
+    CHECK(sc.mean_iou >= 0.95);
+    CHECK(sc.mean_abs_area_error_pct <= 1.0);
+    return fr;
+}
+}  // namespace
+
 TEST_CASE("Outlines from ortho + cloud on a varied town (slopes, ground-coloured roofs, oblique corners, crowns, low sun) - IoU >= 0.95, |area error| <= 1 %",
           "[footprint][synth][variation]") {
     ScratchDir dir("varied_outlines");
@@ -217,18 +250,7 @@ TEST_CASE("Outlines from ortho + cloud on a varied town (slopes, ground-coloured
     o.variation.ground_like_roof_share = 0.3;
     o.variation.oblique_share = 0.3;
     o.variation.tree_touch_share = 0.5;
-    const SynthResult s = write_synthetic_town(dir.path.string(), o);
-    FootprintsRunOptions fo;
-    fo.ortho = s.ortho_path;
-    fo.cloud = s.cloud_path;
-    const FootprintsReport fr = run_footprints(dir / "fp.gpkg", fo);
-    CHECK(fr.mode == "ortho_cloud");
-    const FootprintAuditReport ar = audit_footprints(dir / "fp.gpkg", s.truth_path, dir / "audit", FootprintAuditOptions{});
-    const FootprintScores& sc = ar.scores;
-    INFO("F1 " << sc.f1 << ", mean IoU " << sc.mean_iou << ", mean |area error| " << sc.mean_abs_area_error_pct << " %");
-    CHECK(sc.f1 >= 0.97);
-    CHECK(sc.mean_iou >= 0.95);
-    CHECK(sc.mean_abs_area_error_pct <= 1.0);
+    check_outlines(dir, o);
 }
 
 TEST_CASE("Outlines from ortho + cloud with sparse dark roofs (40 %, 4 pts/m2), crowns and a 25-degree sun - F1 >= 0.97, IoU >= 0.95, |area error| <= 1 %",
@@ -246,19 +268,7 @@ TEST_CASE("Outlines from ortho + cloud with sparse dark roofs (40 %, 4 pts/m2), 
     o.sun_elevation_deg = 25.0;
     o.variation.dark_roof_share = 0.4;
     o.variation.tree_touch_share = 0.5;
-    const SynthResult s = write_synthetic_town(dir.path.string(), o);
-    FootprintsRunOptions fo;
-    fo.ortho = s.ortho_path;
-    fo.cloud = s.cloud_path;
-    const FootprintsReport fr = run_footprints(dir / "fp.gpkg", fo);
-    CHECK(fr.mode == "ortho_cloud");
-    CHECK(fr.hidden_completed_cells > 0);
-    const FootprintAuditReport ar = audit_footprints(dir / "fp.gpkg", s.truth_path, dir / "audit", FootprintAuditOptions{});
-    const FootprintScores& sc = ar.scores;
-    INFO("F1 " << sc.f1 << ", mean IoU " << sc.mean_iou << ", mean |area error| " << sc.mean_abs_area_error_pct << " %");
-    CHECK(sc.f1 >= 0.97);
-    CHECK(sc.mean_iou >= 0.95);
-    CHECK(sc.mean_abs_area_error_pct <= 1.0);
+    CHECK(check_outlines(dir, o).hidden_completed_cells > 0);
 }
 
 TEST_CASE("Sparse dark roofs (40 %, a fifth of the pulses) with every roof family - roof types >= 0.95 - valid LOD2 solids",
@@ -278,15 +288,9 @@ TEST_CASE("Sparse dark roofs (40 %, a fifth of the pulses) with every roof famil
     const PolygonLayer truth = read_polygon_layer(s.truth_path, "");
     RoofsRunReport rep;
     const CityModel model = lod2_on_truth(s, rep);
-    int correct = 0, valid = 0;
-    for (std::size_t i = 0; i < model.buildings.size(); ++i) {
-        const Building& b = model.buildings[i];
-        correct += b.roof_type == text_field(truth, i, "roof_type");
-        valid += !b.lod2.empty() && b.lod2_errors.empty();
-    }
-    const double n = double(model.buildings.size());
-    INFO(correct << " of " << n << " roof types right, " << rep.fallbacks << " fallbacks");
-    CHECK(correct / n >= 0.95);
-    CHECK(valid == static_cast<int>(model.buildings.size()));
+    const RoofTypeScore score = score_roof_types(model, truth);
+    INFO(score.summary() << rep.fallbacks << " fallbacks");
+    CHECK(score.correct / double(score.buildings) >= 0.95);
+    CHECK(score.valid == score.buildings);
     CHECK(rep.fallbacks <= 2);  // 0 when written
 }
