@@ -17,6 +17,7 @@
 #include "core/error.hpp"
 #include "core/grid_fill.hpp"
 #include "core/grid_size.hpp"
+#include "core/large_buffer.hpp"
 #include "core/morphology.hpp"
 
 namespace cityforge {
@@ -37,42 +38,109 @@ void GroundFilterOptions::validate() const {
 }
 
 
-void canonical_order(PointCloud& c) {
+namespace {
+
+__extension__ typedef unsigned __int128 SortKey;
+
+// The bits of a double as an unsigned integer in the order of the values (not
+// NaN): a < b exactly when ordered_bits(a) < ordered_bits(b); -0 and +0 alike.
+inline uint64_t ordered_bits(double v) {
+    const auto b = std::bit_cast<uint64_t>(v + 0.0);  // -0 + 0 = +0
+    return b >> 63 ? ~b : b | (uint64_t(1) << 63);
+}
+
+// Sorts a[0 .. m) (distinct keys) ascending: quicksort whose partition has no
+// branch on the comparisons (those of random keys are unpredictable; an
+// element is swapped whatever the outcome and the boundary moves by it),
+// insertion sort below 16 elements, std::sort past `depth` levels.
+void sort_keys(SortKey* a, std::size_t m, int depth) {
+    while (m > 16) {
+        if (depth-- == 0) {
+            std::sort(a, a + m);
+            return;
+        }
+        SortKey& mid = a[m / 2];
+        if (mid < a[0]) std::swap(mid, a[0]);
+        if (a[m - 1] < mid) std::swap(a[m - 1], mid);
+        if (mid < a[0]) std::swap(mid, a[0]);
+        std::swap(a[0], mid);  // the median of three as the pivot
+        const SortKey p = a[0];
+        std::size_t lt = 1;  // a[1 .. lt) < p <= a[lt .. j)
+        for (std::size_t j = 1; j < m; ++j) {
+            const SortKey e = a[j];
+            const bool smaller = e < p;
+            a[j] = a[lt], a[lt] = e;
+            lt += smaller;
+        }
+        std::swap(a[0], a[lt - 1]);
+        const std::size_t left = lt - 1, right = m - lt;
+        if (left < right) sort_keys(a, left, depth), a += lt, m = right;
+        else sort_keys(a + lt, right, depth), m = left;
+    }
+    for (std::size_t i = 1; i < m; ++i) {
+        const SortKey v = a[i];
+        std::size_t j = i;
+        for (; j > 0 && v < a[j - 1]; --j) a[j] = a[j - 1];
+        a[j] = v;
+    }
+}
+
+// Sorts a[0 .. m) (distinct keys below 2^width) into out[0 .. m): counted
+// into 256 parts by their top 8 of those bits, each part then by sort_keys
+// (parts of a few keys: the mispredicted comparisons of a quicksort's first
+// levels replaced by one counting pass).
+void radix_sort_keys(const SortKey* a, SortKey* out, std::size_t m, int width) {
+    const int shift = std::max(width - 8, 0);
+    std::array<uint32_t, 257> start{};
+    for (std::size_t k = 0; k < m; ++k) ++start[static_cast<std::size_t>(a[k] >> shift) + 1];
+    for (std::size_t d = 0; d < 256; ++d) start[d + 1] += start[d];
+    std::array<uint32_t, 256> fill;
+    std::copy(start.begin(), start.end() - 1, fill.begin());
+    for (std::size_t k = 0; k < m; ++k) out[fill[static_cast<std::size_t>(a[k] >> shift)]++] = a[k];
+    for (std::size_t d = 0; d < 256; ++d) {
+        const std::size_t size = start[d + 1] - start[d];
+        if (size > 1) sort_keys(out + start[d], size, 2 * static_cast<int>(std::bit_width(size)) + 8);
+    }
+}
+
+// Uninitialised arrays from LargeBufferAllocator: large ones on transparent
+// huge pages (fresh 4 kB pages cost 1.8-2.0 system s more at 60 M points).
+template <class T>
+struct LargeDelete {
+    std::size_t n;
+    void operator()(T* p) const noexcept { LargeBufferAllocator<T>().deallocate(p, n); }
+};
+template <class T>
+using LargeArray = std::unique_ptr<T[], LargeDelete<T>>;
+template <class T>
+LargeArray<T> large_array(std::size_t n) {
+    return LargeArray<T>(LargeBufferAllocator<T>().allocate(n), LargeDelete<T>{n});
+}
+
+template <class Index>
+struct Permutation {
+    LargeArray<Index> order;      ///< order[rank] = index of the point of that rank
+    LargeArray<uint64_t> scratch;  ///< at least n entries, free for the caller
+};
+
+// The permutation that sorts the points by canonical_order's key: order[r] is
+// the index of the point of rank r. Index: uint32_t while n fits, else size_t.
+// The point indices are first spread into buckets of ~1024 points by x (a
+// non-decreasing function of x, so every bucket holds a range of the final
+// order), then each bucket is sorted in parallel in cache: x and y as one
+// 128-bit integer above the index (x and y relative to the bucket's smallest,
+// in order-preserving bits; counted by its top 8 bits, then quicksorted
+// without branches), the whole key (through the index) only for ties of x
+// and y. (An indirect sort on the full key missed the cache on every
+// comparison: 28 % of a `heights` run.) Fresh memory: the permutation and the
+// scratch buffer, 12 bytes a point when n < 2^32 (fresh pages are dear on a
+// VM: the former 24-byte copy of every point and a buffer of 8 took most of
+// this step's time at 60 M points). Points equal in every attribute are
+// interchangeable, so the result does not depend on the thread count.
+template <class Index, class Less>
+Permutation<Index> canonical_permutation(const PointCloud& c, Less&& key_less) {
     const std::size_t n = c.size();
-    const bool gps = c.has_gps_time(), rgb = c.has_color();
-    auto key = [&](std::size_t i) {
-        return std::make_tuple(c.x[i], c.y[i], c.z[i], gps ? c.gps_time[i] : 0.0, c.intensity[i], c.classification[i], c.return_number[i],
-                               c.number_of_returns[i], rgb ? c.red[i] : 0, rgb ? c.green[i] : 0, rgb ? c.blue[i] : 0);
-    };
     constexpr std::size_t kGrain = 1u << 16;
-    if (n < 2) return;
-    const bool sorted = tbb::parallel_reduce(
-        tbb::blocked_range<std::size_t>(1, n, kGrain), true,
-        [&](const tbb::blocked_range<std::size_t>& r, bool ok) {
-            for (std::size_t i = r.begin(); ok && i != r.end(); ++i) ok = !(key(i) < key(i - 1));
-            return ok;
-        },
-        [](bool a, bool b) { return a && b; });
-    if (sorted) return;
-    // Sorted on a compact copy of (x, y) with the index: the whole key (through
-    // the index) only breaks ties of x and y. (An indirect sort on the full
-    // key missed the cache on every comparison: 28 % of a `heights` run.)
-    // The copy is first spread into buckets of ~1024 points by x (a
-    // non-decreasing function of x, so every bucket holds a range of the
-    // final order), then the buckets are sorted in parallel, each in cache.
-    // Points equal in every attribute are interchangeable, so the result does
-    // not depend on the thread count.
-    struct XY {
-        double x, y;
-        std::size_t i;
-    };
-    auto less = [&](const XY& a, const XY& b) {
-        if (a.x < b.x) return true;
-        if (b.x < a.x) return false;
-        if (a.y < b.y) return true;
-        if (b.y < a.y) return false;
-        return key(a.i) < key(b.i);
-    };
     using Range = std::pair<double, double>;
     const auto [minx, maxx] = tbb::parallel_reduce(
         tbb::blocked_range<std::size_t>(0, n, kGrain), Range{INFINITY, -INFINITY},
@@ -91,42 +159,156 @@ void canonical_order(PointCloud& c) {
     // Counting sort into the buckets by fixed chunks of points, in parallel:
     // chunk j's points of bucket b follow those of chunks 0 .. j - 1, so every
     // bucket lists its points by index, as one pass would.
-    const std::size_t chunks = std::min<std::size_t>(64, (n + kGrain - 1) / kGrain), chunk = (n + chunks - 1) / chunks;
-    std::vector<std::size_t> at(chunks * buckets, 0), first(buckets + 1, 0);  // at[j * buckets + b]
+    const std::size_t chunks = std::min<std::size_t>(16, (n + kGrain - 1) / kGrain), chunk = (n + chunks - 1) / chunks;
+    std::vector<Index> at(chunks * buckets, 0);  // at[j * buckets + b]
+    std::vector<std::size_t> first(buckets + 1, 0);
     tbb::parallel_for(std::size_t(0), chunks, [&](std::size_t j) {
-        std::size_t* count = at.data() + j * buckets;
+        Index* count = at.data() + j * buckets;
         for (std::size_t i = j * chunk; i < std::min(n, (j + 1) * chunk); ++i) ++count[bucket_of(c.x[i])];
     });
     for (std::size_t b = 0, sum = 0; b < buckets; ++b) {
         first[b] = sum;
-        for (std::size_t j = 0; j < chunks; ++j) sum += std::exchange(at[j * buckets + b], sum);
+        for (std::size_t j = 0; j < chunks; ++j) sum += std::exchange(at[j * buckets + b], static_cast<Index>(sum));
         first[b + 1] = sum;
     }
     // Not zero-filled: every entry is written below.
-    const auto xy = std::make_unique_for_overwrite<XY[]>(n);
-    tbb::parallel_for(std::size_t(0), chunks, [&](std::size_t j) {
-        std::size_t* fill = at.data() + j * buckets;
-        for (std::size_t i = j * chunk; i < std::min(n, (j + 1) * chunk); ++i) xy[fill[bucket_of(c.x[i])]++] = {c.x[i], c.y[i], i};
-    });
-    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, buckets, 16), [&](const tbb::blocked_range<std::size_t>& r) {
-        for (std::size_t b = r.begin(); b != r.end(); ++b) std::sort(xy.get() + first[b], xy.get() + first[b + 1], less);
-    });
-    // Each attribute through one buffer of 8 bytes a point, reused (a new
-    // vector per attribute cost a page fault per 4 kB).
-    const auto scratch = std::make_unique_for_overwrite<std::byte[]>(n * sizeof(double));
-    auto permute = [&](auto& v) {
-        using T = typename std::remove_reference_t<decltype(v)>::value_type;
-        if (v.empty()) return;
-        T* out = reinterpret_cast<T*>(scratch.get());
-        tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, kGrain), [&](const tbb::blocked_range<std::size_t>& r) {
-            for (std::size_t i = r.begin(); i != r.end(); ++i) out[i] = v[xy[i].i];
-        });
-        tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, kGrain), [&](const tbb::blocked_range<std::size_t>& r) {
-            std::copy(out + r.begin(), out + r.end(), v.begin() + static_cast<std::ptrdiff_t>(r.begin()));
-        });
+    auto order = large_array<Index>(n);
+    struct XY {
+        double x, y;
     };
-    permute(c.x), permute(c.y), permute(c.z), permute(c.gps_time), permute(c.intensity), permute(c.classification);
-    permute(c.return_number), permute(c.number_of_returns), permute(c.red), permute(c.green), permute(c.blue);
+    // The buckets in two groups, split at the bucket holding rank n / 2: each
+    // group's coordinates are copied in bucket order into the scratch buffer
+    // (16 bytes a point) by one pass over the points, then its buckets sorted
+    // from there. (Gathering them from the cloud bucket by bucket missed the
+    // cache on every point.) The scratch holds 8 bytes a point (later used to
+    // permute the attributes), a bucket more when the split is uneven.
+    const std::size_t split = static_cast<std::size_t>(std::upper_bound(first.begin(), first.end(), n / 2) - first.begin()) - 1;
+    auto scratch = large_array<uint64_t>(std::max(n, 2 * (n - first[split])));
+    XY* copy = reinterpret_cast<XY*>(scratch.get());
+    auto less = [&](const std::pair<XY, Index>& a, const std::pair<XY, Index>& b) {
+        if (a.first.x < b.first.x) return true;
+        if (b.first.x < a.first.x) return false;
+        if (a.first.y < b.first.y) return true;
+        if (b.first.y < a.first.y) return false;
+        return key_less(a.second, b.second);
+    };
+    for (const auto& [b0, b1] : {std::pair{std::size_t(0), split}, std::pair{split, buckets}}) {
+        tbb::parallel_for(std::size_t(0), chunks, [&](std::size_t j) {
+            Index* fill = at.data() + j * buckets;
+            for (std::size_t i = j * chunk; i < std::min(n, (j + 1) * chunk); ++i) {
+                const std::size_t b = bucket_of(c.x[i]);
+                if (b < b0 || b >= b1) continue;
+                const Index at_rank = fill[b]++;
+                order[at_rank] = static_cast<Index>(i);
+                copy[at_rank - first[b0]] = {c.x[i], c.y[i]};
+            }
+        });
+        tbb::parallel_for(tbb::blocked_range<std::size_t>(b0, b1, 16), [&](const tbb::blocked_range<std::size_t>& r) {
+            std::vector<std::pair<XY, Index>> xy;  // one bucket at a time
+            std::vector<SortKey> keys, sorted_keys;
+            for (std::size_t b = r.begin(); b != r.end(); ++b) {
+                const std::size_t from = first[b], m = first[b + 1] - from;
+                if (m < 2) continue;
+                Index* ids = order.get() + from;
+                auto point = [&](std::size_t k) { return copy[from - first[b0] + k]; };
+                if constexpr (sizeof(Index) == 4) {
+                    keys.resize(m);
+                    uint64_t lox = UINT64_MAX, hix = 0, loy = UINT64_MAX, hiy = 0;
+                    bool nan = false;
+                    for (std::size_t k = 0; k < m; ++k) {
+                        const XY p = point(k);
+                        nan |= std::isnan(p.x) | std::isnan(p.y);
+                        const uint64_t ux = ordered_bits(p.x), uy = ordered_bits(p.y);
+                        lox = std::min(lox, ux), hix = std::max(hix, ux), loy = std::min(loy, uy), hiy = std::max(hiy, uy);
+                        keys[k] = SortKey(ux) << 64 | uy;
+                    }
+                    const int wy = static_cast<int>(std::bit_width(hiy - loy));
+                    if (!nan && static_cast<int>(std::bit_width(hix - lox)) + wy <= 96) {
+                        // (x, y, index) in one integer: dx above dy above the index.
+                        for (std::size_t k = 0; k < m; ++k)
+                            keys[k] = SortKey(uint64_t(keys[k] >> 64) - lox) << (wy + 32) | SortKey(uint64_t(keys[k]) - loy) << 32 | ids[k];
+                        sorted_keys.resize(m);
+                        radix_sort_keys(keys.data(), sorted_keys.data(), m, static_cast<int>(std::bit_width(hix - lox)) + wy + 32);
+                        for (std::size_t k = 0; k < m; ++k) ids[k] = static_cast<Index>(sorted_keys[k]);
+                        for (std::size_t k = 0, e; k < m; k = e) {  // points of equal x and y by their whole key
+                            for (e = k + 1; e < m && sorted_keys[e] >> 32 == sorted_keys[k] >> 32;) ++e;
+                            if (e - k > 1) std::sort(ids + k, ids + e, key_less);
+                        }
+                        continue;
+                    }
+                }
+                xy.resize(m);
+                for (std::size_t k = 0; k < m; ++k) xy[k] = {point(k), ids[k]};
+                std::sort(xy.begin(), xy.end(), less);
+                for (std::size_t k = 0; k < m; ++k) ids[k] = xy[k].second;
+            }
+        });
+    }
+    return {std::move(order), std::move(scratch)};
+}
+
+}  // namespace
+
+void canonical_order(PointCloud& c) {
+    const std::size_t n = c.size();
+    const bool gps = c.has_gps_time(), rgb = c.has_color();
+    auto key = [&](std::size_t i) {
+        return std::make_tuple(c.x[i], c.y[i], c.z[i], gps ? c.gps_time[i] : 0.0, c.intensity[i], c.classification[i], c.return_number[i],
+                               c.number_of_returns[i], rgb ? c.red[i] : 0, rgb ? c.green[i] : 0, rgb ? c.blue[i] : 0);
+    };
+    constexpr std::size_t kGrain = 1u << 16;
+    if (n < 2) return;
+    const bool sorted = tbb::parallel_reduce(
+        tbb::blocked_range<std::size_t>(1, n, kGrain), true,
+        [&](const tbb::blocked_range<std::size_t>& r, bool ok) {
+            for (std::size_t i = r.begin(); ok && i != r.end(); ++i) ok = !(key(i) < key(i - 1));
+            return ok;
+        },
+        [](bool a, bool b) { return a && b; });
+    if (sorted) return;
+    auto key_less = [&](std::size_t a, std::size_t b) { return key(a) < key(b); };
+    // The attributes are gathered in rank order through the scratch buffer of
+    // 8 bytes a point; the small ones packed into 8 bytes a point first, so a
+    // point is fetched from its random place once for (nearly) all of them,
+    // not once per attribute (7 gathers -> 2 with colour, 4 -> 1 without).
+    auto apply = [&](const auto& perm) {
+        const auto* order = perm.order.get();
+        uint64_t* scratch = perm.scratch.get();
+        auto each = [&](auto&& f) {
+            tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, kGrain), [&](const tbb::blocked_range<std::size_t>& r) {
+                for (std::size_t i = r.begin(); i != r.end(); ++i) f(i);
+            });
+        };
+        for (std::vector<double>* v : {&c.x, &c.y, &c.z, &c.gps_time}) {
+            if (v->empty()) continue;
+            double* out = reinterpret_cast<double*>(scratch);
+            const double* in = v->data();
+            each([&](std::size_t i) { out[i] = in[order[i]]; });
+            tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, kGrain), [&](const tbb::blocked_range<std::size_t>& r) {
+                std::copy(out + r.begin(), out + r.end(), v->begin() + static_cast<std::ptrdiff_t>(r.begin()));
+            });
+        }
+        uint64_t* packed = scratch;
+        each([&](std::size_t i) {
+            packed[i] = uint64_t(c.intensity[i]) | uint64_t(c.classification[i]) << 16 | uint64_t(c.return_number[i]) << 24 |
+                        uint64_t(c.number_of_returns[i]) << 32 | (rgb ? uint64_t(c.red[i]) << 40 : 0);
+        });
+        each([&](std::size_t i) {
+            const uint64_t w = packed[order[i]];
+            c.intensity[i] = static_cast<uint16_t>(w), c.classification[i] = static_cast<uint8_t>(w >> 16);
+            c.return_number[i] = static_cast<uint8_t>(w >> 24), c.number_of_returns[i] = static_cast<uint8_t>(w >> 32);
+            if (rgb) c.red[i] = static_cast<uint16_t>(w >> 40);
+        });
+        if (rgb) {
+            each([&](std::size_t i) { packed[i] = uint64_t(c.green[i]) | uint64_t(c.blue[i]) << 16; });
+            each([&](std::size_t i) {
+                const uint64_t w = packed[order[i]];
+                c.green[i] = static_cast<uint16_t>(w), c.blue[i] = static_cast<uint16_t>(w >> 16);
+            });
+        }
+    };
+    if (n <= std::numeric_limits<uint32_t>::max()) apply(canonical_permutation<uint32_t>(c, key_less));
+    else apply(canonical_permutation<std::size_t>(c, key_less));
 }
 
 namespace {

@@ -301,3 +301,43 @@ TEST_CASE("canonical_order sorts by the whole key, by chunks and buckets in para
     canonical_order(sorted_one);  // already in order: unchanged
     CHECK(keys(sorted_one) == expected);
 }
+
+TEST_CASE("canonical_order: coordinates of any magnitude and sign, zeros of both signs, one bucket holding most points", "[cloud][filters]") {
+    // Buckets whose x and y span too many bits for the packed 128-bit key
+    // (1e-300 next to 1e300, or x across 0) take the comparison sort, the
+    // others (negative x too) the packed key; -0 and +0 are equal; 70 % of
+    // the points on one x: the bucket split is uneven (the scratch grows by
+    // the overhang). Equal (x, y) are broken by z and intensity.
+    for (const auto& [share_on_one_x, share_special] : {std::pair{0.0, 0.1}, std::pair{0.7, 0.1}, std::pair{0.0, 0.0}}) {
+        Rng rng(11);
+        PointCloud c;
+        const std::size_t n = 60000;
+        const double specials[] = {-1e300, -1.0, -0.0, 0.0, 1e-300, 1.0, 1e300, 123456.789};
+        for (std::size_t i = 0; i < n; ++i) {
+            const double u = rng.uniform(0, 1);
+            const double x = u < share_on_one_x ? 5.0
+                             : rng.uniform(0, 1) < share_special ? specials[static_cast<std::size_t>(rng.uniform(0, 8)) % 8]
+                                                                 : std::floor(rng.uniform(-500, 500)) * 0.01;
+            const double y = rng.uniform(0, 1) < share_special ? specials[static_cast<std::size_t>(rng.uniform(0, 8)) % 8]
+                                                               : 1000 + std::floor(rng.uniform(0, 50)) * 0.5;
+            c.x.push_back(x), c.y.push_back(y), c.z.push_back(std::floor(rng.uniform(0, 3)));
+            c.intensity.push_back(static_cast<uint16_t>(rng.uniform(0, 3))), c.classification.push_back(2);
+            c.return_number.push_back(1), c.number_of_returns.push_back(1);
+        }
+        using Key = std::tuple<double, double, double, uint16_t>;
+        auto keys = [](const PointCloud& p) {
+            std::vector<Key> k;
+            for (std::size_t i = 0; i < p.size(); ++i) k.emplace_back(p.x[i], p.y[i], p.z[i], p.intensity[i]);
+            return k;
+        };
+        std::vector<Key> expected = keys(c);
+        std::sort(expected.begin(), expected.end());
+        PointCloud sorted = c;
+        canonical_order(sorted);
+        CHECK(keys(sorted) == expected);
+        tbb::global_control one_thread(tbb::global_control::max_allowed_parallelism, 1);
+        PointCloud sorted_one = c;
+        canonical_order(sorted_one);
+        CHECK(keys(sorted_one) == keys(sorted));
+    }
+}
