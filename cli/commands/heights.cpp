@@ -55,9 +55,9 @@ void add_heights_command(CLI::App& parent, const GlobalFlags& g, CommandList& ou
                            std::string q;
                            for (const auto& [k, v] : r.quality_counts) q += " " + k + "=" + std::to_string(v);
                            std::fprintf(stderr,
-                                        "cityforge: heights for %zu buildings in %.1f s, %zu cloud window(s) (%s; %llu points, %zu outliers + %zu isolated removed, %zu ground points %s%s); quality:%s\n",
+                                        "cityforge: heights for %zu buildings in %.1f s, %zu cloud window(s) (%s; %llu points, %zu outliers + %zu isolated removed, %zu on sparse surfaces kept, %zu ground points %s%s); quality:%s\n",
                                         r.buildings, r.seconds, r.tiles, r.crs.c_str(), static_cast<unsigned long long>(r.points_read),
-                                        r.removed_statistical, r.removed_isolated, r.ground_points,
+                                        r.removed_statistical, r.removed_isolated, r.restored_surface, r.ground_points,
                                         r.ground_from_classification ? "from class 2" : "from SMRF", r.reprojected ? ", cloud reprojected" : "",
                                         q.c_str());
                        }

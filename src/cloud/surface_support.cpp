@@ -23,7 +23,7 @@ bool is_noise(uint8_t c) { return c == las_class::low_noise || c == las_class::h
 std::size_t restore_surface_points(const PointCloud& c, std::vector<uint8_t>& keep, const SurfaceSupportOptions& o) {
     o.validate();
     const std::size_t n = c.size();
-    if (!o.enabled || n == 0) return 0;
+    if (n == 0) return 0;
     if (keep.size() != n) throw Error("surface support", "keep flags differ in count from the points");
     if (n > std::numeric_limits<uint32_t>::max()) throw Error("surface support", "more than 4,294,967,295 points held at once");
     std::vector<uint32_t> candidates;

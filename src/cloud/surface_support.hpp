@@ -22,7 +22,6 @@ struct SurfaceSupportOptions {
     int min_support = 3;       ///< supporting neighbours needed (more than the isolated filter's 2, so a restored point is never isolated)
     double z_tolerance = 0.3;  ///< vertical offset always accepted, CRS units (noise of the surface)
     double max_slope = 1.0;    ///< plus this many units of height per unit of horizontal distance (1 = 45 degrees)
-    bool enabled = true;
     /// Throws Error naming the option on bad values.
     void validate() const;
 };

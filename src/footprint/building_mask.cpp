@@ -416,35 +416,21 @@ std::size_t complete_hidden_roofs(BuildingMask& mask, const BuildingCells& cells
             }
         }
         if (!near) continue;
-        // The cells' corners (pixel units): their hull's minimum-area rectangle.
-        std::vector<MapPoint> corners;
-        corners.reserve(own.size() * 4);
+        // Its minimum-area rectangle (pixel units; a corner cut off at an
+        // oblique angle, by the data or by the building, does not turn it).
+        Polygon cells_outline;
+        cells_outline.outer.reserve(own.size() * 4);
         for (const std::size_t k : own) {
             const double x = static_cast<double>(k % static_cast<std::size_t>(w)), y = static_cast<double>(k / static_cast<std::size_t>(w));
-            corners.push_back({x, y}), corners.push_back({x + 1, y}), corners.push_back({x, y + 1}), corners.push_back({x + 1, y + 1});
+            for (const auto& [dx, dy] : {std::pair{0, 0}, std::pair{1, 0}, std::pair{0, 1}, std::pair{1, 1}}) cells_outline.outer.push_back({x + dx, y + dy});
         }
-        // Its rectangle: the hull's box along the hull's dominant edge
-        // direction (length-weighted mean of 4 x the edge angles), not the
-        // minimum-area rectangle, which a cut-off corner can turn.
-        const Ring hull = convex_hull(corners);
-        if (hull.size() < 3) continue;
-        double sx = 0.0, sy = 0.0;
-        for (std::size_t i = 0; i < hull.size(); ++i) {
-            const MapPoint& p0 = hull[i];
-            const MapPoint& p1 = hull[(i + 1) % hull.size()];
-            const double len = std::hypot(p1.x - p0.x, p1.y - p0.y), angle = std::atan2(p1.y - p0.y, p1.x - p0.x);
-            sx += len * std::cos(4.0 * angle), sy += len * std::sin(4.0 * angle);
+        OrientedRectangle rect;
+        try {
+            rect = minimum_area_rectangle(cells_outline);
+        } catch (const Error&) {
+            continue;  // a single line of cells: no area to complete
         }
-        const double a = 0.25 * std::atan2(sy, sx), ux = std::cos(a), uy = std::sin(a);
-        double u0 = INFINITY, u1 = -INFINITY, v0 = INFINITY, v1 = -INFINITY;
-        for (const MapPoint& q : hull) {
-            const double u = q.x * ux + q.y * uy, v = -q.x * uy + q.y * ux;
-            u0 = std::min(u0, u), u1 = std::max(u1, u), v0 = std::min(v0, v), v1 = std::max(v1, v);
-        }
-        auto inside = [&](int x, int y) {  // the cell's centre in the rectangle
-            const double u = (x + 0.5) * ux + (y + 0.5) * uy, v = -(x + 0.5) * uy + (y + 0.5) * ux;
-            return u >= u0 && u <= u1 && v >= v0 && v <= v1;
-        };
+        auto inside = [&](int x, int y) { return rect.contains({x + 0.5, y + 0.5}); };  // the cell's centre
         std::vector<std::size_t>& add = claims[l];
         stack.assign(own.begin(), own.end());
         while (!stack.empty()) {

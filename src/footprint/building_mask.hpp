@@ -90,8 +90,8 @@ BuildingMask buildings_from_cells(const BuildingCells& cells, int w, int h, cons
 /// measured: a dark roof returns a fifth of the pulses or none, a tree crown
 /// covers a roof's edge or corner (the image sees the crown, few pulses reach
 /// the roof), and the image's segments there take the colour of what hides
-/// the roof. For each building, the cells inside its rectangle (the box of
-/// its cells' hull along the hull's dominant edge direction) that no building
+/// the roof. For each building, the cells inside its minimum-area rectangle
+/// (of its cells' corners) that no building
 /// holds and that are not measured as something else (no own evidence, or
 /// own evidence of a roof) join it when they connect to it through such
 /// cells -- unless they would grow it by more than `max_growth_share` of its

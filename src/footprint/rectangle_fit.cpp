@@ -105,6 +105,13 @@ OrientedRectangle minimum_area_rectangle(const Polygon& polygon) {
     return best;
 }
 
+bool OrientedRectangle::contains(MapPoint p) const {
+    const double a = orientation_deg * std::numbers::pi / 180.0, ux = std::cos(a), uy = std::sin(a);
+    const double dx = p.x - centre.x, dy = p.y - centre.y;
+    const double eps = 1e-9 * std::max(1.0, length);
+    return std::abs(dx * ux + dy * uy) <= 0.5 * length + eps && std::abs(-dx * uy + dy * ux) <= 0.5 * width + eps;
+}
+
 double polygon_iou(const Polygon& a, const Polygon& b) {
     const BPolygon pa = to_boost(a), pb = to_boost(b);
     BMulti inter;

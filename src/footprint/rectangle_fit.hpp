@@ -16,6 +16,8 @@ struct OrientedRectangle {
     double orientation_deg = 0.0;  ///< long side from east, counter-clockwise, in [0, 180)
     /// Corners counter-clockwise.
     std::array<MapPoint, 4> corners() const;
+    /// Whether `p` lies inside or on the rectangle.
+    bool contains(MapPoint p) const;
     Polygon polygon() const;
 };
 
@@ -26,6 +28,7 @@ Ring convex_hull(const std::vector<MapPoint>& points);
 /// calipers over the convex hull's edges; ties go to the smaller angle).
 /// Throws Error for a polygon with fewer than 3 distinct vertices or zero area.
 OrientedRectangle minimum_area_rectangle(const Polygon& polygon);
+
 
 /// Accuracy of a fitted polygon against the raw one.
 struct FitAccuracy {

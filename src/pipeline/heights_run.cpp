@@ -106,6 +106,7 @@ HeightsStage compute_heights_stage(PolygonLayer footprints_in, PreparedCloud clo
     rep.reprojected = pc.reprojected;
     rep.removed_statistical = pc.removed_statistical;
     rep.removed_isolated = pc.removed_isolated;
+    rep.restored_surface = pc.restored_surface;
     rep.ground_points = pc.ground_points;
     rep.ground_from_classification = pc.ground_from_classification;
     const CrsInfo& cloud_crs = pc.source_crs;
@@ -208,6 +209,7 @@ HeightsStage tiled_heights_stage(PolygonLayer footprints, const std::string& foo
         }
         out.report.points_read += st.report.points_read, out.report.removed_statistical += st.report.removed_statistical;
         out.report.removed_isolated += st.report.removed_isolated, out.report.ground_points += st.report.ground_points;
+        out.report.restored_surface += st.report.restored_surface;
         out.report.reprojected = out.report.reprojected || st.report.reprojected;
         for (std::size_t k = 0; k < members.size(); ++k) rows[members[k]] = std::move(st.table.features[k]), heights[members[k]] = std::move(st.heights[k]);
         done += members.size();

@@ -48,6 +48,7 @@ struct HeightsRunReport {
     std::string crs;                  ///< output CRS label (horizontal + vertical)
     uint64_t points_read = 0;
     std::size_t removed_statistical = 0, removed_isolated = 0;
+    std::size_t restored_surface = 0;  ///< points the statistical test removed and restore_surface_points put back
     std::size_t ground_points = 0;
     bool ground_from_classification = false;
     bool reprojected = false;

@@ -624,7 +624,6 @@ Lod2Result reconstruct_once(const std::vector<Polygon>& footprint, const std::ve
         return fallback(e.what());
     }
     if (planes.empty()) return fallback("no roof plane found");
-
     std::vector<int> point_plane(local.size(), -1);
     for (std::size_t k = 0; k < planes.size(); ++k)
         for (uint32_t i : planes[k].points) point_plane[i] = static_cast<int>(k);

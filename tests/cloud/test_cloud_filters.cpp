@@ -269,6 +269,31 @@ TEST_CASE("Gap fill by strips of rows equals the sweeps over the whole grid, for
     }
 }
 
+namespace {
+// canonical_order of `c` against std::sort of the key each point gives
+// (key(cloud, i)), with the default threads and with one, and again on its
+// own output (already in order: unchanged).
+template <class KeyOf>
+void check_canonical_order(const PointCloud& c, KeyOf key) {
+    auto keys = [&](const PointCloud& p) {
+        std::vector<decltype(key(p, 0))> k;
+        for (std::size_t i = 0; i < p.size(); ++i) k.push_back(key(p, i));
+        return k;
+    };
+    auto expected = keys(c);
+    std::sort(expected.begin(), expected.end());
+    PointCloud sorted = c;
+    canonical_order(sorted);
+    CHECK(keys(sorted) == expected);
+    tbb::global_control one_thread(tbb::global_control::max_allowed_parallelism, 1);
+    PointCloud sorted_one = c;
+    canonical_order(sorted_one);
+    CHECK(keys(sorted_one) == expected);
+    canonical_order(sorted_one);
+    CHECK(keys(sorted_one) == expected);
+}
+}  // namespace
+
 TEST_CASE("canonical_order sorts by the whole key, by chunks and buckets in parallel, for any thread count", "[cloud][filters]") {
     // 300 k points (several chunks of the parallel counting sort), x and y on
     // a coarse grid (many ties broken by z and the other attributes), GPS time
@@ -283,23 +308,9 @@ TEST_CASE("canonical_order sorts by the whole key, by chunks and buckets in para
         c.return_number.push_back(1), c.number_of_returns.push_back(1);
         c.red.push_back(static_cast<uint16_t>(rng.uniform(0, 2))), c.green.push_back(0), c.blue.push_back(0);
     }
-    using Key = std::tuple<double, double, double, double, uint16_t, uint8_t, uint16_t>;
-    auto keys = [](const PointCloud& p) {
-        std::vector<Key> k;
-        for (std::size_t i = 0; i < p.size(); ++i) k.emplace_back(p.x[i], p.y[i], p.z[i], p.gps_time[i], p.intensity[i], p.classification[i], p.red[i]);
-        return k;
-    };
-    std::vector<Key> expected = keys(c);
-    std::sort(expected.begin(), expected.end());
-    PointCloud sorted = c;
-    canonical_order(sorted);
-    CHECK(keys(sorted) == expected);
-    tbb::global_control one_thread(tbb::global_control::max_allowed_parallelism, 1);
-    PointCloud sorted_one = c;
-    canonical_order(sorted_one);
-    CHECK(keys(sorted_one) == expected);
-    canonical_order(sorted_one);  // already in order: unchanged
-    CHECK(keys(sorted_one) == expected);
+    check_canonical_order(c, [](const PointCloud& p, std::size_t i) {
+        return std::tuple{p.x[i], p.y[i], p.z[i], p.gps_time[i], p.intensity[i], p.classification[i], p.red[i]};
+    });
 }
 
 TEST_CASE("canonical_order: coordinates of any magnitude and sign, zeros of both signs, one bucket holding most points", "[cloud][filters]") {
@@ -324,20 +335,6 @@ TEST_CASE("canonical_order: coordinates of any magnitude and sign, zeros of both
             c.intensity.push_back(static_cast<uint16_t>(rng.uniform(0, 3))), c.classification.push_back(2);
             c.return_number.push_back(1), c.number_of_returns.push_back(1);
         }
-        using Key = std::tuple<double, double, double, uint16_t>;
-        auto keys = [](const PointCloud& p) {
-            std::vector<Key> k;
-            for (std::size_t i = 0; i < p.size(); ++i) k.emplace_back(p.x[i], p.y[i], p.z[i], p.intensity[i]);
-            return k;
-        };
-        std::vector<Key> expected = keys(c);
-        std::sort(expected.begin(), expected.end());
-        PointCloud sorted = c;
-        canonical_order(sorted);
-        CHECK(keys(sorted) == expected);
-        tbb::global_control one_thread(tbb::global_control::max_allowed_parallelism, 1);
-        PointCloud sorted_one = c;
-        canonical_order(sorted_one);
-        CHECK(keys(sorted_one) == keys(sorted));
+        check_canonical_order(c, [](const PointCloud& p, std::size_t i) { return std::tuple{p.x[i], p.y[i], p.z[i], p.intensity[i]}; });
     }
 }

@@ -83,11 +83,7 @@ TEST_CASE("A sparse roof removed by the statistical outlier test is put back; sp
     for (std::size_t i = 0; i < keep_1.size(); ++i)
         if (r.keep[i]) REQUIRE(keep_1[i] == 1);
 
-    SurfaceSupportOptions off;
-    off.enabled = false;
     std::vector<uint8_t> keep_off = r.keep;
-    CHECK(restore_surface_points(s.cloud, keep_off, off) == 0);
-    CHECK(keep_off == r.keep);
     SurfaceSupportOptions bad;
     bad.radius = 0;
     CHECK_THROWS_WITH(restore_surface_points(s.cloud, keep_off, bad), Catch::Contains("radius"));

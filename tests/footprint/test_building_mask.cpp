@@ -143,4 +143,7 @@ TEST_CASE("Roofs the data hides are completed inside the building's rectangle, n
     BuildingMask strict = before;
     CHECK(complete_hidden_roofs(strict, cells, 0.05) == 0);
     CHECK(strict.labels.data == before.labels.data);
+    BuildingMaskOptions bad;
+    bad.hidden_completion_max_share = 1.5;
+    CHECK_THROWS_WITH(bad.validate(), Catch::Contains("hidden_completion_max_share"));
 }

@@ -95,6 +95,30 @@ TEST_CASE("A rectangle fits itself with 0 % error - a rotated noisy rectangle's 
     CHECK_THROWS_WITH(minimum_area_rectangle(degenerate), Catch::Contains("degenerate"));
 }
 
+TEST_CASE("The minimum-area rectangle keeps a rectangle's axes when a corner is cut off at an oblique angle; contains() holds the cut corner", "[footprint][fit]") {
+    // complete_hidden_roofs relies on both: a roof whose corner a crown hides
+    // is completed to the rectangle its visible part gives.
+    OrientedRectangle r;
+    r.centre = {500100, 4400100};
+    r.length = 12, r.width = 10, r.orientation_deg = 33.0;
+    const auto c = r.corners();
+    auto along = [](MapPoint a, MapPoint b, double d) {
+        const double len = std::hypot(b.x - a.x, b.y - a.y);
+        return MapPoint{a.x + (b.x - a.x) * d / len, a.y + (b.y - a.y) * d / len};
+    };
+    for (const auto& [leg1, leg2] : {std::pair{6.0, 5.0}, std::pair{9.0, 8.0}, std::pair{3.0, 7.0}}) {
+        Polygon cut;
+        cut.outer = {c[0], c[1], along(c[2], c[1], leg1), along(c[2], c[3], leg2), c[3]};
+        const OrientedRectangle m = minimum_area_rectangle(cut);
+        CHECK(m.orientation_deg == Approx(33.0).margin(1e-6));
+        CHECK(m.length == Approx(12.0));
+        CHECK(m.width == Approx(10.0));
+        CHECK(m.contains(c[2]));
+        CHECK(m.contains(r.centre));
+        CHECK_FALSE(m.contains(along(c[2], r.centre, -0.5)));  // half a metre beyond the corner
+    }
+}
+
 TEST_CASE("IoU of a shifted square is known", "[footprint][fit]") {
     Polygon a, b;
     a.outer = {{0, 0}, {10, 0}, {10, 10}, {0, 10}};
