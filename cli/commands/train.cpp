@@ -66,6 +66,13 @@ void add_train_command(CLI::App& parent, const GlobalFlags& g, CommandList& out)
     cmd->add_option("--pixel-sigmas-m", d.pixel.sigmas_m, "Pixel stage: filter scales, metres (increasing)")->delimiter(',');
     cmd->add_option("--pixel-samples", d.pixel.samples_per_image, "Pixel stage: training cells per image")->capture_default_str();
     cmd->add_option("--pixel-rounds", d.pixel.booster.rounds, "Pixel stage: boosting rounds")->capture_default_str();
+    cmd->add_option_function<std::string>(
+           "--pixel-stage", [s](const std::string& k) { s->options.detector.pixel.kind = detect::parse_pixel_stage_kind(k); },
+           "Pixel stage: 'boosted' (filter bank + boosted trees) or 'cnn' (a small U-Net on the cell bands, libtorch CPU)")
+        ->default_str("boosted");
+    cmd->add_option("--pixel-cnn-steps", d.pixel.cnn.steps, "Pixel CNN: training steps (Adam)")->capture_default_str();
+    cmd->add_option("--pixel-cnn-channels", d.pixel.cnn.base_channels, "Pixel CNN: channels at full resolution")->capture_default_str();
+    cmd->add_option("--pixel-cnn-crop", d.pixel.cnn.crop_cells, "Pixel CNN: training crop side, cells")->capture_default_str();
     out.push_back({cmd, [s, &g]() {
                        remove_stale_temporaries_beside(s->out);
                        const TrainReport r = run_train(s->out, s->options, s->overwrite, make_progress(g));

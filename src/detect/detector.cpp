@@ -73,6 +73,10 @@ nlohmann::json to_json(const DetectorOptions& o) {
               {"colsample", b.colsample}, {"min_child_weight", b.min_child_weight}, {"lambda", b.lambda}, {"seed", b.seed}}},
             {"pixel",
              {{"enabled", o.pixel.enabled},
+              {"kind", to_string(o.pixel.kind)},
+              {"cnn",
+               {{"base_channels", o.pixel.cnn.base_channels}, {"levels", o.pixel.cnn.levels}, {"crop_cells", o.pixel.cnn.crop_cells},
+                {"batch", o.pixel.cnn.batch}, {"steps", o.pixel.cnn.steps}, {"learning_rate", o.pixel.cnn.learning_rate}, {"seed", o.pixel.cnn.seed}}},
               {"cell_m", o.pixel.cell_m},
               {"sigmas_m", o.pixel.sigmas_m},
               {"samples_per_image", o.pixel.samples_per_image},
@@ -121,6 +125,17 @@ DetectorOptions detector_options_from_json(const nlohmann::json& j) {
         o.pixel.booster.min_child_weight = pb.at("min_child_weight").get<double>();
         o.pixel.booster.lambda = pb.at("lambda").get<double>();
         o.pixel.booster.seed = pb.at("seed").get<uint64_t>();
+        o.pixel.kind = parse_pixel_stage_kind(p.value("kind", std::string("boosted")));  // absent before the CNN kind
+        if (p.contains("cnn")) {
+            const auto& c = p.at("cnn");
+            o.pixel.cnn.base_channels = c.at("base_channels").get<int>();
+            o.pixel.cnn.levels = c.at("levels").get<int>();
+            o.pixel.cnn.crop_cells = c.at("crop_cells").get<int>();
+            o.pixel.cnn.batch = c.at("batch").get<int>();
+            o.pixel.cnn.steps = c.at("steps").get<int>();
+            o.pixel.cnn.learning_rate = c.at("learning_rate").get<double>();
+            o.pixel.cnn.seed = c.at("seed").get<uint64_t>();
+        }
     } else {
         o.pixel.enabled = false;  // models from before the pixel stage
     }
@@ -135,9 +150,10 @@ DetectorOptions detector_options_from_json(const nlohmann::json& j) {
 
 std::vector<uint8_t> serialize_model(const DetectorModel& m) {
     const bool pixel = m.options.pixel.enabled;
+    const bool cnn = pixel && m.options.pixel.kind == PixelStageKind::cnn;
     if (pixel && m.pixel_booster.empty()) throw Error("detector model", "internal: pixel stage without its booster");
     nlohmann::json header = {{"format", "cityforge-detector"},
-                                   {"format_version", pixel ? 2 : 1},
+                                   {"format_version", cnn ? 3 : pixel ? 2 : 1},
                                    {"classifier", "xgboost gbtree (binary:logistic, hist)"},
                                    {"bands", describe_bands(m.layout)},
                                    {"band_count", m.layout.bands},
@@ -185,7 +201,7 @@ DetectorModel parse_model(const std::vector<uint8_t>& in, const std::string& sub
     try {
         const auto header = nlohmann::json::parse(in.begin() + kMagicLen + 8, in.begin() + static_cast<std::ptrdiff_t>(bat));
         version = header.at("format_version").get<int>();
-        if (header.at("format").get<std::string>() != "cityforge-detector" || (version != 1 && version != 2))
+        if (header.at("format").get<std::string>() != "cityforge-detector" || version < 1 || version > 3)
             throw Error(subject, "unsupported detector model format");
         m.layout.bands = header.at("band_count").get<int>();
         m.layout.nir_band = header.at("nir_band").get<int>();
@@ -198,7 +214,8 @@ DetectorModel parse_model(const std::vector<uint8_t>& in, const std::string& sub
         throw Error(subject, std::string("invalid detector model header: ") + e.what());
     }
     m.options.validate(m.layout.bands);
-    if (blobs.size() != (m.options.pixel.enabled ? 2u : 1u) || (version == 2) != m.options.pixel.enabled)
+    const bool cnn = m.options.pixel.enabled && m.options.pixel.kind == PixelStageKind::cnn;
+    if (blobs.size() != (m.options.pixel.enabled ? 2u : 1u) || (version >= 2) != m.options.pixel.enabled || (version == 3) != cnn)
         throw Error(subject, "corrupt detector model (block count does not match the header)");
     if (m.features != feature_names(m.layout, int(m.options.segmentation.scales.size()) - 1, m.options.pixel.enabled))
         throw Error(subject, "the model's feature list is not the one this version of cityforge computes");
@@ -207,6 +224,7 @@ DetectorModel parse_model(const std::vector<uint8_t>& in, const std::string& sub
     };
     m.booster = blob(0);
     if (m.options.pixel.enabled) m.pixel_booster = blob(1);
+    if (cnn) check_cnn_weights(m.pixel_booster, m.layout.bands, m.options.pixel.cnn, subject);
     return m;
 }
 

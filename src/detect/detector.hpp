@@ -57,12 +57,12 @@ struct DetectorModel {
     std::string fingerprint;            ///< hash of the training images, labels and options (hex)
     nlohmann::json training;            ///< sources, sample counts, per-fold figures (free form, recorded as given)
     std::vector<uint8_t> booster;       ///< XGBoost UBJSON model
-    std::vector<uint8_t> pixel_booster; ///< XGBoost UBJSON pixel model (options.pixel.enabled), else empty
+    std::vector<uint8_t> pixel_booster; ///< pixel model (options.pixel.enabled): XGBoost UBJSON, or CFCNN1 weights for kind cnn; else empty
 };
 
 /// The model's bytes: "CFDET1\n", then header JSON, booster, the pixel
-/// booster when the model has a pixel stage (format_version 2) and an
-/// FNV-1a checksum, each length-prefixed; the same model gives the same bytes.
+/// model when the model has a pixel stage (format_version 2; 3 when it is a
+/// CNN) and an FNV-1a checksum, each length-prefixed; the same model gives the same bytes.
 std::vector<uint8_t> serialize_model(const DetectorModel& model);
 /// Parses bytes from serialize_model. Throws Error naming `subject` when the
 /// magic, a length or the checksum is wrong (truncated or corrupt file) or

@@ -19,6 +19,15 @@ void PixelClassifierOptions::validate() const {
     }
     if (samples_per_image < 100) throw Error("pixel.samples_per_image", "must be at least 100");
     booster.validate();
+    cnn.validate();
+}
+
+std::string to_string(PixelStageKind k) { return k == PixelStageKind::cnn ? "cnn" : "boosted"; }
+
+PixelStageKind parse_pixel_stage_kind(const std::string& name) {
+    if (name == "boosted") return PixelStageKind::boosted;
+    if (name == "cnn") return PixelStageKind::cnn;
+    throw Error("pixel.kind", "'" + name + "' is not a pixel stage (boosted or cnn)");
 }
 
 int pixel_cell_factor(double gsd_m, const PixelClassifierOptions& o) {
@@ -87,6 +96,45 @@ void derivatives(const std::vector<float>& v, int w, int h, std::vector<float>& 
     });
 }
 
+// Box averages of the valid pixels of every cell of f x f pixels, one
+// vector per band (ceil(w / f) x ceil(h / f) cells); `cell_valid` = 1 where
+// the cell holds a valid pixel. Invalid cells take the mean of the valid
+// ones (no edge at nodata borders).
+std::vector<std::vector<float>> box_average(const Image<float>& img, const std::vector<uint8_t>& valid, int f, std::vector<uint8_t>& cell_valid) {
+    const int W = img.width, H = img.height;
+    const int w = (W + f - 1) / f, h = (H + f - 1) / f;
+    const std::size_t n = std::size_t(w) * h;
+    const int B = img.bands;
+    std::vector<std::vector<float>> band(B, std::vector<float>(n, 0.0f));
+    std::vector<float> count(n, 0.0f);
+    tbb::parallel_for(0, h, [&](int cy) {
+        for (int y = cy * f; y < std::min(H, (cy + 1) * f); ++y)
+            for (int x = 0; x < W; ++x) {
+                const std::size_t i = std::size_t(y) * W + x;
+                if (!valid.empty() && !valid[i]) continue;
+                const std::size_t c = std::size_t(cy) * w + x / f;
+                count[c] += 1.0f;
+                for (int b = 0; b < B; ++b) band[b][c] += img.band_data(b)[i];
+            }
+    });
+    std::vector<uint8_t>& cv = cell_valid;
+    cv.assign(n, 0);
+    for (std::size_t c = 0; c < n; ++c)
+        if (count[c] > 0.0f) {
+            cv[c] = 1;
+            for (int b = 0; b < B; ++b) band[b][c] /= count[c];
+        }
+    for (int b = 0; b < B; ++b) {
+        double s = 0.0, k = 0.0;
+        for (std::size_t c = 0; c < n; ++c)
+            if (cv[c]) s += band[b][c], k += 1.0;
+        const float fill = k > 0 ? static_cast<float>(s / k) : 0.0f;
+        for (std::size_t c = 0; c < n; ++c)
+            if (!cv[c]) band[b][c] = fill;
+    }
+    return band;
+}
+
 // Eigenvalues (larger first) of [[a, b], [b, c]].
 inline void eig2(float a, float b, float c, float& l1, float& l2) {
     const float m = 0.5f * (a + c), d = std::sqrt(0.25f * (a - c) * (a - c) + b * b);
@@ -117,39 +165,12 @@ Image<float> pixel_feature_stack(const Image<float>& img, const std::vector<uint
     o.validate();
     if (img.bands != layout.bands) throw Error("pixel features", "image has " + std::to_string(img.bands) + " bands, layout " + std::to_string(layout.bands));
     const int f = pixel_cell_factor(gsd_m, o);
-    const int W = img.width, H = img.height;
-    const int w = (W + f - 1) / f, h = (H + f - 1) / f;
+    std::vector<uint8_t> cv;
+    std::vector<std::vector<float>> band = box_average(img, valid, f, cv);
+    const int w = (img.width + f - 1) / f, h = (img.height + f - 1) / f;
     const std::size_t n = std::size_t(w) * h;
     const double cell_m = f * gsd_m;
     const int B = img.bands;
-    // Box averages of the valid pixels of every cell.
-    std::vector<std::vector<float>> band(B, std::vector<float>(n, 0.0f));
-    std::vector<float> count(n, 0.0f);
-    tbb::parallel_for(0, h, [&](int cy) {
-        for (int y = cy * f; y < std::min(H, (cy + 1) * f); ++y)
-            for (int x = 0; x < W; ++x) {
-                const std::size_t i = std::size_t(y) * W + x;
-                if (!valid.empty() && !valid[i]) continue;
-                const std::size_t c = std::size_t(cy) * w + x / f;
-                count[c] += 1.0f;
-                for (int b = 0; b < B; ++b) band[b][c] += img.band_data(b)[i];
-            }
-    });
-    std::vector<uint8_t> cv(n, 0);
-    for (std::size_t c = 0; c < n; ++c)
-        if (count[c] > 0.0f) {
-            cv[c] = 1;
-            for (int b = 0; b < B; ++b) band[b][c] /= count[c];
-        }
-    // Invalid cells take the mean of the valid ones (no edge at nodata borders).
-    for (int b = 0; b < B; ++b) {
-        double s = 0.0, k = 0.0;
-        for (std::size_t c = 0; c < n; ++c)
-            if (cv[c]) s += band[b][c], k += 1.0;
-        const float fill = k > 0 ? static_cast<float>(s / k) : 0.0f;
-        for (std::size_t c = 0; c < n; ++c)
-            if (!cv[c]) band[b][c] = fill;
-    }
     const std::vector<int> colours = colour_bands(layout);
     std::vector<float> bright(n, 0.0f);
     for (const int b : colours)
@@ -265,10 +286,119 @@ std::vector<float> upsample(const std::vector<float>& cp, int w, int h, int f, i
     return out;
 }
 
+// CNN input of an image: the box-averaged bands of its cells, scaled from
+// 0..255 to about -2..2 (planar, bands x h x w); `cell_valid` as box_average.
+CnnGrid cnn_grid(const Image<float>& img, const std::vector<uint8_t>& valid, int f, std::vector<uint8_t>& cell_valid) {
+    const std::vector<std::vector<float>> band = box_average(img, valid, f, cell_valid);
+    CnnGrid g;
+    g.width = (img.width + f - 1) / f, g.height = (img.height + f - 1) / f;
+    for (const std::vector<float>& b : band)
+        for (const float v : b) g.input.push_back((v - 127.5f) / 64.0f);
+    return g;
+}
+
+// Building share of every cell (valid pixels of `truth` inside it).
+std::vector<float> cell_labels(const PixelTrainingImage& ti, int f, int w, std::size_t cells) {
+    const int W = ti.normalised->width, H = ti.normalised->height;
+    std::vector<float> n(cells, 0.0f), label(cells, 0.0f);
+    for (int y = 0; y < H; ++y)
+        for (int x = 0; x < W; ++x) {
+            const std::size_t px = std::size_t(y) * W + x;
+            if (!ti.valid->empty() && !(*ti.valid)[px]) continue;
+            const std::size_t c = std::size_t(y / f) * w + x / f;
+            n[c] += 1.0f, label[c] += (*ti.truth)[px] ? 1.0f : 0.0f;
+        }
+    for (std::size_t c = 0; c < cells; ++c) label[c] = n[c] > 0 ? label[c] / n[c] : 0.0f;
+    return label;
+}
+
+// Fold of every cell (its centre's block).
+std::vector<int> cell_folds(const FoldBlocks& folds, std::size_t image, int f, int w, std::size_t cells) {
+    std::vector<int> fold(cells, 0);
+    for (std::size_t c = 0; c < cells; ++c) fold[c] = folds.fold_at(image, (double(c % w) + 0.5) * f, (double(c / w) + 0.5) * f);
+    return fold;
+}
+
+// The CNN kind of train_pixel_stage.
+PixelStage train_cnn_stage(const std::vector<PixelTrainingImage>& images, const BandLayout& layout, const PixelClassifierOptions& o,
+                           const FoldBlocks* folds, int fold_count, const Progress& progress) {
+    struct Prepared {
+        CnnGrid grid;
+        std::vector<uint8_t> cell_valid;
+        std::vector<int> fold;
+        int factor = 1;
+    };
+    std::vector<Prepared> prep(images.size());
+    for (std::size_t i = 0; i < images.size(); ++i) {
+        const PixelTrainingImage& ti = images[i];
+        if (ti.normalised->bands != layout.bands) throw Error("pixel CNN", "a training image's band count differs from the layout");
+        Prepared& p = prep[i];
+        p.factor = pixel_cell_factor(ti.gsd_m, o);
+        p.grid = cnn_grid(*ti.normalised, *ti.valid, p.factor, p.cell_valid);
+        p.grid.target = cell_labels(ti, p.factor, p.grid.width, p.cell_valid.size());
+        if (folds) p.fold = cell_folds(*folds, i, p.factor, p.grid.width, p.cell_valid.size());
+    }
+    progress(0.05, "pixel CNN inputs");
+    // Model `skip` (-1: all data) learns from the valid cells outside fold `skip`.
+    auto train = [&](int skip) {
+        std::vector<CnnGrid> grids;
+        std::vector<const CnnGrid*> ptr;
+        double pos = 0.0, n = 0.0;
+        for (const Prepared& p : prep) {
+            CnnGrid g;
+            g.width = p.grid.width, g.height = p.grid.height;
+            g.weight.assign(p.cell_valid.size(), 0.0f);
+            for (std::size_t c = 0; c < g.weight.size(); ++c)
+                if (p.cell_valid[c] && (skip < 0 || p.fold[c] != skip)) g.weight[c] = 1.0f, n += 1.0, pos += p.grid.target[c];
+            g.input = p.grid.input, g.target = p.grid.target;
+            grids.push_back(std::move(g));
+        }
+        if (!(pos > 0.0) || !(pos < n)) return std::vector<uint8_t>{};
+        for (const CnnGrid& g : grids) ptr.push_back(&g);
+        return train_cnn(ptr, layout.bands, o.cnn);
+    };
+    PixelStage out;
+    const bool cv = folds && fold_count >= 2;
+    const int models = cv ? fold_count + 1 : 1;
+    std::vector<std::vector<uint8_t>> m(std::size_t(models), std::vector<uint8_t>{});
+    // Each network trains on one thread (its bytes do not depend on the thread count), the fold models in parallel.
+    tbb::parallel_for(0, models, [&](int f) { m[std::size_t(f)] = train(cv && f < fold_count ? f : -1); });
+    progress(0.85, "pixel CNN trained");
+    out.model = std::move(m.back());
+    if (out.model.empty()) throw Error("pixel classifier", "the training images need building and non-building pixels");
+    if (cv) {
+        for (std::size_t i = 0; i < prep.size(); ++i) {
+            const Prepared& p = prep[i];
+            std::vector<float> cp(p.cell_valid.size(), 0.0f);
+            for (int f = 0; f < fold_count; ++f) {
+                if (m[std::size_t(f)].empty()) continue;
+                const std::vector<float> q = predict_cnn(m[std::size_t(f)], p.grid.input, p.grid.width, p.grid.height, layout.bands, o.cnn);
+                for (std::size_t c = 0; c < cp.size(); ++c)
+                    if (p.cell_valid[c] && p.fold[c] == f) cp[c] = q[c];
+            }
+            out.out_of_fold.push_back(upsample(cp, p.grid.width, p.grid.height, p.factor, images[i].normalised->width, images[i].normalised->height,
+                                               *images[i].valid));
+        }
+    }
+    progress(1.0, "pixel CNN");
+    return out;
+}
+
 }  // namespace
 
 std::vector<float> pixel_probability(const std::vector<uint8_t>& model, const Image<float>& img, const std::vector<uint8_t>& valid,
                                      const BandLayout& layout, double gsd_m, const PixelClassifierOptions& o, int threads) {
+    if (o.kind == PixelStageKind::cnn) {
+        o.validate();
+        if (img.bands != layout.bands) throw Error("pixel CNN", "image has " + std::to_string(img.bands) + " bands, layout " + std::to_string(layout.bands));
+        const int f = pixel_cell_factor(gsd_m, o);
+        std::vector<uint8_t> cv;
+        const CnnGrid g = cnn_grid(img, valid, f, cv);
+        std::vector<float> cp = predict_cnn(model, g.input, g.width, g.height, layout.bands, o.cnn);
+        for (std::size_t c = 0; c < cp.size(); ++c)
+            if (!cv[c]) cp[c] = 0.0f;
+        return upsample(cp, g.width, g.height, f, img.width, img.height, valid);
+    }
     std::vector<uint8_t> cv;
     const Image<float> stack = pixel_feature_stack(img, valid, layout, gsd_m, o, &cv);
     std::vector<std::size_t> cells;
@@ -283,6 +413,7 @@ PixelStage train_pixel_stage(const std::vector<PixelTrainingImage>& images, cons
                              const FoldBlocks* folds, int fold_count, int threads, const Progress& progress) {
     o.validate();
     if (images.empty()) throw Error("pixel classifier", "no training image");
+    if (o.kind == PixelStageKind::cnn) return train_cnn_stage(images, layout, o, folds, fold_count, progress);
     const std::size_t F = pixel_feature_names(layout, o).size();
     struct Prepared {
         Image<float> stack;
@@ -298,26 +429,13 @@ PixelStage train_pixel_stage(const std::vector<PixelTrainingImage>& images, cons
         Prepared& p = prep[i];
         p.factor = pixel_cell_factor(ti.gsd_m, o);
         p.stack = pixel_feature_stack(*ti.normalised, *ti.valid, layout, ti.gsd_m, o, &p.cell_valid);
-        const int W = ti.normalised->width, H = ti.normalised->height, w = p.stack.width, f = p.factor;
-        std::vector<float> n(p.cell_valid.size(), 0.0f);
-        p.label.assign(p.cell_valid.size(), 0.0f);
-        for (int y = 0; y < H; ++y)
-            for (int x = 0; x < W; ++x) {
-                const std::size_t px = std::size_t(y) * W + x;
-                if (!ti.valid->empty() && !(*ti.valid)[px]) continue;
-                const std::size_t c = std::size_t(y / f) * w + x / f;
-                n[c] += 1.0f, p.label[c] += (*ti.truth)[px] ? 1.0f : 0.0f;
-            }
-        for (std::size_t c = 0; c < n.size(); ++c) p.label[c] = n[c] > 0 ? p.label[c] / n[c] : 0.0f;
-        if (folds) {
-            p.fold.assign(p.cell_valid.size(), 0);
-            for (std::size_t c = 0; c < p.fold.size(); ++c)
-                p.fold[c] = folds->fold_at(i, (double(c % w) + 0.5) * f, (double(c / w) + 0.5) * f);
-        }
+        const int w = p.stack.width, f = p.factor;
+        p.label = cell_labels(ti, f, w, p.cell_valid.size());
+        if (folds) p.fold = cell_folds(*folds, i, f, w, p.cell_valid.size());
         // Samples: up to half building cells (share >= 0.5), the rest other
         // cells, each chosen by a hash of (seed, image, cell).
         std::vector<std::pair<uint64_t, std::size_t>> pos, neg;
-        for (std::size_t c = 0; c < n.size(); ++c) {
+        for (std::size_t c = 0; c < p.cell_valid.size(); ++c) {
             if (!p.cell_valid[c]) continue;
             // Mixed cells (edges) teach little and blur the boundary: left out.
             if (p.label[c] > 0.2f && p.label[c] < 0.8f) continue;

@@ -6,8 +6,10 @@
 // (the image box-averaged to about `cell_m`), classified by gradient-boosted
 // trees trained on sampled cells. The map (upsampled to the image grid)
 // becomes per-segment features (segment_features.hpp), so buildings smaller
-// or darker than the segment statistics show are still seen. Pure
-// algorithm; no GDAL.
+// or darker than the segment statistics show are still seen. The
+// alternative kind "cnn" maps the box-averaged bands of the same cells with a
+// small convolutional network (cnn_pixel_stage.hpp) under the same contract.
+// Pure algorithm; no GDAL.
 #include <cstdint>
 #include <string>
 #include <vector>
@@ -15,14 +17,25 @@
 #include "core/image.hpp"
 #include "core/progress.hpp"
 #include "detect/booster.hpp"
+#include "detect/cnn_pixel_stage.hpp"
 #include "detect/label_raster.hpp"
 #include "detect/segment_features.hpp"
 
 namespace cityforge::detect {
 
+/// What computes the pixel stage's map.
+enum class PixelStageKind {
+    boosted,  ///< filter bank + gradient-boosted trees (XGBoost model)
+    cnn,      ///< small U-Net on the cell bands (CFCNN1 weights, cnn_pixel_stage.hpp)
+};
+/// "boosted" / "cnn"; parse_pixel_stage_kind throws Error on another name.
+std::string to_string(PixelStageKind kind);
+PixelStageKind parse_pixel_stage_kind(const std::string& name);
+
 /// How the pixel stage is computed and trained.
 struct PixelClassifierOptions {
     bool enabled = true;
+    PixelStageKind kind = PixelStageKind::boosted;
     /// Working cell, metres: the image is box-averaged by an integer factor
     /// max(1, round(cell_m / gsd)) before filtering (the map is upsampled
     /// back), so a model carries across resolutions and 4000 x 4000 px
@@ -30,7 +43,8 @@ struct PixelClassifierOptions {
     double cell_m = 0.8;
     std::vector<double> sigmas_m{0.7, 1.5, 3.0};  ///< filter scales, metres (strictly increasing, > 0)
     std::size_t samples_per_image = 30000;         ///< training cells per image (half building where there are enough)
-    BoosterOptions booster{60, 6, 0.2, 0.8, 0.8, 1.0, 1.0, 1};
+    BoosterOptions booster{60, 6, 0.2, 0.8, 0.8, 1.0, 1.0, 1};  ///< kind boosted
+    CnnOptions cnn;                                               ///< kind cnn
     void validate() const;
 };
 
@@ -48,8 +62,8 @@ Image<float> pixel_feature_stack(const Image<float>& normalised, const std::vect
                                  const PixelClassifierOptions& options, std::vector<uint8_t>* cell_valid = nullptr);
 
 /// Building probability per image pixel (w x h, row-major; 0 outside
-/// `valid`) from a pixel model (XGBoost UBJSON). Any thread count gives the
-/// same values.
+/// `valid`) from a pixel model (XGBoost UBJSON, or CNN weights for kind
+/// cnn). Any thread count gives the same values.
 std::vector<float> pixel_probability(const std::vector<uint8_t>& model, const Image<float>& normalised, const std::vector<uint8_t>& valid,
                                      const BandLayout& layout, double gsd_m, const PixelClassifierOptions& options, int threads = 0);
 
@@ -65,12 +79,13 @@ struct PixelTrainingImage {
 /// out-of-fold probability of every pixel of every image (each pixel
 /// predicted by the model trained without its fold's blocks).
 struct PixelStage {
-    std::vector<uint8_t> model;
+    std::vector<uint8_t> model;  ///< XGBoost UBJSON (boosted) or CFCNN1 weights (cnn)
     std::vector<std::vector<float>> out_of_fold;  ///< per image, w x h (empty without folds)
 };
 /// `folds` = the cross-validation blocks (pixel units of each image) or
-/// null; `fold_count` their number. Training runs on one thread (same bytes
-/// for any thread count); prediction may use `threads`.
+/// null; `fold_count` their number. Each model trains on one thread (the
+/// fold models in parallel: same bytes for any thread count); prediction
+/// may use `threads`.
 PixelStage train_pixel_stage(const std::vector<PixelTrainingImage>& images, const BandLayout& layout, const PixelClassifierOptions& options,
                              const FoldBlocks* folds, int fold_count, int threads = 0, const Progress& progress = {});
 

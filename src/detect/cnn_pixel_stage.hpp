@@ -1,0 +1,60 @@
+#pragma once
+// A small fully-convolutional network (U-Net: `levels` poolings, 3x3
+// convolutions, BatchNorm, ReLU, nearest upsampling with skip connections,
+// 1x1 logit head) that maps the bands of a cell grid to a per-cell building
+// probability: the alternative pixel stage (pixel_classifier.hpp, kind
+// "cnn"). libtorch (CPU) is used only inside cnn_pixel_stage.cpp; this
+// header is plain C++. Pure algorithm; no GDAL.
+//
+// Determinism: the weights are initialised from our own counter-based RNG
+// (never torch's generator), crops and augmentations are drawn from it too,
+// and every torch computation runs on ONE intra-op thread (set per calling
+// thread), so the same data and options give the same weight bytes whatever
+// the thread count. Prediction cuts the grid into fixed tiles (core 128
+// cells plus a 32-cell margin) computed one per task: any thread count gives
+// the same map.
+#include <cstdint>
+#include <string>
+#include <vector>
+
+namespace cityforge::detect {
+
+/// The network and its training.
+struct CnnOptions {
+    int base_channels = 8;       ///< channels at full resolution (doubled per level, at most 4x)
+    int levels = 3;              ///< poolings (1..4); crops must be divisible by 2^levels
+    int crop_cells = 64;         ///< training crop side, cells (square; random flips and rot90)
+    int batch = 8;               ///< crops per step
+    int steps = 600;             ///< optimisation steps (Adam)
+    double learning_rate = 0.003;  ///< Adam step size (halved at 60 % and again at 85 % of the steps)
+    uint64_t seed = 1;           ///< weight initialisation, crops and augmentations
+    void validate() const;
+};
+
+/// One training grid, planar: `input` = channels x height x width values
+/// (about zero-mean, unit scale; 0 where there is no data), `target` = per
+/// cell building share 0..1, `weight` = per cell loss weight (0 = ignored:
+/// no data, or a held-out fold).
+struct CnnGrid {
+    int width = 0, height = 0;
+    std::vector<float> input, target, weight;
+};
+
+/// Trains the network on `grids` (each with `channels` input channels) and
+/// returns its weights: "CFCNN1", the tensor count, then per tensor its
+/// rank, dimensions and little-endian float32 values, in the network's
+/// fixed parameter/buffer order. Runs on the calling thread only.
+std::vector<uint8_t> train_cnn(const std::vector<const CnnGrid*>& grids, int channels, const CnnOptions& options);
+
+/// Building probability per cell (width x height, row-major) of a planar
+/// `input` grid (channels x height x width) from weights of train_cnn.
+/// Tiles run in parallel (TBB); the values do not depend on the thread count.
+std::vector<float> predict_cnn(const std::vector<uint8_t>& weights, const std::vector<float>& input, int width, int height, int channels,
+                               const CnnOptions& options);
+
+/// Throws Error naming `subject` unless `weights` is a complete weight blob
+/// of the network of `options` with `channels` inputs (count, shapes,
+/// length, finite values).
+void check_cnn_weights(const std::vector<uint8_t>& weights, int channels, const CnnOptions& options, const std::string& subject);
+
+}  // namespace cityforge::detect
