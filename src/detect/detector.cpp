@@ -150,7 +150,7 @@ DetectorOptions detector_options_from_json(const nlohmann::json& j) {
 
 std::vector<uint8_t> serialize_model(const DetectorModel& m) {
     const bool pixel = m.options.pixel.enabled;
-    const bool cnn = pixel && m.options.pixel.kind == PixelStageKind::cnn;
+    const bool cnn = pixel && m.options.pixel.kind != PixelStageKind::boosted;
     if (pixel && m.pixel_booster.empty()) throw Error("detector model", "internal: pixel stage without its booster");
     nlohmann::json header = {{"format", "cityforge-detector"},
                                    {"format_version", cnn ? 3 : pixel ? 2 : 1},
@@ -214,7 +214,7 @@ DetectorModel parse_model(const std::vector<uint8_t>& in, const std::string& sub
         throw Error(subject, std::string("invalid detector model header: ") + e.what());
     }
     m.options.validate(m.layout.bands);
-    const bool cnn = m.options.pixel.enabled && m.options.pixel.kind == PixelStageKind::cnn;
+    const bool cnn = m.options.pixel.enabled && m.options.pixel.kind != PixelStageKind::boosted;
     if (blobs.size() != (m.options.pixel.enabled ? 2u : 1u) || (version >= 2) != m.options.pixel.enabled || (version == 3) != cnn)
         throw Error(subject, "corrupt detector model (block count does not match the header)");
     if (m.features != feature_names(m.layout, int(m.options.segmentation.scales.size()) - 1, m.options.pixel.enabled))
@@ -224,7 +224,9 @@ DetectorModel parse_model(const std::vector<uint8_t>& in, const std::string& sub
     };
     m.booster = blob(0);
     if (m.options.pixel.enabled) m.pixel_booster = blob(1);
-    if (cnn) check_cnn_weights(m.pixel_booster, m.layout.bands, m.options.pixel.cnn, subject);
+    if (m.options.pixel.enabled && m.options.pixel.kind == PixelStageKind::cnn) check_cnn_weights(m.pixel_booster, m.layout.bands, m.options.pixel.cnn, subject);
+    if (m.options.pixel.enabled && m.options.pixel.kind == PixelStageKind::both)
+        check_cnn_weights(unpack_pixel_models(m.pixel_booster, subject).second, m.layout.bands, m.options.pixel.cnn, subject);
     return m;
 }
 

@@ -61,7 +61,7 @@ struct DetectorModel {
 };
 
 /// The model's bytes: "CFDET1\n", then header JSON, booster, the pixel
-/// model when the model has a pixel stage (format_version 2; 3 when it is a
+/// model when the model has a pixel stage (format_version 2; 3 when it has a
 /// CNN) and an FNV-1a checksum, each length-prefixed; the same model gives the same bytes.
 std::vector<uint8_t> serialize_model(const DetectorModel& model);
 /// Parses bytes from serialize_model. Throws Error naming `subject` when the

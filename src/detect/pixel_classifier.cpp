@@ -22,12 +22,39 @@ void PixelClassifierOptions::validate() const {
     cnn.validate();
 }
 
-std::string to_string(PixelStageKind k) { return k == PixelStageKind::cnn ? "cnn" : "boosted"; }
+std::string to_string(PixelStageKind k) { return k == PixelStageKind::cnn ? "cnn" : k == PixelStageKind::both ? "both" : "boosted"; }
 
 PixelStageKind parse_pixel_stage_kind(const std::string& name) {
     if (name == "boosted") return PixelStageKind::boosted;
     if (name == "cnn") return PixelStageKind::cnn;
-    throw Error("pixel.kind", "'" + name + "' is not a pixel stage (boosted or cnn)");
+    if (name == "both") return PixelStageKind::both;
+    throw Error("pixel.kind", "'" + name + "' is not a pixel stage (boosted, cnn or both)");
+}
+
+std::vector<uint8_t> pack_pixel_models(const std::vector<uint8_t>& boosted, const std::vector<uint8_t>& cnn) {
+    std::vector<uint8_t> out{'C', 'F', 'P', 'I', 'X', '2'};
+    for (const std::vector<uint8_t>* m : {&boosted, &cnn}) {
+        for (int i = 0; i < 8; ++i) out.push_back(static_cast<uint8_t>(uint64_t(m->size()) >> (8 * i)));
+        out.insert(out.end(), m->begin(), m->end());
+    }
+    return out;
+}
+
+std::pair<std::vector<uint8_t>, std::vector<uint8_t>> unpack_pixel_models(const std::vector<uint8_t>& in, const std::string& subject) {
+    if (in.size() < 6 || std::string(in.begin(), in.begin() + 6) != "CFPIX2") throw Error(subject, "corrupt pixel models (no CFPIX2 magic)");
+    std::vector<uint8_t> part[2];
+    std::size_t at = 6;
+    for (std::vector<uint8_t>& m : part) {
+        if (in.size() - at < 8) throw Error(subject, "truncated pixel models");
+        uint64_t len = 0;
+        for (int i = 0; i < 8; ++i) len |= uint64_t(in[at + i]) << (8 * i);
+        at += 8;
+        if (len > in.size() - at) throw Error(subject, "truncated pixel models");
+        m.assign(in.begin() + std::ptrdiff_t(at), in.begin() + std::ptrdiff_t(at + len));
+        at += len;
+    }
+    if (at != in.size()) throw Error(subject, "corrupt pixel models (trailing bytes)");
+    return {std::move(part[0]), std::move(part[1])};
 }
 
 int pixel_cell_factor(double gsd_m, const PixelClassifierOptions& o) {
@@ -388,6 +415,15 @@ PixelStage train_cnn_stage(const std::vector<PixelTrainingImage>& images, const 
 
 std::vector<float> pixel_probability(const std::vector<uint8_t>& model, const Image<float>& img, const std::vector<uint8_t>& valid,
                                      const BandLayout& layout, double gsd_m, const PixelClassifierOptions& o, int threads) {
+    if (o.kind == PixelStageKind::both) {
+        const auto [boosted, cnn] = unpack_pixel_models(model, "pixel models");
+        PixelClassifierOptions ob = o, oc = o;
+        ob.kind = PixelStageKind::boosted, oc.kind = PixelStageKind::cnn;
+        std::vector<float> p = pixel_probability(boosted, img, valid, layout, gsd_m, ob, threads);
+        const std::vector<float> q = pixel_probability(cnn, img, valid, layout, gsd_m, oc, threads);
+        for (std::size_t i = 0; i < p.size(); ++i) p[i] = 0.5f * (p[i] + q[i]);
+        return p;
+    }
     if (o.kind == PixelStageKind::cnn) {
         o.validate();
         if (img.bands != layout.bands) throw Error("pixel CNN", "image has " + std::to_string(img.bands) + " bands, layout " + std::to_string(layout.bands));
@@ -414,6 +450,16 @@ PixelStage train_pixel_stage(const std::vector<PixelTrainingImage>& images, cons
     o.validate();
     if (images.empty()) throw Error("pixel classifier", "no training image");
     if (o.kind == PixelStageKind::cnn) return train_cnn_stage(images, layout, o, folds, fold_count, progress);
+    if (o.kind == PixelStageKind::both) {
+        PixelClassifierOptions ob = o;
+        ob.kind = PixelStageKind::boosted;
+        PixelStage b = train_pixel_stage(images, layout, ob, folds, fold_count, threads, progress.sub(0.0, 0.4));
+        const PixelStage c = train_cnn_stage(images, layout, o, folds, fold_count, progress.sub(0.4, 1.0));
+        for (std::size_t i = 0; i < b.out_of_fold.size(); ++i)
+            for (std::size_t k = 0; k < b.out_of_fold[i].size(); ++k) b.out_of_fold[i][k] = 0.5f * (b.out_of_fold[i][k] + c.out_of_fold[i][k]);
+        b.model = pack_pixel_models(b.model, c.model);
+        return b;
+    }
     const std::size_t F = pixel_feature_names(layout, o).size();
     struct Prepared {
         Image<float> stack;

@@ -12,6 +12,7 @@
 // Pure algorithm; no GDAL.
 #include <cstdint>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "core/image.hpp"
@@ -27,8 +28,9 @@ namespace cityforge::detect {
 enum class PixelStageKind {
     boosted,  ///< filter bank + gradient-boosted trees (XGBoost model)
     cnn,      ///< small U-Net on the cell bands (CFCNN1 weights, cnn_pixel_stage.hpp)
+    both,     ///< the mean of the two maps (both models, packed by pack_pixel_models)
 };
-/// "boosted" / "cnn"; parse_pixel_stage_kind throws Error on another name.
+/// "boosted" / "cnn" / "both"; parse_pixel_stage_kind throws Error on another name.
 std::string to_string(PixelStageKind kind);
 PixelStageKind parse_pixel_stage_kind(const std::string& name);
 
@@ -61,9 +63,15 @@ std::vector<std::string> pixel_feature_names(const BandLayout& layout, const Pix
 Image<float> pixel_feature_stack(const Image<float>& normalised, const std::vector<uint8_t>& valid, const BandLayout& layout, double gsd_m,
                                  const PixelClassifierOptions& options, std::vector<uint8_t>* cell_valid = nullptr);
 
+/// The pixel model of kind both: "CFPIX2", then the boosted and the CNN
+/// model, each length-prefixed (u64 little-endian). unpack throws Error
+/// naming `subject` on a truncated or corrupt pack.
+std::vector<uint8_t> pack_pixel_models(const std::vector<uint8_t>& boosted, const std::vector<uint8_t>& cnn);
+std::pair<std::vector<uint8_t>, std::vector<uint8_t>> unpack_pixel_models(const std::vector<uint8_t>& pack, const std::string& subject);
+
 /// Building probability per image pixel (w x h, row-major; 0 outside
-/// `valid`) from a pixel model (XGBoost UBJSON, or CNN weights for kind
-/// cnn). Any thread count gives the same values.
+/// `valid`) from a pixel model (XGBoost UBJSON, CNN weights for kind cnn,
+/// a pack of both for kind both). Any thread count gives the same values.
 std::vector<float> pixel_probability(const std::vector<uint8_t>& model, const Image<float>& normalised, const std::vector<uint8_t>& valid,
                                      const BandLayout& layout, double gsd_m, const PixelClassifierOptions& options, int threads = 0);
 
@@ -79,7 +87,7 @@ struct PixelTrainingImage {
 /// out-of-fold probability of every pixel of every image (each pixel
 /// predicted by the model trained without its fold's blocks).
 struct PixelStage {
-    std::vector<uint8_t> model;  ///< XGBoost UBJSON (boosted) or CFCNN1 weights (cnn)
+    std::vector<uint8_t> model;  ///< XGBoost UBJSON (boosted), CFCNN1 weights (cnn) or pack_pixel_models (both)
     std::vector<std::vector<float>> out_of_fold;  ///< per image, w x h (empty without folds)
 };
 /// `folds` = the cross-validation blocks (pixel units of each image) or
