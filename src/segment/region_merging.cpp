@@ -7,7 +7,7 @@
 #include <cstdlib>
 #include <ctime>
 #include <new>
-#include <tbb/enumerable_thread_specific.h>
+#include <tbb/task_arena.h>
 #include <tbb/parallel_reduce.h>
 #include <tbb/parallel_for.h>
 
@@ -69,6 +69,7 @@ double thread_cpu_seconds() {
 }
 
 __extension__ typedef __int128 int128;  // exact sums of squared fixed-point values
+__extension__ typedef unsigned __int128 uint128;
 
 // One entry of a region's adjacency: a neighbouring node and the length of
 // the shared boundary. Lists are flat arrays sorted by node.
@@ -190,80 +191,170 @@ public:
         double fixed = 1.0;  // largest power of two keeping |v| * fixed <= 2^24
         while (max_abs * fixed * 2.0 <= 16777216.0 && fixed < 65536.0) fixed *= 2.0;
         while (max_abs * fixed > 16777216.0) fixed *= 0.5;
-        const std::size_t nb = static_cast<std::size_t>(n_) * bands_;
-        struct Partial {
-            LargeVector<int64_t> area, perimeter, sum;
-            LargeVector<int128> sumsq;
-            LargeVector<int> x0, y0, x1, y1;
+        // Integer accumulators of a region, in 64-bit words: area, perimeter,
+        // x0, y0, x1, y1, Σq per band, then Σq² per band as (low, high)
+        // halves of a 128-bit sum. They live in the room of the record's
+        // inline adjacency (not yet used; 120 of 176 bytes for 3 bands), so
+        // no per-thread copies of all regions' totals are allocated.
+        const std::size_t words = 6 + 3 * static_cast<std::size_t>(bands_);
+        const bool in_record = words * sizeof(int64_t) <= inline_capacity_ * sizeof(Neighbour);
+        LargeVector<int64_t> outside(in_record ? 0 : std::size_t(n_) * words);  // many bands: beside the records
+        auto acc = [&](uint32_t r) {
+            return in_record ? std::launder(reinterpret_cast<int64_t*>(inline_bytes(r))) : outside.data() + std::size_t(r) * words;
+        };
+        auto init_acc = [&](int64_t* A) {
+            std::fill(A, A + words, 0);
+            A[2] = A[3] = INT32_MAX, A[4] = A[5] = -1;
+        };
+        tbb::parallel_for(tbb::blocked_range<uint32_t>(0, n_, 1 << 14), [&](const tbb::blocked_range<uint32_t>& rr) {
+            for (uint32_t r = rr.begin(); r != rr.end(); ++r)
+                init_acc(in_record ? new (inline_bytes(r)) int64_t[words] : outside.data() + std::size_t(r) * words);
+        });
+        // Row bands. A band owns the labels above every label of the bands
+        // before it (with labels numbered in raster order of first
+        // appearance, nearly all of its labels) and adds their pixels
+        // straight into the region's accumulator; no other band sees them.
+        // Labels of earlier bands (regions crossing its top edge) are summed
+        // in a small per-band table and added afterwards. Integer sums and
+        // min/max: the totals do not depend on the split.
+        const int n_bands = std::clamp(h / 32, 1, 4 * tbb::this_task_arena::max_concurrency());
+        auto band_row = [&](int j) { return static_cast<int>(static_cast<int64_t>(h) * j / n_bands); };
+        std::vector<uint32_t> band_max(n_bands, 0);
+        tbb::parallel_for(0, n_bands, [&](int j) {
+            uint32_t m = 0;
+            for (std::size_t i = std::size_t(band_row(j)) * w; i < std::size_t(band_row(j + 1)) * w; ++i) m = std::max(m, lab[i]);
+            band_max[j] = m;
+        });
+        for (int j = 0; j < n_bands; ++j)
+            if (band_max[j] >= n_) throw Error("region merging", "label " + std::to_string(band_max[j]) + " exceeds the region count");
+        struct Band {
+            uint32_t owned_from = 0;                           // labels >= this are owned
+            std::vector<std::pair<uint32_t, std::size_t>> foreign_index;  // (label, offset in foreign), unsorted
+            std::vector<int64_t> foreign;
+            std::vector<uint32_t> slot;                        // small open-addressing table: label -> entry + 1
             std::vector<std::pair<uint64_t, uint32_t>> pairs;  // (pair key, shared edges)
         };
-        tbb::enumerable_thread_specific<Partial> partials([&] {
-            Partial p;
-            p.area.assign(n_, 0), p.perimeter.assign(n_, 0), p.sum.assign(nb, 0), p.sumsq.assign(nb, 0);
-            p.x0.assign(n_, INT32_MAX), p.y0.assign(n_, INT32_MAX), p.x1.assign(n_, -1), p.y1.assign(n_, -1);
-            return p;
-        });
-        tbb::parallel_for(tbb::blocked_range<int>(0, h, 64), [&](const tbb::blocked_range<int>& rows) {
-            Partial& P = partials.local();
-            for (int y = rows.begin(); y != rows.end(); ++y) {
+        std::vector<Band> band_data(n_bands);
+        for (int j = 1; j < n_bands; ++j) band_data[j].owned_from = std::max(band_data[j - 1].owned_from, band_max[j - 1] + 1);
+        tbb::parallel_for(0, n_bands, [&](int j) {
+            Band& B = band_data[j];
+            auto foreign_acc = [&](uint32_t a) {
+                if (B.slot.empty()) B.slot.assign(1024, 0);
+                std::size_t mask = B.slot.size() - 1, i = (a * 2654435761u) & mask;
+                while (B.slot[i] && B.foreign_index[B.slot[i] - 1].first != a) i = (i + 1) & mask;
+                if (!B.slot[i]) {
+                    B.foreign_index.push_back({a, B.foreign.size()});
+                    B.foreign.resize(B.foreign.size() + words);
+                    init_acc(B.foreign.data() + B.foreign_index.back().second);
+                    B.slot[i] = static_cast<uint32_t>(B.foreign_index.size());
+                    if (2 * B.foreign_index.size() > B.slot.size()) {  // grow and rehash
+                        B.slot.assign(2 * B.slot.size(), 0);
+                        mask = B.slot.size() - 1;
+                        for (std::size_t e = 0; e < B.foreign_index.size(); ++e) {
+                            std::size_t k = (B.foreign_index[e].first * 2654435761u) & mask;
+                            while (B.slot[k]) k = (k + 1) & mask;
+                            B.slot[k] = static_cast<uint32_t>(e + 1);
+                        }
+                    }
+                    return B.foreign.data() + B.foreign_index.back().second;
+                }
+                return B.foreign.data() + B.foreign_index[B.slot[i] - 1].second;
+            };
+            std::vector<int64_t> sum(bands_);
+            std::vector<int128> sumsq(bands_);
+            for (int y = band_row(j); y < band_row(j + 1); ++y) {
+                const uint32_t* row = lab + std::size_t(y) * w;
+                const uint32_t* above = y > 0 ? row - w : nullptr;
+                const uint32_t* below = y < h - 1 ? row + w : nullptr;
                 uint64_t last_down = 0;  // runs of the same vertical neighbour pair collapse into one entry
-                for (int x = 0; x < w; ++x) {
-                    const std::size_t i = static_cast<std::size_t>(y) * w + x;
-                    const uint32_t a = lab[i];
-                    if (!a) continue;
-                    if (a >= n_) throw Error("region merging", "label " + std::to_string(a) + " exceeds the region count");
-                    ++P.area[a];
+                int x = 0;
+                while (x < w) {
+                    const uint32_t a = row[x];
+                    if (!a) {
+                        ++x;
+                        continue;
+                    }
+                    // A run of pixels of region a: x .. end - 1.
+                    int end = x + 1;
+                    while (end < w && row[end] == a) ++end;
+                    int64_t perimeter = 2;  // its left and right ends
+                    std::fill(sum.begin(), sum.end(), 0);
+                    std::fill(sumsq.begin(), sumsq.end(), 0);
+                    for (int px = x; px < end; ++px) {
+                        const std::size_t i = std::size_t(y) * w + px;
+                        for (int b = 0; b < bands_; ++b) {
+                            const double v = image.band_data(b)[i] * fixed;  // round half away from zero
+                            const auto q = static_cast<int64_t>(v + (v >= 0.0 ? 0.5 : -0.5));
+                            sum[b] += q;
+                            sumsq[b] += static_cast<int128>(q) * q;
+                        }
+                        const uint32_t up = above ? above[px] : 0, down = below ? below[px] : 0;
+                        perimeter += (up != a) + (down != a);
+                        if (down && down != a) {
+                            const uint64_t k = key(a, down);
+                            if (k == last_down && !B.pairs.empty() && B.pairs.back().first == k) ++B.pairs.back().second;
+                            else B.pairs.push_back({k, 1});
+                            last_down = k;
+                        } else {
+                            last_down = 0;
+                        }
+                    }
+                    if (end < w && row[end]) B.pairs.push_back({key(a, row[end]), 1});
+                    int64_t* A = a >= B.owned_from ? acc(a) : foreign_acc(a);
+                    A[0] += end - x, A[1] += perimeter;
+                    A[2] = std::min<int64_t>(A[2], x), A[3] = std::min<int64_t>(A[3], y);
+                    A[4] = std::max<int64_t>(A[4], end - 1), A[5] = std::max<int64_t>(A[5], y);
                     for (int b = 0; b < bands_; ++b) {
-                        const double v = image.band_data(b)[i] * fixed;  // round half away from zero
-                        const auto q = static_cast<int64_t>(v + (v >= 0.0 ? 0.5 : -0.5));
-                        P.sum[a * bands_ + b] += q;
-                        P.sumsq[a * bands_ + b] += static_cast<int128>(q) * q;
+                        A[6 + b] += sum[b];
+                        int64_t* half = A + 6 + bands_ + 2 * b;
+                        const auto total = static_cast<uint128>(static_cast<uint64_t>(half[0])) |
+                                           static_cast<uint128>(static_cast<uint64_t>(half[1])) << 64;
+                        const auto added = total + static_cast<uint128>(sumsq[b]);
+                        half[0] = static_cast<int64_t>(static_cast<uint64_t>(added));
+                        half[1] = static_cast<int64_t>(static_cast<uint64_t>(added >> 64));
                     }
-                    P.x0[a] = std::min(P.x0[a], x), P.x1[a] = std::max(P.x1[a], x);
-                    P.y0[a] = std::min(P.y0[a], y), P.y1[a] = std::max(P.y1[a], y);
-                    const uint32_t left = x > 0 ? lab[i - 1] : 0, up = y > 0 ? lab[i - w] : 0;
-                    const uint32_t right = x < w - 1 ? lab[i + 1] : 0, down = y < h - 1 ? lab[i + w] : 0;
-                    P.perimeter[a] += (left != a) + (up != a) + (right != a) + (down != a);
-                    if (right && right != a) P.pairs.push_back({key(a, right), 1});
-                    if (down && down != a) {
-                        const uint64_t k = key(a, down);
-                        if (k == last_down && !P.pairs.empty() && P.pairs.back().first == k) ++P.pairs.back().second;
-                        else P.pairs.push_back({k, 1});
-                        last_down = k;
-                    } else {
-                        last_down = 0;
-                    }
+                    x = end;
                 }
             }
         });
-        // Totals per region: exact integer sums of the per-thread partials, in
-        // parallel over regions, straight into the node records.
-        std::vector<Partial*> parts;
-        for (Partial& P : partials) parts.push_back(&P);
-        tbb::parallel_for(tbb::blocked_range<uint32_t>(0, n_, 1 << 14), [&](const tbb::blocked_range<uint32_t>& rr) {
-            std::vector<int64_t> sum(bands_);
-            std::vector<int128> sumsq(bands_);
-            for (uint32_t r = rr.begin(); r != rr.end(); ++r) {
-                int64_t area = 0, perimeter = 0;
-                int x0 = INT32_MAX, y0 = INT32_MAX, x1 = -1, y1 = -1;
-                std::fill(sum.begin(), sum.end(), 0);
-                std::fill(sumsq.begin(), sumsq.end(), 0);
-                for (const Partial* P : parts) {
-                    if (!P->area[r]) continue;
-                    area += P->area[r], perimeter += P->perimeter[r];
-                    x0 = std::min(x0, P->x0[r]), x1 = std::max(x1, P->x1[r]);
-                    y0 = std::min(y0, P->y0[r]), y1 = std::max(y1, P->y1[r]);
-                    for (int b = 0; b < bands_; ++b)
-                        sum[b] += P->sum[std::size_t(r) * bands_ + b], sumsq[b] += P->sumsq[std::size_t(r) * bands_ + b];
+        // The crossing regions' sums, band by band (integer sums: any order).
+        for (Band& B : band_data) {
+            for (const auto& [a, offset] : B.foreign_index) {
+                int64_t* A = acc(a);
+                const int64_t* F = B.foreign.data() + offset;
+                A[0] += F[0], A[1] += F[1];
+                A[2] = std::min(A[2], F[2]), A[3] = std::min(A[3], F[3]), A[4] = std::max(A[4], F[4]), A[5] = std::max(A[5], F[5]);
+                for (int b = 0; b < bands_; ++b) {
+                    A[6 + b] += F[6 + b];
+                    int64_t* half = A + 6 + bands_ + 2 * b;
+                    const int64_t* fh = F + 6 + bands_ + 2 * b;
+                    const auto added = (static_cast<uint128>(static_cast<uint64_t>(half[0])) |
+                                        static_cast<uint128>(static_cast<uint64_t>(half[1])) << 64) +
+                                       (static_cast<uint128>(static_cast<uint64_t>(fh[0])) |
+                                        static_cast<uint128>(static_cast<uint64_t>(fh[1])) << 64);
+                    half[0] = static_cast<int64_t>(static_cast<uint64_t>(added));
+                    half[1] = static_cast<int64_t>(static_cast<uint64_t>(added >> 64));
                 }
+            }
+            std::vector<int64_t>().swap(B.foreign);
+        }
+        // Totals into the node records; the inline adjacency gets its room back.
+        tbb::parallel_for(tbb::blocked_range<uint32_t>(0, n_, 1 << 14), [&](const tbb::blocked_range<uint32_t>& rr) {
+            for (uint32_t r = rr.begin(); r != rr.end(); ++r) {
+                const int64_t* A = acc(r);
                 NodeHead& R = head(r);
                 double* S = sums(r);
-                R.n = static_cast<double>(area), R.l = static_cast<double>(perimeter);
-                R.x0 = x0, R.y0 = y0, R.x1 = x1, R.y1 = y1;
+                R.n = static_cast<double>(A[0]), R.l = static_cast<double>(A[1]);
+                R.x0 = static_cast<int32_t>(A[2]), R.y0 = static_cast<int32_t>(A[3]);
+                R.x1 = static_cast<int32_t>(A[4]), R.y1 = static_cast<int32_t>(A[5]);
                 for (int b = 0; b < bands_; ++b) {
-                    S[2 * b] = static_cast<double>(sum[b]) / fixed;
-                    S[2 * b + 1] = static_cast<double>(sumsq[b]) / (fixed * fixed);
+                    const int64_t* half = A + 6 + bands_ + 2 * b;
+                    const auto sq = static_cast<int128>(static_cast<uint128>(static_cast<uint64_t>(half[0])) |
+                                                        static_cast<uint128>(static_cast<uint64_t>(half[1])) << 64);
+                    S[2 * b] = static_cast<double>(A[6 + b]) / fixed;
+                    S[2 * b + 1] = static_cast<double>(sq) / (fixed * fixed);
                 }
+                if (in_record) R.list = new (inline_bytes(r)) Neighbour[inline_capacity_];
             }
         });
         // Boundary pairs bucketed by their lower region (counting sort, no
@@ -274,15 +365,15 @@ public:
             uint32_t id, shared;
         };
         LargeVector<uint64_t> start(std::size_t(n_) + 1, 0);
-        for (const Partial* P : parts)
-            for (const auto& q : P->pairs) ++start[(q.first >> 32) + 1];
+        for (const Band& B : band_data)
+            for (const auto& q : B.pairs) ++start[(q.first >> 32) + 1];
         for (uint32_t r = 0; r < n_; ++r) start[r + 1] += start[r];
         LargeVector<Upper> upper(start[n_]);
         {
             LargeVector<uint64_t> fill(start.begin(), start.end() - 1);
-            for (Partial* P : parts) {
-                for (const auto& q : P->pairs) upper[fill[q.first >> 32]++] = {static_cast<uint32_t>(q.first & 0xFFFFFFFFu), q.second};
-                std::vector<std::pair<uint64_t, uint32_t>>().swap(P->pairs);
+            for (Band& B : band_data) {
+                for (const auto& q : B.pairs) upper[fill[q.first >> 32]++] = {static_cast<uint32_t>(q.first & 0xFFFFFFFFu), q.second};
+                std::vector<std::pair<uint64_t, uint32_t>>().swap(B.pairs);
             }
         }
         std::vector<uint32_t> unique(n_, 0), degree(n_, 0);
@@ -302,7 +393,6 @@ public:
                 unique[r] = static_cast<uint32_t>(out - first);
             }
         });
-        partials.clear();
         for (uint32_t r = 0; r < n_; ++r) {
             degree[r] += unique[r];
             for (const Upper* i = upper.data() + start[r]; i != upper.data() + start[r] + unique[r]; ++i) ++degree[i->id];
@@ -551,9 +641,8 @@ private:
     static Neighbour* find(NodeHead& h, uint32_t id) {
         return std::lower_bound(h.list, h.list + h.degree, id, [](const Neighbour& q, uint32_t v) { return q.id < v; });
     }
-    Neighbour* inline_list(uint32_t r) {
-        return std::launder(reinterpret_cast<Neighbour*>(sums_ptr(r) + 2 * sizeof(double) * bands_));
-    }
+    std::byte* inline_bytes(uint32_t r) { return sums_ptr(r) + 2 * sizeof(double) * bands_; }
+    Neighbour* inline_list(uint32_t r) { return std::launder(reinterpret_cast<Neighbour*>(inline_bytes(r))); }
     // Room for `count` neighbours in r's list (contents kept).
     void reserve(uint32_t r, uint32_t count) {
         NodeHead& h = head(r);

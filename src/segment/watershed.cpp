@@ -166,8 +166,15 @@ Oversegmentation watershed_oversegment(const Image<float>& image, const std::vec
     LargeVector<uint32_t> parent(n, kNone);
     LargeVector<uint16_t> min_level(n);
     const auto h_levels = static_cast<uint32_t>(std::lround(options.h_minima * kLevelsPerUnit));
+    // absorbed[r] (one bit per pixel, small enough to stay in cache) is set
+    // when root r is merged into another basin. A flooded pixel points at a
+    // root that usually still is one: one bit test then replaces the load of
+    // the root's parent entry, a cache miss far away in the image.
+    LargeVector<uint64_t> absorbed((n + 63) / 64, 0);
+    auto is_absorbed = [&](uint32_t r) { return (absorbed[r >> 6] >> (r & 63)) & 1u; };
     auto find = [&](uint32_t x) {
-        uint32_t r = x;
+        uint32_t r = parent[x];
+        if (!is_absorbed(r)) return r;
         while (parent[r] != r) r = parent[r];
         while (parent[x] != r) {
             const uint32_t next = parent[x];
@@ -176,6 +183,11 @@ Oversegmentation watershed_oversegment(const Image<float>& image, const std::vec
         }
         return r;
     };
+    // Band pointers in locals: stores to parent[] could otherwise alias the image's fields.
+    const int bands = image.bands;
+    std::vector<const float*> band_ptrs(bands);
+    for (int b = 0; b < bands; ++b) band_ptrs[b] = image.band_data(b);
+    const float* const* band = band_ptrs.data();
     // count[l] is now the end of level l's run in `order` (the start of l + 1's).
     uint32_t lp = 0;
     for (uint32_t k = 0; k < n_valid; ++k) {
@@ -212,8 +224,8 @@ Oversegmentation watershed_oversegment(const Image<float>& image, const std::vec
         float closest = INFINITY;
         for (int i = 0; i < nr; ++i) {
             float d = 0.0f;
-            for (int b = 0; b < image.bands; ++b) {
-                const float diff = image.band_data(b)[p] - image.band_data(b)[via[i]];
+            for (int b = 0; b < bands; ++b) {
+                const float diff = band[b][p] - band[b][via[i]];
                 d += diff * diff;
             }
             if (d < closest) closest = d, closest_root = roots[i];
@@ -229,6 +241,7 @@ Oversegmentation watershed_oversegment(const Image<float>& image, const std::vec
         for (int i = 1; i < nr; ++i)
             if (lp - min_level[roots[i]] < h_levels) {
                 parent[roots[i]] = deepest;
+                absorbed[roots[i] >> 6] |= uint64_t(1) << (roots[i] & 63);
                 closest_merged = closest_merged || roots[i] == closest_root;
             }
         parent[p] = closest_merged ? deepest : closest_root;

@@ -235,3 +235,55 @@ TEST_CASE("Merging with regions of thousands of neighbours: same labels for ever
     CHECK(tables[0] == tables[1]);
     CHECK(tables[0] == tables[2]);
 }
+
+TEST_CASE("Region statistics do not depend on the label order or the thread count", "[segment][merging][determinism]") {
+    // The graph adds each row band's pixels straight into the regions it owns
+    // and the crossing regions' through a per-band table: labels in random
+    // order make nearly every region cross, which must give the same merges.
+    auto permuted = [](const Image<uint32_t>& labels, uint32_t count) {
+        std::vector<uint32_t> to(count + 1, 0);
+        for (uint32_t k = 1; k <= count; ++k) to[k] = k;
+        uint64_t state = 88172645463325252ull;
+        for (uint32_t k = count; k > 1; --k) {  // Fisher-Yates with xorshift
+            state ^= state << 13, state ^= state >> 7, state ^= state << 17;
+            std::swap(to[k], to[1 + state % k]);
+        }
+        return relabel(labels, to);
+    };
+    SECTION("flat colours are recovered from shuffled seeds") {
+        Image<float> img;
+        Image<uint32_t> truth;
+        four_regions(img, truth);
+        WatershedOptions wo;
+        wo.smoothing_sigma_px = 0.0;
+        wo.h_minima = 0.0;
+        const Oversegmentation over = watershed_oversegment(img, {}, wo);
+        const Image<uint32_t> shuffled = permuted(over.labels, over.region_count);
+        RegionMergingOptions mo;
+        mo.scales = {20};
+        mo.verify_invariants = true;
+        const auto res = merge_regions(img, shuffled, over.region_count, mo);
+        CHECK(res.levels[0].regions_after == 4);
+        CHECK(same_partition(relabel(shuffled, res.levels[0].label_of_input), truth));
+    }
+    SECTION("shuffled seeds of a town: 1 thread and all threads agree") {
+        ScratchDir dir("seg_shuffled");
+        make_town(dir, 150, 3, 0);
+        Image<float> img = RasterReader(dir / "ortho.tif").read_all<float>();
+        normalize_bands(img, {});
+        WatershedOptions fine;  // every regional minimum a seed: thousands of regions
+        fine.h_minima = 0.0;
+        fine.smoothing_sigma_px = 0.0;
+        const Oversegmentation over = watershed_oversegment(img, {}, fine);
+        const Image<uint32_t> shuffled = permuted(over.labels, over.region_count);
+        RegionMergingOptions mo;
+        mo.scales = {10, 30, 60};
+        mo.verify_invariants = true;
+        const auto all_threads = merge_regions(img, shuffled, over.region_count, mo);
+        tbb::global_control one(tbb::global_control::max_allowed_parallelism, 1);
+        const auto one_thread = merge_regions(img, shuffled, over.region_count, mo);
+        for (std::size_t l = 0; l < mo.scales.size(); ++l) CHECK(all_threads.levels[l].label_of_input == one_thread.levels[l].label_of_input);
+        REQUIRE(over.region_count > 1000);
+        CHECK(all_threads.levels.back().regions_after < over.region_count / 10);
+    }
+}
