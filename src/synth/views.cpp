@@ -379,7 +379,7 @@ ViewsResult write_views(const std::string& out_dir, const Scene& scene, const Vi
                         if (x < bx0 || x > bx1 || y < by0 || y > by1) continue;
                         const double top = b.ground_z + b.roof_height(x, y), ground = scene.terrain_z(x, y);
                         for (double z = ground + 0.5 * sp; z < top; z += sp)
-                            push(pc, x, y, z, las_class::building, static_cast<int>(hf.col_of(x)), static_cast<int>(hf.row_of(y)));
+                            push(pc, x, y, z, kSurfaceWallClass, static_cast<int>(hf.col_of(x)), static_cast<int>(hf.row_of(y)));
                     }
                 }
         }

@@ -13,6 +13,10 @@
 
 namespace cityforge::synth {
 
+/// Class of wall samples in surface.las (LAS 1.4 user-definable range):
+/// terrain is 2, roofs 6, tree crowns 5, walls this.
+inline constexpr uint8_t kSurfaceWallClass = 64;
+
 struct ViewsOptions {
     int views = 0;                   ///< number of photos (>= 2 when asked for)
     double gsd_m = 0.1;              ///< ground sample distance at mean terrain height, metres/pixel
@@ -37,7 +41,8 @@ struct ViewsResult {
 
 /// Renders `options.views` photos of `scene` into `out_dir`/views (view_NNN.png,
 /// cameras_truth.json, gps.txt with WGS 84 positions) and writes
-/// `out_dir`/surface.las. Map coordinates = scene-local + (origin_x, origin_y)
+/// `out_dir`/surface.las (classes 2 terrain, 5 crowns, 6 roofs,
+/// kSurfaceWallClass walls). Map coordinates = scene-local + (origin_x, origin_y)
 /// in EPSG:`epsg`. Deterministic in (scene, options, seed).
 ViewsResult write_views(const std::string& out_dir, const Scene& scene, const ViewsOptions& options, int epsg,
                         double origin_x, double origin_y, uint64_t seed, const Progress& progress = {});
