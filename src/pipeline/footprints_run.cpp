@@ -20,7 +20,7 @@
 #include "pipeline/prepared_cloud.hpp"
 #include "raster/raster.hpp"
 #include "pipeline/cloud_cells.hpp"
-#include "pipeline/ortho_buildings.hpp"
+#include "footprint/ortho_refine.hpp"
 #include "pipeline/segment_raster.hpp"
 #include "pipeline/train_run.hpp"
 #include "segment/boundary_refine.hpp"
@@ -492,7 +492,7 @@ FootprintsReport run_footprints_unguarded(const std::string& output_path, const 
     } else {
         mask = buildings_from_cells(cells, grid.width, grid.height, mo);
         if (mode == DetectionMode::ortho_cloud) {
-            // Each building redrawn along the ortho's edges (see ortho_buildings.hpp).
+            // Each building redrawn along the ortho's edges (see footprint/ortho_refine.hpp).
             Image<uint32_t> segments;
             if (!o.segments.empty()) {
                 const std::string path = segments_file(o.segments, o.segmentation.segment_scale);

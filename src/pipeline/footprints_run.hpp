@@ -18,7 +18,7 @@
 #include "footprint/regularize.hpp"
 #include "footprint/roof_seams.hpp"
 #include "footprint/segment_classifier.hpp"
-#include "pipeline/ortho_buildings.hpp"
+#include "footprint/ortho_refine.hpp"
 
 namespace cityforge {
 

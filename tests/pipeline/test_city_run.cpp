@@ -129,3 +129,13 @@ TEST_CASE("run without a cloud - ortho-only footprints as one tile - no heights 
     CHECK(audit.exit_code == 0);
 }
 
+TEST_CASE("run refuses detection modes its inputs cannot serve", "[run][errors]") {
+    RunOptions o;
+    o.ortho = "ortho.tif";
+    o.cloud = "cloud.las";
+    o.extraction.mode = DetectionMode::ortho_only;
+    CHECK_THROWS_WITH(o.validate(), Catch::StartsWith("extraction.mode") && Catch::Contains("would ignore the cloud"));
+    o.cloud.clear();
+    o.extraction.mode = DetectionMode::ortho_cloud;
+    CHECK_THROWS_WITH(o.validate(), Catch::StartsWith("extraction.mode") && Catch::Contains("needs a cloud"));
+}

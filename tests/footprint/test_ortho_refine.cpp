@@ -2,8 +2,7 @@
 #include <cmath>
 
 #include "core/error.hpp"
-#include "pipeline/city_run.hpp"
-#include "pipeline/ortho_buildings.hpp"
+#include "footprint/ortho_refine.hpp"
 
 using namespace cityforge;
 
@@ -49,7 +48,7 @@ BuildingMask mask_of(const BuildingCells& c, int w, int h) {
 }
 }  // namespace
 
-TEST_CASE("A building of the heights is redrawn along the ortho's edge", "[pipeline][ortho]") {
+TEST_CASE("A building of the heights is redrawn along the ortho's edge", "[footprint][ortho]") {
     const Scene s = roof_scene(true);
     BuildingMask m = mask_of(s.cells, 80, 60);
     REQUIRE(m.count == 1);
@@ -61,7 +60,7 @@ TEST_CASE("A building of the heights is redrawn along the ortho's edge", "[pipel
     CHECK(wrong == 0);  // the cloud's extra ring of 124 pixels is gone
 }
 
-TEST_CASE("A redrawn building depends only on its own crop (tile invariance)", "[pipeline][ortho]") {
+TEST_CASE("A redrawn building depends only on its own crop (tile invariance)", "[footprint][ortho]") {
     const Scene s = roof_scene(true);
     // The same scene seen through a window that starts at (7, 5).
     const int x0 = 7, y0 = 5, w = 80 - x0, h = 60 - y0;
@@ -84,7 +83,7 @@ TEST_CASE("A redrawn building depends only on its own crop (tile invariance)", "
     CHECK(differ == 0);
 }
 
-TEST_CASE("Without an edge in the ortho a building keeps the heights' outline", "[pipeline][ortho]") {
+TEST_CASE("Without an edge in the ortho a building keeps the heights' outline", "[footprint][ortho]") {
     const Scene s = roof_scene(false);  // the roof has the grass's colours
     BuildingMask m = mask_of(s.cells, 80, 60);
     const auto before = m.labels.data;
@@ -94,7 +93,7 @@ TEST_CASE("Without an edge in the ortho a building keeps the heights' outline", 
     CHECK(m.labels.data == before);
 }
 
-TEST_CASE("Crowns by colour are vetoed and rasters of another size refused", "[pipeline][ortho]") {
+TEST_CASE("Crowns by colour are vetoed and rasters of another size refused", "[footprint][ortho]") {
     const Scene s = roof_scene(true);
     BuildingMask m = mask_of(s.cells, 80, 60);
     const auto before = m.labels.data;
@@ -106,15 +105,4 @@ TEST_CASE("Crowns by colour are vetoed and rasters of another size refused", "[p
     const std::vector<uint8_t> short_valid(10, 1);
     CHECK_THROWS_WITH(refine_buildings_with_ortho(m, s.cells, s.colours, short_valid, s.ndsm, 20.0, {}, {}, OrthoRefineOptions{}),
                       Catch::Contains("rasters differ in size"));
-}
-
-TEST_CASE("run refuses detection modes its inputs cannot serve", "[run][errors]") {
-    RunOptions o;
-    o.ortho = "ortho.tif";
-    o.cloud = "cloud.las";
-    o.extraction.mode = DetectionMode::ortho_only;
-    CHECK_THROWS_WITH(o.validate(), Catch::StartsWith("extraction.mode") && Catch::Contains("would ignore the cloud"));
-    o.cloud.clear();
-    o.extraction.mode = DetectionMode::ortho_cloud;
-    CHECK_THROWS_WITH(o.validate(), Catch::StartsWith("extraction.mode") && Catch::Contains("needs a cloud"));
 }

@@ -1,4 +1,4 @@
-#include "pipeline/ortho_buildings.hpp"
+#include "footprint/ortho_refine.hpp"
 
 #include <algorithm>
 #include <cmath>
