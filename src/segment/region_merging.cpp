@@ -770,7 +770,12 @@ RegionMergingResult merge_regions(const Image<float>& image, const Image<uint32_
     result.graph_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t_graph).count();
     const std::vector<double> initial_totals = o.verify_invariants ? g.totals() : std::vector<double>{};
     std::vector<uint32_t> previous_compact(n, 0);  // alive node -> label at previous level
-    for (uint32_t r = 1; r < n; ++r) previous_compact[r] = g.alive(r) ? r : 0;
+    // Nodes alive at the start of the scale, ascending: the per-scale loops
+    // visit them, not every record of the over-segmentation (1.1 M records
+    // of 320 bytes when 10 k regions are left).
+    std::vector<uint32_t> live;
+    for (uint32_t r = 1; r < n; ++r)
+        if (g.alive(r)) previous_compact[r] = r, live.push_back(r);
     uint32_t previous_count = region_count;
     std::vector<uint32_t> changed, rescan;
     for (std::size_t s = 0; s < o.scales.size(); ++s) {
@@ -791,8 +796,7 @@ RegionMergingResult merge_regions(const Image<float>& image, const Image<uint32_
             if (!k || !(g.nn_cost(r) < threshold)) return false;
             return o.strategy != QueueStrategy::mutual || g.nn(k) == r;
         };
-        for (uint32_t r = 1; r < n; ++r) {
-            if (!g.alive(r)) continue;
+        for (uint32_t r : live) {
             if (o.strategy == QueueStrategy::rag) {
                 for (const Neighbour& k : g.neighbours(r))
                     if (k.id > r) initial.push_back(entry(r, k.id, g.cost(r, k.id, k.shared)));
@@ -847,18 +851,21 @@ RegionMergingResult merge_regions(const Image<float>& image, const Image<uint32_
         level.regions_after = g.alive_count();
         if (o.verify_invariants) g.verify(initial_totals);
         // Contiguous labels of this level in ascending key; hierarchy links.
-        std::vector<uint32_t> node_of_key(n, 0);
-        for (uint32_t r = 1; r < n; ++r)
-            if (g.alive(r)) node_of_key[g.key_of(r)] = r;
+        std::vector<std::pair<uint32_t, uint32_t>> by_key;  // (key, node) of the regions left
+        by_key.reserve(g.alive_count());
+        for (uint32_t r : live)
+            if (g.alive(r)) by_key.push_back({g.key_of(r), r});
+        std::sort(by_key.begin(), by_key.end());
         std::vector<uint32_t> compact(n, 0);
         uint32_t next = 0;
-        for (uint32_t k = 1; k < n; ++k)
-            if (node_of_key[k]) compact[node_of_key[k]] = ++next;
+        for (const auto& kr : by_key) compact[kr.second] = ++next;
         level.label_of_input.assign(n, 0);
         for (uint32_t r = 1; r < n; ++r) level.label_of_input[r] = compact[find(r)];
         level.parent.assign(previous_count + 1, 0);
-        for (uint32_t r = 1; r < n; ++r)
-            if (previous_compact[r]) level.parent[previous_compact[r]] = compact[find(r)];
+        for (uint32_t r : live) level.parent[previous_compact[r]] = compact[find(r)];
+        live.clear();
+        for (const auto& kr : by_key) live.push_back(kr.second);
+        std::sort(live.begin(), live.end());
         previous_compact = compact;
         previous_count = next;
         level.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
