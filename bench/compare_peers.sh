@@ -10,6 +10,13 @@
 #  - optionally Orfeo ToolBox otbcli_Segmentation (watershed) when installed.
 # Prints wall and CPU seconds of each side and the ratios (peer / cityforge).
 # The machine may be shared: CPU seconds are the fairer figure; both are printed.
+# What each figure holds: scikit-image = rgb2gray + sobel + watershed in the
+# Python process (reading excluded); cityforge watershed = band normalisation
+# + gradient + flooding (reading excluded). GRASS i.segment = its whole process
+# (start-up, reading the group and seeds, merging, writing the map; the
+# script also times r.mapcalc over the same maps as an estimate of that I/O);
+# cityforge merging = region graph + merging in process, and also its whole
+# process (GDAL reading, writing a GeoTIFF) for the like-for-like ratio.
 #
 #   bash bench/compare_peers.sh [--raster FILE] [--window col,row,w,h | --centre w,h]
 #                               [--synth SIZE_M] [--grass-threshold T] [--install]
@@ -84,9 +91,11 @@ echo "== cityforge watershed (--h-minima 0, no smoothing)"
 "$bench" --raster "$ortho" --h-minima 0 --smoothing 0 --scales 0.001 --strategies mutual \
   --seeds-out "$work/seeds.tif" --json "$work/cf_ws.json" > "$work/cf_ws.txt"
 cf_regions=$(json "$work/cf_ws.json" 'd["watershed"]["regions"]')
-cf_ws=$(json "$work/cf_ws.json" 'd["watershed"]["seconds"]')
-cf_ws_cpu=$(json "$work/cf_ws.json" 'd["watershed"]["cpu_seconds"]')
-echo "watershed: $cf_regions regions in $cf_ws s wall, $cf_ws_cpu s CPU (reading the image excluded)"
+# Our side counts the band normalisation (percentile stretch) as scikit-image's
+# side counts rgb2gray: both prepare the image for the gradient.
+cf_ws=$(json "$work/cf_ws.json" 'd["watershed"]["seconds"] + d["watershed"]["normalize_seconds"]')
+cf_ws_cpu=$(json "$work/cf_ws.json" 'd["watershed"]["cpu_seconds"] + d["watershed"]["normalize_cpu_seconds"]')
+echo "watershed: $cf_regions regions in $cf_ws s wall, $cf_ws_cpu s CPU (band normalisation included, reading the image excluded)"
 
 sk_regions=nan; sk_ws=nan; sk_cpu=nan
 if [ "$run_sk" = 1 ]; then
@@ -105,6 +114,7 @@ echo "watershed: $sk_regions regions in $sk_ws s wall, $sk_cpu s CPU (reading th
 fi
 
 grass_regions=""; g_wall=nan; g_cpu=nan; cf_final=nan; cf_merge=nan; cf_merge_cpu=nan
+cf_proc=nan; cf_proc_cpu=nan; g_io=nan; g_io_cpu=nan
 if [ "$run_grass" = 1 ]; then
 echo "== GRASS GIS $(grass --version 2>&1 | head -1 | awk '{print $3}') i.segment seeds=<our $cf_regions regions> threshold=$grass_threshold"
 cat > "$work/grass.sh" <<SH
@@ -117,6 +127,10 @@ r.mapcalc --quiet "seeds = int(seeds_raw)"
 i.group --quiet group=g input="\$bands"
 /usr/bin/time -f "%e %U %S" -o "$work/grass.time" i.segment --quiet group=g output=seg seeds=seeds threshold=$grass_threshold minsize=1 memory=4000
 r.stats --quiet -n seg | wc -l > "$work/grass.count"
+# What reading the group and the seeds and writing one map costs GRASS (its
+# i.segment time includes them): r.mapcalc over the same four maps.
+b1=\$(echo "\$bands" | cut -d, -f1); b2=\$(echo "\$bands" | cut -d, -f2); b3=\$(echo "\$bands" | cut -d, -f3)
+/usr/bin/time -f "%e %U %S" -o "$work/grass_io.time" r.mapcalc --quiet expression="io = int(\$b1 + \$b2 + \$b3 + seeds)"
 SH
 grass --tmp-location "$ortho" --exec bash "$work/grass.sh" > "$work/grass.log" 2>&1 || { echo "GRASS run failed:"; tail -5 "$work/grass.log"; exit 1; }
 grass_regions=$(tr -d ' ' < "$work/grass.count")
@@ -129,7 +143,15 @@ cf_final=$(json "$work/cf_merge.json" 'd["merging"]["mutual"]["regions"]')
 cf_merge=$(json "$work/cf_merge.json" 'd["merging"]["mutual"]["seconds"]')
 cf_merge_cpu=$(json "$work/cf_merge.json" 'd["merging"]["mutual"]["cpu_seconds"]')
 echo "merging: $cf_regions -> $cf_final regions in $cf_merge s wall, $cf_merge_cpu s CPU (region graph included)"
+# The same as a whole process, like the GRASS figure: start-up, reading the
+# image and the seeds (GDAL), normalising, merging and writing the labels.
+/usr/bin/time -f "%e %U %S" -o "$work/cf_proc.time" "$bench" --raster "$ortho" --seeds-in "$work/seeds.tif" --scales 1e9 \
+  --min-regions "$grass_regions" --strategies mutual --labels-out "$work/cf_labels.tif" > /dev/null
+cf_proc=$(wall_of "$work/cf_proc.time"); cf_proc_cpu=$(cpu_of "$work/cf_proc.time")
+echo "merging as a whole process (reading the image and seeds, writing the labels): $cf_proc s wall, $cf_proc_cpu s CPU"
 g_wall=$(wall_of "$work/grass.time"); g_cpu=$(cpu_of "$work/grass.time")
+g_io=$(wall_of "$work/grass_io.time"); g_io_cpu=$(cpu_of "$work/grass_io.time")
+echo "GRASS reading the four maps and writing one (r.mapcalc, part of the i.segment figure): $g_io s wall, $g_io_cpu s CPU"
 [ "$cf_final" = "$grass_regions" ] || echo "WARNING: final region counts differ (GRASS $grass_regions, cityforge $cf_final)"
 fi
 
@@ -143,9 +165,9 @@ fi
 
 echo "== ratios (peer / cityforge); load average now: $(cut -d' ' -f1-3 /proc/loadavg)"
 "$py" - "$cf_ws" "$cf_ws_cpu" "$cf_regions" "$sk_ws" "$sk_cpu" "$sk_regions" "$g_wall" "$g_cpu" \
-  "${grass_regions:-nan}" "$cf_merge" "$cf_merge_cpu" "$cf_final" "${otb_s:-nan}" <<'PY'
+  "${grass_regions:-nan}" "$cf_merge" "$cf_merge_cpu" "$cf_final" "${otb_s:-nan}" "$cf_proc" "$cf_proc_cpu" "$g_io" "$g_io_cpu" <<'PY'
 import sys
-cf_ws, cf_ws_cpu, cf_n, sk_ws, sk_cpu, sk_n, g_wall, g_cpu, g_n, cf_m, cf_m_cpu, cf_final, otb = map(float, sys.argv[1:])
+cf_ws, cf_ws_cpu, cf_n, sk_ws, sk_cpu, sk_n, g_wall, g_cpu, g_n, cf_m, cf_m_cpu, cf_final, otb, cf_p, cf_p_cpu, g_io, g_io_cpu = map(float, sys.argv[1:])
 if sk_ws == sk_ws:
     print(f"watershed: scikit-image {sk_ws:.2f} s wall, {sk_cpu:.2f} s CPU ({sk_n:.0f} regions) / cityforge {cf_ws:.2f} s wall, "
           f"{cf_ws_cpu:.2f} s CPU ({cf_n:.0f} regions, {cf_n / sk_n:.2f} x as many) = {sk_ws / cf_ws:.1f}x wall, {sk_cpu / cf_ws_cpu:.1f}x CPU")
@@ -157,6 +179,10 @@ if g_wall == g_wall:
     print(f"merging the same {cf_n:.0f} seeds -> {g_n:.0f} (GRASS) / {cf_final:.0f} (cityforge) regions: "
           f"GRASS i.segment {g_wall:.2f} s wall / cityforge {cf_m:.3f} s wall = {g_wall / cf_m:.0f}x; "
           f"CPU {g_cpu:.2f} s / {cf_m_cpu:.3f} s = {g_cpu / cf_m_cpu:.0f}x")
+    print(f"  both as whole processes (reading and writing included on both sides): GRASS {g_wall:.2f} s / cityforge {cf_p:.2f} s wall = "
+          f"{g_wall / cf_p:.0f}x; CPU {g_cpu:.2f} s / {cf_p_cpu:.2f} s = {g_cpu / cf_p_cpu:.0f}x")
+    print(f"  both without reading and writing (GRASS minus its r.mapcalc I/O figure): CPU {g_cpu - g_io_cpu:.2f} s / {cf_m_cpu:.3f} s = "
+          f"{(g_cpu - g_io_cpu) / cf_m_cpu:.0f}x")
 else:
     print("merging: GRASS skipped")
 PY
