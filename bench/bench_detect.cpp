@@ -57,7 +57,11 @@ int main(int argc, char** argv) try {
     std::printf("bench_detect: %d x %d px RGB (%s), model %s\n", img.grid.width, img.grid.height, ortho.string().c_str(), model_path.c_str());
     std::printf("  read + normalise      %7.2f s\n", t_read);
     if (model.options.pixel.enabled)
-        std::printf("  pixel stage           %7.2f s  (filter bank on %g m cells + boosted trees)\n", t_pix, model.options.pixel.cell_m);
+        std::printf("  pixel stage           %7.2f s  (%s on %g m cells)\n", t_pix,
+                    model.options.pixel.kind == detect::PixelStageKind::cnn    ? "U-Net"
+                    : model.options.pixel.kind == detect::PixelStageKind::both ? "filter bank + boosted trees, and U-Net"
+                                                                                : "filter bank + boosted trees",
+                    model.options.pixel.cell_m);
     std::printf("  segmentation          %7.2f s  (%u segments, scales", t_seg, seg.count);
     for (double s : model.options.segmentation.scales) std::printf(" %g", s);
     std::printf(")\n  features              %7.2f s  (%zu per segment)\n", t_feat, f.cols);

@@ -25,7 +25,7 @@ struct CnnOptions {
     int levels = 3;              ///< poolings (1..4); crops must be divisible by 2^levels
     int crop_cells = 64;         ///< training crop side, cells (square; random flips and rot90)
     int batch = 8;               ///< crops per step
-    int steps = 600;             ///< optimisation steps (Adam)
+    int steps = 1500;            ///< optimisation steps (Adam)
     double learning_rate = 0.003;  ///< Adam step size (halved at 60 % and again at 85 % of the steps)
     uint64_t seed = 1;           ///< weight initialisation, crops and augmentations
     void validate() const;
