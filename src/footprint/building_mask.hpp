@@ -72,6 +72,11 @@ struct BuildingCells {
     std::vector<uint8_t> evidence;  ///< 1 where the cell was decided by its own points (not from neighbours)
     Image<float> step_dsm;
     bool used_classes = false;
+    /// Points per cell of the classified cloud (capped at 255; empty when
+    /// unknown): roof = building class, ground = neither building nor
+    /// vegetation. An edge decision weighs them against the roof's and the
+    /// ground's return rates (refine_buildings_with_ortho).
+    std::vector<uint8_t> roof_points, ground_points;
 };
 /// True when more than 10 % of the cells with points have building or
 /// vegetation points (NaN shares = no point).

@@ -17,6 +17,7 @@ void OrthoRefineOptions::validate() const {
     if (!(ndsm_band_weight >= 0)) throw Error("--ndsm-weight", "must be >= 0");
     if (!(min_segment_building_share > 0 && min_segment_building_share <= 1)) throw Error("--min-segment-building-share", "must be in (0, 1]");
     if (!(min_iou_with_heights >= 0 && min_iou_with_heights <= 1)) throw Error("ortho refinement", "IoU limit must be in [0, 1]");
+    if (!(ortho_edge_odds >= 0)) throw Error("ortho_edge_odds", "must be >= 0");
     if (margin_px < 1 || margin_px > 200) throw Error("ortho margin", "must be between 1 and 200 pixels");
 }
 
@@ -133,7 +134,33 @@ void refine_buildings_with_ortho(BuildingMask& mask, const BuildingCells& cells,
                     !vetoed[s] && (seen[s] ? static_cast<double>(yes[s]) >= o.min_segment_building_share * votes[s] : old[k] == l);
             }
         if (cells.used_classes && o.cloud_edges) {
-            // Outline pixels with evidence keep the classified cloud's decision.
+            // Outline pixels with evidence keep the classified cloud's decision
+            // -- unless its evidence is too weak against the ortho's. A pixel of
+            // a sparse roof (dark: a fifth of the pulses) with no roof point and
+            // one ground point is as likely three-quarters roof as a quarter:
+            // with Poisson returns at the ground's rate g and the roof's rate r
+            // (points per cell, measured around and on this building), n ground
+            // and no roof points, the likelihood ratio of roof cover 3/4 against
+            // 1/4 is exp((g - r) / 2) / 3^n; the ortho's vote for building stays
+            // when that ratio times `ortho_edge_odds` is at least 1. On a roof
+            // as bright as the ground (r = g) one ground point always wins.
+            double edge_lr_base = 0.0;  // (g - r) / 2 + ln(odds); 0 = the cloud decides alone
+            if (o.ortho_edge_odds > 0 && !cells.roof_points.empty()) {
+                double roof_pts = 0, ground_pts = 0;
+                long roof_cells = 0, ground_cells = 0;
+                for (int y = 0; y < ch; ++y)
+                    for (int x = 0; x < cw; ++x) {
+                        const std::size_t k = global(x, y);
+                        if (old[k] == l) roof_pts += cells.roof_points[k], ++roof_cells;
+                        // Every ground cell, with points or none: the cells with
+                        // points alone would overstate a sparse ground's rate.
+                        else if (!old[k] && !cells.cells[k]) ground_pts += cells.ground_points[k], ++ground_cells;
+                    }
+                if (roof_cells > 0 && ground_cells > 0) {
+                    const double g = ground_pts / static_cast<double>(ground_cells), r = roof_pts / static_cast<double>(roof_cells);
+                    edge_lr_base = 0.5 * (g - r) + std::log(o.ortho_edge_odds);
+                }
+            }
             std::vector<uint8_t> edged = voted;
             for (int y = 0; y < ch; ++y)
                 for (int x = 0; x < cw; ++x) {
@@ -146,7 +173,11 @@ void refine_buildings_with_ortho(BuildingMask& mask, const BuildingCells& cells,
                             if (xx < 0 || yy < 0 || xx >= cw || yy >= ch) continue;
                             edge = voted[static_cast<std::size_t>(yy) * cw + xx] != voted[static_cast<std::size_t>(y) * cw + x];
                         }
-                    if (edge) edged[static_cast<std::size_t>(y) * cw + x] = cells.cells[k];
+                    if (!edge) continue;
+                    const std::size_t c = static_cast<std::size_t>(y) * cw + x;
+                    const bool weak_ground = voted[c] && !cells.cells[k] && edge_lr_base > 0 && cells.roof_points[k] == 0 &&
+                                             edge_lr_base >= cells.ground_points[k] * std::log(3.0);
+                    if (!weak_ground) edged[c] = cells.cells[k];
                 }
             voted.swap(edged);
         }

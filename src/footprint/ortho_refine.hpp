@@ -22,6 +22,10 @@ struct OrthoRefineOptions {
     /// With a classified cloud rasterised on the ortho's own pixels, outline
     /// pixels keep the cloud's decision; off when the cloud cells are coarser.
     bool cloud_edges = true;
+    /// Prior odds that the ortho's edge is right where the cloud's evidence
+    /// at an outline pixel is only ground points, weighed by the roof's and
+    /// the ground's return rates (sparse, dark roofs); 0 = the cloud decides.
+    double ortho_edge_odds = 2.0;
     int margin_px = 20;                   ///< crop = the building's bounding box grown by this many pixels
     /// A redrawn building whose IoU with its heights' outline is below this
     /// keeps the heights' outline (the image merged or lost the roof).

@@ -56,6 +56,20 @@ WindowCloudCells cloud_cells_from_rasters(CloudRasters cr, int w, int h, int col
         go.grid_col0 = col0, go.grid_row0 = row0;
         out.rasters = std::move(cr);
         out.cells = building_cells(out.rasters.ndsm, out.rasters.dsm, out.rasters.building_share, out.rasters.vegetation_share, go);
+        if (out.cells.used_classes) {
+            // Point counts back from the density (points per m2) and the shares.
+            const double cell_m2 = options.gsd_m * options.gsd_m;
+            const std::size_t n = out.rasters.density.data.size();
+            out.cells.roof_points.assign(n, 0), out.cells.ground_points.assign(n, 0);
+            for (std::size_t k = 0; k < n; ++k) {
+                const double all = std::round(out.rasters.density.data[k] * cell_m2);
+                const float v = out.rasters.vegetation_share.data[k], b = out.rasters.building_share.data[k];
+                const double other = std::isnan(v) ? all : std::round(all * (1.0 - v));  // not vegetation
+                const double roof = std::isnan(b) ? 0.0 : std::round(other * b);
+                out.cells.roof_points[k] = static_cast<uint8_t>(std::clamp(roof, 0.0, 255.0));
+                out.cells.ground_points[k] = static_cast<uint8_t>(std::clamp(other - roof, 0.0, 255.0));
+            }
+        }
         return out;
     }
     // Coarse cells anchored at global multiples of the factor.

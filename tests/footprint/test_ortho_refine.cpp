@@ -106,3 +106,58 @@ TEST_CASE("Crowns by colour are vetoed and rasters of another size refused", "[f
     CHECK_THROWS_WITH(refine_buildings_with_ortho(m, s.cells, s.colours, short_valid, s.ndsm, 20.0, {}, {}, OrthoRefineOptions{}),
                       Catch::Contains("rasters differ in size"));
 }
+
+TEST_CASE("A sparse (dark) roof keeps the ortho's edge where the cloud has only one ground point there", "[footprint][ortho][dark]") {
+    // The ortho's roof is [20, 49] x [15, 44]. The classified cloud's cells
+    // miss its outermost ring: there a pixel three-quarters roof caught one
+    // ground point and no roof point. Ground elsewhere has 2 points per cell.
+    auto scene = [](int roof_points_per_cell_x5) {
+        Scene s = roof_scene(true);
+        const int w = 80, h = 60;
+        s.cells.used_classes = true;
+        s.cells.roof_points.assign(s.valid.size(), 0), s.cells.ground_points.assign(s.valid.size(), 2);
+        for (int y = 0; y < h; ++y)
+            for (int x = 0; x < w; ++x) {
+                const std::size_t k = static_cast<std::size_t>(y) * w + x;
+                const bool inner = x >= 21 && x <= 48 && y >= 16 && y <= 43, roof = x >= 20 && x <= 49 && y >= 15 && y <= 44;
+                s.cells.cells[k] = inner;
+                s.cells.step_dsm.at(0, x, y) = inner ? 9.0f : NAN;
+                s.ndsm.at(0, x, y) = roof ? 9.0f : 0.1f;
+                if (inner) {
+                    s.cells.ground_points[k] = 0;
+                    // A dark roof returns 1 point in 5 cells; a bright one 2 per cell.
+                    s.cells.roof_points[k] = roof_points_per_cell_x5 >= 5 ? static_cast<uint8_t>(roof_points_per_cell_x5 / 5) : (x + y) % 5 == 0;
+                    s.cells.evidence[k] = s.cells.roof_points[k] > 0;
+                } else if (roof) {
+                    s.cells.ground_points[k] = 1;  // the ring: evidence of ground, weak on a dark roof
+                }
+            }
+        return s;
+    };
+    auto wrong_pixels = [](const BuildingMask& m) {
+        long wrong = 0;
+        for (int y = 0; y < 60; ++y)
+            for (int x = 0; x < 80; ++x) wrong += (m.labels.at(0, x, y) == 1) != (x >= 20 && x <= 49 && y >= 15 && y <= 44);
+        return wrong;
+    };
+    const Scene dark = scene(1);
+    OrthoRefineOptions o;
+    BuildingMask m = mask_of(dark.cells, 80, 60);
+    REQUIRE(m.count == 1);
+    refine_buildings_with_ortho(m, dark.cells, dark.colours, dark.valid, dark.ndsm, 20.0, {}, {}, o);
+    CHECK(wrong_pixels(m) == 0);  // the ortho's edge stays
+    // With the cloud alone deciding the edges, the ring (116 pixels) is lost.
+    o.ortho_edge_odds = 0.0;
+    BuildingMask cloud_only = mask_of(dark.cells, 80, 60);
+    refine_buildings_with_ortho(cloud_only, dark.cells, dark.colours, dark.valid, dark.ndsm, 20.0, {}, {}, o);
+    CHECK(wrong_pixels(cloud_only) == 116);
+    // A roof as bright as the ground (2 points per cell): one ground point is
+    // strong evidence, the cloud's edge wins whatever the odds.
+    const Scene bright = scene(10);
+    o.ortho_edge_odds = 2.0;
+    BuildingMask b = mask_of(bright.cells, 80, 60);
+    refine_buildings_with_ortho(b, bright.cells, bright.colours, bright.valid, bright.ndsm, 20.0, {}, {}, o);
+    CHECK(wrong_pixels(b) == 116);
+    o.ortho_edge_odds = -1.0;
+    CHECK_THROWS_WITH(o.validate(), Catch::Contains("ortho_edge_odds"));
+}
