@@ -45,6 +45,10 @@ void add_footprints_command(CLI::App& parent, const GlobalFlags& g, CommandList&
     cmd->add_option("--refine-passes", o.segmentation.refine_passes, "Ortho modes: passes moving boundary pixels to the closest-colour segment")
         ->capture_default_str();
     cmd->add_option("--ndsm-weight", o.segmentation.ndsm_band_weight, "ortho_cloud: weight of the nDSM band in the segmentation")->capture_default_str();
+    cmd->add_option("--ortho-edge-odds", o.segmentation.ortho_edge_odds,
+                    "ortho_cloud with a classified cloud: prior odds of the ortho's edge where an outline pixel has only ground points, weighed by "
+                    "the roof's and the ground's return rates (sparse, dark roofs); 0 = the cloud's points decide the edge")
+        ->capture_default_str();
     cmd->add_option("--min-segment-building-share", o.segmentation.min_segment_building_share,
                     "ortho_cloud: share of a segment's pixels that must be cloud building cells")
         ->capture_default_str();
