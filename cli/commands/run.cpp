@@ -121,6 +121,12 @@ void add_run_commands(CLI::App& parent, const GlobalFlags& g, CommandList& out) 
                                         "cityforge: %zu buildings from %zu tiles (%zu failed); LOD1 valid %zu, LOD2 valid %zu; %zu warnings; %.1f s, peak %.0f MB -> %s\n",
                                         r.buildings, r.tiles.size(), failed, r.valid_lod1, r.valid_lod2, r.warnings.size(), r.seconds,
                                         r.peak_memory_mb, r.report_path.c_str());
+                           auto wall = [&r](const char* phase) {
+                               const auto it = r.wall_seconds.find(phase);
+                               return it == r.wall_seconds.end() ? 0.0 : it->second;
+                           };
+                           std::fprintf(stderr, "cityforge: wall seconds: split %.1f, tiles %.1f, merge %.1f, export %.1f, view %.1f\n", wall("split"),
+                                        wall("tiles"), wall("merge"), wall("export"), wall("view"));
                        }
                        return 0;
                    }});

@@ -990,9 +990,10 @@ TileReport run_tile(const RunManifest& m, int k, const std::string& out_dir, con
     return rep;
 }
 
-RunReport merge_tiles(const RunManifest& m, const std::string& out_dir, const Progress& progress) {
+RunReport merge_tiles(const RunManifest& m, const std::string& out_dir, const Progress& progress, const std::map<std::string, double>& phases) {
     const auto t0 = std::chrono::steady_clock::now();
     RunReport rep;
+    rep.wall_seconds = phases;
     const fs::path dir = fs::path(out_dir) / "tiles";
     const CrsInfo grid_crs = crs_from_wkt(m.crs_wkt, "manifest");
     std::vector<Building> buildings;
@@ -1079,6 +1080,7 @@ RunReport merge_tiles(const RunManifest& m, const std::string& out_dir, const Pr
         }
     }
     const auto te = std::chrono::steady_clock::now();
+    rep.wall_seconds["merge"] = std::chrono::duration<double>(te - t0).count();
     ExportOptions eo = m.options.buildings.model;
     if (m.options.cloud.empty()) {
         // Without a cloud there is no solid: the 3D-only formats have nothing to hold.
@@ -1091,7 +1093,7 @@ RunReport merge_tiles(const RunManifest& m, const std::string& out_dir, const Pr
         }
     }
     rep.model = write_city_model(model, crs, out_dir, eo, progress.sub(0.3, 0.95));
-    stage_seconds["export"] = since(te);
+    stage_seconds["export"] = rep.wall_seconds["export"] = since(te);
     if (fs::exists(fs::path(out_dir) / "buildings.gpkg")) {  // the viewer page, DIR/view/index.html
         const auto tv = std::chrono::steady_clock::now();
         try {
@@ -1102,11 +1104,14 @@ RunReport merge_tiles(const RunManifest& m, const std::string& out_dir, const Pr
             rep.warnings.push_back(std::string("viewer page: ") + e.what());
             log::warning(rep.warnings.back());
         }
-        stage_seconds["view"] = since(tv);
+        stage_seconds["view"] = rep.wall_seconds["view"] = since(tv);
     }
     rep.buildings = rep.model.buildings, rep.valid_lod1 = rep.model.valid_lod1, rep.valid_lod2 = rep.model.valid_lod2;
     rep.peak_memory_mb = std::max(rep.peak_memory_mb, peak_memory_mb());
     rep.seconds = since(t0);
+    double before_merge = 0.0;
+    for (const auto& [phase, sec] : phases) before_merge += sec;
+    rep.wall_seconds["total"] = before_merge + rep.seconds;
 
     json j;
     j["cityforge_version"] = version();
@@ -1127,6 +1132,7 @@ RunReport merge_tiles(const RunManifest& m, const std::string& out_dir, const Pr
                          {"peak_memory_mb", t.peak_memory_mb}});
     j["tiles"] = tiles;
     j["stage_seconds"] = stage_seconds;
+    j["wall_seconds"] = rep.wall_seconds;
     j["peak_memory_mb"] = rep.peak_memory_mb;
     j["counts"] = {{"buildings", rep.model.buildings},   {"with_lod1", rep.model.with_lod1}, {"valid_lod1", rep.model.valid_lod1},
                    {"with_lod2", rep.model.with_lod2},   {"valid_lod2", rep.model.valid_lod2}, {"status", rep.model.status_counts}};
@@ -1169,6 +1175,7 @@ RunReport run_city(const RunManifest& m, const std::string& out_dir, const RunSh
         while (!fs::exists(dir / "complete") && !fs::exists(dir / "not_split") && since(run_start) < share.wait_seconds)
             std::this_thread::sleep_for(std::chrono::milliseconds(200));
     }
+    std::map<std::string, double> phases{{"split", since(run_start)}};
     progress(0.05, "cloud split");
     std::vector<int> mine;
     for (const TileSpec& t : m.tiles)
@@ -1181,6 +1188,7 @@ RunReport run_city(const RunManifest& m, const std::string& out_dir, const RunSh
         msg << "tile " << i + 1 << "/" << mine.size() << " (" << r.status << ")";
         tiles_progress(done, msg.str());
     }
+    phases["tiles"] = since(run_start) - phases["split"];
     if (share.rank != 0) return {};
     // Rank 0 merges once every tile has its report.
     const auto wait0 = std::chrono::steady_clock::now();
@@ -1191,7 +1199,8 @@ RunReport run_city(const RunManifest& m, const std::string& out_dir, const RunSh
         if (since(wait0) > share.wait_seconds) throw Error(out_dir, "other ranks' tiles did not finish in time");
         std::this_thread::sleep_for(std::chrono::milliseconds(200));
     }
-    RunReport rep = merge_tiles(m, out_dir, progress.sub(0.85, 1.0));
+    if (share.size > 1) phases["wait"] = since(wait0);
+    RunReport rep = merge_tiles(m, out_dir, progress.sub(0.85, 1.0), phases);
     rep.seconds = since(run_start);
     return rep;
 }

@@ -108,11 +108,20 @@ struct RunReport {
     ExportReport model;
     std::string report_path;   ///< DIR/run_report.json
     double seconds = 0.0, peak_memory_mb = 0.0;
+    /// Wall seconds of the run's phases, in order: `split` (one pass over the
+    /// cloud into its tiles), `tiles` (this process's tiles, one after the
+    /// other), `wait` (for other ranks' tiles), `merge` (reading the tiles'
+    /// buildings, completing them), `export`, `view`, and `total`. The
+    /// report's `stage_seconds` are sums of the tiles' own stage seconds.
+    std::map<std::string, double> wall_seconds;
 };
 
 /// Assembles DIR/tiles/* into the city models in DIR and writes
-/// DIR/run_report.json. Throws Error when a tile has not run.
-RunReport merge_tiles(const RunManifest& manifest, const std::string& out_dir, const Progress& progress = {});
+/// DIR/run_report.json. Throws Error when a tile has not run. `phases`: wall
+/// seconds of the phases before the merge (run_city's split, tiles, wait),
+/// written with the merge's own under `wall_seconds`.
+RunReport merge_tiles(const RunManifest& manifest, const std::string& out_dir, const Progress& progress = {},
+                      const std::map<std::string, double>& phases = {});
 
 /// One process's share of a distributed run: tiles k with k % size == rank.
 struct RunShare {

@@ -36,6 +36,18 @@ TEST_CASE("run is tile-invariant and thread-invariant - byte-identical outputs -
     CHECK(report["counts"]["buildings"] == s.buildings);
     CHECK(report["counts"]["valid_lod2"] == s.buildings);
     CHECK(report["stage_seconds"].contains("roofs"));
+    // The run's wall-clock phases add up to its total.
+    const auto& wall = report["wall_seconds"];
+    double phases = 0;
+    for (const char* p : {"split", "tiles", "merge", "export", "view"}) {
+        INFO(p);
+        REQUIRE(wall.contains(p));
+        CHECK(wall[p].get<double>() >= 0);
+        phases += wall[p].get<double>();
+    }
+    CHECK(wall["total"].get<double>() >= phases - 1e-6);
+    CHECK(wall["total"].get<double>() <= phases + 5.0);  // only the writing of the report itself is left out
+    CHECK(wall["tiles"].get<double>() > 0);
     CHECK(report["peak_memory_mb"].get<double>() > 0);
     CHECK(report["inputs"]["ortho"]["crs"] == "EPSG:32650");
     CHECK(report["options"]["extraction"]["mode"] == "auto");
