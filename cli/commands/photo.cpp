@@ -59,12 +59,20 @@ void add_orient_options(CLI::App* cmd, OrientRunOptions& o) {
 
 void add_densify_options(CLI::App* cmd, photo::DensifyOptions& d) {
     cmd->add_option("--cell-px", d.cell_px, "Image cell size beta (one patch per cell), pixels")->capture_default_str();
+    cmd->add_option("--cell-m", d.cell_m, "Cells are also at least this many metres on the surface (0 = pixels only)")->capture_default_str();
     cmd->add_option("--patch-grid", d.patch_grid, "Patch samples mu per side")->capture_default_str();
     cmd->add_option("--min-ncc", d.min_ncc, "NCC for an image to count as seeing a patch")->capture_default_str();
     cmd->add_option("--min-views", d.min_views, "Images per patch, reference included")->capture_default_str();
     cmd->add_option("--neighbour-images", d.neighbour_images, "Candidate images per reference image")->capture_default_str();
     cmd->add_option("--iterations", d.iterations, "Expansion + filtering rounds")->capture_default_str();
     cmd->add_option("--points-per-patch", d.points_per_patch_side, "Output points per patch side (1 = centres)")->capture_default_str();
+    cmd->add_option("--max-view-angle", d.max_view_angle_deg, "Largest angle between a patch's normal and a ray of an image seeing it, degrees")
+        ->capture_default_str();
+    cmd->add_option("--max-tilt", d.max_tilt_deg, "Largest tilt of a patch's normal during its refinement, degrees")->capture_default_str();
+    cmd->add_option("--wall-hypotheses", d.wall_hypotheses, "Expansion also tries a wall and a level plane where the parent's plane fails (0/1)")
+        ->capture_default_str();
+    cmd->add_option("--min-support", d.min_support, "Share of adjacent patches among the neighbouring ones to survive filtering")
+        ->capture_default_str();
 }
 
 void add_orient(CLI::App& parent, const GlobalFlags& g, CommandList& out) {

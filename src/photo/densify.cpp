@@ -18,6 +18,7 @@ namespace cityforge::photo {
 
 void DensifyOptions::validate() const {
     if (cell_px < 1 || cell_px > 32) throw Error("--cell-px", "must be 1..32 pixels");
+    if (!(cell_m >= 0 && cell_m <= 10)) throw Error("--cell-m", "must be 0..10 metres");
     if (patch_grid < 3 || patch_grid > 15 || patch_grid % 2 == 0) throw Error("--patch-grid", "must be odd, 3..15");
     if (!(min_ncc > -1 && min_ncc < 1)) throw Error("--min-ncc", "must be in (-1, 1)");
     if (min_views < 2 || min_views > 20) throw Error("--min-views", "must be 2..20");
@@ -29,6 +30,7 @@ void DensifyOptions::validate() const {
     if (seed_features < 100 || seed_features > 100000) throw Error("--seed-features", "must be 100..100000");
     if (!(min_support >= 0 && min_support <= 1)) throw Error("--min-support", "must be 0..1");
     if (points_per_patch_side < 1 || points_per_patch_side > 9) throw Error("--points-per-patch", "must be 1..9");
+    if (!(max_tilt_deg > 0 && max_tilt_deg < 90)) throw Error("--max-tilt", "must be in (0, 90) degrees");
 }
 
 namespace {
@@ -45,6 +47,7 @@ struct View {
     cv::Mat gray;          // CV_32F
     Eigen::Vector3d c_local;  // centre relative to the block origin
     std::vector<int> neighbours;
+    int cell = 1;            // cell side, pixels
     int cols = 0, rows = 0;  // cells
 };
 
@@ -74,14 +77,25 @@ public:
             cv::cvtColor(images[i], g, cv::COLOR_BGR2GRAY);
             g.convertTo(v.gray, CV_32F);
             v.c_local = local_[i].centre;
-            v.cols = (local_[i].width + o.cell_px - 1) / o.cell_px;
-            v.rows = (local_[i].height + o.cell_px - 1) / o.cell_px;
+        }
+        // Cells: at least cell_px pixels and cell_m metres on the surface at
+        // the middle of the scene's height range (along the optical axis).
+        const bool z_known = set.scene_z_range_m[0] != 0.0 || set.scene_z_range_m[1] != 0.0;
+        const double zmid = 0.5 * (set.scene_z_range_m[0] + set.scene_z_range_m[1]);
+        for (std::size_t i = 0; i < views_.size(); ++i) {
+            View& v = views_[i];
+            v.cell = o.cell_px;
+            const double down = -local_[i].rotation(2, 2);  // cosine of the optical axis' angle from nadir
+            if (o.cell_m > 0 && z_known && down > 0.1 && set.cameras[i].centre.z() > zmid) {
+                const double gsd = (set.cameras[i].centre.z() - zmid) / down / local_[i].fx;
+                v.cell = std::clamp(static_cast<int>(std::lround(o.cell_m / gsd)), o.cell_px, 32);
+            }
+            v.cols = (local_[i].width + v.cell - 1) / v.cell;
+            v.rows = (local_[i].height + v.cell - 1) / v.cell;
         }
         // Neighbours: images whose centres are closest, among those looking the
         // same way with a baseline: the heads of one oblique camera share a
         // centre, and a pure rotation sees every depth alike.
-        const bool z_known = set.scene_z_range_m[0] != 0.0 || set.scene_z_range_m[1] != 0.0;
-        const double zmid = 0.5 * (set.scene_z_range_m[0] + set.scene_z_range_m[1]);
         for (std::size_t i = 0; i < views_.size(); ++i) {
             std::vector<std::pair<double, int>> d;
             const Eigen::Vector3d zi = local_[i].rotation.row(2).transpose();
@@ -208,6 +222,7 @@ public:
             return (n0 * std::cos(th) * std::cos(ph) + ax * std::sin(th) * std::cos(ph) + ay * std::sin(ph)).normalized();
         };
         const double px = footprint(c, ref);
+        const double max_tilt = o_.max_tilt_deg * std::numbers::pi / 180.0;
         double best = score(rc.centre + t * ray, n, ref, vis);
         double dt = 2.0 * px, da = 0.25;
         for (int level = 0; level < 5; ++level) {
@@ -217,7 +232,7 @@ public:
                 const double trial[6][3] = {{dt, 0, 0}, {-dt, 0, 0}, {0, da, 0}, {0, -da, 0}, {0, 0, da}, {0, 0, -da}};
                 for (const auto& d : trial) {
                     const double nt = t + d[0], nth = theta + d[1], nph = phi + d[2];
-                    if (std::abs(nth) > 1.2 || std::abs(nph) > 1.2 || nt <= 0) continue;
+                    if (std::abs(nth) > max_tilt || std::abs(nph) > max_tilt || nt <= 0) continue;
                     const double s = score(rc.centre + nt * ray, normal_of(nth, nph), ref, vis);
                     if (s < best - 1e-9) best = s, t = nt, theta = nth, phi = nph, improved = true;
                 }
@@ -244,7 +259,7 @@ public:
         const auto px = local_[static_cast<std::size_t>(i)].project(c);
         if (!px || !local_[static_cast<std::size_t>(i)].inside(*px)) return -1;
         const View& v = views_[static_cast<std::size_t>(i)];
-        const int cx = static_cast<int>(px->x()) / o_.cell_px, cy = static_cast<int>(px->y()) / o_.cell_px;
+        const int cx = static_cast<int>(px->x()) / v.cell, cy = static_cast<int>(px->y()) / v.cell;
         return static_cast<long>(cy) * v.cols + cx;
     }
 
@@ -278,7 +293,7 @@ public:
     }
 
     bool adjacent(const Patch& a, const Patch& b) const {
-        const double rho = 2.0 * o_.cell_px * footprint(a.c, a.ref);
+        const double rho = 2.0 * views_[static_cast<std::size_t>(a.ref)].cell * footprint(a.c, a.ref);
         const Eigen::Vector3d d = a.c - b.c;
         return std::abs(d.dot(a.n)) + std::abs(d.dot(b.n)) < 2.0 * rho;
     }
@@ -301,16 +316,28 @@ public:
                 // Skip cells holding a patch adjacent to p (or any patch: occupied).
                 if (occupied(i, nc)) continue;
                 const PhotoCamera& cam = local_[static_cast<std::size_t>(i)];
-                const double u = (x + 0.5) * o_.cell_px - 0.5, w = (y + 0.5) * o_.cell_px - 0.5;
+                const double u = (x + 0.5) * v.cell - 0.5, w = (y + 0.5) * v.cell - 0.5;
                 const Eigen::Vector3d ray = cam.ray(u, w);
-                const double denom = ray.dot(p.n);
-                if (std::abs(denom) < 1e-6) continue;
-                const double t = (p.c - cam.centre).dot(p.n) / denom;
-                if (t <= 0) continue;
-                if (auto q = optimise(cam.centre + t * ray, p.n, i)) {
-                    const long qc = cell_of(q->c, i);
-                    if (qc != nc) continue;  // drifted away from the cell it was made for
-                    out.push_back(std::move(*q));
+                // Planes through p.c to start from: p's own, then (at a roof
+                // edge or a wall's foot, where p's plane misses the surface) a
+                // wall facing the camera and a level plane.
+                Eigen::Vector3d planes[3] = {p.n, Eigen::Vector3d(-ray.x(), -ray.y(), 0.0), Eigen::Vector3d::UnitZ()};
+                const int hypotheses = o_.wall_hypotheses ? 3 : 1;
+                for (int h = 0; h < hypotheses; ++h) {
+                    Eigen::Vector3d n = planes[h];
+                    if (n.norm() < 1e-6) continue;
+                    n.normalize();
+                    if (h > 0 && std::abs(n.dot(p.n)) > std::cos(30.0 * std::numbers::pi / 180.0)) continue;  // p's plane, tried
+                    const double denom = ray.dot(n);
+                    if (std::abs(denom) < 1e-6) continue;
+                    const double t = (p.c - cam.centre).dot(n) / denom;
+                    if (t <= 0) continue;
+                    if (auto q = optimise(cam.centre + t * ray, n, i)) {
+                        const long qc = cell_of(q->c, i);
+                        if (qc != nc) continue;  // drifted away from the cell it was made for
+                        out.push_back(std::move(*q));
+                        break;
+                    }
                 }
             }
         }
@@ -502,7 +529,7 @@ DensifyResult densify_patches(const std::vector<cv::Mat>& images, const CameraSe
         Eigen::Vector3d ax = rc.rotation.row(0).transpose();
         ax = (ax - ax.dot(p.n) * p.n).normalized();
         const Eigen::Vector3d ay = p.n.cross(ax).normalized();
-        const double step = e.footprint(p.c, p.ref) * o.cell_px / k;
+        const double step = e.footprint(p.c, p.ref) * e.view(p.ref).cell / k;
         const cv::Mat& img = images[static_cast<std::size_t>(p.ref)];
         for (int a = 0; a < k; ++a)
             for (int b = 0; b < k; ++b) {

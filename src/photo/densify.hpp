@@ -22,7 +22,12 @@
 namespace cityforge::photo {
 
 struct DensifyOptions {
-    int cell_px = 3;                 ///< beta: image cell size, pixels (one patch per cell and image)
+    int cell_px = 3;                 ///< beta: image cell size, pixels (one patch per cell and image); the smallest
+    /// Cells are also at least this many metres on the surface (at the middle of
+    /// the cameras' scene height range, along each optical axis; 0 or an
+    /// unknown range = cell_px only): fine photos (3 cm GSD) get coarser
+    /// cells in pixels, the same patches per square metre.
+    double cell_m = 0.25;
     int patch_grid = 7;              ///< mu: samples per patch side (one per reference pixel)
     double min_ncc = 0.65;           ///< an image joins V*(p) when its NCC with R(p) is at least this
     int min_views = 2;               ///< |V*(p)| including R(p)
@@ -31,6 +36,13 @@ struct DensifyOptions {
     /// camera's height above the scene (heads of one oblique camera have none).
     double min_baseline_ratio = 0.05;
     double max_view_angle_deg = 65;  ///< normal vs. viewing ray, for visibility
+    /// Largest tilt of a patch's normal from its starting normal during the
+    /// refinement (each of two axes), degrees.
+    double max_tilt_deg = 69;
+    /// Expansion also starts from a wall facing the camera and a level plane
+    /// through the parent patch when the parent's own plane fails (roof edges,
+    /// wall feet).
+    bool wall_hypotheses = true;
     int iterations = 3;              ///< expansion + filtering rounds
     int max_expansion_steps = 400;   ///< expansion fronts per iteration (each grows by one cell)
     int seed_features = 4000;        ///< SIFT features per image for the seeds

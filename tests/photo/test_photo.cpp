@@ -76,6 +76,16 @@ TEST_CASE("synth --views renders photos with exact cameras and the exact surface
     const PointCloud surface = read_las(dir / "surface.las");
     CHECK(surface.size() == r.surface_points);
     CHECK(surface.size() > 100000);
+    // Surface kinds: terrain 2, roofs 6, walls synth::kSurfaceWallClass; a
+    // wall sample stands on its outline between the terrain and the roof.
+    std::size_t kinds[3] = {0, 0, 0};
+    for (std::size_t i = 0; i < surface.size(); ++i) {
+        const uint8_t c = surface.classification[i];
+        kinds[0] += c == las_class::ground, kinds[1] += c == las_class::building, kinds[2] += c == synth::kSurfaceWallClass;
+    }
+    CHECK(kinds[0] > 10000);
+    CHECK(kinds[1] > 1000);
+    CHECK(kinds[2] > 1000);
     // Every camera sees the surface it was rendered from: points project inside it.
     const auto& c0 = set.cameras[0];
     int inside = 0;
@@ -134,6 +144,32 @@ TEST_CASE("stereo and densify reach accuracy floors on synthetic photos", "[phot
     INFO("densify P/R/F@0.25 " << cd.scores[1].precision << " " << cd.scores[1].recall << " " << cd.scores[1].f_score);
     CHECK(cd.scores[1].precision > 0.85);
     CHECK(cd.scores[2].f_score > 0.6);
+    // Where the parent's plane misses (roof edges, wall feet), expansion also
+    // starts from a wall and a level plane: more of the walls, as precise.
+    photo::DensifyOptions plane_only = o;
+    plane_only.wall_hypotheses = false;
+    const photo::DensifyResult po = photo::densify_patches(images, set, {}, plane_only, "views");
+    const auto wall_recall = [&](const PointCloud& pred) {
+        PointCloud walls;
+        for (std::size_t i = 0; i < surface.size(); ++i)
+            if (surface.classification[i] == synth::kSurfaceWallClass) walls.append(surface, i);
+        return compare_clouds(pred, walls, {0.25}).scores[0].recall;
+    };
+    const CloudComparison cpo = compare_clouds(po.cloud, surface, {0.25});
+    INFO("walls R@0.25 " << wall_recall(one.cloud) << " (parent's plane only " << wall_recall(po.cloud) << "), P@0.25 " << cpo.scores[0].precision);
+    CHECK(wall_recall(one.cloud) > wall_recall(po.cloud));
+    CHECK(cd.scores[1].recall > cpo.scores[0].recall);
+    CHECK(cd.scores[1].precision > cpo.scores[0].precision - 0.02);
+    // Cells of at least cell_m on the surface: here 0.6 m = 4 px at 0.15 m,
+    // fewer patches (about (3/4)^2 of them) of the same precision.
+    photo::DensifyOptions coarse = o;
+    coarse.cell_m = 0.6;
+    const photo::DensifyResult co = photo::densify_patches(images, set, {}, coarse, "views");
+    const CloudComparison cco = compare_clouds(co.cloud, surface, {0.25});
+    INFO("cell_m 0.6: " << co.patches << " patches (" << one.patches << " at 3 px), P@0.25 " << cco.scores[0].precision);
+    CHECK(double(co.patches) < 0.8 * double(one.patches));
+    CHECK(double(co.patches) > 0.3 * double(one.patches));
+    CHECK(cco.scores[0].precision > 0.85);
     // Densification beats its own seeds (the sparse, feature-based points) by far in recall.
     photo::DensifyOptions centres = o;
     centres.points_per_patch_side = 1;
