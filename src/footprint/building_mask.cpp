@@ -462,4 +462,38 @@ std::size_t complete_hidden_roofs(BuildingMask& mask, const BuildingCells& cells
     return added;
 }
 
+std::size_t keep_largest_parts(BuildingMask& mask) {
+    const int w = mask.labels.width, h = mask.labels.height;
+    auto& labels = mask.labels.data;
+    // Parts: 4-connected runs of one label, numbered in raster order.
+    std::vector<uint32_t> part(labels.size(), 0);
+    std::vector<std::size_t> part_size{0};
+    std::vector<uint32_t> best(mask.count + 1, 0);  // per label: its largest part
+    std::vector<std::size_t> stack;
+    for (std::size_t s = 0; s < labels.size(); ++s) {
+        const uint32_t l = labels[s];
+        if (!l || part[s]) continue;
+        const uint32_t p = static_cast<uint32_t>(part_size.size());
+        part_size.push_back(0);
+        part[s] = p, stack.push_back(s);
+        while (!stack.empty()) {
+            const std::size_t k = stack.back();
+            stack.pop_back();
+            ++part_size[p];
+            const int x = static_cast<int>(k % static_cast<std::size_t>(w)), y = static_cast<int>(k / static_cast<std::size_t>(w));
+            const int nx[4] = {x - 1, x + 1, x, x}, ny[4] = {y, y, y - 1, y + 1};
+            for (int i = 0; i < 4; ++i) {
+                if (nx[i] < 0 || ny[i] < 0 || nx[i] >= w || ny[i] >= h) continue;
+                const std::size_t q = static_cast<std::size_t>(ny[i]) * w + nx[i];
+                if (labels[q] == l && !part[q]) part[q] = p, stack.push_back(q);
+            }
+        }
+        if (l <= mask.count && (!best[l] || part_size[p] > part_size[best[l]])) best[l] = p;
+    }
+    std::size_t removed = 0;
+    for (std::size_t k = 0; k < labels.size(); ++k)
+        if (labels[k] && labels[k] <= mask.count && part[k] != best[labels[k]]) labels[k] = 0, ++removed;
+    return removed;
+}
+
 }  // namespace cityforge

@@ -105,6 +105,13 @@ BuildingMask buildings_from_cells(const BuildingCells& cells, int w, int h, cons
 /// within its rectangle, not on label order. Returns the cells added.
 std::size_t complete_hidden_roofs(BuildingMask& mask, const BuildingCells& cells, double max_growth_share = 0.25);
 
+/// Each building reduced to its largest 4-connected part (ties: the part
+/// met first in raster order); its other parts -- stray pixels a redrawing
+/// left cut off from it -- become non-building. A building is written as one
+/// polygon, so a second part would be lost or, met first, replace it.
+/// Returns the pixels removed.
+std::size_t keep_largest_parts(BuildingMask& mask);
+
 /// Splits every building of `mask` into parts whose roofs are separated by
 /// height steps of the DSM (see BuildingMaskOptions::split_step_m); parts are
 /// relabelled 1..count in raster order of first appearance. `dsm` on the same

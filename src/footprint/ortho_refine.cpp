@@ -217,6 +217,10 @@ void refine_buildings_with_ortho(BuildingMask& mask, const BuildingCells& cells,
             }
     }
     std::copy(out.begin(), out.end(), mask.labels.data.begin());
+    // A redrawing can leave pixels cut off from their building (an earlier
+    // building took the pixels between, an outline pixel went back to the
+    // cloud's decision): each building stays one part.
+    keep_largest_parts(mask);
 }
 
 }  // namespace cityforge

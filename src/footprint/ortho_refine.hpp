@@ -38,7 +38,8 @@ struct OrthoRefineOptions {
 /// normalised on its own, segmented with the nDSM as one more band (gaps
 /// filled), and its segments are voted building by the cells of `cells` that
 /// have their own evidence; the building becomes the voted pixels connected
-/// to its own cells, never taking another building's cells. With a
+/// to its own cells, never taking another building's cells, and stays one
+/// 4-connected part (keep_largest_parts). With a
 /// classified cloud (`cells.used_classes`), pixels along the new outline keep
 /// the cloud's own decision (the share of roof points places an edge inside a
 /// pixel). `colours` = the ortho's colour bands (raw values) on the window,

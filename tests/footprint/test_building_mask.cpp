@@ -147,3 +147,26 @@ TEST_CASE("Roofs the data hides are completed inside the building's rectangle, n
     bad.hidden_completion_max_share = 1.5;
     CHECK_THROWS_WITH(bad.validate(), Catch::Contains("hidden_completion_max_share"));
 }
+
+TEST_CASE("A building stays one part: stray pixels cut off from it are dropped, whichever comes first", "[footprint][mask]") {
+    // Building 1: a stray pixel at (1, 1) met first in raster order, a
+    // diagonal-only pixel at (9, 3), and its 6 x 6 body at [3, 8] x [4, 9].
+    // Building 2: two parts of 4 pixels each; the first in raster order stays.
+    const int w = 20, h = 12;
+    BuildingMask m;
+    m.labels = Image<uint32_t>(w, h, 1, 0u);
+    m.count = 2;
+    m.labels.at(0, 1, 1) = 1;
+    m.labels.at(0, 9, 3) = 1;
+    for (int y = 4; y <= 9; ++y)
+        for (int x = 3; x <= 8; ++x) m.labels.at(0, x, y) = 1;
+    for (int x = 12; x <= 15; ++x) m.labels.at(0, x, 2) = 2;
+    for (int x = 12; x <= 15; ++x) m.labels.at(0, x, 8) = 2;
+    CHECK(keep_largest_parts(m) == 6);
+    CHECK(m.labels.at(0, 1, 1) == 0u);
+    CHECK(m.labels.at(0, 9, 3) == 0u);
+    CHECK(labels_in(m, 3, 4, 8, 9) == std::set<uint32_t>{1u});
+    CHECK(labels_in(m, 12, 2, 15, 2) == std::set<uint32_t>{2u});
+    CHECK(labels_in(m, 12, 8, 15, 8) == std::set<uint32_t>{0u});
+    CHECK(keep_largest_parts(m) == 0);  // already one part each
+}
