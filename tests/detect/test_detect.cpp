@@ -33,6 +33,22 @@ std::vector<uint8_t> bytes_of(const std::string& path) {
     return {s.begin(), s.end()};
 }
 std::string default_rgb_model() { return default_model_path(detect::BandLayout{3, -1}); }
+// A synthetic town's ortho and its truth burnt on the image grid (1 = building).
+DetectionImage labelled(const SynthResult& s, std::vector<uint8_t>& truth) {
+    DetectionImage img = read_detection_image(s.ortho_path);
+    std::vector<Polygon> polys;
+    const GeoTransform& t = img.grid.transform;
+    for (const auto& f : read_polygon_layer(s.truth_path).features)
+        for (Polygon p : f.geometry) {
+            for (MapPoint& q : p.outer) {
+                const PixelPoint pp = t.map_to_pixel(q);
+                q = {pp.col, pp.row};
+            }
+            polys.push_back(p);
+        }
+    truth = detect::rasterize_polygons(polys, img.grid.width, img.grid.height);
+    return img;
+}
 }  // namespace
 
 TEST_CASE("A detector trained on one synthetic town finds the buildings of another - CV folds partition the segments - same bytes for 1 and 2 threads",
@@ -235,21 +251,6 @@ TEST_CASE("The pixel stage: a filter bank per cell and boosted trees find anothe
     ScratchDir a_dir("detect_pixel_a"), b_dir("detect_pixel_b");
     const SynthResult a = make_town(a_dir, 200, 31, 0);
     const SynthResult b = make_town(b_dir, 200, 32, 0);
-    auto labelled = [](const SynthResult& s, std::vector<uint8_t>& truth) {
-        DetectionImage img = read_detection_image(s.ortho_path);
-        std::vector<Polygon> polys;
-        const GeoTransform& t = img.grid.transform;
-        for (const auto& f : read_polygon_layer(s.truth_path).features)
-            for (Polygon p : f.geometry) {
-                for (MapPoint& q : p.outer) {
-                    const PixelPoint pp = t.map_to_pixel(q);
-                    q = {pp.col, pp.row};
-                }
-                polys.push_back(p);
-            }
-        truth = detect::rasterize_polygons(polys, img.grid.width, img.grid.height);
-        return img;
-    };
     std::vector<uint8_t> ta, tb;
     const DetectionImage ia = labelled(a, ta), ib = labelled(b, tb);
     detect::PixelClassifierOptions po;
@@ -288,21 +289,6 @@ TEST_CASE("The CNN pixel stage: same weight bytes and out-of-fold maps for 1 and
     ScratchDir a_dir("detect_cnn_a"), b_dir("detect_cnn_b");
     const SynthResult a = make_town(a_dir, 200, 31, 0);
     const SynthResult b = make_town(b_dir, 200, 32, 0);
-    auto labelled = [](const SynthResult& s, std::vector<uint8_t>& truth) {
-        DetectionImage img = read_detection_image(s.ortho_path);
-        std::vector<Polygon> polys;
-        const GeoTransform& t = img.grid.transform;
-        for (const auto& f : read_polygon_layer(s.truth_path).features)
-            for (Polygon p : f.geometry) {
-                for (MapPoint& q : p.outer) {
-                    const PixelPoint pp = t.map_to_pixel(q);
-                    q = {pp.col, pp.row};
-                }
-                polys.push_back(p);
-            }
-        truth = detect::rasterize_polygons(polys, img.grid.width, img.grid.height);
-        return img;
-    };
     std::vector<uint8_t> ta, tb;
     const DetectionImage ia = labelled(a, ta), ib = labelled(b, tb);
     detect::PixelClassifierOptions po;
