@@ -134,9 +134,13 @@ FootprintTable footprint_table(const BuildingMask& mask, const Image<float>& nds
     double error_sum = 0.0;
     for (uint32_t id = 1; id <= mask.count; ++id) {
         if (polygons[id].empty()) continue;
+        // One polygon per building: its largest part (the detection keeps
+        // buildings in one part; this guards any other source).
+        const Polygon& pixels = *std::max_element(polygons[id].begin(), polygons[id].end(),
+                                                  [](const Polygon& a, const Polygon& b) { return polygon_area(a) < polygon_area(b); });
         // Douglas–Peucker may fold a ring onto itself: then the exact pixel outline.
-        Polygon raw = simplify_polygon(polygons[id][0], o.simplify_m / unit);
-        if (!polygon_is_valid(raw)) raw = polygons[id][0];
+        Polygon raw = simplify_polygon(pixels, o.simplify_m / unit);
+        if (!polygon_is_valid(raw)) raw = pixels;
         Feature f;
         std::string status = "ok", reason;
         Polygon out = raw;
@@ -151,7 +155,7 @@ FootprintTable footprint_table(const BuildingMask& mask, const Image<float>& nds
             } else if (o.fit == FootprintFit::regularised) {
                 RegularizeOptions go = o.regularize;
                 go.merge_offset /= unit, go.min_edge /= unit, go.match_area_max_offset /= unit;
-                out = regularised_fit(polygons[id][0], rect.orientation_deg, grid.pixel_width, o.simplify_m / unit, polygon_area(raw), go);
+                out = regularised_fit(pixels, rect.orientation_deg, grid.pixel_width, o.simplify_m / unit, polygon_area(raw), go);
                 const FitAccuracy acc = fit_accuracy(raw, out);
                 err = acc.area_error_pct, iou = acc.iou;
             } else if (o.fit == FootprintFit::recursive) {
