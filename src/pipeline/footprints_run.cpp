@@ -1,5 +1,6 @@
 #include "pipeline/footprints_run.hpp"
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <filesystem>
