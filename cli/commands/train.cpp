@@ -69,6 +69,7 @@ void add_train_command(CLI::App& parent, const GlobalFlags& g, CommandList& out)
     cmd->add_option_function<std::string>(
            "--pixel-stage", [s](const std::string& k) { s->options.detector.pixel.kind = detect::parse_pixel_stage_kind(k); },
            "Pixel stage: 'boosted' (filter bank + boosted trees), 'cnn' (a small U-Net on the cell bands, libtorch CPU) or 'both' (the mean of the two maps)")
+        ->check(CLI::IsMember({"boosted", "cnn", "both"}))
         ->default_str("boosted");
     cmd->add_option("--pixel-cnn-steps", d.pixel.cnn.steps, "Pixel CNN: training steps (Adam)")->capture_default_str();
     cmd->add_option("--pixel-cnn-channels", d.pixel.cnn.base_channels, "Pixel CNN: channels at full resolution")->capture_default_str();

@@ -245,6 +245,21 @@ TEST_CASE("cityforge train and footprints --model from the command line - bad in
     CHECK(cut.err.find("cut.cfdet") != std::string::npos);
     CHECK(test::count_lines(cut.err) == 1);
     CHECK_FALSE(std::filesystem::exists(dir / "fp2.geojson"));
+    // The CNN pixel stage: trained, written as format 3 and applied; an unknown kind fails in one line.
+    const std::string cnn = dir / "cnn.cfdet";
+    const auto tc = test::run_cli("train --quiet --ortho " + s.ortho_path + " --labels " + s.truth_path +
+                                  " --folds 2 --fold-block-m 40 --rounds 40 --pixel-stage cnn --pixel-cnn-steps 30 --pixel-cnn-crop 32 --out " + cnn);
+    CHECK(tc.exit_code == 0);
+    REQUIRE(std::filesystem::exists(cnn));
+    CHECK(detect::read_model_file(cnn).options.pixel.kind == detect::PixelStageKind::cnn);
+    CHECK(test::slurp(cnn).find("\"format_version\": 3") != std::string::npos);
+    const auto fc = test::run_cli("footprints --quiet --ortho " + s.ortho_path + " --model " + cnn + " --out " + (dir / "fc.geojson"));
+    CHECK(fc.exit_code == 0);
+    CHECK(std::filesystem::exists(dir / "fc.geojson"));
+    const auto bad = test::run_cli("train --quiet --ortho " + s.ortho_path + " --labels " + s.truth_path + " --pixel-stage deep --out " + (dir / "y.cfdet"));
+    CHECK(bad.exit_code != 0);
+    CHECK(bad.err.find("--pixel-stage") != std::string::npos);
+    CHECK(test::count_lines(bad.err) == 1);
 }
 
 TEST_CASE("The pixel stage: a filter bank per cell and boosted trees find another town's roofs, the same values for 1 and 2 threads", "[detect][synth]") {
