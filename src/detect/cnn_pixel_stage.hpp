@@ -32,7 +32,8 @@ struct CnnOptions {
 };
 
 /// One training grid, planar: `input` = channels x height x width values
-/// (about zero-mean, unit scale; 0 where there is no data), `target` = per
+/// (about zero-mean, unit scale; the pixel stage gives cells without data
+/// the band's mean, as the filter bank does), `target` = per
 /// cell building share 0..1, `weight` = per cell loss weight (0 = ignored:
 /// no data, or a held-out fold).
 struct CnnGrid {
