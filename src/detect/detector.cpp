@@ -62,15 +62,34 @@ std::string describe_bands(const BandLayout& l) {
     return std::to_string(l.bands) + " bands" + (l.nir_band >= 0 ? " (NIR band " + std::to_string(l.nir_band + 1) + ")" : "");
 }
 
+namespace {
+// The options of a booster (the segment classifier's or the pixel stage's) in a model header.
+nlohmann::json booster_json(const BoosterOptions& b) {
+    return {{"rounds", b.rounds},         {"max_depth", b.max_depth},
+            {"learning_rate", b.learning_rate}, {"subsample", b.subsample},
+            {"colsample", b.colsample},   {"min_child_weight", b.min_child_weight},
+            {"lambda", b.lambda},         {"seed", b.seed}};
+}
+BoosterOptions booster_from_json(const nlohmann::json& b) {
+    BoosterOptions o;
+    o.rounds = b.at("rounds").get<int>();
+    o.max_depth = b.at("max_depth").get<int>();
+    o.learning_rate = b.at("learning_rate").get<double>();
+    o.subsample = b.at("subsample").get<double>();
+    o.colsample = b.at("colsample").get<double>();
+    o.min_child_weight = b.at("min_child_weight").get<double>();
+    o.lambda = b.at("lambda").get<double>();
+    o.seed = b.at("seed").get<uint64_t>();
+    return o;
+}
+}  // namespace
+
 nlohmann::json to_json(const DetectorOptions& o) {
     const auto& s = o.segmentation;
-    const auto& b = o.booster;
     return {{"segmentation",
              {{"h_minima", s.watershed.h_minima}, {"smoothing_sigma_px", s.watershed.smoothing_sigma_px},
               {"band_weights", s.watershed.band_weights}, {"scales", s.scales}, {"color_weight", s.color_weight}, {"reference_gsd_m", s.reference_gsd_m}}},
-            {"booster",
-             {{"rounds", b.rounds}, {"max_depth", b.max_depth}, {"learning_rate", b.learning_rate}, {"subsample", b.subsample},
-              {"colsample", b.colsample}, {"min_child_weight", b.min_child_weight}, {"lambda", b.lambda}, {"seed", b.seed}}},
+            {"booster", booster_json(o.booster)},
             {"pixel",
              {{"enabled", o.pixel.enabled},
               {"kind", to_string(o.pixel.kind)},
@@ -80,10 +99,7 @@ nlohmann::json to_json(const DetectorOptions& o) {
               {"cell_m", o.pixel.cell_m},
               {"sigmas_m", o.pixel.sigmas_m},
               {"samples_per_image", o.pixel.samples_per_image},
-              {"booster",
-               {{"rounds", o.pixel.booster.rounds}, {"max_depth", o.pixel.booster.max_depth}, {"learning_rate", o.pixel.booster.learning_rate},
-                {"subsample", o.pixel.booster.subsample}, {"colsample", o.pixel.booster.colsample},
-                {"min_child_weight", o.pixel.booster.min_child_weight}, {"lambda", o.pixel.booster.lambda}, {"seed", o.pixel.booster.seed}}}}},
+              {"booster", booster_json(o.pixel.booster)}}},
             {"min_label_share", o.min_label_share},
             {"threshold", o.threshold},
             {"object_split_level", o.object_split_level},
@@ -101,30 +117,14 @@ DetectorOptions detector_options_from_json(const nlohmann::json& j) {
     o.segmentation.scales = s.at("scales").get<std::vector<double>>();
     o.segmentation.color_weight = s.at("color_weight").get<double>();
     o.segmentation.reference_gsd_m = s.value("reference_gsd_m", 0.0);
-    const auto& b = j.at("booster");
-    o.booster.rounds = b.at("rounds").get<int>();
-    o.booster.max_depth = b.at("max_depth").get<int>();
-    o.booster.learning_rate = b.at("learning_rate").get<double>();
-    o.booster.subsample = b.at("subsample").get<double>();
-    o.booster.colsample = b.at("colsample").get<double>();
-    o.booster.min_child_weight = b.at("min_child_weight").get<double>();
-    o.booster.lambda = b.at("lambda").get<double>();
-    o.booster.seed = b.at("seed").get<uint64_t>();
+    o.booster = booster_from_json(j.at("booster"));
     if (j.contains("pixel")) {
         const auto& p = j.at("pixel");
         o.pixel.enabled = p.at("enabled").get<bool>();
         o.pixel.cell_m = p.at("cell_m").get<double>();
         o.pixel.sigmas_m = p.at("sigmas_m").get<std::vector<double>>();
         o.pixel.samples_per_image = p.at("samples_per_image").get<std::size_t>();
-        const auto& pb = p.at("booster");
-        o.pixel.booster.rounds = pb.at("rounds").get<int>();
-        o.pixel.booster.max_depth = pb.at("max_depth").get<int>();
-        o.pixel.booster.learning_rate = pb.at("learning_rate").get<double>();
-        o.pixel.booster.subsample = pb.at("subsample").get<double>();
-        o.pixel.booster.colsample = pb.at("colsample").get<double>();
-        o.pixel.booster.min_child_weight = pb.at("min_child_weight").get<double>();
-        o.pixel.booster.lambda = pb.at("lambda").get<double>();
-        o.pixel.booster.seed = pb.at("seed").get<uint64_t>();
+        o.pixel.booster = booster_from_json(p.at("booster"));
         o.pixel.kind = parse_pixel_stage_kind(p.value("kind", std::string("boosted")));  // absent before the CNN kind
         if (p.contains("cnn")) {
             const auto& c = p.at("cnn");
@@ -151,7 +151,7 @@ DetectorOptions detector_options_from_json(const nlohmann::json& j) {
 std::vector<uint8_t> serialize_model(const DetectorModel& m) {
     const bool pixel = m.options.pixel.enabled;
     const bool cnn = pixel && m.options.pixel.kind != PixelStageKind::boosted;
-    if (pixel && m.pixel_booster.empty()) throw Error("detector model", "internal: pixel stage without its booster");
+    if (pixel && m.pixel_model.empty()) throw Error("detector model", "internal: pixel stage without its model");
     nlohmann::json header = {{"format", "cityforge-detector"},
                                    {"format_version", cnn ? 3 : pixel ? 2 : 1},
                                    {"classifier", "xgboost gbtree (binary:logistic, hist)"},
@@ -170,8 +170,8 @@ std::vector<uint8_t> serialize_model(const DetectorModel& m) {
     put_u64(out, m.booster.size());
     out.insert(out.end(), m.booster.begin(), m.booster.end());
     if (pixel) {
-        put_u64(out, m.pixel_booster.size());
-        out.insert(out.end(), m.pixel_booster.begin(), m.pixel_booster.end());
+        put_u64(out, m.pixel_model.size());
+        out.insert(out.end(), m.pixel_model.begin(), m.pixel_model.end());
     }
     put_u64(out, fnv1a64(out.data(), out.size()));
     return out;
@@ -223,10 +223,10 @@ DetectorModel parse_model(const std::vector<uint8_t>& in, const std::string& sub
         return std::vector<uint8_t>(in.begin() + std::ptrdiff_t(blobs[k].first), in.begin() + std::ptrdiff_t(blobs[k].first + blobs[k].second));
     };
     m.booster = blob(0);
-    if (m.options.pixel.enabled) m.pixel_booster = blob(1);
-    if (m.options.pixel.enabled && m.options.pixel.kind == PixelStageKind::cnn) check_cnn_weights(m.pixel_booster, m.layout.bands, m.options.pixel.cnn, subject);
+    if (m.options.pixel.enabled) m.pixel_model = blob(1);
+    if (m.options.pixel.enabled && m.options.pixel.kind == PixelStageKind::cnn) check_cnn_weights(m.pixel_model, m.layout.bands, m.options.pixel.cnn, subject);
     if (m.options.pixel.enabled && m.options.pixel.kind == PixelStageKind::both)
-        check_cnn_weights(unpack_pixel_models(m.pixel_booster, subject).second, m.layout.bands, m.options.pixel.cnn, subject);
+        check_cnn_weights(unpack_pixel_models(m.pixel_model, subject).second, m.layout.bands, m.options.pixel.cnn, subject);
     return m;
 }
 
@@ -292,7 +292,7 @@ Detection detect_buildings(const DetectorModel& model, const Image<float>& norma
     Detection d;
     const bool pixel = model.options.pixel.enabled;
     if (pixel) {
-        d.pixel_probability = pixel_probability(model.pixel_booster, normalised, valid, model.layout, gsd_m, model.options.pixel, threads);
+        d.pixel_probability = pixel_probability(model.pixel_model, normalised, valid, model.layout, gsd_m, model.options.pixel, threads);
         progress(0.3, "pixel probability");
     }
     d.segments = segment_scene(normalised, valid, model.options.segmentation, progress.sub(pixel ? 0.3 : 0.0, 0.8), gsd_m);

@@ -57,7 +57,7 @@ struct DetectorModel {
     std::string fingerprint;            ///< hash of the training images, labels and options (hex)
     nlohmann::json training;            ///< sources, sample counts, per-fold figures (free form, recorded as given)
     std::vector<uint8_t> booster;       ///< XGBoost UBJSON model
-    std::vector<uint8_t> pixel_booster; ///< pixel model (options.pixel.enabled): XGBoost UBJSON, or CFCNN1 weights for kind cnn; else empty
+    std::vector<uint8_t> pixel_model; ///< pixel model (options.pixel.enabled): XGBoost UBJSON, or CFCNN1 weights for kind cnn; else empty
 };
 
 /// The model's bytes: "CFDET1\n", then header JSON, booster, the pixel

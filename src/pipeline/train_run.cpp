@@ -494,7 +494,7 @@ TrainReport run_train(const std::string& out_path, const TrainOptions& o, bool o
     model.features = names;
     model.options = chosen;
     model.booster = detect::train_booster(X, y.size(), names.size(), y, wt, o.detector.booster);
-    model.pixel_booster = pixel.model;
+    model.pixel_model = pixel.model;
     const std::string opts = detect::to_json(o.detector).dump();
     fp = detect::fnv1a64(opts.data(), opts.size(), fp);
     model.fingerprint = detect::hex64(fp);

@@ -366,11 +366,11 @@ TEST_CASE("The CNN pixel stage: same weight bytes and out-of-fold maps for 1 and
     m.options.pixel.enabled = true;
     m.options.pixel.kind = detect::PixelStageKind::cnn;
     m.options.pixel.cnn = po.cnn;
-    m.pixel_booster = s1.model;
+    m.pixel_model = s1.model;
     const detect::DetectorModel back = detect::parse_model(detect::serialize_model(m), "cnn.cfdet");
     CHECK(back.options.pixel.kind == detect::PixelStageKind::cnn);
-    CHECK(back.pixel_booster == s1.model);
+    CHECK(back.pixel_model == s1.model);
     CHECK(detect::serialize_model(back) == detect::serialize_model(m));
-    m.pixel_booster = cut;
+    m.pixel_model = cut;
     CHECK_THROWS_WITH(detect::parse_model(detect::serialize_model(m), "cnn.cfdet"), Catch::Contains("cnn.cfdet: truncated CNN weights"));
 }
