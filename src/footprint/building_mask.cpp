@@ -28,31 +28,41 @@ void BuildingMaskOptions::validate() const {
 }
 
 
-uint32_t label_components(const std::vector<uint8_t>& mask, uint8_t value, int w, int h, std::vector<uint32_t>& label,
-                    std::vector<uint32_t>& sizes) {
-    label.assign(mask.size(), 0);
+namespace {
+// 4-connected runs of equal values among the cells `member` accepts,
+// numbered 1.. in raster order of their first cell (0 elsewhere);
+// sizes[run] = its cells.
+template <typename Values, typename Member>
+uint32_t label_runs(const Values& values, int w, int h, Member member, std::vector<uint32_t>& label, std::vector<uint32_t>& sizes) {
+    label.assign(values.size(), 0);
     sizes.assign(1, 0);
     uint32_t next = 0;
-    std::vector<uint32_t> stack;
-    for (std::size_t s = 0; s < mask.size(); ++s) {
-        if (mask[s] != value || label[s]) continue;
+    std::vector<std::size_t> stack;
+    for (std::size_t s = 0; s < values.size(); ++s) {
+        if (label[s] || !member(s)) continue;
         label[s] = ++next;
         sizes.push_back(0);
-        stack.push_back(static_cast<uint32_t>(s));
+        stack.push_back(s);
         while (!stack.empty()) {
-            const uint32_t p = stack.back();
+            const std::size_t p = stack.back();
             stack.pop_back();
             ++sizes[next];
-            const int x = static_cast<int>(p % static_cast<uint32_t>(w)), y = static_cast<int>(p / static_cast<uint32_t>(w));
+            const int x = static_cast<int>(p % static_cast<std::size_t>(w)), y = static_cast<int>(p / static_cast<std::size_t>(w));
             const int nx[4] = {x - 1, x + 1, x, x}, ny[4] = {y, y, y - 1, y + 1};
             for (int k = 0; k < 4; ++k) {
                 if (nx[k] < 0 || ny[k] < 0 || nx[k] >= w || ny[k] >= h) continue;
                 const std::size_t q = static_cast<std::size_t>(ny[k]) * w + nx[k];
-                if (mask[q] == value && !label[q]) label[q] = next, stack.push_back(static_cast<uint32_t>(q));
+                if (!label[q] && values[q] == values[s] && member(q)) label[q] = next, stack.push_back(q);
             }
         }
     }
     return next;
+}
+}  // namespace
+
+uint32_t label_components(const std::vector<uint8_t>& mask, uint8_t value, int w, int h, std::vector<uint32_t>& label,
+                    std::vector<uint32_t>& sizes) {
+    return label_runs(mask, w, h, [&](std::size_t k) { return mask[k] == value; }, label, sizes);
 }
 
 
@@ -463,33 +473,12 @@ std::size_t complete_hidden_roofs(BuildingMask& mask, const BuildingCells& cells
 }
 
 std::size_t keep_largest_parts(BuildingMask& mask) {
-    const int w = mask.labels.width, h = mask.labels.height;
     auto& labels = mask.labels.data;
-    // Parts: 4-connected runs of one label, numbered in raster order.
-    std::vector<uint32_t> part(labels.size(), 0);
-    std::vector<std::size_t> part_size{0};
-    std::vector<uint32_t> best(mask.count + 1, 0);  // per label: its largest part
-    std::vector<std::size_t> stack;
-    for (std::size_t s = 0; s < labels.size(); ++s) {
-        const uint32_t l = labels[s];
-        if (!l || part[s]) continue;
-        const uint32_t p = static_cast<uint32_t>(part_size.size());
-        part_size.push_back(0);
-        part[s] = p, stack.push_back(s);
-        while (!stack.empty()) {
-            const std::size_t k = stack.back();
-            stack.pop_back();
-            ++part_size[p];
-            const int x = static_cast<int>(k % static_cast<std::size_t>(w)), y = static_cast<int>(k / static_cast<std::size_t>(w));
-            const int nx[4] = {x - 1, x + 1, x, x}, ny[4] = {y, y, y - 1, y + 1};
-            for (int i = 0; i < 4; ++i) {
-                if (nx[i] < 0 || ny[i] < 0 || nx[i] >= w || ny[i] >= h) continue;
-                const std::size_t q = static_cast<std::size_t>(ny[i]) * w + nx[i];
-                if (labels[q] == l && !part[q]) part[q] = p, stack.push_back(q);
-            }
-        }
-        if (l <= mask.count && (!best[l] || part_size[p] > part_size[best[l]])) best[l] = p;
-    }
+    std::vector<uint32_t> part, part_size;
+    label_runs(labels, mask.labels.width, mask.labels.height, [&](std::size_t k) { return labels[k] != 0; }, part, part_size);
+    std::vector<uint32_t> best(mask.count + 1, 0);  // per building: its largest part (the first met of equal ones)
+    for (std::size_t k = 0; k < labels.size(); ++k)
+        if (const uint32_t l = labels[k]; l && l <= mask.count && (!best[l] || part_size[part[k]] > part_size[best[l]])) best[l] = part[k];
     std::size_t removed = 0;
     for (std::size_t k = 0; k < labels.size(); ++k)
         if (labels[k] && labels[k] <= mask.count && part[k] != best[labels[k]]) labels[k] = 0, ++removed;

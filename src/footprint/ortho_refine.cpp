@@ -144,6 +144,7 @@ void refine_buildings_with_ortho(BuildingMask& mask, const BuildingCells& cells,
             // 1/4 is exp((g - r) / 2) / 3^n; the ortho's vote for building stays
             // when that ratio times `ortho_edge_odds` is at least 1. On a roof
             // as bright as the ground (r = g) one ground point always wins.
+            constexpr double kLn3 = 1.0986122886681098;  // ln 3: one ground point's weight
             double edge_lr_base = 0.0;  // (g - r) / 2 + ln(odds); 0 = the cloud decides alone
             if (o.ortho_edge_odds > 0 && !cells.roof_points.empty()) {
                 double roof_pts = 0, ground_pts = 0;
@@ -176,7 +177,7 @@ void refine_buildings_with_ortho(BuildingMask& mask, const BuildingCells& cells,
                     if (!edge) continue;
                     const std::size_t c = static_cast<std::size_t>(y) * cw + x;
                     const bool weak_ground = voted[c] && !cells.cells[k] && edge_lr_base > 0 && cells.roof_points[k] == 0 &&
-                                             edge_lr_base >= cells.ground_points[k] * std::log(3.0);
+                                             edge_lr_base >= cells.ground_points[k] * kLn3;
                     if (!weak_ground) edged[c] = cells.cells[k];
                 }
             voted.swap(edged);
