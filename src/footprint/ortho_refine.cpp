@@ -17,7 +17,7 @@ void OrthoRefineOptions::validate() const {
     if (!(ndsm_band_weight >= 0)) throw Error("--ndsm-weight", "must be >= 0");
     if (!(min_segment_building_share > 0 && min_segment_building_share <= 1)) throw Error("--min-segment-building-share", "must be in (0, 1]");
     if (!(min_iou_with_heights >= 0 && min_iou_with_heights <= 1)) throw Error("ortho refinement", "IoU limit must be in [0, 1]");
-    if (!(ortho_edge_odds >= 0)) throw Error("ortho_edge_odds", "must be >= 0");
+    if (!(ortho_edge_odds >= 0)) throw Error("--ortho-edge-odds", "must be >= 0");
     if (margin_px < 1 || margin_px > 200) throw Error("ortho margin", "must be between 1 and 200 pixels");
 }
 

@@ -95,6 +95,15 @@ TEST_CASE("A detection mode without its input is refused", "[footprint][errors]"
     CHECK(dir.file_count() == 0);
 }
 
+TEST_CASE("A negative --ortho-edge-odds is refused before anything is read or written", "[footprint][errors]") {
+    ScratchDir dir("fp_edge_odds");
+    FootprintsRunOptions o;
+    o.ortho = "missing.tif", o.cloud = "missing.las";
+    o.segmentation.ortho_edge_odds = -1.0;
+    CHECK_THROWS_WITH(run_footprints(dir / "x.gpkg", o), Catch::StartsWith("--ortho-edge-odds") && Catch::Contains(">= 0"));
+    CHECK(dir.file_count() == 0);
+}
+
 TEST_CASE("footprints refuses to run without a cloud", "[footprint][errors]") {
     ScratchDir dir("fp_bad");
     FootprintsRunOptions o;
