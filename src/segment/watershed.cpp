@@ -86,6 +86,59 @@ void gaussian_blur(const float* in, float* out, float* tmp_buffer, int w, int h,
     });
 }
 
+// Adds w_b (gx² + gy²) of one band's Sobel operator to the row `g` (row y of
+// a w-pixel image; a, m, c = rows y - 1, y, y + 1, clamped at the edges).
+// Shared by multiband_gradient and the fused levels below, so both give the
+// same floats bit for bit.
+inline void add_sobel_row(const float* a, const float* m, const float* c, int w, float fw, float* g) {
+    auto sobel = [&](int x, int x0, int x1) {
+        const float gx = (a[x1] + 2 * m[x1] + c[x1]) - (a[x0] + 2 * m[x0] + c[x0]);
+        const float gy = (c[x0] + 2 * c[x] + c[x1]) - (a[x0] + 2 * a[x] + a[x1]);
+        g[x] += fw * (gx * gx + gy * gy);
+    };
+    sobel(0, 0, std::min(1, w - 1));
+    for (int x = 1; x < w - 1; ++x) sobel(x, x - 1, x + 1);
+    if (w > 1) sobel(w - 1, w - 2, w - 1);
+}
+
+// 1 / (8 √Σw): Sobel sums 8 weighted differences; this brings the gradient
+// back to grey-level units.
+float gradient_norm(const Image<float>& image, const WatershedOptions& options) {
+    double wsum = 0.0;
+    for (int b = 0; b < image.bands; ++b) wsum += options.band_weights.empty() ? 1.0 : options.band_weights[b];
+    return static_cast<float>(1.0 / (8.0 * std::sqrt(std::max(wsum, 1e-12))));
+}
+
+// Flooding levels: the gradient in 1/kLevelsPerUnit grey levels, clamped to 16 bits.
+constexpr float kLevelsPerUnit = 4.0f;
+inline uint16_t gradient_level(float g) { return static_cast<uint16_t>(std::min(65535.0f, g * kLevelsPerUnit)); }
+
+// The quantised gradient without the float gradient raster (no smoothing):
+// row by row, all bands at once; the same levels as quantising
+// multiband_gradient's output, bit for bit.
+LargeVector<uint16_t> unsmoothed_gradient_levels(const Image<float>& image, const WatershedOptions& options) {
+    const int w = image.width, h = image.height;
+    LargeVector<uint16_t> level(image.pixel_count());
+    const float norm = gradient_norm(image, options);
+    tbb::parallel_for(tbb::blocked_range<int>(0, h, 16), [&](const tbb::blocked_range<int>& rows) {
+        std::vector<float> g(static_cast<std::size_t>(w));
+        for (int y = rows.begin(); y != rows.end(); ++y) {
+            std::fill(g.begin(), g.end(), 0.0f);
+            const int y0 = std::max(0, y - 1), y1 = std::min(h - 1, y + 1);
+            for (int b = 0; b < image.bands; ++b) {
+                const double wb = options.band_weights.empty() ? 1.0 : options.band_weights[b];
+                if (wb == 0.0) continue;
+                const float* src = image.band_data(b);
+                add_sobel_row(src + static_cast<std::size_t>(y0) * w, src + static_cast<std::size_t>(y) * w,
+                              src + static_cast<std::size_t>(y1) * w, w, static_cast<float>(wb), g.data());
+            }
+            uint16_t* out = level.data() + static_cast<std::size_t>(y) * w;
+            for (int x = 0; x < w; ++x) out[x] = gradient_level(std::sqrt(g[x]) * norm);
+        }
+    });
+    return level;
+}
+
 }  // namespace
 
 Image<float> multiband_gradient(const Image<float>& image, const WatershedOptions& options) {
@@ -104,24 +157,11 @@ Image<float> multiband_gradient(const Image<float>& image, const WatershedOption
         const auto fw = static_cast<float>(wb);
         tbb::parallel_for(0, h, [&](int y) {
             const int y0 = std::max(0, y - 1), y1 = std::min(h - 1, y + 1);
-            const float* a = src + static_cast<std::size_t>(y0) * w;
-            const float* m = src + static_cast<std::size_t>(y) * w;
-            const float* c = src + static_cast<std::size_t>(y1) * w;
-            float* g = grad.band_data(0) + static_cast<std::size_t>(y) * w;
-            auto sobel = [&](int x, int x0, int x1) {
-                const float gx = (a[x1] + 2 * m[x1] + c[x1]) - (a[x0] + 2 * m[x0] + c[x0]);
-                const float gy = (c[x0] + 2 * c[x] + c[x1]) - (a[x0] + 2 * a[x] + a[x1]);
-                g[x] += fw * (gx * gx + gy * gy);
-            };
-            sobel(0, 0, std::min(1, w - 1));
-            for (int x = 1; x < w - 1; ++x) sobel(x, x - 1, x + 1);
-            if (w > 1) sobel(w - 1, w - 2, w - 1);
+            add_sobel_row(src + static_cast<std::size_t>(y0) * w, src + static_cast<std::size_t>(y) * w,
+                          src + static_cast<std::size_t>(y1) * w, w, fw, grad.band_data(0) + static_cast<std::size_t>(y) * w);
         });
     }
-    // Sobel sums 8 weighted differences; /8 brings the gradient back to grey-level units.
-    double wsum = 0.0;
-    for (int b = 0; b < image.bands; ++b) wsum += options.band_weights.empty() ? 1.0 : options.band_weights[b];
-    const auto norm = static_cast<float>(1.0 / (8.0 * std::sqrt(std::max(wsum, 1e-12))));
+    const float norm = gradient_norm(image, options);
     float* g = grad.band_data(0);
     parallel_for_each_index(grad.pixel_count(), [&](std::size_t i) { g[i] = std::sqrt(g[i]) * norm; });
     return grad;
@@ -134,29 +174,70 @@ Oversegmentation watershed_oversegment(const Image<float>& image, const std::vec
     const std::size_t n = image.pixel_count();
     if (n == 0) throw Error("watershed", "empty image");
     if (!valid.empty() && valid.size() != n) throw Error("watershed", "valid mask size does not match the image");
-    const Image<float> grad = multiband_gradient(image, options);
+    // Integer levels (1/4 grey level) for a bucket (hierarchical) queue.
+    // Without smoothing, straight from the bands (no float gradient raster).
+    LargeVector<uint16_t> level;
+    if (options.smoothing_sigma_px > 0.0) {
+        const Image<float> grad = multiband_gradient(image, options);
+        const float* g = grad.band_data(0);
+        level.resize(n);  // written before it is read: no memset
+        parallel_for_each_index(n, [&](std::size_t i) { level[i] = gradient_level(g[i]); });
+    } else {
+        level = unsmoothed_gradient_levels(image, options);
+    }
     progress(0.3, "gradient");
 
-    // Quantise to integer levels (1/4 grey level) for a bucket (hierarchical) queue.
-    constexpr float kLevelsPerUnit = 4.0f;
-    const float* g = grad.band_data(0);
-    // Buffers written before they are read are left uninitialised (no memset).
-    LargeVector<uint16_t> level(n);
-    parallel_for_each_index(n, [&](std::size_t i) { level[i] = static_cast<uint16_t>(std::min(65535.0f, g[i] * kLevelsPerUnit)); });
-    const uint32_t max_level = *std::max_element(level.begin(), level.end());
-    // Counting sort of valid pixels by level; ties stay in raster order (deterministic).
-    std::vector<uint32_t> count(max_level + 2, 0);
-    for (std::size_t i = 0; i < n; ++i)
-        if (valid.empty() || valid[i]) ++count[level[i] + 1];
-    for (std::size_t l = 1; l < count.size(); ++l) count[l] += count[l - 1];
-    const uint32_t n_valid = count.back();
+    // Counting sort of valid pixels by level; ties stay in raster order
+    // (deterministic). Counted and scattered in parallel by row chunks:
+    // chunk c's pixels of a level go after those of chunks < c, so the order
+    // is the sequential one whatever the chunk count.
+    const int chunk_rows = std::max(1, (h + 15) / 16);
+    const int chunks = (h + chunk_rows - 1) / chunk_rows;
+    auto chunk_range = [&](int c) {
+        return std::pair<std::size_t, std::size_t>(static_cast<std::size_t>(c) * chunk_rows * w,
+                                                   std::min<std::size_t>(n, static_cast<std::size_t>(c + 1) * chunk_rows * w));
+    };
+    std::vector<uint16_t> chunk_max(chunks, 0);
+    tbb::parallel_for(0, chunks, [&](int c) {
+        const auto [lo, hi] = chunk_range(c);
+        uint16_t m = 0;
+        for (std::size_t i = lo; i < hi; ++i) m = std::max(m, level[i]);
+        chunk_max[c] = m;
+    });
+    const uint32_t max_level = *std::max_element(chunk_max.begin(), chunk_max.end());
+    const std::size_t n_levels = std::size_t(max_level) + 1;
+    std::vector<uint32_t> chunk_count(static_cast<std::size_t>(chunks) * n_levels, 0);  // [chunk][level]
+    tbb::parallel_for(0, chunks, [&](int c) {
+        const auto [lo, hi] = chunk_range(c);
+        uint32_t* cc = chunk_count.data() + static_cast<std::size_t>(c) * n_levels;
+        for (std::size_t i = lo; i < hi; ++i)
+            if (valid.empty() || valid[i]) ++cc[level[i]];
+    });
+    // count[l] = start of level l in `order`; chunk_count becomes each chunk's write position.
+    std::vector<uint32_t> count(n_levels + 1, 0);
+    uint32_t n_valid = 0;
+    for (std::size_t l = 0; l < n_levels; ++l) {
+        count[l] = n_valid;
+        for (int c = 0; c < chunks; ++c) {
+            uint32_t& cc = chunk_count[static_cast<std::size_t>(c) * n_levels + l];
+            const uint32_t k = cc;
+            cc = n_valid;
+            n_valid += k;
+        }
+    }
+    count[n_levels] = n_valid;
     if (n_valid == 0) throw Error("watershed", "image has no valid (non-nodata) pixels");
     LargeVector<uint32_t> order;
     order.reserve(n);  // reused as the root -> label table at the end
     order.resize(n_valid);
-    for (std::size_t i = 0; i < n; ++i)
-        if (valid.empty() || valid[i]) order[count[level[i]]++] = static_cast<uint32_t>(i);
-    LargeVector<uint16_t>().swap(level);  // the flooding reads levels from `count`
+    tbb::parallel_for(0, chunks, [&](int c) {
+        const auto [lo, hi] = chunk_range(c);
+        uint32_t* pos = chunk_count.data() + static_cast<std::size_t>(c) * n_levels;
+        for (std::size_t i = lo; i < hi; ++i)
+            if (valid.empty() || valid[i]) order[pos[level[i]]++] = static_cast<uint32_t>(i);
+    });
+    // count[l] is now made the end of level l's run (the start of l + 1's), as the flooding reads it.
+    for (std::size_t l = 0; l < n_levels; ++l) count[l] = count[l + 1];
     progress(0.5, "sorting");
 
     // Union-find flooding. parent == kNone: not yet flooded. Each root keeps the
@@ -164,8 +245,13 @@ Oversegmentation watershed_oversegment(const Image<float>& image, const std::vec
     // shallower one's depth (L - its minimum) is below h.
     constexpr uint32_t kNone = 0xFFFFFFFFu;
     LargeVector<uint32_t> parent(n, kNone);
-    LargeVector<uint16_t> min_level(n);
     const auto h_levels = static_cast<uint32_t>(std::lround(options.h_minima * kLevelsPerUnit));
+    // The flooding reads levels from `count`; the level buffer holds the
+    // basins' minima instead (written when a basin starts, read only for
+    // roots). Without dynamics (h = 0) no basin is absorbed and they are not read.
+    LargeVector<uint16_t> min_level;
+    if (h_levels > 0) min_level = std::move(level);
+    else LargeVector<uint16_t>().swap(level);
     // absorbed[r] (one bit per pixel, small enough to stay in cache) is set
     // when root r is merged into another basin. A flooded pixel points at a
     // root that usually still is one: one bit test then replaces the load of
@@ -190,9 +276,26 @@ Oversegmentation watershed_oversegment(const Image<float>& image, const std::vec
     const float* const* band = band_ptrs.data();
     // count[l] is now the end of level l's run in `order` (the start of l + 1's).
     uint32_t lp = 0;
+    // Pixels come in level order, scattered over the image: each one's
+    // neighbourhood is a cache miss. The pixels a few steps ahead are known,
+    // so their parent entries and colours are loaded while this one is done.
+    constexpr uint32_t kAhead = 16;
+    const std::size_t row = static_cast<std::size_t>(w);
+    auto prefetch_pixel = [&](uint32_t q) {
+        const uint32_t* pq = parent.data() + q;
+        __builtin_prefetch(pq, 1);
+        if (q >= row) __builtin_prefetch(pq - row, 1);
+        if (q + row < n) __builtin_prefetch(pq + row, 1);
+        for (int b = 0; b < bands; ++b) {
+            __builtin_prefetch(band[b] + q);
+            if (q >= row) __builtin_prefetch(band[b] + q - row);
+            if (q + row < n) __builtin_prefetch(band[b] + q + row);
+        }
+    };
     for (uint32_t k = 0; k < n_valid; ++k) {
         if ((k & 0xFFFFF) == 0) progress(0.5 + 0.4 * k / n_valid, "flooding");
         while (k >= count[lp]) ++lp;  // the level of order[k], without reading level[]
+        if (k + kAhead < n_valid) prefetch_pixel(order[k + kAhead]);
         const uint32_t p = order[k];
         const int x = static_cast<int>(p % static_cast<uint32_t>(w)), y = static_cast<int>(p / static_cast<uint32_t>(w));
         uint32_t roots[4], via[4];
@@ -215,7 +318,7 @@ Oversegmentation watershed_oversegment(const Image<float>& image, const std::vec
         }
         if (nr == 0) {
             parent[p] = p;
-            min_level[p] = static_cast<uint16_t>(lp);
+            if (h_levels > 0) min_level[p] = static_cast<uint16_t>(lp);
             continue;
         }
         // The flooded neighbour most similar in colour decides where p goes, so
@@ -229,6 +332,10 @@ Oversegmentation watershed_oversegment(const Image<float>& image, const std::vec
                 d += diff * diff;
             }
             if (d < closest) closest = d, closest_root = roots[i];
+        }
+        if (h_levels == 0) {  // no basin is ever absorbed: p joins the closest one
+            parent[p] = closest_root;
+            continue;
         }
         // Deepest basin first (lowest minimum, then lowest root index).
         auto deeper = [&](uint32_t a, uint32_t b) {

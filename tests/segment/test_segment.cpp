@@ -185,6 +185,36 @@ TEST_CASE("Segmentation gives the same labels with 1 thread and with all threads
     CHECK(all_threads.second == one_thread.second);
 }
 
+TEST_CASE("Watershed without smoothing (levels straight from the bands, sorted by row chunks): same labels for 1 thread and all threads", "[segment][determinism]") {
+    ScratchDir dir("seg_threads_unsmoothed");
+    make_town(dir, 200, 12, 0);
+    Image<float> img = RasterReader(dir / "ortho.tif").read_all<float>();
+    normalize_bands(img, {});
+    std::vector<uint8_t> valid(img.pixel_count(), 1);
+    for (std::size_t i = 0; i < valid.size(); i += 7) valid[i] = 0;  // nodata scattered over every row chunk
+    for (double h : {0.0, 2.0}) {
+        WatershedOptions wo;
+        wo.smoothing_sigma_px = 0.0;
+        wo.h_minima = h;
+        const Oversegmentation all_threads = watershed_oversegment(img, valid, wo);
+        Oversegmentation one_thread;
+        {
+            tbb::global_control one(tbb::global_control::max_allowed_parallelism, 1);
+            one_thread = watershed_oversegment(img, valid, wo);
+        }
+        CHECK(all_threads.region_count == one_thread.region_count);
+        CHECK(all_threads.labels.data == one_thread.labels.data);
+        // Every valid pixel labelled, nodata left 0, labels 1..N.
+        std::size_t bad = 0;
+        for (std::size_t i = 0; i < valid.size(); ++i) {
+            const uint32_t l = all_threads.labels.data[i];
+            bad += valid[i] ? (l == 0 || l > all_threads.region_count) : l != 0;
+        }
+        CHECK(bad == 0);
+        if (h == 0.0) CHECK(all_threads.region_count > 100);
+    }
+}
+
 TEST_CASE("Merging with regions of thousands of neighbours: same labels for every strategy, invariants kept", "[segment][merging]") {
     // A flat background cut into 3 x 3 blocks with 2 x 2 dots of varied
     // colour every 6 pixels: the background merges into one region that
