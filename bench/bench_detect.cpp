@@ -12,6 +12,7 @@
 
 #include "core/error.hpp"
 #include "detect/detector.hpp"
+#include "detect/segment_merge.hpp"
 #include "pipeline/train_run.hpp"
 #include "synth/synth.hpp"
 
@@ -52,6 +53,13 @@ int main(int argc, char** argv) try {
     const std::vector<float> p = detect::segment_probabilities(model, f);
     const double t_pred = now() - t;
     t = now();
+    std::size_t n_pairs = 0;
+    if (model.options.merge_threshold > 0.0) {
+        const detect::SegmentPairs pairs = detect::segment_pairs(img.normalised, seg, img.gsd_m, model.options.pixel.enabled ? &pix : nullptr);
+        n_pairs = detect::predict_booster(model.merge_model, pairs.values, pairs.size(), pairs.cols).size();
+    }
+    const double t_pairs = now() - t;
+    t = now();
     const BuildingMask mask = detect_building_mask(model, img);  // the whole chain once more, for the total
     const double t_all = now() - t;
     std::printf("bench_detect: %d x %d px RGB (%s), model %s\n", img.grid.width, img.grid.height, ortho.string().c_str(), model_path.c_str());
@@ -66,6 +74,7 @@ int main(int argc, char** argv) try {
     for (double s : model.options.segmentation.scales) std::printf(" %g", s);
     std::printf(")\n  features              %7.2f s  (%zu per segment)\n", t_feat, f.cols);
     std::printf("  classification        %7.2f s\n", t_pred);
+    if (model.options.merge_threshold > 0.0) std::printf("  pair classifier       %7.2f s  (%zu adjacent segment pairs)\n", t_pairs, n_pairs);
     std::printf("  detect_building_mask  %7.2f s  (segmentation .. components; %u buildings)\n", t_all, mask.count);
     std::printf("  total incl. reading   %7.2f s   (target < 30 s on 2 cores)\n", t_read + t_all);
     (void)p;

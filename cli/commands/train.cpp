@@ -18,6 +18,7 @@ void add_train_command(CLI::App& parent, const GlobalFlags& g, CommandList& out)
     struct State {
         std::string out;
         bool overwrite = false;
+        bool no_pairs = false;
         TrainOptions options;
     };
     auto s = std::make_shared<State>();
@@ -43,6 +44,11 @@ void add_train_command(CLI::App& parent, const GlobalFlags& g, CommandList& out)
                     "Candidate object split levels (0 = components of building segments; l = kept apart where context scale l's regions meet); "
                     "the best pooled CV F1 is kept")
         ->delimiter(',');
+    cmd->add_option("--merge-thresholds", o.merge_thresholds,
+                    "Candidate thresholds of the pair classifier grouping adjacent building segments into buildings (tried against the split "
+                    "levels; the best pooled CV F1 is kept)")
+        ->delimiter(',');
+    cmd->add_flag("--no-pair-classifier", s->no_pairs, "Buildings from the split levels only (no pair classifier is trained)");
     cmd->add_option("--split-level", d.object_split_level, "Object split level when there is no cross-validation")->capture_default_str();
     cmd->add_option("--threshold", d.threshold, "Probability threshold when there is no cross-validation")->capture_default_str();
     cmd->add_option("--scales", d.segmentation.scales, "Merging scales: classified segments first, then context levels")->delimiter(',');
@@ -76,6 +82,7 @@ void add_train_command(CLI::App& parent, const GlobalFlags& g, CommandList& out)
     cmd->add_option("--pixel-cnn-crop", d.pixel.cnn.crop_cells, "Pixel CNN: training crop side, cells")->capture_default_str();
     out.push_back({cmd, [s, &g]() {
                        remove_stale_temporaries_beside(s->out);
+                       if (s->no_pairs) s->options.merge_thresholds.clear();
                        const TrainReport r = run_train(s->out, s->options, s->overwrite, make_progress(g));
                        if (!g.quiet) {
                            std::fprintf(stderr, "cityforge: trained on %zu image(s), %s, %zu segments (%zu building), %zu reference buildings, %zu features\n",
@@ -99,7 +106,7 @@ void add_train_command(CLI::App& parent, const GlobalFlags& g, CommandList& out)
                                print_scores("segment pixels", r.pooled_segments);
                                std::fprintf(stderr, "\n");
                            }
-                           std::fprintf(stderr, "cityforge: threshold %.2f, split level %d, fingerprint %s, %zu bytes in %.1f s -> %s\n", r.threshold, r.object_split_level, r.fingerprint.c_str(),
+                           std::fprintf(stderr, "cityforge: threshold %.2f, split level %d, merge threshold %.2f, fingerprint %s, %zu bytes in %.1f s -> %s\n", r.threshold, r.object_split_level, r.merge_threshold, r.fingerprint.c_str(),
                                         r.model_bytes, r.seconds, s->out.c_str());
                        }
                        return 0;

@@ -7,6 +7,7 @@
 
 #include "core/atomic_file.hpp"
 #include "core/error.hpp"
+#include "detect/segment_merge.hpp"
 
 namespace cityforge::detect {
 
@@ -48,6 +49,7 @@ void DetectorOptions::validate(int bands) const {
     if (!(pixel_object_threshold >= 0.0 && pixel_object_threshold < 1.0)) throw Error("pixel_object_threshold", "must be in [0, 1) (0 = off)");
     if (pixel_object_threshold > 0.0 && !pixel.enabled) throw Error("pixel_object_threshold", "needs the pixel stage");
     if (!(min_hole_m2 >= 0.0)) throw Error("min_hole_m2", "must be >= 0");
+    if (!(merge_threshold >= 0.0 && merge_threshold < 1.0)) throw Error("merge_threshold", "must be in [0, 1) (0 = off)");
 }
 
 std::string describe_bands(const BandLayout& l) {
@@ -86,7 +88,7 @@ BoosterOptions booster_from_json(const nlohmann::json& b) {
 
 nlohmann::json to_json(const DetectorOptions& o) {
     const auto& s = o.segmentation;
-    return {{"segmentation",
+    nlohmann::json j = {{"segmentation",
              {{"h_minima", s.watershed.h_minima}, {"smoothing_sigma_px", s.watershed.smoothing_sigma_px},
               {"band_weights", s.watershed.band_weights}, {"scales", s.scales}, {"color_weight", s.color_weight}, {"reference_gsd_m", s.reference_gsd_m}}},
             {"booster", booster_json(o.booster)},
@@ -106,6 +108,9 @@ nlohmann::json to_json(const DetectorOptions& o) {
             {"pixel_object_threshold", o.pixel_object_threshold},
             {"min_area_m2", o.min_area_m2},
             {"min_hole_m2", o.min_hole_m2}};
+    // Written only when on: models without the pair classifier keep their header bytes.
+    if (o.merge_threshold > 0.0) j["merge_threshold"] = o.merge_threshold;
+    return j;
 }
 
 DetectorOptions detector_options_from_json(const nlohmann::json& j) {
@@ -142,6 +147,7 @@ DetectorOptions detector_options_from_json(const nlohmann::json& j) {
     o.min_label_share = j.at("min_label_share").get<double>();
     o.object_split_level = j.value("object_split_level", 0);
     o.pixel_object_threshold = j.value("pixel_object_threshold", 0.0);
+    o.merge_threshold = j.value("merge_threshold", 0.0);
     o.threshold = j.at("threshold").get<double>();
     o.min_area_m2 = j.at("min_area_m2").get<double>();
     o.min_hole_m2 = j.at("min_hole_m2").get<double>();
@@ -152,6 +158,8 @@ std::vector<uint8_t> serialize_model(const DetectorModel& m) {
     const bool pixel = m.options.pixel.enabled;
     const bool cnn = pixel && m.options.pixel.kind != PixelStageKind::boosted;
     if (pixel && m.pixel_model.empty()) throw Error("detector model", "internal: pixel stage without its model");
+    const bool merge = m.options.merge_threshold > 0.0;
+    if (merge && m.merge_model.empty()) throw Error("detector model", "internal: merge threshold without the pair classifier");
     nlohmann::json header = {{"format", "cityforge-detector"},
                                    {"format_version", cnn ? 3 : pixel ? 2 : 1},
                                    {"classifier", "xgboost gbtree (binary:logistic, hist)"},
@@ -162,7 +170,8 @@ std::vector<uint8_t> serialize_model(const DetectorModel& m) {
                                    {"options", to_json(m.options)},
                                    {"fingerprint", m.fingerprint},
                                    {"training", m.training}};
-    if (m.layout.ndsm_band >= 0) header["ndsm_band"] = m.layout.ndsm_band;  // absent: no nDSM band (older models parse alike)
+    if (m.layout.ndsm_band >= 0) header["ndsm_band"] = m.layout.ndsm_band;
+    if (merge) header["merge_features"] = pair_feature_names(int(m.options.segmentation.scales.size()) - 1, pixel);  // absent: no nDSM band (older models parse alike)
     const std::string text = header.dump(1);
     std::vector<uint8_t> out(kMagic, kMagic + kMagicLen);
     put_u64(out, text.size());
@@ -172,6 +181,10 @@ std::vector<uint8_t> serialize_model(const DetectorModel& m) {
     if (pixel) {
         put_u64(out, m.pixel_model.size());
         out.insert(out.end(), m.pixel_model.begin(), m.pixel_model.end());
+    }
+    if (merge) {
+        put_u64(out, m.merge_model.size());
+        out.insert(out.end(), m.merge_model.begin(), m.merge_model.end());
     }
     put_u64(out, fnv1a64(out.data(), out.size()));
     return out;
@@ -192,12 +205,13 @@ DetectorModel parse_model(const std::vector<uint8_t>& in, const std::string& sub
         if (len > n - 8 - (at + 8)) throw Error(subject, "truncated or padded detector model (a block runs past the end: " + std::to_string(n) + " bytes)");
         blobs.emplace_back(at + 8, std::size_t(len));
         at += 8 + len;
-        if (blobs.size() > 2) throw Error(subject, "corrupt detector model (too many blocks)");
+        if (blobs.size() > 3) throw Error(subject, "corrupt detector model (too many blocks)");
     }
     if (blobs.empty()) throw Error(subject, "truncated detector model (no booster)");
     if (get_u64(in, n - 8) != fnv1a64(in.data(), n - 8)) throw Error(subject, "corrupt detector model (checksum mismatch)");
     DetectorModel m;
     int version = 1;
+    std::vector<std::string> merge_features;
     try {
         const auto header = nlohmann::json::parse(in.begin() + kMagicLen + 8, in.begin() + static_cast<std::ptrdiff_t>(bat));
         version = header.at("format_version").get<int>();
@@ -210,13 +224,17 @@ DetectorModel parse_model(const std::vector<uint8_t>& in, const std::string& sub
         m.options = detector_options_from_json(header.at("options"));
         m.fingerprint = header.at("fingerprint").get<std::string>();
         m.training = header.at("training");
+        if (header.contains("merge_features")) merge_features = header.at("merge_features").get<std::vector<std::string>>();
     } catch (const nlohmann::json::exception& e) {
         throw Error(subject, std::string("invalid detector model header: ") + e.what());
     }
     m.options.validate(m.layout.bands);
     const bool cnn = m.options.pixel.enabled && m.options.pixel.kind != PixelStageKind::boosted;
-    if (blobs.size() != (m.options.pixel.enabled ? 2u : 1u) || (version >= 2) != m.options.pixel.enabled || (version == 3) != cnn)
+    const bool merge = m.options.merge_threshold > 0.0;
+    if (blobs.size() != 1u + (m.options.pixel.enabled ? 1u : 0u) + (merge ? 1u : 0u) || (version >= 2) != m.options.pixel.enabled || (version == 3) != cnn)
         throw Error(subject, "corrupt detector model (block count does not match the header)");
+    if (merge && merge_features != pair_feature_names(int(m.options.segmentation.scales.size()) - 1, m.options.pixel.enabled))
+        throw Error(subject, "the model's pair feature list is not the one this version of cityforge computes");
     if (m.features != feature_names(m.layout, int(m.options.segmentation.scales.size()) - 1, m.options.pixel.enabled))
         throw Error(subject, "the model's feature list is not the one this version of cityforge computes");
     auto blob = [&](std::size_t k) {
@@ -224,6 +242,7 @@ DetectorModel parse_model(const std::vector<uint8_t>& in, const std::string& sub
     };
     m.booster = blob(0);
     if (m.options.pixel.enabled) m.pixel_model = blob(1);
+    if (merge) m.merge_model = blob(m.options.pixel.enabled ? 2 : 1);
     if (m.options.pixel.enabled && m.options.pixel.kind == PixelStageKind::cnn) check_cnn_weights(m.pixel_model, m.layout.bands, m.options.pixel.cnn, subject);
     if (m.options.pixel.enabled && m.options.pixel.kind == PixelStageKind::both)
         check_cnn_weights(unpack_pixel_models(m.pixel_model, subject).second, m.layout.bands, m.options.pixel.cnn, subject);
@@ -262,18 +281,19 @@ std::vector<float> segment_probabilities(const DetectorModel& model, const Featu
 }
 
 std::vector<uint8_t> building_pixels(const SceneSegments& s, const std::vector<float>& probability, double threshold, int split_level,
-                                     const std::vector<float>* pixel_probability, double pixel_threshold) {
+                                     const std::vector<float>* pixel_probability, double pixel_threshold, const std::vector<uint32_t>* groups) {
     std::vector<uint8_t> b(s.labels.data.size(), 0);
     const bool px = pixel_probability && pixel_threshold > 0.0;
     if (px && pixel_probability->size() != b.size()) throw Error("building pixels", "internal: pixel probability map size");
     for (std::size_t i = 0; i < b.size(); ++i)
         if (const uint32_t a = s.labels.data[i])
             b[i] = probability[a] >= threshold || (px && (*pixel_probability)[i] >= pixel_threshold) ? 1 : 0;
-    if (split_level <= 0) return b;
-    if (split_level > int(s.context.size())) throw Error("object_split_level", "exceeds the number of context scales");
+    if (groups && groups->size() != std::size_t(s.count) + 1) throw Error("building pixels", "internal: one group per segment");
+    if (!groups && split_level <= 0) return b;
+    if (!groups && split_level > int(s.context.size())) throw Error("object_split_level", "exceeds the number of context scales");
     // A pixel whose right or lower neighbour is building in another context
-    // region leaves the building mask: a cut between the two objects.
-    const std::vector<uint32_t>& parent = s.context[std::size_t(split_level - 1)];
+    // region (or group) leaves the building mask: a cut between the two objects.
+    const std::vector<uint32_t>& parent = groups ? *groups : s.context[std::size_t(split_level - 1)];
     const int w = s.labels.width, h = s.labels.height;
     const uint32_t* L = s.labels.data.data();
     std::vector<uint8_t> out = b;
@@ -299,8 +319,15 @@ Detection detect_buildings(const DetectorModel& model, const Image<float>& norma
     const FeatureMatrix f = segment_features(normalised, valid, d.segments, model.layout, gsd_m, pixel ? &d.pixel_probability : nullptr);
     progress(0.9, "features");
     d.probability = segment_probabilities(model, f, threads);
+    if (model.options.merge_threshold > 0.0) {
+        const SegmentPairs pairs = segment_pairs(normalised, d.segments, gsd_m, pixel ? &d.pixel_probability : nullptr);
+        const std::vector<float> pp = predict_booster(model.merge_model, pairs.values, pairs.size(), pairs.cols, threads);
+        std::vector<uint8_t> building(d.segments.count + 1, 0);
+        for (uint32_t k = 1; k <= d.segments.count; ++k) building[k] = d.probability[k] >= model.options.threshold;
+        d.groups = merge_groups(pairs, pp, building, model.options.merge_threshold);
+    }
     d.building = building_pixels(d.segments, d.probability, model.options.threshold, model.options.object_split_level,
-                                 pixel ? &d.pixel_probability : nullptr, model.options.pixel_object_threshold);
+                                 pixel ? &d.pixel_probability : nullptr, model.options.pixel_object_threshold, d.groups.empty() ? nullptr : &d.groups);
     progress(1.0, "classified");
     return d;
 }

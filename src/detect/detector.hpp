@@ -41,6 +41,12 @@ struct DetectorOptions {
     /// segments below `threshold`); 0 = off (the training command picks it
     /// by cross-validation when the model has a pixel stage).
     double pixel_object_threshold = 0.0;
+    /// > 0: building segments are grouped into buildings by the model's
+    /// pair classifier (segment_merge.hpp): adjacent building segments whose
+    /// "same building" probability reaches this are one building, the others
+    /// are cut apart along a one-pixel line (replaces object_split_level);
+    /// 0 = off (the training command picks it by cross-validation).
+    double merge_threshold = 0.0;
     double min_area_m2 = 8.0;  ///< building components smaller than this are dropped
     double min_hole_m2 = 6.0;  ///< holes smaller than this are filled
     void validate(int bands) const;
@@ -58,11 +64,15 @@ struct DetectorModel {
     nlohmann::json training;            ///< sources, sample counts, per-fold figures (free form, recorded as given)
     std::vector<uint8_t> booster;       ///< XGBoost UBJSON model
     std::vector<uint8_t> pixel_model; ///< pixel model (options.pixel.enabled): XGBoost UBJSON, or CFCNN1 weights for kind cnn; else empty
+    /// Pair ("same building") classifier, XGBoost UBJSON on pair_feature_names
+    /// (options.merge_threshold > 0; else empty).
+    std::vector<uint8_t> merge_model;
 };
 
 /// The model's bytes: "CFDET1\n", then header JSON, booster, the pixel
 /// model when the model has a pixel stage (format_version 2; 3 when it has a
-/// CNN) and an FNV-1a checksum, each length-prefixed; the same model gives the same bytes.
+/// CNN), the pair classifier when options.merge_threshold > 0 (the header
+/// then holds "merge_features") and an FNV-1a checksum, each length-prefixed; the same model gives the same bytes.
 std::vector<uint8_t> serialize_model(const DetectorModel& model);
 /// Parses bytes from serialize_model. Throws Error naming `subject` when the
 /// magic, a length or the checksum is wrong (truncated or corrupt file) or
@@ -86,8 +96,11 @@ std::vector<float> segment_probabilities(const DetectorModel& model, const Featu
 /// With `pixel_probability` (per pixel, or null) and `pixel_threshold` > 0,
 /// pixels of the other segments whose pixel probability reaches it are
 /// building too (DetectorOptions::pixel_object_threshold).
+/// With `groups` (building object per segment, merge_groups) building
+/// pixels of different groups are cut apart instead of the split level's regions.
 std::vector<uint8_t> building_pixels(const SceneSegments& segments, const std::vector<float>& probability, double threshold,
-                                     int split_level = 0, const std::vector<float>* pixel_probability = nullptr, double pixel_threshold = 0.0);
+                                     int split_level = 0, const std::vector<float>* pixel_probability = nullptr, double pixel_threshold = 0.0,
+                                     const std::vector<uint32_t>* groups = nullptr);
 
 /// The whole detection on one image: segmentation with the model's options,
 /// features, probabilities and building pixels. `normalised` = bands scaled
@@ -96,6 +109,7 @@ struct Detection {
     SceneSegments segments;
     std::vector<float> pixel_probability;  ///< per pixel, 0..1 (models with a pixel stage; else empty)
     std::vector<float> probability;  ///< per segment (index = label)
+    std::vector<uint32_t> groups;    ///< building object per segment (merge_groups; empty without the pair classifier)
     std::vector<uint8_t> building;   ///< per pixel
 };
 Detection detect_buildings(const DetectorModel& model, const Image<float>& normalised, const std::vector<uint8_t>& valid, double gsd_m,

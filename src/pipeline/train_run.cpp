@@ -9,6 +9,7 @@
 #include "audit/footprint_match.hpp"
 #include "core/error.hpp"
 #include "detect/label_raster.hpp"
+#include "detect/segment_merge.hpp"
 #include "footprint/vectorize.hpp"
 #include "io/vector.hpp"
 #include "pipeline/cloud_cells.hpp"
@@ -138,12 +139,13 @@ void add_ndsm_band(DetectionImage& image, const Image<float>& heights_m) {
 namespace {
 
 BuildingMask mask_from_probabilities(const detect::SceneSegments& segments, const std::vector<float>& probability, double threshold,
-                                     double gsd_m, const detect::DetectorOptions& o, const std::vector<float>* pixel_map) {
+                                     double gsd_m, const detect::DetectorOptions& o, const std::vector<float>* pixel_map,
+                                     const std::vector<uint32_t>* groups = nullptr) {
     BuildingMaskOptions mo;
     mo.gsd_m = gsd_m;
     mo.min_area_m2 = o.min_area_m2;
     mo.min_hole_m2 = o.min_hole_m2;
-    return label_buildings(detect::building_pixels(segments, probability, threshold, o.object_split_level, pixel_map, o.pixel_object_threshold),
+    return label_buildings(detect::building_pixels(segments, probability, threshold, o.object_split_level, pixel_map, o.pixel_object_threshold, groups),
                            segments.labels.width, segments.labels.height, mo);
 }
 
@@ -156,6 +158,9 @@ struct LabelledImage {
     detect::FeatureMatrix features;
     std::vector<float> share;                       // per segment (index = label)
     std::vector<int> fold;                          // per segment (index = label - 1)
+    std::vector<uint32_t> reference_ids;            // per pixel: 1-based label feature burnt there (0 = none)
+    detect::SegmentPairs pairs;                     // adjacent segments and their features
+    std::vector<int8_t> pair_y;                     // per pair: 1 same building, 0 different, -1 not an example
 };
 
 bool is_raster_path(const std::string& p) {
@@ -179,6 +184,7 @@ void load_labels(LabelledImage& li, const std::string& path, const std::string& 
         for (std::size_t i = 0; i < m.data.size(); ++i) li.truth[i] = m.data[i] > 0.0f;
         std::vector<uint32_t> labels, sizes;
         const uint32_t n = label_components(li.truth, 1, w, h, labels, sizes);
+        li.reference_ids = labels;
         Image<uint32_t> img(w, h, 1, 0);
         std::copy(labels.begin(), labels.end(), img.data.begin());
         auto polys = vectorize_all(img, GeoTransform{0.0, 1.0, 0.0, -1.0});
@@ -190,6 +196,7 @@ void load_labels(LabelledImage& li, const std::string& path, const std::string& 
     if (labels.crs.empty()) throw Error(path, "the labels have no CRS");
     const bool reproject = !same_horizontal_crs(labels.crs, li.image.crs);
     std::vector<Polygon> burn;
+    uint32_t feature_id = 0;
     for (const Feature& f : labels.features) {
         std::vector<Polygon> parts = f.geometry;
         for (Polygon& p : parts) {
@@ -211,6 +218,12 @@ void load_labels(LabelledImage& li, const std::string& path, const std::string& 
         const Extent e = parts_extent(parts);
         if (e.max_x <= 0 || e.max_y <= 0 || e.min_x >= w || e.min_y >= h) continue;  // outside this image
         for (const Polygon& p : parts) burn.push_back(p);
+        // Each label feature's own pixels (which label a segment belongs to).
+        const std::vector<uint8_t> own = detect::rasterize_polygons(parts, w, h);
+        if (li.reference_ids.empty()) li.reference_ids.assign(std::size_t(w) * h, 0);
+        ++feature_id;
+        for (std::size_t k = 0; k < own.size(); ++k)
+            if (own[k]) li.reference_ids[k] = feature_id;
         const double cx = 0.5 * (e.min_x + e.max_x), cy = 0.5 * (e.min_y + e.max_y);
         if (cx < 0 || cy < 0 || cx >= w || cy >= h) continue;  // mostly outside: not counted as a reference
         for (Polygon& p : parts) {
@@ -262,7 +275,7 @@ BuildingMask detect_building_mask(const detect::DetectorModel& model, const Dete
     detect::check_bands(model, image.layout, image.path);
     const detect::Detection d = detect::detect_buildings(model, image.normalised, image.valid, image.gsd_m, threads, progress);
     return mask_from_probabilities(d.segments, d.probability, model.options.threshold, image.gsd_m, model.options,
-                                   d.pixel_probability.empty() ? nullptr : &d.pixel_probability);
+                                   d.pixel_probability.empty() ? nullptr : &d.pixel_probability, d.groups.empty() ? nullptr : &d.groups);
 }
 
 std::string default_model_path(const detect::BandLayout& layout) {
@@ -292,6 +305,8 @@ void TrainOptions::validate() const {
         if (l < 0 || l > 16) throw Error("--split-levels", "each split level must be between 0 and 16");
     for (const double t : thresholds)
         if (!(t > 0.0 && t < 1.0)) throw Error("--thresholds", "each threshold must be in (0, 1)");
+    for (const double t : merge_thresholds)
+        if (!(t > 0.0 && t < 1.0)) throw Error("--merge-thresholds", "each merge threshold must be in (0, 1)");
 }
 
 void DetectionScores::add(const DetectionScores& o) { tp += o.tp, predicted += o.predicted, reference += o.reference; }
@@ -344,6 +359,28 @@ TrainReport run_train(const std::string& out_path, const TrainOptions& o, bool o
         data[i].features = detect::segment_features(data[i].image.normalised, data[i].image.valid, data[i].segments, layout, data[i].image.gsd_m,
                                                     o.detector.pixel.enabled ? &pixel.out_of_fold[i] : nullptr);
     const std::vector<std::string> names = detect::feature_names(layout, int(o.detector.segmentation.scales.size()) - 1, o.detector.pixel.enabled);
+    // Adjacent segment pairs and their "same building" labels (the pair classifier).
+    const bool merging = !o.merge_thresholds.empty();
+    const std::size_t pair_cols = detect::pair_feature_names(int(o.detector.segmentation.scales.size()) - 1, o.detector.pixel.enabled).size();
+    if (merging)
+        for (std::size_t i = 0; i < data.size(); ++i) {
+            LabelledImage& li = data[i];
+            li.pairs = detect::segment_pairs(li.image.normalised, li.segments, li.image.gsd_m, o.detector.pixel.enabled ? &pixel.out_of_fold[i] : nullptr);
+            li.pair_y = detect::pair_labels(li.pairs, li.segments, li.share, li.reference_ids, o.detector.min_label_share);
+        }
+    // Pair rows of a subset (examples only).
+    auto pair_rows_where = [&](auto&& keep, std::vector<float>& X, std::vector<float>& y, std::vector<float>& wt) {
+        for (std::size_t i = 0; i < data.size(); ++i) {
+            const LabelledImage& li = data[i];
+            for (std::size_t k = 0; k < li.pairs.size(); ++k) {
+                if (li.pair_y[k] < 0 || !keep(i, k)) continue;
+                const float* r = li.pairs.values.data() + k * li.pairs.cols;
+                X.insert(X.end(), r, r + li.pairs.cols);
+                y.push_back(float(li.pair_y[k]));
+                wt.push_back(1.0f);
+            }
+        }
+    };
     rep.images = data.size();
     rep.features = names.size();
     rep.bands = detect::describe_bands(layout);
@@ -376,6 +413,8 @@ TrainReport run_train(const std::string& out_path, const TrainOptions& o, bool o
         // Out-of-fold probabilities: fold f predicted by the model trained on the others.
         std::vector<std::vector<float>> cv(data.size());
         for (std::size_t i = 0; i < data.size(); ++i) cv[i].assign(data[i].segments.count + 1, 0.0f);
+        std::vector<std::vector<float>> cv_pairs(data.size());  // out-of-fold "same building" probability per pair
+        for (std::size_t i = 0; i < data.size(); ++i) cv_pairs[i].assign(data[i].pairs.size(), 0.0f);
         rep.folds.resize(o.folds);
         tbb::parallel_for(0, o.folds, [&](int f) {
             std::vector<float> X, y, wt;
@@ -400,6 +439,27 @@ TrainReport run_train(const std::string& out_path, const TrainOptions& o, bool o
                 for (std::size_t j = 0; j < ks.size(); ++j) cv[i][ks[j]] = p[j];
                 rep.folds[f].test_segments += ks.size();
             }
+            if (!merging) return;
+            // The pair classifier of the other folds (a pair belongs to its first segment's fold).
+            std::vector<float> Xp, yp, wp;
+            pair_rows_where([&](std::size_t i, std::size_t k) { return data[i].fold[data[i].pairs.a[k] - 1] != f; }, Xp, yp, wp);
+            std::size_t same = 0;
+            for (const float v : yp) same += v > 0.5f;
+            if (same == 0 || same == yp.size()) return;
+            const std::vector<uint8_t> pair_model = detect::train_booster(Xp, yp.size(), pair_cols, yp, wp, o.detector.booster);
+            for (std::size_t i = 0; i < data.size(); ++i) {
+                const LabelledImage& li = data[i];
+                std::vector<float> Xt;
+                std::vector<std::size_t> ks;
+                for (std::size_t k = 0; k < li.pairs.size(); ++k)
+                    if (li.fold[li.pairs.a[k] - 1] == f) {
+                        const float* r = li.pairs.values.data() + k * li.pairs.cols;
+                        Xt.insert(Xt.end(), r, r + li.pairs.cols);
+                        ks.push_back(k);
+                    }
+                const std::vector<float> p = detect::predict_booster(pair_model, Xt, ks.size(), pair_cols, 1);
+                for (std::size_t j = 0; j < ks.size(); ++j) cv_pairs[i][ks[j]] = p[j];
+            }
         });
         progress(0.8, "cross-validation");
         // Object scores of every threshold; the best pooled F1 is kept.
@@ -408,8 +468,14 @@ TrainReport run_train(const std::string& out_path, const TrainOptions& o, bool o
             DetectionScores pooled;
             for (std::size_t i = 0; i < data.size(); ++i) {
                 const LabelledImage& li = data[i];
-                const BuildingMask mask =
-                    mask_from_probabilities(li.segments, cv[i], threshold, li.image.gsd_m, opts, opts.pixel.enabled ? &pixel.out_of_fold[i] : nullptr);
+                std::vector<uint32_t> groups;
+                if (opts.merge_threshold > 0.0) {
+                    std::vector<uint8_t> building(li.segments.count + 1, 0);
+                    for (uint32_t k = 1; k <= li.segments.count; ++k) building[k] = cv[i][k] >= threshold;
+                    groups = detect::merge_groups(li.pairs, cv_pairs[i], building, opts.merge_threshold);
+                }
+                const BuildingMask mask = mask_from_probabilities(li.segments, cv[i], threshold, li.image.gsd_m, opts,
+                                                                  opts.pixel.enabled ? &pixel.out_of_fold[i] : nullptr, groups.empty() ? nullptr : &groups);
                 const auto pred = predicted_footprints(mask, li.image.gsd_m);
                 DetectionScores img;
                 for (int f = 0; f < o.folds; ++f) {
@@ -457,6 +523,14 @@ TrainReport run_train(const std::string& out_path, const TrainOptions& o, bool o
                 if (s.f1 > best_f1 + 1e-12) best_f1 = s.f1, chosen.threshold = t, chosen.object_split_level = level;
             }
         }
+        // Buildings grouped by the pair classifier instead of a split level.
+        for (const double mt : o.merge_thresholds)
+            for (const double t : o.thresholds) {
+                detect::DetectorOptions cand = o.detector;
+                cand.threshold = t, cand.object_split_level = 0, cand.merge_threshold = mt;
+                const DetectionScores s = evaluate(cand, nullptr, nullptr);
+                if (s.f1 > best_f1 + 1e-12) best_f1 = s.f1, chosen.threshold = t, chosen.object_split_level = 0, chosen.merge_threshold = mt;
+            }
         // Then pixels of the pixel map joining the buildings (0 = off), and the threshold again.
         if (o.detector.pixel.enabled) {
             for (const double pt : {0.6, 0.7, 0.8, 0.9}) {
@@ -485,6 +559,7 @@ TrainReport run_train(const std::string& out_path, const TrainOptions& o, bool o
     }
     rep.threshold = chosen.threshold;
     rep.object_split_level = chosen.object_split_level;
+    rep.merge_threshold = chosen.merge_threshold;
 
     // The model: every segment.
     std::vector<float> X, y, wt;
@@ -495,6 +570,11 @@ TrainReport run_train(const std::string& out_path, const TrainOptions& o, bool o
     model.options = chosen;
     model.booster = detect::train_booster(X, y.size(), names.size(), y, wt, o.detector.booster);
     model.pixel_model = pixel.model;
+    if (chosen.merge_threshold > 0.0) {
+        std::vector<float> Xp, yp, wp;
+        pair_rows_where([](std::size_t, std::size_t) { return true; }, Xp, yp, wp);
+        model.merge_model = detect::train_booster(Xp, yp.size(), pair_cols, yp, wp, o.detector.booster);
+    }
     const std::string opts = detect::to_json(o.detector).dump();
     fp = detect::fnv1a64(opts.data(), opts.size(), fp);
     model.fingerprint = detect::hex64(fp);
@@ -521,7 +601,7 @@ TrainReport run_train(const std::string& out_path, const TrainOptions& o, bool o
             fold_json.push_back({{"fold", f.fold}, {"objects_iou_0.5", scores_json(f.objects)}, {"segment_pixels", scores_json(f.segments)}});
         nlohmann::json images = nlohmann::json::array();
         for (const auto& [name, s] : rep.per_image) images.push_back({{"ortho", fs::path(name).filename().string()}, {"objects_iou_0.5", scores_json(s)}});
-        cvj = {{"folds", o.folds}, {"fold_block_m", o.fold_block_m}, {"threshold", chosen.threshold}, {"object_split_level", chosen.object_split_level}, {"per_fold", fold_json}, {"per_image", images},
+        cvj = {{"folds", o.folds}, {"fold_block_m", o.fold_block_m}, {"threshold", chosen.threshold}, {"object_split_level", chosen.object_split_level}, {"merge_threshold", chosen.merge_threshold}, {"per_fold", fold_json}, {"per_image", images},
                {"pooled_objects_iou_0.5", scores_json(rep.pooled_objects)}, {"pooled_segment_pixels", scores_json(rep.pooled_segments)}};
     }
     model.training = {{"sources", sources}, {"segments", rep.segments}, {"building_segments", rep.building_segments},

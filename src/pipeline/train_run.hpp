@@ -75,6 +75,10 @@ struct TrainOptions {
     /// threshold by the cross-validation (levels beyond the context scales
     /// are skipped; empty or no CV: detector.object_split_level).
     std::vector<int> split_levels{0, 1, 2};
+    /// Candidate DetectorOptions::merge_threshold values (buildings grouped
+    /// by the pair classifier, segment_merge.hpp), tried with every threshold
+    /// against the split levels; empty = no pair classifier is trained.
+    std::vector<double> merge_thresholds{0.5, 0.6, 0.7, 0.8, 0.9};
     void validate() const;
 };
 
@@ -100,6 +104,7 @@ struct TrainReport {
     std::vector<std::pair<std::string, DetectionScores>> per_image;  ///< pooled object scores per ortho
     double threshold = 0.5;
     int object_split_level = 0;
+    double merge_threshold = 0.0;  ///< chosen; 0 = the split level groups buildings
     std::string fingerprint;
     std::size_t model_bytes = 0;
     double seconds = 0.0;
