@@ -601,8 +601,9 @@ TrainReport run_train(const std::string& out_path, const TrainOptions& o, bool o
             fold_json.push_back({{"fold", f.fold}, {"objects_iou_0.5", scores_json(f.objects)}, {"segment_pixels", scores_json(f.segments)}});
         nlohmann::json images = nlohmann::json::array();
         for (const auto& [name, s] : rep.per_image) images.push_back({{"ortho", fs::path(name).filename().string()}, {"objects_iou_0.5", scores_json(s)}});
-        cvj = {{"folds", o.folds}, {"fold_block_m", o.fold_block_m}, {"threshold", chosen.threshold}, {"object_split_level", chosen.object_split_level}, {"merge_threshold", chosen.merge_threshold}, {"per_fold", fold_json}, {"per_image", images},
+        cvj = {{"folds", o.folds}, {"fold_block_m", o.fold_block_m}, {"threshold", chosen.threshold}, {"object_split_level", chosen.object_split_level}, {"per_fold", fold_json}, {"per_image", images},
                {"pooled_objects_iou_0.5", scores_json(rep.pooled_objects)}, {"pooled_segment_pixels", scores_json(rep.pooled_segments)}};
+        if (chosen.merge_threshold > 0.0) cvj["merge_threshold"] = chosen.merge_threshold;  // absent when off: such models keep their bytes
     }
     model.training = {{"sources", sources}, {"segments", rep.segments}, {"building_segments", rep.building_segments},
                       {"cross_validation", cvj}, {"cityforge_version", CITYFORGE_VERSION}};
