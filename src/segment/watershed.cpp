@@ -6,7 +6,11 @@
 #include <numeric>
 #include <string>
 #include <sys/mman.h>
+#include <atomic>
+#include <exception>
+#include <tbb/global_control.h>
 #include <tbb/parallel_for.h>
+#include <thread>
 #include <unistd.h>
 
 #include "core/error.hpp"
@@ -159,6 +163,138 @@ LargeVector<uint16_t> unsmoothed_gradient_levels(const Image<float>& image, cons
     return level;
 }
 
+// Rows of the stripes the two flooding threads own alternately.
+constexpr int kStripeRows = 64;
+
+struct FloodInput {
+    int w, h;
+    uint32_t n_valid;
+    int bands;
+    const float* const* band;
+    const uint32_t* order;    // valid pixels by (level, index)
+    const uint32_t* level_end;  // level_end[l] = end of level l's run in order
+    const uint16_t* level;    // level of every pixel
+    const uint8_t* valid;     // null = all valid
+    uint32_t* parent;         // kNone = not flooded; else the pixel's basin seed
+};
+
+// The flooding without dynamics (h = 0) on two threads, with exactly the
+// sequential result. Without dynamics no basin is ever absorbed, so a
+// flooded pixel's parent is its basin's seed from the moment it is written
+// and never changes. Row stripes of kStripeRows go alternately to the two
+// threads; each walks the whole level order and floods its own pixels in
+// that order, so a neighbour in its own stripes is flooded exactly when it
+// would be in the sequential run. A neighbour in the other thread's row
+// (above the stripe's first row or below its last) counts as flooded when it
+// comes first in the order (level, then index; nodata never does), and the
+// thread then waits until the other one has passed it, and reads its seed.
+// Each thread publishes how far it is in the order after every pixel, its
+// own or not, so neither waits for the other forever: the one further back
+// never waits.
+void flood_two_threads(const FloodInput& in, const Progress& progress) {
+    constexpr uint32_t kNone = 0xFFFFFFFFu;
+    struct alignas(64) Done {
+        std::atomic<uint64_t> key{0};  // order key (level << 32 | index) of the last element passed
+    };
+    Done done[2];
+    const uint32_t w = static_cast<uint32_t>(in.w);
+    const std::size_t n = std::size_t(w) * static_cast<std::size_t>(in.h);
+    auto owner = [](uint32_t y) { return (y / kStripeRows) & 1u; };
+    auto run = [&](uint32_t t) {
+        const Done& other = done[1 - t];
+        uint32_t lp = 0;
+        for (uint32_t k = 0; k < in.n_valid; ++k) {
+            if (t == 0 && (k & 0xFFFFF) == 0) progress(0.5 + 0.4 * k / in.n_valid, "flooding");
+            while (k >= in.level_end[lp]) ++lp;
+            if (k + 16 < in.n_valid) {
+                const uint32_t q = in.order[k + 16];
+                if (owner(q / w) == t) {
+                    __builtin_prefetch(in.parent + q, 1);
+                    if (q >= w) __builtin_prefetch(in.parent + q - w, 1);
+                    const bool below = q + w < n;
+                    if (below) __builtin_prefetch(in.parent + q + w, 1);
+                    for (int b = 0; b < in.bands; ++b) {
+                        __builtin_prefetch(in.band[b] + q);
+                        if (q >= w) __builtin_prefetch(in.band[b] + q - w);
+                        if (below) __builtin_prefetch(in.band[b] + q + w);
+                    }
+                }
+            }
+            const uint32_t p = in.order[k];
+            const uint64_t key_p = uint64_t(lp) << 32 | p;
+            const uint32_t y = p / w, x = p - y * w;
+            if (owner(y) != t) {
+                done[t].key.store(key_p, std::memory_order_release);
+                continue;
+            }
+            uint32_t roots[4], via[4];
+            int nr = 0;
+            auto add = [&](uint32_t q, uint32_t r) {
+                for (int i = 0; i < nr; ++i)
+                    if (roots[i] == r) return;
+                via[nr] = q;
+                roots[nr++] = r;
+            };
+            auto visit = [&](uint32_t q) {
+                const uint32_t r = in.parent[q];
+                if (r != kNone) add(q, r);
+            };
+            auto visit_other = [&](uint32_t q) {  // q is in the other thread's row
+                if (in.valid && !in.valid[q]) return;
+                const uint64_t key_q = uint64_t(in.level[q]) << 32 | q;
+                if (key_q > key_p) return;  // flooded after p
+                for (int spins = 0; other.key.load(std::memory_order_acquire) < key_q; ++spins)
+                    if (spins > 64) std::this_thread::yield();
+                add(q, in.parent[q]);
+            };
+            if (y > 0) {
+                if (owner(y - 1) == t) visit(p - w);
+                else visit_other(p - w);
+            }
+            if (x > 0) visit(p - 1);
+            if (x < w - 1) visit(p + 1);
+            if (y + 1 < static_cast<uint32_t>(in.h)) {
+                if (owner(y + 1) == t) visit(p + w);
+                else visit_other(p + w);
+            }
+            uint32_t seed = p;
+            if (nr == 1) {
+                seed = roots[0];
+            } else if (nr > 1) {  // the flooded neighbour closest in colour, as in the sequential loop
+                float closest = INFINITY;
+                for (int i = 0; i < nr; ++i) {
+                    float d = 0.0f;
+                    for (int b = 0; b < in.bands; ++b) {
+                        const float diff = in.band[b][p] - in.band[b][via[i]];
+                        d += diff * diff;
+                    }
+                    if (d < closest) closest = d, seed = roots[i];
+                }
+            }
+            in.parent[p] = seed;
+            done[t].key.store(key_p, std::memory_order_release);
+        }
+        done[t].key.store(UINT64_MAX, std::memory_order_release);
+    };
+    std::exception_ptr error;
+    std::thread second([&] {
+        try {
+            run(1);
+        } catch (...) {
+            error = std::current_exception();
+        }
+    });
+    try {
+        run(0);  // the progress callback may throw (interrupted)
+    } catch (...) {
+        done[0].key.store(UINT64_MAX, std::memory_order_release);  // let the other thread finish, then rethrow
+        second.join();
+        throw;
+    }
+    second.join();
+    if (error) std::rethrow_exception(error);
+}
+
 }  // namespace
 
 Image<float> multiband_gradient(const Image<float>& image, const WatershedOptions& options) {
@@ -270,9 +406,13 @@ Oversegmentation watershed_oversegment(const Image<float>& image, const std::vec
     // The flooding reads levels from `count`; the level buffer holds the
     // basins' minima instead (written when a basin starts, read only for
     // roots). Without dynamics (h = 0) no basin is absorbed and they are not read.
+    // Without dynamics the flooding can run on two threads (see below); it
+    // then reads the levels of pixels next to the other thread's rows.
+    const bool two_threads = h_levels == 0 && h >= 4 * kStripeRows && n >= (std::size_t(1) << 18) &&
+                             tbb::global_control::active_value(tbb::global_control::max_allowed_parallelism) >= 2;
     LargeVector<uint16_t> min_level;
     if (h_levels > 0) min_level = std::move(level);
-    else LargeVector<uint16_t>().swap(level);
+    else if (!two_threads) LargeVector<uint16_t>().swap(level);
     // absorbed[r] (one bit per pixel, small enough to stay in cache) is set
     // when root r is merged into another basin. A flooded pixel points at a
     // root that usually still is one: one bit test then replaces the load of
@@ -313,7 +453,13 @@ Oversegmentation watershed_oversegment(const Image<float>& image, const std::vec
             if (q + row < n) __builtin_prefetch(band[b] + q + row);
         }
     };
-    for (uint32_t k = 0; k < n_valid; ++k) {
+    if (two_threads) {
+        flood_two_threads(FloodInput{w, h, n_valid, bands, band, order.data(), count.data(), level.data(),
+                                     valid.empty() ? nullptr : valid.data(), parent.data()},
+                          progress);
+        LargeVector<uint16_t>().swap(level);
+    }
+    for (uint32_t k = two_threads ? n_valid : 0; k < n_valid; ++k) {
         if ((k & 0xFFFFF) == 0) progress(0.5 + 0.4 * k / n_valid, "flooding");
         while (k >= count[lp]) ++lp;  // the level of order[k], without reading level[]
         if (k + kAhead < n_valid) prefetch_pixel(order[k + kAhead]);
