@@ -208,7 +208,7 @@ TEST_CASE("Cross-validated detection on a real 0.3 m RGBA drone ortho (OAM Kampa
                 r.pooled_segments.f1, r.threshold);
     CHECK(r.bands == "RGB");  // the alpha band is a mask, not a colour
     CHECK(r.reference_buildings >= 90);
-    CHECK(r.pooled_objects.f1 >= 0.40);  // measured 0.447 (P 0.603 R 0.355) with the pixel stage (0.439 without)
+    CHECK(r.pooled_objects.f1 >= 0.50);  // measured 0.552 (P 0.676 R 0.467) with the pair classifier (0.447 before, 0.439 without the pixel stage)
     CHECK(r.pooled_segments.f1 >= 0.70);  // measured 0.749 (0.764 without the pixel stage)
 }
 
