@@ -20,6 +20,7 @@
 #
 #   bash bench/compare_peers.sh [--raster FILE] [--window col,row,w,h | --centre w,h]
 #                               [--synth SIZE_M] [--grass-threshold T] [--install]
+#                               [--bench PATH]   (another bench_segment build, e.g. an older one)
 # Default: the Autzen ortho (shared data), 2000 x 2000 px around its centre,
 # native 1 ft resolution (--centre 4000,4000: the 16 MP window, clipped to the
 # raster). Any GDAL raster with 3 or more bands works (the first 3 are used).
@@ -36,18 +37,19 @@ synth=""
 grass_threshold="0.1"
 centre=""
 install=0
+bench="$here/build/bin/bench_segment"
 while [ $# -gt 0 ]; do
   case "$1" in
     --raster) raster="$2"; shift 2 ;;
     --window) window="$2"; shift 2 ;;
     --centre) centre="$2"; shift 2 ;;
     --install) install=1; shift ;;
+    --bench) bench="$2"; shift 2 ;;
     --synth) synth="$2"; window=""; shift 2 ;;
     --grass-threshold) grass_threshold="$2"; shift 2 ;;
     *) echo "compare_peers.sh: unknown argument $1" >&2; exit 2 ;;
   esac
 done
-bench="$here/build/bin/bench_segment"
 py=/usr/bin/python3
 [ -x "$bench" ] || { echo "compare_peers.sh: build bench_segment first (cmake --build build --target bench_segment)" >&2; exit 1; }
 [ -r "$raster" ] || [ -n "$synth" ] || { echo "compare_peers.sh: cannot read $raster" >&2; exit 1; }
