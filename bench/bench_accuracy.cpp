@@ -155,7 +155,7 @@ int main(int argc, char** argv) try {
         FootprintsRunOptions fo;
         fo.ortho = s.ortho_path;
         fo.cloud = s.cloud_path;
-        fo.seams.enabled = num("seams", 0) != 0;  // terraces split at roof seams (opt-in)
+        fo.seams.enabled = num("seams", 1) != 0;  // terraces split at roof seams (seams=0 turns it off)
         fo.outliers.enabled = num("outliers", 1) != 0;
         const std::string out = dir + "/footprints.gpkg";
         const FootprintsReport fr = run_footprints(out, fo);

@@ -10,7 +10,7 @@ namespace cityforge::cli {
 void add_footprints_command(CLI::App& parent, const GlobalFlags& g, CommandList& out) {
     struct State {
         std::string out, fit = "recursive", mode = "auto", regularize = "lines", detector = "auto", self_training = "on";
-        bool roof_seams = false;
+        bool roof_seams = RoofSeamOptions{}.enabled;
         FootprintsRunOptions options;
     };
     auto s = std::make_shared<State>();
@@ -73,7 +73,9 @@ void add_footprints_command(CLI::App& parent, const GlobalFlags& g, CommandList&
         ->capture_default_str();
     cmd->add_option("--min-split-part-m2", o.mask.min_split_part_m2, "Smallest part split off at a height step, square metres")
         ->capture_default_str();
-    cmd->add_flag("--roof-seams", s->roof_seams, "ortho_cloud: split touching roofs of one height at straight colour seams / valleys (terraces; experimental)");
+    cmd->add_flag("--roof-seams,!--no-roof-seams", s->roof_seams,
+                  "ortho_cloud: split touching roofs of one height (terraces) where the colour steps on one surface, at valleys, or where a ridge turns (on by default)")
+        ->capture_default_str();
     cmd->add_option("--fit-tolerance-pct", o.recursive.tolerance_pct, "Recursive fit: stop below this area error, percent")->capture_default_str();
     cmd->add_option("--regularize-method", s->regularize,
                     "Regularised fit: lines (edge lines snapped to the dominant directions) or cgal (CGAL Shape_regularization contours)")

@@ -21,6 +21,16 @@ void RoofSeamOptions::validate() const {
 namespace {
 
 constexpr double kPi = 3.14159265358979323846;
+// A valley must be this many times deeper than the scatter of the slices'
+// heights about each side's line (sparse points on facets that vary along the
+// slice make noisy slices, and noise dips look like valleys).
+constexpr double kValleyToScatter = 4.0;
+// Where a ridge turns, the level side's cross-section and both sides' scatter
+// stay within this share of the ridge side's rise.
+constexpr double kLevelShare = 0.25;
+// Steepest roof facet, as its rise per unit run (tan 65 deg): steeper slopes
+// between slices are walls.
+constexpr double kSteepestRoof = 2.14;
 
 struct Slice {
     double count = 0;               // cells
@@ -29,21 +39,30 @@ struct Slice {
     double height = 0, height_count = 0;
     double strip_count[3] = {0, 0, 0};  // the same across three strips of the building's width
     std::vector<double> strip_colour[3];
+    double strip_height[3] = {0, 0, 0}, strip_height_count[3] = {0, 0, 0};  // heights per strip
 };
 
 struct Axis {
     double cx, cy;  // unit direction, in cell units
 };
 
+// A building's own origin (its bounding box's first column and row): cell
+// coordinates are taken from it, so that the same building on two windows of
+// a grid gives the same sums to the last bit (tile-size independence).
+struct CellOrigin {
+    std::size_t col = 0, row = 0;
+};
+
 // Cells of one building (linear indices) split into pieces by seams across
 // `axis`; returns a piece index per cell (0 = no split).
-std::vector<int> seams_along(const std::vector<std::size_t>& cells, int w, Axis axis, const Image<float>& colours, const std::vector<uint8_t>& valid,
-                             const Image<float>& ndsm, const std::vector<double>& pixel_sd, const RoofSeamOptions& o, int& cuts) {
+std::vector<int> seams_along(const std::vector<std::size_t>& cells, int w, CellOrigin origin, Axis axis, const Image<float>& colours,
+                             const std::vector<uint8_t>& valid, const Image<float>& ndsm, const std::vector<double>& pixel_sd, const RoofSeamOptions& o,
+                             int& cuts) {
     const int bands = colours.bands;
     std::vector<double> u(cells.size()), vv(cells.size());
     double umin = INFINITY, umax = -INFINITY, vmin = INFINITY, vmax = -INFINITY;
     for (std::size_t i = 0; i < cells.size(); ++i) {
-        const double x = double(cells[i] % std::size_t(w)), y = double(cells[i] / std::size_t(w));
+        const double x = double(cells[i] % std::size_t(w) - origin.col), y = double(cells[i] / std::size_t(w) - origin.row);
         u[i] = x * axis.cx + y * axis.cy;
         vv[i] = -x * axis.cy + y * axis.cx;
         umin = std::min(umin, u[i]), umax = std::max(umax, u[i]);
@@ -76,7 +95,11 @@ std::vector<int> seams_along(const std::vector<std::size_t>& cells, int w, Axis 
             }
         }
         const float z = ndsm.data[k];
-        if (!std::isnan(z)) sl.height += z, sl.height_count += 1;
+        if (!std::isnan(z)) {
+            sl.height += z, sl.height_count += 1;
+            const int strip = std::clamp(static_cast<int>(3.0 * (vv[i] - vmin) / std::max(vmax - vmin, 1e-9)), 0, 2);
+            sl.strip_height[strip] += z, sl.strip_height_count[strip] += 1;
+        }
     }
     // Window statistics on [a, b): count-weighted mean colour, the spread of
     // the slices' means around it, mean height, mean width.
@@ -85,6 +108,8 @@ std::vector<int> seams_along(const std::vector<std::size_t>& cells, int w, Axis 
         std::vector<double> mean;
         double noise2 = 0, height = NAN, width = 0;
         double slope = NAN;  // height change per cell along the axis (least squares over the slices)
+        double intercept = NAN;  // height of that line at slice 0, metres
+        double height_scatter = NAN;  // residual standard deviation of the slices' heights about that line, metres
     };
     auto window = [&](int a, int b) {
         Win r;
@@ -116,7 +141,22 @@ std::vector<int> seams_along(const std::vector<std::size_t>& cells, int w, Axis 
             const double t = j, z = sl.height / sl.height_count;
             st += t, sh += z, stt += t * t, sth += t * z, sn += 1;
         }
-        if (sn >= 3 && sn * stt - st * st > 0) r.slope = (sn * sth - st * sh) / (sn * stt - st * st);
+        if (sn >= 3 && sn * stt - st * st > 0) {
+            r.slope = (sn * sth - st * sh) / (sn * stt - st * st);
+            // Scatter of the slices' heights about that line: a slice along a
+            // ridge or across facets sampled by a few points is noisy, a slice
+            // of one level (along a valley or a flat roof) is not.
+            const double c0 = (sh - r.slope * st) / sn;
+            r.intercept = c0;
+            double rr = 0;
+            for (int j = a; j < b; ++j) {
+                const Slice& sl = s[static_cast<std::size_t>(j)];
+                if (sl.height_count < 1) continue;
+                const double d = sl.height / sl.height_count - (c0 + r.slope * j);
+                rr += d * d;
+            }
+            r.height_scatter = std::sqrt(rr / std::max(1.0, sn - 2));
+        }
         r.ok = true;
         return r;
     };
@@ -139,13 +179,18 @@ std::vector<int> seams_along(const std::vector<std::size_t>& cells, int w, Axis 
     auto same_surface = [&](const Win& L, const Win& R, int m) {
         if (std::isnan(L.slope) || std::isnan(R.slope)) return true;  // no heights: colours alone
         if (std::abs(L.slope - R.slope) > min_slope) return false;
+        // Slices too noisy to see a ridge or a fold (sparse points on facets
+        // that vary along the slice): not known to be one surface.
+        if (!(std::max(L.height_scatter, R.height_scatter) <= 0.5 * o.ridge_rise_m)) return false;
         double peak = -INFINITY;
         for (int j = std::max(0, m - W); j <= std::min(nbins - 1, m + W); ++j) {
             const double z = slice_height(j);
             if (!std::isnan(z)) peak = std::max(peak, z);
         }
-        const double ends = std::max(slice_height(std::max(0, m - W)), slice_height(std::min(nbins - 1, m + W)));
-        return std::isnan(ends) || peak - ends <= o.ridge_rise_m;
+        // The windows' ends read off each side's line (an end slice may hold
+        // no point on a sparse roof).
+        const double ends = std::max(L.intercept + L.slope * (m - W), R.intercept + R.slope * (m + W));
+        return !(peak > -INFINITY) || peak - ends <= o.ridge_rise_m;
     };
     // The step runs straight across the whole width: each third of the width
     // changes colour the same way (a shadow edge or a crown does not).
@@ -167,6 +212,78 @@ std::vector<int> seams_along(const std::vector<std::size_t>& cells, int w, Axis 
         }
         return true;
     };
+    // Cross-section of the roof over the slices [a, b): how far the middle
+    // third of the width stands above the outer thirds (a ridge along the
+    // axis: a gable's or hip's peak), as a mean over the window and the
+    // scatter of the slices around it; NaN without heights in every strip.
+    struct Profile {
+        double rise = NAN, scatter = NAN;
+        double tilt = NAN;  // mean height of the first outer third minus the last, metres
+    };
+    auto cross_profile = [&](int a, int b) {
+        Profile p;
+        if (a < 0 || b > nbins) return p;
+        std::vector<double> r;
+        double tilt = 0;
+        for (int j = a; j < b; ++j) {
+            const Slice& sl = s[static_cast<std::size_t>(j)];
+            if (sl.strip_height_count[0] < 1 || sl.strip_height_count[1] < 1 || sl.strip_height_count[2] < 1) continue;
+            const double h0 = sl.strip_height[0] / sl.strip_height_count[0], h2 = sl.strip_height[2] / sl.strip_height_count[2];
+            r.push_back(sl.strip_height[1] / sl.strip_height_count[1] - 0.5 * (h0 + h2));
+            tilt += h0 - h2;
+        }
+        if (2 * r.size() < static_cast<std::size_t>(b - a)) return p;
+        p.tilt = tilt / double(r.size());
+        p.rise = std::accumulate(r.begin(), r.end(), 0.0) / double(r.size());
+        double v = 0;
+        for (double x : r) v += (x - p.rise) * (x - p.rise);
+        p.scatter = std::sqrt(v / double(r.size()));
+        return p;
+    };
+    // Both sides' lines run down into the valley's floor (two facets meeting
+    // there), rather than one low slice between two level stretches.
+    auto valley_on_lines = [&](const Win& L, const Win& R, int m, double floor_z) {
+        const double depth = std::min(L.height, R.height) - floor_z;
+        const double at_l = L.intercept + L.slope * m, at_r = R.intercept + R.slope * m;
+        // Across the width both sides are level (the ridges run across the
+        // row); a ridge along the row sampled by a few points is not a valley.
+        // Both sides are measured across the whole width, level and not
+        // tilted (a hole in a roof or a lower wing is not a valley), and
+        // their facets are roofs, not walls.
+        const Profile pl = cross_profile(m - W, m), pr = cross_profile(m + 1, m + 1 + W);
+        if (!(std::abs(pl.rise) <= 0.5 * depth && std::abs(pr.rise) <= 0.5 * depth && std::abs(pl.tilt) <= 0.5 * depth &&
+              std::abs(pr.tilt) <= 0.5 * depth))
+            return false;
+        if (std::max(-L.slope, R.slope) > kSteepestRoof * o.gsd_m) return false;
+        // (the floor may lie between two slices: half a slice's rise of slack)
+        return std::abs(at_l - floor_z) < 0.5 * depth + std::abs(L.slope) && std::abs(at_r - floor_z) < 0.5 * depth + std::abs(R.slope);
+    };
+    // The ridge turns: on one side a ridge runs along the axis (the middle
+    // stands above the outer thirds all along the window), on the other the
+    // cross-section is level all along (ridge across the axis, or none), and
+    // the change happens at one straight line across the whole width. A hip
+    // fades its ridge out gradually, so it does not pass.
+    auto ridge_turns = [&](int m, const Win& left, const Win& right) {
+        const Profile L = cross_profile(m - W, m), R = cross_profile(m + 1, m + 1 + W);
+        if (std::isnan(L.rise) || std::isnan(R.rise) || std::isnan(left.slope) || std::isnan(right.slope)) return 0.0;
+        const Profile& ridge = L.rise > R.rise ? L : R;
+        const Profile& level = L.rise > R.rise ? R : L;
+        if (ridge.rise < o.valley_depth_m) return 0.0;
+        const double tol = kLevelShare * ridge.rise;
+        if (std::abs(level.rise) > tol || level.scatter > tol || ridge.scatter > tol) return 0.0;
+        // The ridge side is a symmetric peak (a gable or hip, not a shed or a
+        // cut corner), and the level side's facet rises away from the seam (a
+        // roof whose ridge runs across: the seam is at its eave).
+        if (std::abs(ridge.tilt) > tol) return 0.0;
+        const double rising_away = L.rise > R.rise ? right.slope : -left.slope;
+        if (rising_away < 2 * min_slope) return 0.0;
+        // Abrupt: the slices on either side of the seam already hold each side's cross-section.
+        const Profile next_ridge = L.rise > R.rise ? cross_profile(m - 1, m) : cross_profile(m + 1, m + 2);
+        const Profile next_level = L.rise > R.rise ? cross_profile(m + 1, m + 2) : cross_profile(m - 1, m);
+        if (std::isnan(next_ridge.rise) || std::isnan(next_level.rise) || next_ridge.rise < ridge.rise - tol || std::abs(next_level.rise) > tol)
+            return 0.0;
+        return ridge.rise - std::abs(level.rise);
+    };
     std::vector<Candidate> cand;
     for (int m = min_len; m + min_len < nbins; ++m) {
         // Seam slice m (mixed pixels) left out; windows on both sides.
@@ -182,10 +299,16 @@ std::vector<int> seams_along(const std::vector<std::size_t>& cells, int w, Axis 
         // A valley: both sides slope down into the seam, alike (two pitched roofs of one pitch).
         const bool valley = !std::isnan(hm) && !std::isnan(L.height) && !std::isnan(R.height) && !std::isnan(L.slope) && !std::isnan(R.slope) &&
                             std::min(L.height, R.height) - hm > o.valley_depth_m && L.slope < -2 * min_slope && R.slope > 2 * min_slope &&
-                            std::abs(L.slope + R.slope) < 0.5 * std::max(-L.slope, R.slope);
+                            std::abs(L.slope + R.slope) < 0.5 * std::max(-L.slope, R.slope) &&
+                            std::min(L.height, R.height) - hm > kValleyToScatter * std::max(L.height_scatter, R.height_scatter) &&
+                            valley_on_lines(L, R, m, hm);
+        const double turn = valley ? 0.0 : ridge_turns(m, L, R);
         if (valley) {
             seam = true;  // a valley across the row
             strength = 1e6 + std::min(L.height, R.height) - hm;
+        } else if (turn > 0) {
+            seam = true;  // a ridge along the row meets a roof with its ridge across
+            strength = 1e6 + turn;
         } else if (same_surface(L, R, m)) {
             double d2 = 0;
             std::vector<double> step_vec(static_cast<std::size_t>(bands));
@@ -274,12 +397,14 @@ int split_at_roof_seams(BuildingMask& mask, const Image<float>& colours, const s
             continue;
         }
         // Principal axes from the second moments; seams across each.
+        CellOrigin origin{std::size_t(w), cl.front() / std::size_t(w)};  // cells are in raster order
+        for (std::size_t k : cl) origin.col = std::min(origin.col, k % std::size_t(w));
         double mx = 0, my = 0;
-        for (std::size_t k : cl) mx += double(k % std::size_t(w)), my += double(k / std::size_t(w));
+        for (std::size_t k : cl) mx += double(k % std::size_t(w) - origin.col), my += double(k / std::size_t(w) - origin.row);
         mx /= double(cl.size()), my /= double(cl.size());
         double sxx = 0, sxy = 0, syy = 0;
         for (std::size_t k : cl) {
-            const double dx = double(k % std::size_t(w)) - mx, dy = double(k / std::size_t(w)) - my;
+            const double dx = double(k % std::size_t(w) - origin.col) - mx, dy = double(k / std::size_t(w) - origin.row) - my;
             sxx += dx * dx, sxy += dx * dy, syy += dy * dy;
         }
         const double ang = 0.5 * std::atan2(2 * sxy, sxx - syy);
@@ -298,7 +423,7 @@ int split_at_roof_seams(BuildingMask& mask, const Image<float>& colours, const s
             sd[static_cast<std::size_t>(c)] = cnt > 1 ? std::sqrt(std::max(0.0, sum2 / cnt - (sum / cnt) * (sum / cnt))) : 0.0;
         }
         const Axis along{std::cos(a0), std::sin(a0)}, across{-std::sin(a0), std::cos(a0)};
-        const std::vector<int> p1 = seams_along(cl, w, along, colours, valid, ndsm, sd, o, cuts);
+        const std::vector<int> p1 = seams_along(cl, w, origin, along, colours, valid, ndsm, sd, o, cuts);
         const int n1 = p1.empty() ? 1 : *std::max_element(p1.begin(), p1.end()) + 1;
         uint32_t used = 0;
         for (int a = 0; a < n1; ++a) {
@@ -306,7 +431,7 @@ int split_at_roof_seams(BuildingMask& mask, const Image<float>& colours, const s
             for (std::size_t i = 0; i < cl.size(); ++i)
                 if (p1[i] == a) sub.push_back(cl[i]);
             if (sub.empty()) continue;
-            const std::vector<int> p2 = seams_along(sub, w, across, colours, valid, ndsm, sd, o, cuts);
+            const std::vector<int> p2 = seams_along(sub, w, origin, across, colours, valid, ndsm, sd, o, cuts);
             const int n2 = p2.empty() ? 1 : *std::max_element(p2.begin(), p2.end()) + 1;
             for (std::size_t i = 0; i < sub.size(); ++i) part[sub[i]] = base + used + static_cast<uint32_t>(p2[i]);
             used += static_cast<uint32_t>(n2);

@@ -128,6 +128,7 @@ json to_json(const RunOptions& o) {
               {"cloud_cell_px", o.extraction.cloud_cell_factor},
               {"use_point_classes", o.extraction.mask.use_classes < 0 ? "auto" : o.extraction.mask.use_classes ? "yes" : "no"},
               {"split_step_m", m.split_step_m},
+              {"roof_seams", o.extraction.seams.enabled},
               {"min_split_part_m2", m.min_split_part_m2},
               {"fit", to_string(o.extraction.fit)},
               {"fit_tolerance_pct", o.extraction.recursive.tolerance_pct},
@@ -169,12 +170,13 @@ RunOptions run_options_from_json(const json& j, const std::string& where, RunOpt
     if (j.contains("extraction")) {
         const json& x = j["extraction"];
         const std::string w = where + ": extraction";
-        check_keys(x, {"mode", "cloud_cell_px", "use_point_classes", "min_height_m", "min_area_m2", "min_hole_m2", "opening_px", "hidden_completion_max_share", "split_step_m", "min_split_part_m2", "fit", "fit_tolerance_pct", "simplify_m", "footprint_grid_m", "detector", "model"}, w);
+        check_keys(x, {"mode", "cloud_cell_px", "use_point_classes", "min_height_m", "min_area_m2", "min_hole_m2", "opening_px", "hidden_completion_max_share", "split_step_m", "roof_seams", "min_split_part_m2", "fit", "fit_tolerance_pct", "simplify_m", "footprint_grid_m", "detector", "model"}, w);
         take(x, "min_height_m", o.extraction.mask.min_height_m, w), take(x, "min_area_m2", o.extraction.mask.min_area_m2, w);
         take(x, "min_hole_m2", o.extraction.mask.min_hole_m2, w), take(x, "opening_px", o.extraction.mask.opening_radius_px, w);
         take(x, "hidden_completion_max_share", o.extraction.mask.hidden_completion_max_share, w);
         take(x, "cloud_cell_px", o.extraction.cloud_cell_factor, w);
         take(x, "split_step_m", o.extraction.mask.split_step_m, w), take(x, "min_split_part_m2", o.extraction.mask.min_split_part_m2, w);
+        take(x, "roof_seams", o.extraction.seams.enabled, w);
         take(x, "fit_tolerance_pct", o.extraction.recursive.tolerance_pct, w), take(x, "simplify_m", o.extraction.simplify_m, w);
         take(x, "footprint_grid_m", o.footprint_grid_m, w);
         take(x, "model", o.extraction.model, w);
@@ -691,6 +693,18 @@ WindowBuildings detect_on_window(const RunManifest& m, const PixelWindow& win, P
         OrthoRefineOptions ro = o.extraction.segmentation;
         ro.cloud_edges = o.extraction.cloud_cell_factor <= 1;
         refine_buildings_with_ortho(d.mask, cells, colours, valid, wc.rasters.ndsm, 20.0 / pc.crs.z_unit_m, {}, vegetation, ro);
+        RoofSeamOptions so = o.extraction.seams;
+        so.gsd_m = mo.gsd_m, so.ridge_rise_m /= pc.crs.z_unit_m, so.valley_depth_m /= pc.crs.z_unit_m;
+        const Image<uint32_t> before = d.mask.labels;
+        if (split_at_roof_seams(d.mask, colours, valid, wc.rasters.ndsm, so) > 0) {
+            // Terraces cut at their seams: each part keeps its building's
+            // cells before the redraw in its box (the box decides which tile
+            // owns it and whether the window holds it whole).
+            std::vector<PixelBox> box(d.mask.count + 1, PixelBox{});
+            for (std::size_t k = 0; k < before.data.size(); ++k)
+                if (const uint32_t l = d.mask.labels.data[k]; l && before.data[k]) box[l] = d.box[before.data[k]];
+            d.box = std::move(box);
+        }
     }
     if (mo.hidden_completion_max_share > 0) complete_hidden_roofs(d.mask, cells, mo.hidden_completion_max_share);
     d.id.assign(d.mask.count + 1, 0);

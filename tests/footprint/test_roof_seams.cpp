@@ -120,3 +120,55 @@ TEST_CASE("No split at a ridge, a shadow edge over part of the width, or a gradu
         CHECK(m.count == 1);
     }
 }
+
+TEST_CASE("Pitched terraces split where a ridge along the row meets a house whose ridge runs across it", "[footprint][seams]") {
+    BuildingMask m = row_mask();
+    const Image<float> c = colours({}, {0.0f}, 4.0f);  // one colour: only the roof's shape tells
+    // House A (x 10-49, 20 m): ridge along the row at y = 20 (mid-width); house
+    // B (x 50-89, 20 m): ridge across the row at x = 70. Pitch 35 deg, eaves 6 m.
+    const double t = std::tan(35.0 * 3.14159265 / 180.0);
+    Image<float> h = flat_heights(0.0f);
+    for (int y = kY0; y <= kY1; ++y)
+        for (int x = kX0; x <= kX1; ++x) {
+            const double across = std::abs((y + 0.5) - 20.0) * 0.5, along = std::abs((x + 0.5) - 70.0) * 0.5;  // metres from each ridge
+            h.at(0, x, y) = static_cast<float>(x < 50 ? 6.0 + t * (5.0 - across) : 6.0 + t * (10.0 - along));
+        }
+    RoofSeamOptions o;
+    CHECK(split_at_roof_seams(m, c, {}, h, o) == 1);
+    REQUIRE(m.count == 2);
+    CHECK(labels_in(m, kX0, kY0, 48, kY1).size() == 1);
+    CHECK(labels_in(m, 51, kY0, kX1, kY1).size() == 1);
+    CHECK(m.labels.at(0, 30, 20) != m.labels.at(0, 70, 20));
+}
+
+TEST_CASE("No split of a hip roof's end, nor of a sparse, noisy roof at a dip of one slice", "[footprint][seams]") {
+    RoofSeamOptions o;
+    const Image<float> c = colours({}, {0.0f}, 4.0f);
+    const double t = std::tan(30.0 * 3.14159265 / 180.0);
+    SECTION("a hip: the ridge along the row fades into the end facets") {
+        BuildingMask m = row_mask();
+        Image<float> h = flat_heights(0.0f);
+        for (int y = kY0; y <= kY1; ++y)
+            for (int x = kX0; x <= kX1; ++x) {
+                const double to_side = 5.0 - std::abs((y + 0.5) - 20.0) * 0.5, to_end = std::min(x + 0.5 - kX0, kX1 + 1 - (x + 0.5)) * 0.5;
+                h.at(0, x, y) = static_cast<float>(6.0 + t * std::min(to_side, to_end));
+            }
+        CHECK(split_at_roof_seams(m, c, {}, h, o) == 0);
+        CHECK(m.count == 1);
+    }
+    SECTION("a gable along the row measured at a fifth of its cells, one slice with a low point") {
+        // A dark roof: few returns, so each slice's mean height depends on
+        // where its points fall on the facets; noise, not a valley.
+        BuildingMask m = row_mask();
+        Image<float> h(kW, kH, 1, NAN);
+        for (int y = kY0; y <= kY1; ++y)
+            for (int x = kX0; x <= kX1; ++x) {
+                if (noise(x, y, 7, 1.0f) < 0.6f) continue;  // a fifth of the cells measured
+                h.at(0, x, y) = static_cast<float>(6.0 + t * (5.0 - std::abs((y + 0.5) - 20.0) * 0.5));
+            }
+        for (int y = kY0; y <= kY1; ++y)
+            if (!std::isnan(h.at(0, 45, y))) h.at(0, 45, y) = 5.0f;
+        CHECK(split_at_roof_seams(m, c, {}, h, o) == 0);
+        CHECK(m.count == 1);
+    }
+}
