@@ -299,9 +299,17 @@ void flood_two_threads(const FloodInput& in, const Progress& progress) {
 
 Image<float> multiband_gradient(const Image<float>& image, const WatershedOptions& options) {
     const int w = image.width, h = image.height;
-    Image<float> grad(w, h, 1, 0.0f);
+    // Small pages: these buffers are read row by row, and fresh huge pages
+    // cost far more to touch first on a virtual machine (small_page_vector).
+    Image<float> grad;
+    grad.width = w, grad.height = h, grad.bands = 1;
+    grad.data = small_page_vector<float>(image.pixel_count());
+    grad.data.resize(image.pixel_count(), 0.0f);
     LargeVector<float> smooth, tmp;
-    if (options.smoothing_sigma_px > 0.0) smooth.resize(image.pixel_count()), tmp.resize(image.pixel_count());
+    if (options.smoothing_sigma_px > 0.0) {
+        smooth = small_page_vector<float>(image.pixel_count()), tmp = small_page_vector<float>(image.pixel_count());
+        smooth.resize(image.pixel_count()), tmp.resize(image.pixel_count());
+    }
     for (int b = 0; b < image.bands; ++b) {
         const double wb = options.band_weights.empty() ? 1.0 : options.band_weights[b];
         if (wb == 0.0) continue;
