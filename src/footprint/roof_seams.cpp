@@ -258,6 +258,17 @@ std::vector<int> seams_along(const std::vector<std::size_t>& cells, int w, CellO
         // (the floor may lie between two slices: half a slice's rise of slack)
         return std::abs(at_l - floor_z) < 0.5 * depth + std::abs(L.slope) && std::abs(at_r - floor_z) < 0.5 * depth + std::abs(R.slope);
     };
+    // A terrace's roofs run level along the row (flat, or a ridge along it)
+    // with one cross-section on both sides of the seam; a facet rising along
+    // the axis, or a cross-section that changes (slices cutting a hip's
+    // facets at an angle), shades differently along the axis by itself.
+    auto level_along_row = [&](const Win& L, const Win& R, int m) {
+        if (std::isnan(L.slope) || std::isnan(R.slope)) return true;  // no heights: colours alone
+        if (std::max(std::abs(L.slope), std::abs(R.slope)) > min_slope) return false;
+        const Profile pl = cross_profile(m - W, m), pr = cross_profile(m + 1, m + 1 + W);
+        if (std::isnan(pl.rise) || std::isnan(pr.rise)) return true;
+        return std::abs(pl.rise - pr.rise) <= o.ridge_rise_m && std::abs(pl.tilt - pr.tilt) <= o.ridge_rise_m;
+    };
     // The ridge turns: on one side a ridge runs along the axis (the middle
     // stands above the outer thirds all along the window), on the other the
     // cross-section is level all along (ridge across the axis, or none), and
@@ -309,7 +320,7 @@ std::vector<int> seams_along(const std::vector<std::size_t>& cells, int w, CellO
         } else if (turn > 0) {
             seam = true;  // a ridge along the row meets a roof with its ridge across
             strength = 1e6 + turn;
-        } else if (same_surface(L, R, m)) {
+        } else if (same_surface(L, R, m) && level_along_row(L, R, m)) {
             double d2 = 0;
             std::vector<double> step_vec(static_cast<std::size_t>(bands));
             for (int c = 0; c < bands; ++c) {
