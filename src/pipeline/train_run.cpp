@@ -360,7 +360,7 @@ TrainReport run_train(const std::string& out_path, const TrainOptions& o, bool o
                                                     o.detector.pixel.enabled ? &pixel.out_of_fold[i] : nullptr);
     const std::vector<std::string> names = detect::feature_names(layout, int(o.detector.segmentation.scales.size()) - 1, o.detector.pixel.enabled);
     // Adjacent segment pairs and their "same building" labels (the pair classifier).
-    const bool merging = !o.merge_thresholds.empty();
+    const bool merging = !o.merge_thresholds.empty() || o.detector.merge_threshold > 0.0;
     const std::size_t pair_cols = detect::pair_feature_names(int(o.detector.segmentation.scales.size()) - 1, o.detector.pixel.enabled).size();
     if (merging)
         for (std::size_t i = 0; i < data.size(); ++i) {

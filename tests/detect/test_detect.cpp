@@ -80,8 +80,9 @@ TEST_CASE("A detector trained on one synthetic town finds the buildings of anoth
         tested += f.test_segments;
     }
     CHECK(tested == rep.segments);
-    std::printf("detect synth: CV on town A pooled P %.3f R %.3f F1 %.3f (threshold %.2f, %zu segments, %zu bytes)\n", rep.pooled_objects.precision,
-                rep.pooled_objects.recall, rep.pooled_objects.f1, rep.threshold, rep.segments, rep.model_bytes);
+    std::printf("detect synth: CV on town A pooled P %.3f R %.3f F1 %.3f (threshold %.2f, merge threshold %.2f, %zu segments, %zu bytes)\n",
+                rep.pooled_objects.precision, rep.pooled_objects.recall, rep.pooled_objects.f1, rep.threshold, rep.merge_threshold, rep.segments,
+                rep.model_bytes);
     CHECK(rep.pooled_objects.f1 >= 0.85);
 
     // The model file says what it is.
