@@ -72,40 +72,57 @@ LargeVector<T> small_page_vector(std::size_t count) {
     return v;
 }
 
-// Separable Gaussian blur of one band, edges clamped.
-void gaussian_blur(const float* in, float* out, float* tmp_buffer, int w, int h, double sigma) {
-    const int radius = std::max(1, static_cast<int>(std::ceil(3.0 * sigma)));
+// Normalised Gaussian kernel of standard deviation sigma (pixels), 2r + 1 taps.
+std::vector<float> gaussian_kernel(double sigma, int& radius) {
+    radius = std::max(1, static_cast<int>(std::ceil(3.0 * sigma)));
     std::vector<float> k(2 * radius + 1);
     double sum = 0.0;
     for (int i = -radius; i <= radius; ++i) sum += k[i + radius] = static_cast<float>(std::exp(-0.5 * i * i / (sigma * sigma)));
     for (auto& x : k) x = static_cast<float>(x / sum);
+    return k;
+}
+
+// Horizontal pass of the blur over one row (edges clamped).
+inline void blur_row_horizontal(const float* row, float* t, int w, const std::vector<float>& k, int radius) {
+    // Borders clamp; the interior runs without branches so it vectorises.
+    auto clamped = [&](int x) {
+        float s = 0.0f;
+        for (int i = -radius; i <= radius; ++i) s += k[i + radius] * row[std::clamp(x + i, 0, w - 1)];
+        return s;
+    };
+    const int lo = std::min(radius, w), hi = std::max(lo, w - radius);
+    for (int x = 0; x < lo; ++x) t[x] = clamped(x);
+    for (int x = lo; x < hi; ++x) t[x] = 0.0f;
+    for (int i = -radius; i <= radius; ++i) {
+        const float ki = k[i + radius];
+        const float* src = row + i;
+        for (int x = lo; x < hi; ++x) t[x] += ki * src[x];
+    }
+    for (int x = hi; x < w; ++x) t[x] = clamped(x);
+}
+
+// Vertical pass for row y: `hrow(r)` gives the horizontally blurred row r
+// (r already clamped to the image).
+template <typename RowOf>
+inline void blur_row_vertical(int y, int h, float* o, int w, const std::vector<float>& k, int radius, const RowOf& hrow) {
+    for (int x = 0; x < w; ++x) o[x] = 0.0f;
+    for (int i = -radius; i <= radius; ++i) {
+        const float* t = hrow(std::clamp(y + i, 0, h - 1));
+        const float ki = k[i + radius];
+        for (int x = 0; x < w; ++x) o[x] += ki * t[x];
+    }
+}
+
+// Separable Gaussian blur of one band, edges clamped.
+void gaussian_blur(const float* in, float* out, float* tmp_buffer, int w, int h, double sigma) {
+    int radius = 0;
+    const std::vector<float> k = gaussian_kernel(sigma, radius);
     tbb::parallel_for(0, h, [&](int y) {
-        const float* row = in + static_cast<std::size_t>(y) * w;
-        float* t = tmp_buffer + static_cast<std::size_t>(y) * w;
-        // Borders clamp; the interior runs without branches so it vectorises.
-        auto clamped = [&](int x) {
-            float s = 0.0f;
-            for (int i = -radius; i <= radius; ++i) s += k[i + radius] * row[std::clamp(x + i, 0, w - 1)];
-            return s;
-        };
-        const int lo = std::min(radius, w), hi = std::max(lo, w - radius);
-        for (int x = 0; x < lo; ++x) t[x] = clamped(x);
-        for (int x = lo; x < hi; ++x) t[x] = 0.0f;
-        for (int i = -radius; i <= radius; ++i) {
-            const float ki = k[i + radius];
-            const float* src = row + i;
-            for (int x = lo; x < hi; ++x) t[x] += ki * src[x];
-        }
-        for (int x = hi; x < w; ++x) t[x] = clamped(x);
+        blur_row_horizontal(in + static_cast<std::size_t>(y) * w, tmp_buffer + static_cast<std::size_t>(y) * w, w, k, radius);
     });
     tbb::parallel_for(0, h, [&](int y) {
-        float* o = out + static_cast<std::size_t>(y) * w;
-        for (int x = 0; x < w; ++x) o[x] = 0.0f;
-        for (int i = -radius; i <= radius; ++i) {
-            const float* t = tmp_buffer + static_cast<std::size_t>(std::clamp(y + i, 0, h - 1)) * w;
-            const float ki = k[i + radius];
-            for (int x = 0; x < w; ++x) o[x] += ki * t[x];
-        }
+        blur_row_vertical(y, h, out + static_cast<std::size_t>(y) * w, w, k, radius,
+                          [&](int r) { return tmp_buffer + static_cast<std::size_t>(r) * w; });
     });
 }
 
@@ -158,6 +175,54 @@ LargeVector<uint16_t> unsmoothed_gradient_levels(const Image<float>& image, cons
             }
             uint16_t* out = level.data() + static_cast<std::size_t>(y) * w;
             for (int x = 0; x < w; ++x) out[x] = gradient_level(std::sqrt(g[x]) * norm);
+        }
+    });
+    return level;
+}
+
+// The quantised gradient of the smoothed bands without any full-size float
+// raster (the blurred band, the blur's scratch and the gradient were three
+// of them: 768 MB at 64 MP). Blocks of rows are blurred and differentiated
+// with their halo in small buffers; every row goes through the same
+// operations as in gaussian_blur and multiband_gradient, so the levels are
+// the same bit for bit.
+LargeVector<uint16_t> smoothed_gradient_levels(const Image<float>& image, const WatershedOptions& options) {
+    const int w = image.width, h = image.height;
+    LargeVector<uint16_t> level = small_page_vector<uint16_t>(image.pixel_count());
+    level.resize(image.pixel_count());
+    const float norm = gradient_norm(image, options);
+    int radius = 0;
+    const std::vector<float> k = gaussian_kernel(options.smoothing_sigma_px, radius);
+    constexpr int kBlockRows = 64;
+    const int blocks = (h + kBlockRows - 1) / kBlockRows;
+    const std::size_t row = static_cast<std::size_t>(w);
+    tbb::parallel_for(tbb::blocked_range<int>(0, blocks), [&](const tbb::blocked_range<int>& range) {
+        std::vector<float> hb, sb, g;  // horizontally blurred rows, smoothed rows, gradient sums
+        for (int blk = range.begin(); blk != range.end(); ++blk) {
+            const int y0 = blk * kBlockRows, y1 = std::min(h, y0 + kBlockRows);
+            const int sy0 = std::max(0, y0 - 1), sy1 = std::min(h, y1 + 1);              // smoothed rows the Sobel reads
+            const int hy0 = std::max(0, sy0 - radius), hy1 = std::min(h, sy1 + radius);  // blurred rows the vertical pass reads
+            hb.resize(static_cast<std::size_t>(hy1 - hy0) * row);
+            sb.resize(static_cast<std::size_t>(sy1 - sy0) * row);
+            g.assign(static_cast<std::size_t>(y1 - y0) * row, 0.0f);
+            for (int b = 0; b < image.bands; ++b) {
+                const double wb = options.band_weights.empty() ? 1.0 : options.band_weights[b];
+                if (wb == 0.0) continue;
+                const float* src = image.band_data(b);
+                for (int r = hy0; r < hy1; ++r) blur_row_horizontal(src + r * row, hb.data() + (r - hy0) * row, w, k, radius);
+                for (int r = sy0; r < sy1; ++r)
+                    blur_row_vertical(r, h, sb.data() + (r - sy0) * row, w, k, radius,
+                                      [&](int q) { return hb.data() + static_cast<std::size_t>(q - hy0) * row; });
+                auto smoothed = [&](int r) { return sb.data() + static_cast<std::size_t>(r - sy0) * row; };
+                for (int y = y0; y < y1; ++y)
+                    add_sobel_row(smoothed(std::max(0, y - 1)), smoothed(y), smoothed(std::min(h - 1, y + 1)), w,
+                                  static_cast<float>(wb), g.data() + static_cast<std::size_t>(y - y0) * row);
+            }
+            for (int y = y0; y < y1; ++y) {
+                const float* gy = g.data() + static_cast<std::size_t>(y - y0) * row;
+                uint16_t* out = level.data() + static_cast<std::size_t>(y) * row;
+                for (int x = 0; x < w; ++x) out[x] = gradient_level(std::sqrt(gy[x]) * norm);
+            }
         }
     });
     return level;
@@ -341,15 +406,8 @@ Oversegmentation watershed_oversegment(const Image<float>& image, const std::vec
     // Integer levels (1/4 grey level) for a bucket (hierarchical) queue.
     // Without smoothing, straight from the bands (no float gradient raster).
     LargeVector<uint16_t> level;
-    if (options.smoothing_sigma_px > 0.0) {
-        const Image<float> grad = multiband_gradient(image, options);
-        const float* g = grad.band_data(0);
-        level = small_page_vector<uint16_t>(n);
-        level.resize(n);
-        parallel_for_each_index(n, [&](std::size_t i) { level[i] = gradient_level(g[i]); });
-    } else {
-        level = unsmoothed_gradient_levels(image, options);
-    }
+    if (options.smoothing_sigma_px > 0.0) level = smoothed_gradient_levels(image, options);
+    else level = unsmoothed_gradient_levels(image, options);
     progress(0.3, "gradient");
 
     // Counting sort of valid pixels by level; ties stay in raster order
