@@ -63,6 +63,8 @@ void add_densify_options(CLI::App* cmd, photo::DensifyOptions& d) {
     cmd->add_option("--patch-grid", d.patch_grid, "Patch samples mu per side")->capture_default_str();
     cmd->add_option("--min-ncc", d.min_ncc, "NCC for an image to count as seeing a patch")->capture_default_str();
     cmd->add_option("--min-views", d.min_views, "Images per patch, reference included")->capture_default_str();
+    cmd->add_option("--min-view-share", d.min_view_share, "Images per patch: also this share of the images that should see it (0 = off)")
+        ->capture_default_str();
     cmd->add_option("--neighbour-images", d.neighbour_images, "Candidate images per reference image")->capture_default_str();
     cmd->add_option("--iterations", d.iterations, "Expansion + filtering rounds")->capture_default_str();
     cmd->add_option("--points-per-patch", d.points_per_patch_side, "Output points per patch side (1 = centres)")->capture_default_str();

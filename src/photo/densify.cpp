@@ -22,6 +22,7 @@ void DensifyOptions::validate() const {
     if (patch_grid < 3 || patch_grid > 15 || patch_grid % 2 == 0) throw Error("--patch-grid", "must be odd, 3..15");
     if (!(min_ncc > -1 && min_ncc < 1)) throw Error("--min-ncc", "must be in (-1, 1)");
     if (min_views < 2 || min_views > 20) throw Error("--min-views", "must be 2..20");
+    if (!(min_view_share >= 0 && min_view_share <= 1)) throw Error("--min-view-share", "must be 0..1");
     if (neighbour_images < 1 || neighbour_images > 50) throw Error("--neighbour-images", "must be 1..50");
     if (!(min_baseline_ratio >= 0 && min_baseline_ratio < 1)) throw Error("--min-baseline", "must be 0..1 of the depth");
     if (!(max_view_angle_deg > 10 && max_view_angle_deg < 89)) throw Error("--max-view-angle", "must be 10..89 degrees");
@@ -109,6 +110,14 @@ public:
             }
             std::sort(d.begin(), d.end());
             for (std::size_t k = 0; k < d.size() && static_cast<int>(k) < o.neighbour_images; ++k) views_[i].neighbours.push_back(d[k].second);
+        }
+        // Patch centres must lie within the scene's height range, widened by
+        // half its span (at least 5 m): a depth search that ran away along a
+        // textureless ray (km below the ground) is refused.
+        if (z_known) {
+            const double lo = set.scene_z_range_m[0], hi = set.scene_z_range_m[1];
+            const double pad = std::max(5.0, 0.5 * (hi - lo));
+            z_lo_ = lo - pad - origin_.z(), z_hi_ = hi + pad - origin_.z();
         }
         cells_.resize(views_.size());
         for (std::size_t i = 0; i < views_.size(); ++i) cells_[i].assign(static_cast<std::size_t>(views_[i].cols) * views_[i].rows, {});
@@ -241,6 +250,7 @@ public:
         }
         Patch p;
         p.c = rc.centre + t * ray;
+        if (p.c.z() < z_lo_ || p.c.z() > z_hi_) return std::nullopt;
         p.n = normal_of(theta, phi);
         p.ref = ref;
         cand = candidates(p.c, p.n, ref);
@@ -250,6 +260,7 @@ public:
         for (std::size_t k = 0; k < per.size(); ++k)
             if (per[k] >= o_.min_ncc) p.vis.push_back(cand[k + 1]), sum += 1.0 - per[k];
         if (static_cast<int>(p.vis.size()) < o_.min_views) return std::nullopt;
+        if (static_cast<double>(p.vis.size()) < std::ceil(o_.min_view_share * static_cast<double>(cand.size()) - 1e-9)) return std::nullopt;
         p.g = sum / static_cast<double>(p.vis.size() - 1);
         return p;
     }
@@ -392,6 +403,7 @@ private:
     Eigen::Vector3d origin_;
     std::vector<PhotoCamera> local_;
     std::vector<View> views_;
+    double z_lo_ = -1e300, z_hi_ = 1e300;  // allowed patch centre heights (local frame)
     std::vector<Patch> patches_;
     std::vector<uint8_t> alive_;
     std::vector<std::vector<std::vector<int>>> cells_;

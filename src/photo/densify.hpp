@@ -31,6 +31,12 @@ struct DensifyOptions {
     int patch_grid = 7;              ///< mu: samples per patch side (one per reference pixel)
     double min_ncc = 0.65;           ///< an image joins V*(p) when its NCC with R(p) is at least this
     int min_views = 2;               ///< |V*(p)| including R(p)
+    /// |V*(p)| must also reach this share of the images that should see the
+    /// patch (the reference and its neighbour images that hold it in frame
+    /// within max_view_angle_deg; rounded up; 0 = off): on a surface that many
+    /// photos see, two images agreeing on a wrong depth (repeated paving, weak
+    /// texture) is not enough.
+    double min_view_share = 0.5;
     int neighbour_images = 6;        ///< candidate images per reference image (closest centres)
     /// Neighbours need a baseline of at least this share of the reference
     /// camera's height above the scene (heads of one oblique camera have none).

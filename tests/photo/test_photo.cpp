@@ -170,6 +170,31 @@ TEST_CASE("stereo and densify reach accuracy floors on synthetic photos", "[phot
     CHECK(double(co.patches) < 0.8 * double(one.patches));
     CHECK(double(co.patches) > 0.3 * double(one.patches));
     CHECK(cco.scores[0].precision > 0.85);
+    // Patch centres stay within the scene's height range widened by half its
+    // span, at least 5 m (a depth search that ran away along a weak-texture
+    // ray, as on Seattle's plaza, km below the ground): a range cut 2 m above
+    // the ground keeps every point below 2 + 5 m (plus a patch's half width).
+    double zmin = 1e300, zmax = -1e300;
+    for (double z : one.cloud.z) zmin = std::min(zmin, z), zmax = std::max(zmax, z);
+    const double ground = set.scene_z_range_m[0];
+    REQUIRE(zmax > ground + 8.0);  // buildings above the cut
+    photo::CameraSet low = set;
+    low.scene_z_range_m = {ground, ground + 2.0};
+    const photo::DensifyResult lo = photo::densify_patches(images, low, {}, o, "views");
+    double lo_max = -1e300;
+    for (double z : lo.cloud.z) lo_max = std::max(lo_max, z);
+    INFO("z range " << zmin << ".." << zmax << ", cut at " << ground + 2.0 << ": max " << lo_max);
+    CHECK(lo_max < ground + 7.5);
+    CHECK(lo.cloud.size() > 0);
+    // A patch must also be confirmed by a share of the images that should see
+    // it: all of them (share 1) keeps fewer patches, not less precise ones.
+    photo::DensifyOptions strict = o;
+    strict.min_view_share = 1.0;
+    const photo::DensifyResult sv = photo::densify_patches(images, set, {}, strict, "views");
+    const CloudComparison csv = compare_clouds(sv.cloud, surface, {0.25});
+    INFO("min_view_share 1: " << sv.patches << " patches (" << one.patches << "), P@0.25 " << csv.scores[0].precision);
+    CHECK(sv.patches < one.patches);
+    CHECK(csv.scores[0].precision > cd.scores[1].precision - 0.01);
     // Densification beats its own seeds (the sparse, feature-based points) by far in recall.
     photo::DensifyOptions centres = o;
     centres.points_per_patch_side = 1;
