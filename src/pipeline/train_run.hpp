@@ -78,7 +78,7 @@ struct TrainOptions {
     /// Candidate DetectorOptions::merge_threshold values (buildings grouped
     /// by the pair classifier, segment_merge.hpp), tried with every threshold
     /// against the split levels; empty = no pair classifier is trained.
-    std::vector<double> merge_thresholds{0.5, 0.6, 0.7, 0.8, 0.9, 0.95};
+    std::vector<double> merge_thresholds{0.5, 0.6, 0.7, 0.8, 0.9};
     void validate() const;
 };
 
