@@ -46,7 +46,7 @@ struct RoofSeamOptions {
     /// is a seam whatever the colours; metres. Also the least rise of a ridge
     /// along the row (middle third of the width above the outer thirds) that
     /// counts as a ridge where it turns.
-    double valley_depth_m = 0.5;
+    double valley_depth_m = 0.3;
     /// The seam's slice and both sides must be about equally wide (each at
     /// least this share of the widest): a straight row, not the corner of an
     /// L or the wing of a U. The colour step must also show in each third of
