@@ -76,6 +76,23 @@ TEST_CASE("run: the same bytes for any tiling, buildings larger than a tile and 
         // Prime tile sizes (33.5 and 50.5 m; its largest building is 73 m long), overlaps below the context.
         check_tilings(dir, "lidar", so, "", {{67, 0.0, 1}, {101, 12.0, 2}});
     }
+    SECTION("terraced town: rows of touching houses cut at their roof seams across tiles") {
+        SynthOptions so;
+        so.size_m = 200, so.seed = 7, so.cloud_density_m2 = 8;
+        so.variation.terraced_block_share = 0.6;
+        // Tiles of 33.5 and 50.5 m; terrace rows run up to 70 m, one building is 73 m long.
+        check_tilings(dir, "terraces", so, "", {{67, 0.0, 1}, {101, 12.0, 2}});
+        // The seams did cut: more buildings than with them off (26 against 14 on the truth's 32).
+        {
+            std::ofstream cfg(dir / "no_seams.json");
+            cfg << R"({"extraction": {"roof_seams": false}})";
+        }
+        const std::string common = "--ortho " + (dir / "terraces/ortho.tif") + " --cloud " + (dir / "terraces/cloud.las") + " --formats geojson --quiet";
+        const auto off = test::run_cli("run " + common + " --tile-size 4000 --config " + (dir / "no_seams.json") + " --out " + (dir / "terraces_off"));
+        REQUIRE(off.exit_code == 0);
+        auto count = [](const std::string& path) { return nlohmann::json::parse(test::slurp(path))["features"].size(); };
+        CHECK(count(dir / "terraces_ref/buildings.geojson") > count(dir / "terraces_off/buildings.geojson"));
+    }
     SECTION("photogrammetric town, cloud only, ground recomputed (SMRF)") {
         SynthOptions so;
         so.size_m = 160, so.seed = 7, so.cloud_density_m2 = 4, so.cloud_mode = CloudMode::photo;
