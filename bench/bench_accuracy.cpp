@@ -8,7 +8,7 @@
 //
 //   build/bin/bench_accuracy [key=value ...]
 //   keys: size seed density sigma sun_az sun_el slope undulation dark trees
-//         ground_like terraced oblique families(0/1) centroid(0/1)
+//         ground_like terraced oblique round families(0/1) centroid(0/1)
 //         stages=heights,roofs,outlines dir=PATH ground=plane|percentile seams(0/1)
 #include <algorithm>
 #include <cmath>
@@ -77,6 +77,7 @@ int main(int argc, char** argv) try {
     v.ground_like_roof_share = num("ground_like", 0.0);
     v.terraced_block_share = num("terraced", 0.0);
     v.oblique_share = num("oblique", 0.0);
+    v.round_share = num("round", 0.0);
     v.all_roof_families = num("families", 0) != 0;
     v.base_at_area_centroid = num("centroid", 0) != 0;
     const std::string dir = kv.at("dir");

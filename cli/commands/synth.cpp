@@ -50,6 +50,8 @@ void add_synth_command(CLI::App& parent, const GlobalFlags& g, CommandList& out)
     cmd->add_option("--ground-like-roof-share", v.ground_like_roof_share, "Share of roofs coloured like grass, soil or road")->capture_default_str();
     cmd->add_option("--terraced-share", v.terraced_block_share, "Share of blocks built as terraces of equal height")->capture_default_str();
     cmd->add_option("--oblique-share", v.oblique_share, "Share of rectangles with a corner cut at an oblique angle")->capture_default_str();
+    cmd->add_option("--round-share", v.round_share, "Share of rectangles drawn round or many-sided instead (circles, ellipses, octagons, hexagons; flat roofs)")
+        ->capture_default_str();
     cmd->add_flag("--all-roof-families", v.all_roof_families, "Flat, shed, gable and hip roofs in equal shares");
     cmd->add_flag("--base-at-area-centroid", v.base_at_area_centroid, "Building base at the terrain height of the footprint's area centroid");
     out.push_back({cmd, [s, &g]() {

@@ -97,6 +97,7 @@ void FootprintsRunOptions::validate() const {
     if (!(simplify_m >= 0.0)) throw Error("--simplify-m", "must be >= 0");
     mask.validate();
     seams.validate();
+    curved.validate();
 }
 
 std::vector<std::vector<Polygon>> vectorize_window(const Image<uint32_t>& labels, const GeoTransform& grid, int col0, int row0) {
@@ -143,7 +144,7 @@ FootprintTable footprint_table(const BuildingMask& mask, const Image<float>& nds
         Polygon raw = simplify_polygon(pixels, o.simplify_m / unit);
         if (!polygon_is_valid(raw)) raw = pixels;
         Feature f;
-        std::string status = "ok", reason;
+        std::string status = "ok", reason, fit = to_string(o.fit);
         Polygon out = raw;
         double orientation = 0.0, err = 0.0, iou = 1.0;
         try {
@@ -167,6 +168,18 @@ FootprintTable footprint_table(const BuildingMask& mask, const Image<float>& nds
                 out = rf.polygon;
                 err = rf.accuracy.area_error_pct, iou = rf.accuracy.iou;
             }
+            if (o.fit == FootprintFit::recursive || o.fit == FootprintFit::regularised) {
+                // Round and many-sided buildings: the smoothed pixel outline, not a staircase of rectangles.
+                const double px = std::abs(grid.pixel_width);
+                const Polygon smooth = smooth_pixel_outline(pixels, px, o.curved.simplify_px);
+                const Polygon coarse = simplify_polygon(smooth, o.curved.classify_simplify_px * px);
+                if (rectilinear_share(coarse, rect.orientation_deg, o.curved.axis_tolerance_deg) < o.curved.max_rectilinear_share &&
+                    polygon_is_valid(smooth)) {
+                    out = smooth, fit = "curved";
+                    const FitAccuracy acc = fit_accuracy(raw, out);
+                    err = acc.area_error_pct, iou = acc.iou;
+                }
+            }
         } catch (const Error& e) {
             status = "fit_failed", reason = e.what();
         }
@@ -180,7 +193,7 @@ FootprintTable footprint_table(const BuildingMask& mask, const Image<float>& nds
         const std::optional<double> h50 = percentile(hv, 50.0);
         f.geometry = {out};
         const std::string& source = id < sources.size() && !sources[id].empty() ? sources[id] : mode_source;
-        f.values = {ids.empty() ? int64_t(features.size() + 1) : ids[id], mode, source, to_string(o.fit), status, reason,
+        f.values = {ids.empty() ? int64_t(features.size() + 1) : ids[id], mode, source, fit, status, reason,
                     polygon_area(out) * unit * unit, polygon_area(raw) * unit * unit,
                     crs.empty() ? AttributeValue() : AttributeValue(geodesic_area_m2(rings, crs)),
                     polygon_perimeter(out) * unit, orientation, err, iou, int64_t(vertices),

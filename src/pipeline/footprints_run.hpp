@@ -16,6 +16,7 @@
 #include "footprint/building_mask.hpp"
 #include "footprint/rectangle_fit.hpp"
 #include "footprint/regularize.hpp"
+#include "footprint/curved_outline.hpp"
 #include "footprint/roof_seams.hpp"
 #include "footprint/segment_classifier.hpp"
 #include "footprint/ortho_refine.hpp"
@@ -88,6 +89,10 @@ struct FootprintsRunOptions {
     FootprintFit fit = FootprintFit::recursive;  ///< geometry written
     RecursiveFitOptions recursive;     ///< tolerance etc. of the recursive fit (areas in m2)
     RegularizeOptions regularize;      ///< snapping of the regularised fit (lengths in metres)
+    /// Recursive and regularised fits: a round or many-sided outline (see
+    /// footprint/curved_outline.hpp) is written smoothed instead, its `fit`
+    /// field "curved".
+    CurvedOutlineOptions curved;
     OutlierFilterOptions outliers;
     GroundFilterOptions ground;
     /// A cloud announcing more points is never held whole: its rasters are

@@ -279,6 +279,21 @@ void cut_corner(SceneBuilding& b, double W, double D, int k, double fu, double f
     b.oblique = true;
 }
 
+// A round or many-sided outline inscribed in the W x D rectangle: `sides`
+// vertices on the ellipse with semi-axes W/2 and D/2 (a circle of the smaller
+// when `circle`), starting at angle `phase`. Uses the polygon test of
+// `contains` (as cut corners do); the roof stays the rectangle's (flat).
+void round_outline(SceneBuilding& b, double W, double D, bool circle, int sides, double phase) {
+    const double a = circle ? std::min(W, D) / 2 : W / 2, c = circle ? std::min(W, D) / 2 : D / 2;
+    Pts out;
+    for (int k = 0; k < sides; ++k) {
+        const double t = phase + 2 * kPi * k / sides;
+        out.push_back({a * std::cos(t), c * std::sin(t)});
+    }
+    b.outline = out;
+    b.oblique = true;
+}
+
 }  // namespace
 
 void SceneVariation::validate() const {
@@ -286,7 +301,7 @@ void SceneVariation::validate() const {
     if (!(terrain_undulation_m >= 0 && terrain_undulation_m <= 50)) throw Error("--terrain-undulation-m", "must be between 0 and 50 m");
     for (const auto& [name, v] : {std::pair<const char*, double>{"--dark-roof-share", dark_roof_share}, {"--tree-touch-share", tree_touch_share},
                                   {"--ground-like-roof-share", ground_like_roof_share}, {"--terraced-share", terraced_block_share},
-                                  {"--oblique-share", oblique_share}})
+                                  {"--oblique-share", oblique_share}, {"--round-share", round_share}})
         if (!(v >= 0 && v <= 1)) throw Error(name, "must be between 0 and 1");
 }
 
@@ -441,6 +456,14 @@ Scene generate_scene(const SceneLayout& layout) {
                 make_shape(b, W, D, t);
                 if (b.shape == BuildingShape::rectangle && var.oblique_share > 0 && bv.chance(var.oblique_share))
                     cut_corner(b, W, D, bv.integer(0, 3), bv.uniform(0.25, 0.7), bv.uniform(0.25, 0.7));
+                // Round and many-sided buildings: own random stream, flat roofs.
+                Rng rv(layout.seed, 6000000 + static_cast<uint64_t>(scene.buildings.size()));
+                const bool round = b.shape == BuildingShape::rectangle && !b.oblique && var.round_share > 0 && rv.chance(var.round_share);
+                if (round) {
+                    const int kind = rv.integer(0, 3);  // circle, ellipse, octagon, hexagon
+                    round_outline(b, W, D, kind == 0, kind <= 1 ? 48 : kind == 2 ? 8 : 6, rv.uniform(0.0, 2 * kPi));
+                    b.roof = RoofType::flat;
+                }
                 if (var.base_at_area_centroid) {
                     const auto xy = b.to_scene(area_centroid(b));
                     b.ground_z = scene.terrain_z(xy[0], xy[1]);

@@ -82,6 +82,10 @@ struct SceneVariation {
     double ground_like_roof_share = 0.0; ///< roofs coloured like grass, soil or road
     double terraced_block_share = 0.0;   ///< blocks built as terraces: touching buildings of equal height
     double oblique_share = 0.0;          ///< rectangular buildings with a corner cut off at an oblique angle
+    /// Rectangular buildings drawn instead as round or many-sided flat-roofed
+    /// buildings inscribed in their rectangle: circles and ellipses (48
+    /// vertices), octagons and hexagons, at any rotation.
+    double round_share = 0.0;
     bool all_roof_families = false;      ///< roof types drawn with equal shares (flat, shed, gable, hip) instead of the default mix
     /// Building base at the terrain height of the footprint's area centroid
     /// (the mean terrain under it) instead of at its bounding-box centre.

@@ -407,12 +407,12 @@ SynthResult write_synthetic_town(const std::string& out_dir, const SynthOptions&
     if (o.lidar_sigma_m != 0.03) j["parameters"]["lidar_sigma_m"] = o.lidar_sigma_m;
     if (v.terrain_slope_max != d.terrain_slope_max || v.terrain_undulation_m != d.terrain_undulation_m ||
         v.dark_roof_share != d.dark_roof_share || v.tree_touch_share != d.tree_touch_share || v.ground_like_roof_share != d.ground_like_roof_share ||
-        v.terraced_block_share != d.terraced_block_share || v.oblique_share != d.oblique_share || v.all_roof_families != d.all_roof_families ||
+        v.terraced_block_share != d.terraced_block_share || v.oblique_share != d.oblique_share || v.round_share != d.round_share || v.all_roof_families != d.all_roof_families ||
         v.base_at_area_centroid != d.base_at_area_centroid)
         j["variation"] = {{"terrain_slope_max", v.terrain_slope_max}, {"terrain_undulation_m", v.terrain_undulation_m},
                           {"dark_roof_share", v.dark_roof_share},      {"tree_touch_share", v.tree_touch_share},
                           {"ground_like_roof_share", v.ground_like_roof_share}, {"terraced_block_share", v.terraced_block_share},
-                          {"oblique_share", v.oblique_share},          {"all_roof_families", v.all_roof_families},
+                          {"oblique_share", v.oblique_share},          {"round_share", v.round_share}, {"all_roof_families", v.all_roof_families},
                           {"base_at_area_centroid", v.base_at_area_centroid}};
     j["counts"] = {{"buildings", res.buildings}, {"trees", res.trees}, {"points", res.points},
                    {"roads_ns", scene.roads_x.size()}, {"roads_ew", scene.roads_y.size()},
