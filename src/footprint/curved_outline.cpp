@@ -3,6 +3,7 @@
 #include <cmath>
 
 #include "core/error.hpp"
+#include "footprint/rectangle_fit.hpp"
 #include "footprint/vectorize.hpp"
 
 namespace cityforge {
@@ -11,6 +12,8 @@ void CurvedOutlineOptions::validate() const {
     if (!(max_rectilinear_share >= 0 && max_rectilinear_share <= 1)) throw Error("curved outlines", "max_rectilinear_share must be in [0, 1]");
     if (!(axis_tolerance_deg > 0 && axis_tolerance_deg < 45)) throw Error("curved outlines", "axis_tolerance_deg must be in (0, 45)");
     if (!(simplify_px >= 0) || !(classify_simplify_px >= 0)) throw Error("curved outlines", "simplify tolerances must be >= 0");
+    if (!(min_solidity >= 0 && min_solidity <= 1) || !(max_rectangularity >= 0 && max_rectangularity <= 1))
+        throw Error("curved outlines", "min_solidity and max_rectangularity must be in [0, 1]");
 }
 
 namespace {
@@ -44,6 +47,19 @@ Polygon smooth_pixel_outline(const Polygon& pixels, double pixel_size, double si
     out.outer = smooth_ring(pixels.outer, pixel_size);
     for (const Ring& h : pixels.holes) out.holes.push_back(smooth_ring(h, pixel_size));
     return simplify_polygon(out, simplify_px * pixel_size);
+}
+
+std::optional<Polygon> curved_outline(const Polygon& pixels, double pixel_size, const CurvedOutlineOptions& o) {
+    const Polygon smooth = smooth_pixel_outline(pixels, pixel_size, o.simplify_px);
+    if (smooth.outer.size() < 5) return std::nullopt;
+    const double area = polygon_area(smooth), hull = std::abs(signed_area(convex_hull(smooth.outer)));
+    if (!(area > 0) || area < o.min_solidity * hull) return std::nullopt;
+    const OrientedRectangle rect = minimum_area_rectangle(smooth);
+    if (area > o.max_rectangularity * rect.length * rect.width) return std::nullopt;
+    const Polygon coarse = simplify_polygon(smooth, o.classify_simplify_px * pixel_size);
+    if (rectilinear_share(coarse, rect.orientation_deg, o.axis_tolerance_deg) >= o.max_rectilinear_share) return std::nullopt;
+    if (!polygon_is_valid(smooth)) return std::nullopt;
+    return smooth;
 }
 
 double rectilinear_share(const Polygon& polygon, double orientation_deg, double tolerance_deg) {

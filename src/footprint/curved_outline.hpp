@@ -4,6 +4,8 @@
 // staircases. This tells a curved outline from a rectilinear one and gives a
 // smooth outline for it. Planar, in the polygon's CRS units (projected CRS
 // expected); no GDAL.
+#include <optional>
+
 #include "core/geometry.hpp"
 
 namespace cityforge {
@@ -21,6 +23,12 @@ struct CurvedOutlineOptions {
     /// (a slanted straight edge's staircase leaves a zigzag of midpoints
     /// that the fine tolerance keeps).
     double classify_simplify_px = 1.0;
+    /// and is convex (area over its convex hull's at least this: real
+    /// outlines with bays and wings are not round) ...
+    double min_solidity = 0.9;
+    /// ... and fills its minimum-area rectangle less than a rectangle does
+    /// (circle pi/4 = 0.785, hexagon 0.75; ragged rectangles 0.83-0.95).
+    double max_rectangularity = 0.82;
     void validate() const;  ///< throws Error naming the option
 };
 
@@ -29,6 +37,12 @@ struct CurvedOutlineOptions {
 /// the steps' midpoints, simplified with Douglas-Peucker (`simplify_px`).
 /// Straight runs stay straight; each staircase corner loses half a pixel.
 Polygon smooth_pixel_outline(const Polygon& pixels, double pixel_size, double simplify_px);
+
+/// The smoothed outline of `pixels` (pixel edges of `pixel_size` CRS units)
+/// when the building is round or many-sided (see CurvedOutlineOptions: few
+/// edges along its rectangle's axes, convex, not filling its rectangle) and
+/// the smoothed outline is valid; nothing otherwise.
+std::optional<Polygon> curved_outline(const Polygon& pixels, double pixel_size, const CurvedOutlineOptions& options);
 
 /// Share (0-1) of the outer ring's perimeter whose edges run within
 /// `tolerance_deg` of `orientation_deg` or of its perpendicular (degrees,

@@ -170,12 +170,8 @@ FootprintTable footprint_table(const BuildingMask& mask, const Image<float>& nds
             }
             if (o.fit == FootprintFit::recursive || o.fit == FootprintFit::regularised) {
                 // Round and many-sided buildings: the smoothed pixel outline, not a staircase of rectangles.
-                const double px = std::abs(grid.pixel_width);
-                const Polygon smooth = smooth_pixel_outline(pixels, px, o.curved.simplify_px);
-                const Polygon coarse = simplify_polygon(smooth, o.curved.classify_simplify_px * px);
-                if (rectilinear_share(coarse, rect.orientation_deg, o.curved.axis_tolerance_deg) < o.curved.max_rectilinear_share &&
-                    polygon_is_valid(smooth)) {
-                    out = smooth, fit = "curved";
+                if (const std::optional<Polygon> curved = curved_outline(pixels, std::abs(grid.pixel_width), o.curved)) {
+                    out = *curved, fit = "curved";
                     const FitAccuracy acc = fit_accuracy(raw, out);
                     err = acc.area_error_pct, iou = acc.iou;
                 }

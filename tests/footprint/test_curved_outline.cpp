@@ -29,7 +29,7 @@ Polygon exact_circle(double cx, double cy, double r) {
 }
 }  // namespace
 
-TEST_CASE("Curved outlines: a circle and an octagon are curved, rotated rectangles and an L are not; the smooth outline follows the circle",
+TEST_CASE("Curved outlines: a circle and a hexagon are curved, rotated rectangles, an L and a cross are not; the smooth outline follows the circle",
           "[footprint][curved]") {
     const CurvedOutlineOptions o;
     auto share = [&](const Polygon& pixels) {
@@ -44,15 +44,19 @@ TEST_CASE("Curved outlines: a circle and an octagon are curved, rotated rectangl
     const Polygon truth = exact_circle(25, 25, 9.0);
     CHECK(polygon_iou(smooth, truth) > 0.98);
     CHECK(polygon_iou(smooth, truth) > polygon_iou(circle, truth));  // better than the staircase
-    // A regular octagon, 10 m across the corners, rotated by 10 degrees.
-    const Polygon octagon = pixel_outline([](double x, double y) {
-        for (int k = 0; k < 8; ++k) {
-            const double a = (10.0 + 22.5 + 45.0 * k) * kPi / 180;
-            if ((x - 25) * std::cos(a) + (y - 25) * std::sin(a) > 10.0 * std::cos(22.5 * kPi / 180)) return false;
+    CHECK(curved_outline(circle, 0.5, o).has_value());
+    // A regular hexagon, 10 m to the corners, rotated by 10 degrees: curved.
+    // (A regular octagon fills 0.83 of its square, as ragged rectangles do:
+    // it keeps the rectangle fits.)
+    const Polygon hexagon = pixel_outline([](double x, double y) {
+        for (int k = 0; k < 6; ++k) {
+            const double a = (10.0 + 30.0 + 60.0 * k) * kPi / 180;
+            if ((x - 25) * std::cos(a) + (y - 25) * std::sin(a) > 10.0 * std::cos(30.0 * kPi / 180)) return false;
         }
         return true;
     });
-    CHECK(share(octagon) < o.max_rectilinear_share);
+    CHECK(share(hexagon) < o.max_rectilinear_share);
+    CHECK(curved_outline(hexagon, 0.5, o).has_value());
     // Rectangles at 0, 17 and 38 degrees, and an L.
     for (double deg : {0.0, 17.0, 38.0}) {
         const double a = deg * kPi / 180;
@@ -62,8 +66,13 @@ TEST_CASE("Curved outlines: a circle and an octagon are curved, rotated rectangl
         });
         INFO(deg << " degrees");
         CHECK(share(rect) > 0.8);
+        CHECK_FALSE(curved_outline(rect, 0.5, o).has_value());
     }
     const Polygon ell = pixel_outline([](double x, double y) { return x > 10 && x < 40 && y > 10 && y < 40 && (x < 20 || y < 20); });
     CHECK(share(ell) > 0.9);
+    CHECK_FALSE(curved_outline(ell, 0.5, o).has_value());
+    // A ragged, concave real-world outline is not round: a cross.
+    const Polygon cross = pixel_outline([](double x, double y) { return (std::abs(x - 25) < 3 && std::abs(y - 25) < 12) || (std::abs(y - 25) < 3 && std::abs(x - 25) < 12); });
+    CHECK_FALSE(curved_outline(cross, 0.5, o).has_value());
     CHECK_THROWS_WITH(smooth_pixel_outline(circle, 0.0, 0.35), Catch::Contains("pixel size"));
 }
