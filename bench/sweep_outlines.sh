@@ -26,8 +26,9 @@ declare -A V=(
   [dens20]="density=20"
   [mix]="slope=0.08 ground_like=0.4 oblique=0.5 trees=0.6 sun_az=230 sun_el=30 dark=0.2"
   [terraced]="terraced=0.5"
+  [round]="round=0.5"
 )
-variants=(${VARIANTS:-default slope groundlike trees dark dark4 oblique sun dens4 dens20 mix terraced})
+variants=(${VARIANTS:-default slope groundlike trees dark dark4 oblique sun dens4 dens20 mix terraced round})
 work="$(mktemp -d /tmp/cityforge_sweep.XXXXXX)"
 trap 'rm -rf "$work"' EXIT
 printf '%-11s %6s %7s %7s %9s\n' variant seed F1 IoU "|area|%"
