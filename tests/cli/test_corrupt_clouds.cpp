@@ -137,7 +137,7 @@ TEST_CASE("corrupt LAS headers: EVLR length wrap, scale 1e300, a point count of 
     }
 }
 
-TEST_CASE("LAS records outside the header's bounds are dropped with a warning, results unchanged; all outside is refused", "[faults][corrupt][cli]") {
+TEST_CASE("LAS records outside the header's bounds are dropped with a warning, results unchanged - all outside is refused", "[faults][corrupt][cli]") {
     ScratchDir dir("corrupt_las_bounds");
     const SynthResult s = test::make_town(dir, 120, 3, 4.0);
     std::string b = read_bytes(s.cloud_path);

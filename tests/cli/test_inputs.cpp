@@ -808,7 +808,7 @@ TEST_CASE("A lon/lat ortho with a cloud (ortho_cloud footprints) finds what the 
     CHECK(info_json(dir / "ll.gpkg")["layers"][0]["crs"]["epsg"] == 4326);  // written in the input's CRS
 }
 
-TEST_CASE("run: inputs that do not overlap are one-line errors naming both files and extents; partial overlap warns", "[inputs][overlap][cli]") {
+TEST_CASE("run: inputs that do not overlap are one-line errors naming both files and extents - partial overlap warns", "[inputs][overlap][cli]") {
     ScratchDir dir("inputs_run_overlap");
     const std::string delft = shared_data("delft_ahn3_bgt_west/ahn3_delft_west.las");
     const std::string fp = shared_data("delft_ahn3_bgt_west/bgt_pand_west_with_ref_heights.geojson");

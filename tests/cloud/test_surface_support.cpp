@@ -51,7 +51,7 @@ Scene make_scene() {
 }
 }  // namespace
 
-TEST_CASE("A sparse roof removed by the statistical outlier test is put back; spikes and noise stay removed, for any thread count",
+TEST_CASE("A sparse roof removed by the statistical outlier test is put back - spikes and noise stay removed, for any thread count",
           "[cloud][filters][surface]") {
     const Scene s = make_scene();
     OutlierFilterOptions oo;

@@ -29,7 +29,7 @@ Polygon exact_circle(double cx, double cy, double r) {
 }
 }  // namespace
 
-TEST_CASE("Curved outlines: a circle and a hexagon are curved, rotated rectangles, an L and a cross are not; the smooth outline follows the circle",
+TEST_CASE("Curved outlines: a circle and a hexagon are curved, rotated rectangles, an L and a cross are not - the smooth outline follows the circle",
           "[footprint][curved]") {
     const CurvedOutlineOptions o;
     auto share = [&](const Polygon& pixels) {

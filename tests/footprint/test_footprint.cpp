@@ -95,7 +95,7 @@ TEST_CASE("A rectangle fits itself with 0 % error - a rotated noisy rectangle's 
     CHECK_THROWS_WITH(minimum_area_rectangle(degenerate), Catch::Contains("degenerate"));
 }
 
-TEST_CASE("The minimum-area rectangle keeps a rectangle's axes when a corner is cut off at an oblique angle; contains() holds the cut corner", "[footprint][fit]") {
+TEST_CASE("The minimum-area rectangle keeps a rectangle's axes when a corner is cut off at an oblique angle - contains() holds the cut corner", "[footprint][fit]") {
     // complete_hidden_roofs relies on both: a roof whose corner a crown hides
     // is completed to the rectangle its visible part gives.
     OrientedRectangle r;

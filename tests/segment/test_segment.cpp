@@ -185,7 +185,7 @@ TEST_CASE("Segmentation gives the same labels with 1 thread and with all threads
     CHECK(all_threads.second == one_thread.second);
 }
 
-TEST_CASE("Watershed without smoothing (levels straight from the bands, sorted by row chunks; h 0 floods on two threads): same labels for 1 thread and all threads", "[segment][determinism]") {
+TEST_CASE("Watershed without smoothing (levels straight from the bands, sorted by row chunks - h 0 floods on two threads): same labels for 1 thread and all threads", "[segment][determinism]") {
     ScratchDir dir("seg_threads_unsmoothed");
     make_town(dir, 300, 12, 0);  // 600 x 600 px: h 0 floods on two threads when two are allowed
     Image<float> img = RasterReader(dir / "ortho.tif").read_all<float>();
