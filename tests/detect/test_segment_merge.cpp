@@ -73,7 +73,7 @@ TEST_CASE("Segment pairs: every 4-adjacent pair once, in label order, with its b
     CHECK(feature(q, 1, "log_boundary_m", 1, false) == feature(p, 1, "log_boundary_m", 1, true));
 }
 
-TEST_CASE("Merge groups join building segments through confident pairs only; pair labels follow the reference buildings", "[detect]") {
+TEST_CASE("Merge groups join building segments through confident pairs only - pair labels follow the reference buildings", "[detect]") {
     Image<float> img;
     const detect::SceneSegments s = three_segments(img);
     const detect::SegmentPairs p = detect::segment_pairs(img, s, 0.5, nullptr);
@@ -101,7 +101,7 @@ TEST_CASE("Merge groups join building segments through confident pairs only; pai
     CHECK(detect::pair_labels(p, s, {0.0f, 1.0f, 0.1f, 1.0f}, rid, 0.5) == std::vector<int8_t>{-1, 0, -1});
 }
 
-TEST_CASE("A model with a pair classifier round-trips; models without one keep their bytes; a missing block is refused", "[detect]") {
+TEST_CASE("A model with a pair classifier round-trips - models without one keep their bytes - a missing block is refused", "[detect]") {
     const std::string path = default_model_path(detect::BandLayout{3, -1});
     REQUIRE(std::filesystem::exists(path));
     const std::string text = test::slurp(path);
