@@ -30,7 +30,7 @@ Polygon exact_circle(double cx, double cy, double r) {
 }  // namespace
 
 TEST_CASE("Curved outlines: a circle and a hexagon are curved, rotated rectangles, an L and a cross are not - the smooth outline follows the circle",
-          "[footprint][curved]") {
+          "[footprint][curved][fit]") {
     const CurvedOutlineOptions o;
     auto share = [&](const Polygon& pixels) {
         const Polygon coarse = simplify_polygon(smooth_pixel_outline(pixels, 0.5, o.simplify_px), o.classify_simplify_px * 0.5);
