@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <map>
 #include <numeric>
 
 #include "core/error.hpp"
@@ -467,8 +468,43 @@ int split_at_roof_seams(BuildingMask& mask, const Image<float>& colours, const s
                 if (q != p && part[q] == part[p] && !out.data[q]) out.data[q] = count, stack.push_back(q);
         }
     }
+    // Fragments: a seam slice's cells go to the side whose colour they are
+    // closer to, which can leave a few cells cut off from their side. A
+    // piece smaller than a part joins the neighbouring piece of the same
+    // building it shares most edges with (ties: the lower label).
+    const double min_cells = o.min_part_area_m2 / (o.gsd_m * o.gsd_m);
+    std::vector<std::size_t> size(count + 1, 0);
+    for (std::size_t k = 0; k < n; ++k) ++size[out.data[k]];
+    std::vector<std::map<uint32_t, int>> shared(count + 1);
+    for (std::size_t k = 0; k < n; ++k) {
+        const uint32_t c = out.data[k];
+        if (!c || double(size[c]) >= min_cells) continue;
+        const int x = static_cast<int>(k % std::size_t(w)), y = static_cast<int>(k / std::size_t(w));
+        const std::size_t nb[4] = {x > 0 ? k - 1 : k, x + 1 < w ? k + 1 : k, y > 0 ? k - std::size_t(w) : k, y + 1 < h ? k + std::size_t(w) : k};
+        for (std::size_t q : nb) {
+            const uint32_t d = out.data[q];
+            if (q != k && d && d != c && mask.labels.data[q] == mask.labels.data[k] && double(size[d]) >= min_cells) ++shared[c][d];
+        }
+    }
+    std::vector<uint32_t> into(count + 1);
+    for (uint32_t c = 0; c <= count; ++c) {
+        into[c] = c;
+        int best = 0;
+        for (const auto& [d, edges] : shared[c])
+            if (edges > best) best = edges, into[c] = d;
+    }
+    // Labels 1..count again, in raster order of first appearance.
+    std::vector<uint32_t> renumber(count + 1, 0);
+    uint32_t next = 0;
+    for (std::size_t k = 0; k < n; ++k) {
+        uint32_t& v = out.data[k];
+        if (!v) continue;
+        v = into[v];
+        if (!renumber[v]) renumber[v] = ++next;
+        v = renumber[v];
+    }
     mask.labels = std::move(out);
-    mask.count = count;
+    mask.count = next;
     return cuts;
 }
 

@@ -20,8 +20,8 @@ namespace cityforge {
 struct RoofSeamOptions {
     /// On by default (`footprints --no-roof-seams`, run config
     /// `extraction.roof_seams: false` turn it off). Terraces 50 % of the blocks,
-    /// 300 m towns, seeds 220-224: F1 0.36-0.70 without, 0.90-0.99 with; no cut
-    /// on 48 towns of twelve other variants (bench/sweep_outlines.sh).
+    /// 300 m towns, seeds 210-233: F1 0.34-0.78 without, 0.91-1.00 with; no cut
+    /// on 84 towns of twelve other variants and 12 at 600 m (bench/sweep_outlines.sh).
     bool enabled = true;
     double gsd_m = 0.5;              ///< cell size of the rasters, metres
     double window_m = 2.0;           ///< colour / height profiles compared over this length on each side of a seam
@@ -29,7 +29,7 @@ struct RoofSeamOptions {
     double min_part_area_m2 = 30.0;  ///< parts smaller than this are not split off
     /// Colour step across the seam, in units of the profile's own noise
     /// (standard deviation of the per-slice colour means on both sides).
-    double min_colour_contrast = 6.0;
+    double min_colour_contrast = 5.0;
     /// and as a share of the roof's colour scale (mean over bands of the
     /// building's own pixel standard deviation): steps smaller than this
     /// fraction of the roof's texture are noise. (The scale holds the steps
