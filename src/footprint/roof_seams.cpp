@@ -221,24 +221,29 @@ std::vector<int> seams_along(const std::vector<std::size_t>& cells, int w, CellO
         double rise = NAN, scatter = NAN;
         double tilt = NAN;  // mean height of the first outer third minus the last, metres
     };
+    // Per slice, once: the middle third's height above the outer thirds'
+    // mean and the first outer third's above the last (NaN without heights
+    // in every strip).
+    std::vector<double> slice_rise(static_cast<std::size_t>(nbins), NAN), slice_tilt(static_cast<std::size_t>(nbins), NAN);
+    for (int j = 0; j < nbins; ++j) {
+        const Slice& sl = s[static_cast<std::size_t>(j)];
+        if (sl.strip_height_count[0] < 1 || sl.strip_height_count[1] < 1 || sl.strip_height_count[2] < 1) continue;
+        const double h0 = sl.strip_height[0] / sl.strip_height_count[0], h2 = sl.strip_height[2] / sl.strip_height_count[2];
+        slice_rise[static_cast<std::size_t>(j)] = sl.strip_height[1] / sl.strip_height_count[1] - 0.5 * (h0 + h2);
+        slice_tilt[static_cast<std::size_t>(j)] = h0 - h2;
+    }
     auto cross_profile = [&](int a, int b) {
         Profile p;
         if (a < 0 || b > nbins) return p;
-        std::vector<double> r;
-        double tilt = 0;
-        for (int j = a; j < b; ++j) {
-            const Slice& sl = s[static_cast<std::size_t>(j)];
-            if (sl.strip_height_count[0] < 1 || sl.strip_height_count[1] < 1 || sl.strip_height_count[2] < 1) continue;
-            const double h0 = sl.strip_height[0] / sl.strip_height_count[0], h2 = sl.strip_height[2] / sl.strip_height_count[2];
-            r.push_back(sl.strip_height[1] / sl.strip_height_count[1] - 0.5 * (h0 + h2));
-            tilt += h0 - h2;
-        }
-        if (2 * r.size() < static_cast<std::size_t>(b - a)) return p;
-        p.tilt = tilt / double(r.size());
-        p.rise = std::accumulate(r.begin(), r.end(), 0.0) / double(r.size());
+        double n = 0, rise = 0, tilt = 0;
+        for (int j = a; j < b; ++j)
+            if (!std::isnan(slice_rise[static_cast<std::size_t>(j)])) n += 1, rise += slice_rise[static_cast<std::size_t>(j)], tilt += slice_tilt[static_cast<std::size_t>(j)];
+        if (2 * n < double(b - a)) return p;
+        p.rise = rise / n, p.tilt = tilt / n;
         double v = 0;
-        for (double x : r) v += (x - p.rise) * (x - p.rise);
-        p.scatter = std::sqrt(v / double(r.size()));
+        for (int j = a; j < b; ++j)
+            if (const double r = slice_rise[static_cast<std::size_t>(j)]; !std::isnan(r)) v += (r - p.rise) * (r - p.rise);
+        p.scatter = std::sqrt(v / n);
         return p;
     };
     // Both sides' lines run down into the valley's floor (two facets meeting

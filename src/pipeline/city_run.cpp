@@ -695,7 +695,7 @@ WindowBuildings detect_on_window(const RunManifest& m, const PixelWindow& win, P
         refine_buildings_with_ortho(d.mask, cells, colours, valid, wc.rasters.ndsm, 20.0 / pc.crs.z_unit_m, {}, vegetation, ro);
         RoofSeamOptions so = o.extraction.seams;
         so.gsd_m = mo.gsd_m, so.ridge_rise_m /= pc.crs.z_unit_m, so.valley_depth_m /= pc.crs.z_unit_m;
-        const Image<uint32_t> before = d.mask.labels;
+        const Image<uint32_t> before = so.enabled ? d.mask.labels : Image<uint32_t>{};
         if (split_at_roof_seams(d.mask, colours, valid, wc.rasters.ndsm, so) > 0) {
             // Terraces cut at their seams: each part keeps its building's
             // cells before the redraw in its box (the box decides which tile
