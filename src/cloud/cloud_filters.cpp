@@ -699,6 +699,30 @@ void grid_knn(const PointCloud& c, std::size_t k, Visit&& visit) {
 
 }  // namespace
 
+double outlier_limit(const std::vector<double>& mean_dist, double std_multiplier) {
+    const std::size_t n = mean_dist.size();
+    if (n == 0) return 0.0;
+    // Gross outliers (a few points kilometres away, or a z of -1700 m) would
+    // set sigma alone: 3 of them among 100 000 points raise the limit tenfold
+    // and let every ordinary outlier through. Points farther from their
+    // neighbours than kGrossOutlierFactor x the median are left out of the
+    // mean and sigma (they are over the limit anyway); a cloud without such
+    // points gets the plain mean + m * sigma.
+    std::vector<float> sorted(mean_dist.begin(), mean_dist.end());
+    const auto mid = sorted.begin() + static_cast<std::ptrdiff_t>(n / 2);
+    std::nth_element(sorted.begin(), mid, sorted.end());
+    const double median = *mid;
+    const double gross = median > 0 ? kGrossOutlierFactor * median : INFINITY;
+    // Sums in index order: the threshold does not depend on the thread count.
+    double sum = 0.0, sum2 = 0.0;
+    std::size_t used = 0;
+    for (double d : mean_dist)
+        if (d <= gross) sum += d, sum2 += d * d, ++used;
+    const double mean = sum / static_cast<double>(used);
+    const double sigma = std::sqrt(std::max(0.0, sum2 / static_cast<double>(used) - mean * mean));
+    return mean + std_multiplier * sigma;
+}
+
 OutlierFilterResult filter_outliers(const PointCloud& c, const OutlierFilterOptions& o) {
     o.validate();
     OutlierFilterResult r;
@@ -737,12 +761,7 @@ OutlierFilterResult filter_outliers(const PointCloud& c, const OutlierFilterOpti
     };
     if (k == 9) grid_knn<9>(c, k, visit);  // the defaults: 8 neighbours and the point itself
     else grid_knn<0>(c, k, visit);
-    // Sums in index order: the threshold does not depend on the thread count.
-    double sum = 0.0, sum2 = 0.0;
-    for (double d : mean_dist) sum += d, sum2 += d * d;
-    const double mean = sum / static_cast<double>(n);
-    const double sigma = std::sqrt(std::max(0.0, sum2 / static_cast<double>(n) - mean * mean));
-    const double limit = o.max_mean_distance > 0 ? o.max_mean_distance : mean + o.std_multiplier * sigma;
+    const double limit = o.max_mean_distance > 0 ? o.max_mean_distance : outlier_limit(mean_dist, o.std_multiplier);
     r.limit = limit;
     const Counts removed = tbb::parallel_reduce(
         tbb::blocked_range<std::size_t>(0, n, kGrain), Counts{0, 0},

@@ -36,6 +36,15 @@ struct OutlierFilterResult {
     double limit = 0.0;                 ///< mean kNN distance limit used (CRS units)
 };
 
+/// Mean kNN distances over kGrossOutlierFactor x their median are gross
+/// outliers: left out of the statistics of the outlier limit.
+inline constexpr double kGrossOutlierFactor = 50.0;
+
+/// The statistical filter's limit for these mean kNN distances (one a point):
+/// mean + std_multiplier * sigma over the points that are not gross outliers
+/// (all of them when none is). 0 for no point.
+double outlier_limit(const std::vector<double>& mean_dist, double std_multiplier);
+
 /// Statistical outlier removal (3D k nearest neighbours) followed by an
 /// isolated-point filter. Points classified as noise (7, 18) are removed too
 /// and counted as statistical. Deterministic (k-d tree, fixed tie order).

@@ -82,7 +82,9 @@ LasReader::LasReader(const std::string& path) : path_(path) {
     in_.read(hdr, sizeof hdr);
     const auto got = static_cast<std::size_t>(in_.gcount());
     in_.clear();
-    if (got < 227 || std::memcmp(hdr, "LASF", 4) != 0) throw Error(path, "not a LAS file (no LASF signature)");
+    if (got == 0) throw Error(path, "empty file (0 bytes), not a LAS file");
+    if (got < 4 || std::memcmp(hdr, "LASF", 4) != 0) throw Error(path, "not a LAS file (no LASF signature)");
+    if (got < 227) throw Error(path, "truncated LAS header: the file ends after " + std::to_string(got) + " bytes, a header needs at least 227");
     LasHeader& h = header_;
     h.version_major = static_cast<uint8_t>(hdr[24]);
     h.version_minor = static_cast<uint8_t>(hdr[25]);

@@ -1,6 +1,7 @@
 #include "io/inspect.hpp"
 
 #include <algorithm>
+#include <cctype>
 #include <cstring>
 #include <filesystem>
 #include <fstream>
@@ -64,6 +65,16 @@ CloudInfo inspect_cloud(const std::string& path, const InspectOptions& options) 
 
 }  // namespace
 
+namespace {
+// City model files cityforge writes (and others write) but does not read.
+bool is_city_model_name(const std::string& path) {
+    std::string name = std::filesystem::path(path).filename().string();
+    for (char& c : name) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
+    const auto ends = [&](const std::string& tail) { return name.size() >= tail.size() && name.compare(name.size() - tail.size(), tail.size(), tail) == 0; };
+    return ends(".city.json") || ends(".city.jsonl") || ends(".glb") || ends(".gltf") || ends("tileset.json");
+}
+}  // namespace
+
 DatasetInfo inspect_dataset(const std::string& path, const InspectOptions& options) {
     require_dataset_exists(path);
     DatasetInfo info;
@@ -87,10 +98,17 @@ DatasetInfo inspect_dataset(const std::string& path, const InspectOptions& optio
     }
     try {
         info.vector = read_vector_info(path);
-    } catch (const Error&) {
+    } catch (const Error& e) {
         // A folder may be a vector dataset (a Shapefile folder, a .gdb); any other is named as one.
-        throw Error(path, std::filesystem::is_directory(path) ? "is a directory, not a raster, point cloud or vector dataset cityforge can read"
-                                                              : "not a raster, LAS point cloud or vector file that cityforge can read");
+        if (std::filesystem::is_directory(path)) throw Error(path, "is a directory, not a raster, point cloud or vector dataset cityforge can read");
+        std::error_code ec;
+        if (std::filesystem::is_regular_file(path, ec) && std::filesystem::file_size(path, ec) == 0 && !ec) throw Error(path, "empty file (0 bytes)");
+        if (is_city_model_name(path))
+            throw Error(path, "a city model (CityJSON / CityGML / glTF): info describes rasters, point clouds and vector layers; "
+                              "the model's building table is the buildings.gpkg or .geojson written next to it");
+        // A vector extension: OGR's reason (a truncated GeoJSON says so).
+        if (vector_ext) throw Error(std::string(e.what()));
+        throw Error(path, "not a raster, LAS point cloud or vector file that cityforge can read");
     }
     if (info.vector->layers.empty()) throw Error(path, "vector dataset has no layers");
     return info;

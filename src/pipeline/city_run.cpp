@@ -292,6 +292,9 @@ Extent cloud_bounds_on_grid(const RunManifest& m) {
     return cloud_bounds_in(m.options.cloud, m.options.cloud_crs, crs_from_wkt(m.crs_wkt, "grid"));
 }
 
+// The square of half-side `half` centred on `c`.
+Extent square_around(const MapPoint& c, double half) { return {c.x - half, c.y - half, c.x + half, c.y + half}; }
+
 // The part of the grid the cloud covers; Error naming both inputs and their extents when none.
 Extent covered_part(const RunManifest& m, const Extent& cloud) {
     const RunOptions& o = m.options;
@@ -386,14 +389,31 @@ RunManifest plan_run(const RunOptions& in) {
         PreparedCloud points;
         MapPoint centre = m.grid.transform.pixel_to_map({m.grid.width / 2.0, m.grid.height / 2.0});
         CloudSample sample = sample_cloud(o.cloud, o.cloud_crs, grid_crs, outliers, centre, &points);
-        if (points.cloud.size() == 0) {
-            // No point around the grid's centre: the sample is taken at the centre of the part the cloud covers.
+        // Too few points around the grid's centre to measure anything: the
+        // centre of the part the cloud covers, and if its box says little of
+        // where the points are (far outliers, an L-shaped survey), the
+        // grid's most populated 400 m square.
+        constexpr std::size_t kMinSample = 100;
+        if (points.cloud.size() < kMinSample) {
             const Extent covered = covered_part(m, bounds());
-            centre = {0.5 * (covered.min_x + covered.max_x), 0.5 * (covered.min_y + covered.max_y)};
-            sample = sample_cloud(o.cloud, o.cloud_crs, grid_crs, outliers, centre, &points);
+            const MapPoint mid{0.5 * (covered.min_x + covered.max_x), 0.5 * (covered.min_y + covered.max_y)};
+            PreparedCloud p;
+            CloudSample s = sample_cloud(o.cloud, o.cloud_crs, grid_crs, outliers, mid, &p);
+            if (p.cloud.size() > points.cloud.size()) centre = mid, sample = s, points = std::move(p);
+        }
+        if (points.cloud.size() < kMinSample) {
+            const DensestSquare d = densest_square(o.cloud, o.cloud_crs, grid_crs, grid_extent(m), 400.0 / grid_metres_per_unit(m));
+            if (d.points > points.cloud.size()) {
+                PreparedCloud p;
+                CloudSample s = sample_cloud(o.cloud, o.cloud_crs, grid_crs, outliers, d.centre, &p);
+                if (p.cloud.size() > points.cloud.size()) centre = d.centre, sample = s, points = std::move(p);
+            }
         }
         if (need_limit) {
-            if (!(sample.outlier_limit_m > 0)) throw Error(o.cloud, "no point left after cleaning in the 400 m around " + describe_extent({centre.x, centre.y, centre.x, centre.y}, grid_crs) + "; is the cloud this sparse?");
+            if (!(sample.outlier_limit_m > 0))
+                throw Error(o.cloud, "too few points to measure the outlier filter's limit: " + std::to_string(points.cloud.size()) +
+                                         " in the grid's most populated 400 m square, " + describe_extent(square_around(centre, 200.0 / grid_metres_per_unit(m)), grid_crs) +
+                                         "; set cleaning.outlier_limit_m or cleaning.outlier_filter false in the --config");
             outliers.max_mean_distance = sample.outlier_limit_m;
             ex.outliers.max_mean_distance = sample.outlier_limit_m;
         }

@@ -81,6 +81,46 @@ WindowedRasters rasterize_cloud_by_windows(const std::string& cloud_path, const 
     return out;
 }
 
+DensestSquare densest_square(const std::string& cloud_path, const std::string& cloud_crs_override, const CrsInfo& target,
+                             const Extent& within, double cell) {
+    DensestSquare best{{0.5 * (within.min_x + within.max_x), 0.5 * (within.min_y + within.max_y)}, 0};
+    if (!(cell > 0) || !(within.min_x <= within.max_x && within.min_y <= within.max_y)) return best;
+    // At most 4 M squares: larger areas get larger squares.
+    auto count = [&](double c) { return (std::floor(within.width() / c) + 1) * (std::floor(within.height() / c) + 1); };
+    while (count(cell) > 4e6) cell *= 2;
+    const auto nx = static_cast<std::size_t>(std::floor(within.width() / cell)) + 1, ny = static_cast<std::size_t>(std::floor(within.height() / cell)) + 1;
+    std::vector<uint64_t> counts(nx * ny, 0);
+    const CrsInfo from = resolve_cloud_crs(cloud_path, cloud_crs_override).crs;
+    const bool move = !target.empty() && !from.empty() && !same_horizontal_crs(from, target);
+    CloudReader reader(cloud_path);
+    PointCloud chunk;
+    std::vector<double> z;
+    while (true) {
+        chunk.clear();
+        if (reader.read_chunk(chunk, 1u << 20) == 0) break;
+        if (move) {
+            z.assign(chunk.size(), 0.0);
+            transform_points(from, target, chunk.x, chunk.y, z, cloud_path);
+        }
+        for (std::size_t i = 0; i < chunk.size(); ++i) {
+            const double x = chunk.x[i], y = chunk.y[i];
+            if (!(x >= within.min_x && x <= within.max_x && y >= within.min_y && y <= within.max_y)) continue;
+            const auto c = std::min(nx - 1, static_cast<std::size_t>((x - within.min_x) / cell));
+            const auto r = std::min(ny - 1, static_cast<std::size_t>((y - within.min_y) / cell));
+            ++counts[r * nx + c];
+        }
+    }
+    std::size_t at = 0;
+    for (std::size_t k = 1; k < counts.size(); ++k)
+        if (counts[k] > counts[at]) at = k;
+    if (counts[at] == 0) return best;
+    best.points = counts[at];
+    // The square's centre, kept inside `within` (a last square may be cut).
+    const double x0 = within.min_x + static_cast<double>(at % nx) * cell, y0 = within.min_y + static_cast<double>(at / nx) * cell;
+    best.centre = {0.5 * (x0 + std::min(within.max_x, x0 + cell)), 0.5 * (y0 + std::min(within.max_y, y0 + cell))};
+    return best;
+}
+
 Extent cloud_point_bounds(const std::string& cloud_path) {
     CloudReader reader(cloud_path);
     Extent e = empty_extent();

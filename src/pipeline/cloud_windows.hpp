@@ -60,6 +60,20 @@ WindowedRasters rasterize_cloud_by_windows(const std::string& cloud_path, const 
                                            const GridSpec& grid, double unit_m, const OutlierFilterOptions& outliers,
                                            const GroundFilterOptions& ground, int tile_px, int overlap_px, const Progress& progress = {});
 
+/// The most populated square of `cell` (target CRS units) a side, on squares
+/// anchored at `within`'s lower-left corner, among the cloud's points inside
+/// `within` (target CRS): its centre and its point count (0 and `within`'s
+/// centre when no point falls inside). One streamed pass; ties go to the
+/// lowest row (from min_y), then column, so the answer is the same whatever
+/// the order of the points. Used to sample a cloud whose bounding box says
+/// little of where its points are (a few far outliers, an L-shaped survey).
+struct DensestSquare {
+    MapPoint centre;
+    uint64_t points = 0;
+};
+DensestSquare densest_square(const std::string& cloud_path, const std::string& cloud_crs_override, const CrsInfo& target,
+                             const Extent& within, double cell);
+
 /// The bounding box of every point of the cloud (file CRS), one streamed
 /// pass: what grid_over_cloud sees when the cloud is held whole.
 Extent cloud_point_bounds(const std::string& cloud_path);

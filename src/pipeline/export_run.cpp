@@ -311,6 +311,11 @@ ExportReport run_export(const std::string& in_path, const std::string& out_dir, 
     else if (!crs.epsg || crs.epsg == crs.horizontal_epsg)
         log::warning(in_path + ": " + crs.label() + " has no EPSG compound code; CityJSON's referenceSystem names the horizontal CRS only");
     const CityModel model = build_city_model(layer, crs, o, in_path);
+    // glTF and 3D Tiles are meshes of solids: refused before any file is written.
+    const bool solids = std::any_of(model.buildings.begin(), model.buildings.end(), [](const Building& b) { return !b.lod1.empty() || !b.lod2.empty(); });
+    if (!solids && (wants(o.formats, "gltf") || wants(o.formats, "3dtiles")))
+        throw Error(in_path, "no building has a height (fields " + o.ground_field + ", " + o.height_field +
+                                 "), so there is no solid for glTF or 3D Tiles; run `cityforge heights` first, or leave gltf and 3dtiles out of --formats");
     return write_city_model(model, crs, out_dir, o, progress);
 }
 

@@ -48,9 +48,14 @@ std::vector<uint8_t> kd_tree_outlier_keep(const PointCloud& c, const OutlierFilt
         mean[i] = used > 1 ? s / double(used - 1) : 0.0;
         isolated[i] = found <= m || d2[m] > o.isolated_radius * o.isolated_radius;
     }
-    double sum = 0.0, sum2 = 0.0;
-    for (double d : mean) sum += d, sum2 += d * d;
-    const double mu = sum / double(n), sigma = std::sqrt(std::max(0.0, sum2 / double(n) - mu * mu));
+    // Gross outliers (over kGrossOutlierFactor x the median) stay out of mu and sigma.
+    std::vector<float> sorted(mean.begin(), mean.end());
+    std::sort(sorted.begin(), sorted.end());
+    const double gross = sorted[n / 2] > 0 ? kGrossOutlierFactor * double(sorted[n / 2]) : INFINITY;
+    double sum = 0.0, sum2 = 0.0, used = 0.0;
+    for (double d : mean)
+        if (d <= gross) sum += d, sum2 += d * d, used += 1;
+    const double mu = sum / used, sigma = std::sqrt(std::max(0.0, sum2 / used - mu * mu));
     const double limit = mu + o.std_multiplier * sigma;
     for (std::size_t i = 0; i < n; ++i)
         if (keep[i] && (mean[i] > limit || isolated[i])) keep[i] = 0;

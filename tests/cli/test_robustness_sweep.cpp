@@ -1,0 +1,164 @@
+// Robustness sweep on data we did not make (December 2026): what broke, each
+// case as it was found. Real files from ../shared/data, altered as named.
+#include <catch2/catch.hpp>
+#include <algorithm>
+#include <cstdint>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <nlohmann/json.hpp>
+#include <string>
+#include <vector>
+
+#include "cloud/cloud_filters.hpp"
+#include "cloud/las.hpp"
+#include "test_support.hpp"
+
+using namespace cityforge;
+using cityforge::test::run_cli;
+using cityforge::test::run_command;
+using cityforge::test::ScratchDir;
+using cityforge::test::shared_data;
+using cityforge::test::slurp;
+using nlohmann::json;
+
+namespace {
+
+struct FarPoint {
+    double x, y, z;  ///< file CRS units
+};
+
+// A copy of a LAS 1.0-1.3 file (legacy point count) with `extra` points
+// appended: the first record's attributes, these coordinates; the header's
+// count and bounds updated.
+void write_with_points(const std::string& src, const std::string& dst, const std::vector<FarPoint>& extra) {
+    std::string las = slurp(src);
+    REQUIRE(las.size() > 227);
+    uint32_t offset, n;
+    uint16_t rec;
+    double scale[3], origin[3], bounds[6];  // max x, min x, max y, min y, max z, min z
+    std::memcpy(&offset, las.data() + 96, 4);
+    std::memcpy(&rec, las.data() + 105, 2);
+    std::memcpy(&n, las.data() + 107, 4);
+    std::memcpy(scale, las.data() + 131, 24);
+    std::memcpy(origin, las.data() + 155, 24);
+    std::memcpy(bounds, las.data() + 179, 48);
+    REQUIRE(las.size() >= offset + std::size_t(n) * rec);
+    las.resize(offset + std::size_t(n) * rec);
+    const std::string first = las.substr(offset, rec);
+    for (const FarPoint& p : extra) {
+        std::string r = first;
+        const double v[3] = {p.x, p.y, p.z};
+        for (int a = 0; a < 3; ++a) {
+            const auto q = static_cast<int32_t>(std::llround((v[a] - origin[a]) / scale[a]));
+            std::memcpy(r.data() + 4 * a, &q, 4);
+            bounds[2 * a] = std::max(bounds[2 * a], v[a]), bounds[2 * a + 1] = std::min(bounds[2 * a + 1], v[a]);
+        }
+        las += r;
+    }
+    const uint32_t count = n + static_cast<uint32_t>(extra.size());
+    std::memcpy(las.data() + 107, &count, 4);
+    std::memcpy(las.data() + 179, bounds, 48);
+    std::ofstream(dst, std::ios::binary) << las;
+}
+
+// PDAL's Autzen trim (EPSG:2994-like WKT, international feet: x 636002-637179, y 848935-849498, z 406-521).
+const std::vector<FarPoint> kAutzenFar = {{646500, 859200, 450}, {626500, 839200, 450}, {656500, 849200, 430}};  // 3 km away
+const std::vector<FarPoint> kAutzenLow = {{636500, 849200, -5577}, {636600, 849250, -5577}, {636700, 849300, -5600}};  // z -1700 m
+
+}  // namespace
+
+TEST_CASE("A few gross outliers do not set the outlier filter's limit (Autzen, 3 points 1.7 km below)", "[cloud][filters][sweep]") {
+    ScratchDir dir("sweep_filter");
+    const std::string src = shared_data("autzen_oregon/autzen_trim.las");
+    write_with_points(src, dir / "low.las", kAutzenLow);
+    const PointCloud clean = read_las(src), low = read_las(dir / "low.las");
+    REQUIRE(low.size() == clean.size() + 3);
+    const OutlierFilterResult a = filter_outliers(clean, OutlierFilterOptions{}), b = filter_outliers(low, OutlierFilterOptions{});
+    // Before: mean + 3 sigma over every point, 2.0 m -> 22.6 m (in feet 6.7 -> 74).
+    CHECK(b.limit == a.limit);
+    for (std::size_t i = clean.size(); i < low.size(); ++i) CHECK_FALSE(b.keep[i]);
+    CHECK(std::equal(a.keep.begin(), a.keep.end(), b.keep.begin()));
+}
+
+TEST_CASE("run copes with far outliers: points km away and a z of -1700 m give the clean cloud's buildings", "[run][sweep][cli]") {
+    ScratchDir dir("sweep_far");
+    // 1300 x 2600 px of the Autzen ortho (1 ft): the cloud fills its southern
+    // third, so the grid's centre is 800 m from any point.
+    const std::string ortho = dir / "ortho.tif";
+    REQUIRE(run_command("gdal_translate -q -projwin 635950 851500 637250 848900 " + shared_data("autzen_oregon/autzen_ortho_1ft_epsg2994.tif") +
+                        " " + ortho).exit_code == 0);
+    const std::string src = shared_data("autzen_oregon/autzen_trim.las");
+    std::vector<FarPoint> both = kAutzenFar;
+    both.insert(both.end(), kAutzenLow.begin(), kAutzenLow.end());
+    write_with_points(src, dir / "far.las", both);
+    const auto run = [&](const std::string& cloud, const std::string& out) {
+        return run_cli("run --quiet --ortho " + ortho + " --cloud " + cloud + " --formats geojson --lod 0,1 --out " + (dir / out));
+    };
+    const auto clean = run(src, "clean");
+    INFO(clean.err);
+    REQUIRE(clean.exit_code == 0);
+    // Before: exit 1, "no point left after cleaning in the 400 m around ..."
+    // (the far points stretch the cloud's box over the whole grid, whose centre
+    // is empty); the low points alone raised the outlier limit 11 times (on
+    // a 1280 x 650 px crop of the same ortho: 16 buildings instead of 17).
+    const auto far = run(dir / "far.las", "far");
+    INFO(far.err);
+    REQUIRE(far.exit_code == 0);
+    CHECK(slurp(dir / "far/buildings.geojson") == slurp(dir / "clean/buildings.geojson"));
+    const json report = json::parse(slurp(dir / "far/run_report.json"));
+    CHECK(report["counts"]["buildings"].get<int>() > 10);
+}
+
+TEST_CASE("Empty and cut files are named as such: a 0-byte LAS, a LAS cut in its header, a cut GeoJSON, a city model", "[cli][errors][sweep]") {
+    ScratchDir dir("sweep_cut");
+    std::ofstream(dir / "empty.las").flush();
+    std::ofstream(dir / "empty.tif").flush();
+    const std::string las = slurp(shared_data("autzen_oregon/autzen_trim.las"));
+    std::ofstream(dir / "head.las", std::ios::binary) << las.substr(0, 200);
+    const std::string geojson = slurp(shared_data("ign_lidarhd_bdtopo_west/bdtopo_buildings_west.geojson"));
+    std::ofstream(dir / "cut.geojson") << geojson.substr(0, geojson.size() / 2);
+    std::ofstream(dir / "model.city.json") << R"({"type": "CityJSON", "version": "2.0", "transform": {"scale": [1, 1, 1], "translate": [0, 0, 0]}, "CityObjects": {}, "vertices": []})";
+    const std::string fp = shared_data("ign_lidarhd_bdtopo_west/bdtopo_buildings_west.geojson");
+    struct Case {
+        std::string args, file, problem;
+    };
+    // Before: "not a LAS file (no LASF signature)" for the first three, and
+    // "not a raster, LAS point cloud or vector file" for the last four.
+    const std::vector<Case> cases = {
+        {"heights --footprints " + fp + " --cloud " + (dir / "empty.las") + " --out " + (dir / "h.gpkg"), dir / "empty.las", "empty file (0 bytes)"},
+        {"info " + (dir / "head.las"), dir / "head.las", "truncated LAS header: the file ends after 200 bytes"},
+        {"cloud rasterize --cloud " + (dir / "head.las") + " --gsd 1 --out " + (dir / "r"), dir / "head.las", "truncated LAS header"},
+        {"info " + (dir / "empty.tif"), dir / "empty.tif", "empty file (0 bytes)"},
+        {"info " + (dir / "empty.las"), dir / "empty.las", "empty file (0 bytes)"},
+        {"info " + (dir / "cut.geojson"), dir / "cut.geojson", "GeoJSON"},
+        {"info " + (dir / "model.city.json"), dir / "model.city.json", "a city model"},
+    };
+    for (const Case& c : cases) {
+        const auto r = run_cli(c.args);
+        INFO(c.args << "\n" << r.err);
+        CHECK(r.exit_code == 1);
+        CHECK(r.err.rfind("cityforge: error: " + c.file + ": ", 0) == 0);
+        CHECK(r.err.find(c.problem) != std::string::npos);
+        CHECK(std::count(r.err.begin(), r.err.end(), '\n') == 1);
+    }
+    CHECK_FALSE(std::filesystem::exists(dir / "h.gpkg"));
+    CHECK_FALSE(std::filesystem::exists(dir / "r"));
+}
+
+TEST_CASE("export of footprints without heights to every format is refused naming the input, before any file is written", "[cli][export][sweep]") {
+    ScratchDir dir("sweep_export");
+    // OpenStreetMap footprints of Kampala (EPSG:3857), no height fields.
+    const std::string in = shared_data("oam_kampala_rgba/kampala_z19_east_buildings.geojson");
+    const auto r = run_cli("export --in " + in + " --out " + (dir / "m"));
+    INFO(r.err);
+    // Before: exit 1 naming m/buildings.glb, with six city model files left in m/.
+    CHECK(r.exit_code == 1);
+    CHECK(r.err.find("cityforge: error: " + in + ": no building has a height") != std::string::npos);
+    CHECK_FALSE(std::filesystem::exists(dir / "m"));
+    // Without the mesh formats the footprints (LOD0) are written.
+    const auto lod0 = run_cli("export --quiet --in " + in + " --formats geojson,cityjson --out " + (dir / "m0"));
+    INFO(lod0.err);
+    CHECK(lod0.exit_code == 0);
+    CHECK(std::filesystem::exists(dir / "m0/buildings.city.json"));
+}
