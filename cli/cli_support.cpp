@@ -8,6 +8,7 @@
 #include "core/atomic_file.hpp"
 #include "core/error.hpp"
 #include "core/log.hpp"
+#include "io/cloud_crs.hpp"
 
 namespace cityforge::cli {
 
@@ -21,6 +22,12 @@ void remove_stale_temporaries_beside(const std::string& path) {
     if (fs::is_directory(p, ec)) removed += remove_stale_temporaries(p);
     if (removed)
         log::info("removed " + std::to_string(removed) + " temporar" + (removed == 1 ? "y" : "ies") + " of an interrupted process beside " + path);
+}
+
+void warn_without_vertical_crs(const std::string& cloud, const std::string& cloud_crs, const std::string& what, const std::string& remedy) {
+    const CrsInfo c = resolve_cloud_crs(cloud, cloud_crs).crs;
+    if (c.empty() || c.vertical_epsg || !c.vertical_name.empty()) return;
+    log::warning(cloud + ": no vertical CRS (" + c.label() + "): " + what + " are written without a named height datum; " + remedy);
 }
 
 void refuse_existing_output(const GlobalFlags& g, const std::string& path) {

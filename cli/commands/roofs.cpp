@@ -3,6 +3,7 @@
 #include <memory>
 
 #include "commands/commands.hpp"
+#include "core/log.hpp"
 #include "pipeline/roofs_run.hpp"
 
 namespace cityforge::cli {
@@ -54,6 +55,8 @@ void add_roofs_command(CLI::App& parent, const GlobalFlags& g, CommandList& out)
                        opt.model.lods = parse_lods(s->lods);
                        refuse_existing_output(g, s->out);
                        const RoofsRunReport r = run_roofs(s->footprints, s->cloud, s->out, opt, make_progress(g));
+                       if (!r.model.vertical_known)
+                           log::warning(s->cloud + ": no vertical CRS: the city models' heights are written without a named height datum; give --vertical-crs, e.g. EPSG:5720");
                        if (!g.quiet) {
                            std::string types;
                            for (const auto& [k, v] : r.roof_types) types += " " + k + "=" + std::to_string(v);

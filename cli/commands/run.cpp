@@ -1,10 +1,12 @@
 // cityforge run / plan / merge-tiles: the whole chain in tiles.
 #include <cstdio>
 #include <cstdlib>
+#include <filesystem>
 #include <memory>
 
 #include "commands/commands.hpp"
 #include "core/error.hpp"
+#include "core/log.hpp"
 #include "pipeline/city_run.hpp"
 
 namespace cityforge::cli {
@@ -76,6 +78,36 @@ RunManifest plan_from(const RunInputs& rc) {
     return plan_run(ro);
 }
 
+// What --out may hold before a run: nothing, or an earlier run of the same
+// plan (resumed: its finished tiles are kept). An earlier run with other
+// options, or other files, are refused unless --overwrite: then the earlier
+// run's state (manifest, tiles, cloud tiles, report) is removed and the run
+// starts afresh, its outputs replacing the folder's.
+void prepare_run_folder(const GlobalFlags& g, const std::string& out, const RunManifest& m) {
+    namespace fs = std::filesystem;
+    std::error_code ec;
+    if (!fs::exists(out, ec)) return;
+    if (!fs::is_directory(out, ec)) throw Error(out, "exists and is not a folder; --out names the run's output folder");
+    if (fs::is_empty(out, ec)) return;
+    const fs::path stored = fs::path(out) / "manifest.json";
+    if (fs::exists(stored, ec)) {
+        bool same = false;
+        try {
+            const RunManifest before = read_manifest(stored.string());
+            same = to_json(before.options) == to_json(m.options) && before.tiles.size() == m.tiles.size() && before.overlap_px == m.overlap_px;
+        } catch (const Error&) {
+            if (!g.overwrite) throw;
+        }
+        if (same) return;  // resume
+        if (!g.overwrite)
+            throw Error(out, "holds a run with other options or tiles; resume with the same options, use a new folder, or give --overwrite to replace it");
+    } else if (!g.overwrite) {
+        throw Error(out, "output folder exists and is not empty (no earlier run to resume in it); give --overwrite to replace its outputs");
+    }
+    for (const char* name : {"manifest.json", "run_report.json", "tiles", "cloud_tiles"}) fs::remove_all(fs::path(out) / name, ec);
+    log::info(out + ": earlier run state removed (--overwrite); the run starts afresh");
+}
+
 }  // namespace
 
 void add_run_commands(CLI::App& parent, const GlobalFlags& g, CommandList& out) {
@@ -113,6 +145,7 @@ void add_run_commands(CLI::App& parent, const GlobalFlags& g, CommandList& out) 
                        }
                        RunShare share;
                        if (rs->mpi) share = mpi_share();
+                       if (share.rank == 0) prepare_run_folder(g, rs->out, manifest);
                        const RunReport r = run_city(manifest, rs->out, share, make_progress(g));
                        if (!g.quiet && share.rank == 0) {
                            std::size_t failed = 0;

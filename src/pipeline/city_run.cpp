@@ -1094,6 +1094,10 @@ RunReport merge_tiles(const RunManifest& m, const std::string& out_dir, const Pr
     crs = combine_with_vertical(crs, cloud_crs);
     if (!m.options.buildings.model.vertical_crs.empty() && !crs.vertical_epsg)
         crs = combine_with_vertical(crs, crs_from_user_input(m.options.buildings.model.vertical_crs, "--vertical-crs"));
+    if (!m.options.cloud.empty() && !crs.vertical_epsg && crs.vertical_name.empty()) {
+        rep.warnings.push_back(m.options.cloud + ": no vertical CRS: the city models' heights are written without a named height datum (give --vertical-crs, e.g. EPSG:5720)");
+        log::warning(rep.warnings.back());
+    }
     CityModel model;
     Extent extent = empty_extent();
     for (const Building& b : buildings) include(extent, parts_extent(b.footprint));

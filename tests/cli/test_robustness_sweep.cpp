@@ -162,3 +162,74 @@ TEST_CASE("export of footprints without heights to every format is refused namin
     CHECK(lod0.exit_code == 0);
     CHECK(std::filesystem::exists(dir / "m0/buildings.city.json"));
 }
+
+TEST_CASE("run does not replace a folder's outputs without --overwrite - with it, a run of other options starts afresh", "[cli][run][sweep]") {
+    ScratchDir dir("sweep_run_folder");
+    const std::string ign = shared_data("ign_lidarhd_bdtopo_west/");
+    const std::string inputs = " --ortho " + ign + "rgb_from_points_0p5m_west.tif --cloud " + ign + "lidarhd_870200_6617083_west.las --formats geojson";
+    // A folder holding another command's city models (export of Delft footprints).
+    const std::string delft = shared_data("delft_ahn3_bgt_west/bgt_pand_west_with_ref_heights.geojson");
+    REQUIRE(run_cli("export --quiet --in " + delft + " --formats geojson,cityjson --lod 0 --out " + (dir / "m")).exit_code == 0);
+    const std::string before = slurp(dir / "m/buildings.geojson");
+    // Before: exit 0, the 135 Delft buildings silently replaced by the run's.
+    const auto refused = run_cli("run --quiet" + inputs + " --out " + (dir / "m"));
+    CHECK(refused.exit_code == 1);
+    CHECK(refused.err.find("cityforge: error: " + (dir / "m") + ": output folder exists and is not empty") != std::string::npos);
+    CHECK(refused.err.find("--overwrite") != std::string::npos);
+    CHECK(slurp(dir / "m/buildings.geojson") == before);
+    const auto replaced = run_cli("--overwrite run --quiet" + inputs + " --out " + (dir / "m"));
+    INFO(replaced.err);
+    CHECK(replaced.exit_code == 0);
+    CHECK(slurp(dir / "m/buildings.geojson") != before);
+    // The same run again resumes (no --overwrite needed, same bytes); other
+    // options are refused, and with --overwrite start afresh (before: refused
+    // with or without --overwrite).
+    const std::string first = slurp(dir / "m/buildings.geojson");
+    CHECK(run_cli("run --quiet" + inputs + " --out " + (dir / "m")).exit_code == 0);
+    CHECK(slurp(dir / "m/buildings.geojson") == first);
+    const auto other = run_cli("run --quiet" + inputs + " --tile-size 64 --out " + (dir / "m"));
+    CHECK(other.exit_code == 1);
+    CHECK(other.err.find("holds a run with other options") != std::string::npos);
+    CHECK(other.err.find("--overwrite") != std::string::npos);
+    const auto fresh = run_cli("--overwrite run --quiet" + inputs + " --tile-size 64 --out " + (dir / "m"));
+    INFO(fresh.err);
+    CHECK(fresh.exit_code == 0);
+    CHECK(json::parse(slurp(dir / "m/manifest.json"))["tiles"].size() > 1);
+    // A file where the folder should be.
+    std::ofstream(dir / "file") << "x";
+    const auto file = run_cli("--overwrite run --quiet" + inputs + " --out " + (dir / "file"));
+    CHECK(file.exit_code == 1);
+    CHECK(file.err.find(dir / "file") != std::string::npos);
+}
+
+TEST_CASE("Heights from a cloud without a vertical CRS (IGN Lidar HD, EPSG:2154 only) say their datum is unnamed", "[cli][crs][sweep]") {
+    ScratchDir dir("sweep_vertical");
+    const std::string ign = shared_data("ign_lidarhd_bdtopo_west/");
+    const std::string cloud = ign + "lidarhd_870200_6617083_west.las", fp = ign + "bdtopo_buildings_west.geojson";
+    // Before: heights, roofs, rasterize and run wrote heights in an unnamed datum without a word.
+    const auto h = run_cli("heights --footprints " + fp + " --cloud " + cloud + " --out " + (dir / "h.gpkg"));
+    INFO(h.err);
+    REQUIRE(h.exit_code == 0);
+    CHECK(h.err.find("warning: " + cloud + ": no vertical CRS") != std::string::npos);
+    const auto r = run_cli("cloud rasterize --cloud " + cloud + " --gsd 1 --out " + (dir / "r"));
+    CHECK(r.exit_code == 0);
+    CHECK(r.err.find("no vertical CRS") != std::string::npos);
+    const auto roofs = run_cli("roofs --footprints " + fp + " --cloud " + cloud + " --formats cityjson --out " + (dir / "roofs"));
+    CHECK(roofs.exit_code == 0);
+    CHECK(roofs.err.find("no vertical CRS") != std::string::npos);
+    const auto run = run_cli("run --ortho " + ign + "rgb_from_points_0p5m_west.tif --cloud " + cloud + " --formats geojson --out " + (dir / "run"));
+    REQUIRE(run.exit_code == 0);
+    const json report = json::parse(slurp(dir / "run/run_report.json"));
+    bool said = false;
+    for (const auto& w : report["warnings"]) said = said || w.get<std::string>().find("no vertical CRS") != std::string::npos;
+    CHECK(said);
+    // Given one, nothing is said and the outputs name it.
+    const auto named = run_cli("heights --footprints " + fp + " --cloud " + cloud + " --cloud-crs EPSG:2154+5720 --out " + (dir / "h2.gpkg"));
+    CHECK(named.exit_code == 0);
+    CHECK(named.err.find("no vertical CRS") == std::string::npos);
+    const auto roofs2 = run_cli("roofs --footprints " + fp + " --cloud " + cloud + " --vertical-crs EPSG:5720 --formats cityjson --out " + (dir / "roofs2"));
+    CHECK(roofs2.exit_code == 0);
+    CHECK(roofs2.err.find("no vertical CRS") == std::string::npos);
+    // EPSG:5698 = RGF93 / Lambert-93 + NGF-IGN69 height.
+    CHECK(json::parse(slurp(dir / "roofs2/buildings.city.json"))["metadata"]["referenceSystem"] == "https://www.opengis.net/def/crs/EPSG/0/5698");
+}
