@@ -7,6 +7,8 @@
 # Never reads ../shared/data/holdout/. Same data, same seed -> same model bytes (whatever the thread count).
 #
 #   scripts/train_default_models.sh [BUILD_DIR]      (default build/; data from ../shared/data or $CITYFORGE_DATA)
+# Experiments: $CITYFORGE_MODELS_OUT writes the two models elsewhere (default models/),
+# $CITYFORGE_ONLY=rgb|pan trains one of them, $CITYFORGE_TRAIN_ARGS adds train options; the shipped models take none.
 # Prints each model's cross-validation figures (5 spatial folds, 60 m blocks).
 set -euo pipefail
 here="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
@@ -54,8 +56,16 @@ done
 # of the same ground size: Rio and Atlanta at 0.5 m merge at 18, 36, 72);
 # the pixel stage filters 0.8 m cells (factor 3 at 0.3 m, 2 at 0.5 m).
 common=(--seed 1 --reference-gsd-m 0.3 --pixel-cell-m 0.8)
-mkdir -p "$here/models"
-echo "== models/default_rgb.cfdet" >&2
-"$cf" train "${args[@]}" "${common[@]}" --out "$here/models/default_rgb.cfdet" --overwrite
-echo "== models/default_pan.cfdet" >&2
-"$cf" train "${pan[@]}" "${common[@]}" --out "$here/models/default_pan.cfdet" --overwrite
+# shellcheck disable=SC2206  # experiments: extra train options, split on blanks
+[ -n "${CITYFORGE_TRAIN_ARGS:-}" ] && common+=(${CITYFORGE_TRAIN_ARGS})
+out="${CITYFORGE_MODELS_OUT:-$here/models}"
+only="${CITYFORGE_ONLY:-}"
+mkdir -p "$out"
+if [ "$only" != pan ]; then
+  echo "== $out/default_rgb.cfdet" >&2
+  "$cf" train "${args[@]}" "${common[@]}" --out "$out/default_rgb.cfdet" --overwrite
+fi
+if [ "$only" != rgb ]; then
+  echo "== $out/default_pan.cfdet" >&2
+  "$cf" train "${pan[@]}" "${common[@]}" --out "$out/default_pan.cfdet" --overwrite
+fi

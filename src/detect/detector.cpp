@@ -1,5 +1,7 @@
 #include "detect/detector.hpp"
 
+#include <algorithm>
+#include <cmath>
 #include <cstring>
 #include <filesystem>
 #include <fstream>
@@ -50,6 +52,12 @@ void DetectorOptions::validate(int bands) const {
     if (pixel_object_threshold > 0.0 && !pixel.enabled) throw Error("pixel_object_threshold", "needs the pixel stage");
     if (!(min_hole_m2 >= 0.0)) throw Error("min_hole_m2", "must be >= 0");
     if (!(merge_threshold >= 0.0 && merge_threshold < 1.0)) throw Error("merge_threshold", "must be in [0, 1) (0 = off)");
+}
+
+void encode_linear_counts(Image<float>& image, int band) {
+    if (band < 0 || band >= image.bands) throw Error("encode_linear_counts", "band " + std::to_string(band) + " does not exist");
+    float* v = image.band_data(band);
+    for (std::size_t i = 0; i < image.pixel_count(); ++i) v[i] = std::sqrt(std::max(v[i], 0.0f));
 }
 
 std::string describe_bands(const BandLayout& l) {

@@ -52,6 +52,13 @@ struct DetectorOptions {
     void validate(int bands) const;
 };
 
+/// Brings one band of linear sensor counts (a source deeper than 8 bits:
+/// UInt16 WorldView pan, ...) to a display-like tone before the per-band
+/// normalisation: its square root (about the gamma 8-bit imagery already
+/// carries), so dark roofs and tree shadows are not squeezed into a few grey
+/// levels by the few bright pixels. Negative values become 0.
+void encode_linear_counts(Image<float>& image, int band);
+
 /// The bands a model expects, in the image's order (alpha bands are masks,
 /// never counted): "pan" (1), "RGB" (3), "RGB+NIR" (4), or "N bands".
 std::string describe_bands(const BandLayout& layout);

@@ -59,6 +59,12 @@ DetectionImage detection_image_from(const Image<float>& image, const std::vector
     std::size_t n_valid = 0;
     for (const uint8_t v : d.valid) n_valid += v;
     if (n_valid == 0) throw Error(path, "has no valid pixel (all nodata or transparent)");
+    // Integer sources deeper than 8 bits (UInt16 pan ...) hold linear counts: brought to a display tone first.
+    for (std::size_t k = 0; k < colours.size(); ++k) {
+        const SampleType t = info.bands[source_bands[colours[k]] - 1].type;
+        if (t == SampleType::uint16 || t == SampleType::int16 || t == SampleType::uint32 || t == SampleType::int32)
+            detect::encode_linear_counts(d.normalised, int(k));
+    }
     normalize_bands(d.normalised, d.valid);
     // True ground size of the centre pixel for any CRS (Web Mercator's grid
     // metres are not ground metres away from the equator).
