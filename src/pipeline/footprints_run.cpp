@@ -135,7 +135,7 @@ FootprintTable footprint_table(const BuildingMask& mask, const Image<float>& nds
     std::vector<Feature>& features = table.features;
     double error_sum = 0.0;
     for (uint32_t id = 1; id <= mask.count; ++id) {
-        if (polygons[id].empty()) continue;
+        if (id >= polygons.size() || polygons[id].empty()) continue;  // a label left empty (a crown dropped, absorbed)
         // One polygon per building: its largest part (the detection keeps
         // buildings in one part; this guards any other source).
         const Polygon& pixels = *std::max_element(polygons[id].begin(), polygons[id].end(),
@@ -260,6 +260,40 @@ Image<uint32_t> read_segments(const std::string& path, const GridSpec& grid, uin
     for (const uint32_t l : labels.data) count = std::max(count, l);
     if (count == 0) throw Error(path, "segments raster holds no segment (all 0)");
     return labels;
+}
+
+// A building mask found on the ortho file's own grid carried onto the
+// working grid (a lon/lat ortho is read warped onto its UTM zone, but the
+// learned detector reads the file's own pixels, which it was trained on:
+// bilinear resampling blurs their texture). Each working cell takes the
+// label of the file pixel under its centre; labels are renumbered 1..count
+// in their order, without the ones no cell took.
+BuildingMask mask_on_working_grid(const BuildingMask& m, const GridSpec& from, const CrsInfo& from_crs, const GridSpec& to, const CrsInfo& to_crs,
+                                  const std::string& subject) {
+    const std::size_t n = std::size_t(to.width) * std::size_t(to.height);
+    std::vector<double> x(n), y(n), z(n, 0.0);
+    for (int r = 0; r < to.height; ++r)
+        for (int c = 0; c < to.width; ++c) {
+            const MapPoint p = to.transform.pixel_centre(c, r);
+            const std::size_t i = std::size_t(r) * std::size_t(to.width) + std::size_t(c);
+            x[i] = p.x, y[i] = p.y;
+        }
+    transform_points(to_crs, from_crs, x, y, z, subject);
+    BuildingMask out;
+    out.used_classes = m.used_classes;
+    out.labels = Image<uint32_t>(to.width, to.height, 1, 0u);
+    std::vector<uint32_t> renumber(std::size_t(m.count) + 1, 0);
+    for (std::size_t i = 0; i < n; ++i) {
+        const PixelPoint q = from.transform.map_to_pixel({x[i], y[i]});
+        const double c = std::floor(q.col), r = std::floor(q.row);
+        if (!(c >= 0.0 && r >= 0.0 && c < from.width && r < from.height)) continue;
+        const uint32_t l = m.labels.data[std::size_t(r) * std::size_t(from.width) + std::size_t(c)];
+        if (l > 0 && l <= m.count) renumber[l] = 1, out.labels.data[i] = l;
+    }
+    for (std::size_t l = 1; l < renumber.size(); ++l)
+        if (renumber[l]) renumber[l] = ++out.count;
+    for (uint32_t& l : out.labels.data) l = renumber[l];
+    return out;
 }
 
 // ortho_cloud: the buildings outside the heights' coverage, found by an
@@ -486,6 +520,7 @@ FootprintsReport run_footprints_unguarded(const std::string& output_path, const 
         }
         rep.detector = "model " + path;
         mask = detect_building_mask(model, di, 0, progress.sub(0.1, 0.55));
+        if (ortho->info().warped) mask = mask_on_working_grid(mask, di.grid, di.crs, grid, crs, o.ortho);
     } else if (mode == DetectionMode::ortho_only) {
         rep.detector = "rules";
         Image<float> normalised = img.image;
@@ -517,7 +552,8 @@ FootprintsReport run_footprints_unguarded(const std::string& output_path, const 
             progress(0.45, "buildings");
             OrthoRefineOptions ro = o.segmentation;
             ro.cloud_edges = rep.cloud_cell_factor == 1;
-            refine_buildings_with_ortho(mask, cells, img.image, img.valid, ndsm, 20.0 / z_unit, segments, vegetation, ro);
+            ro.max_crown_plane_sigma_m /= z_unit, ro.min_crown_local_roughness_m /= z_unit, ro.gsd_m = mo.gsd_m;
+            rep.crowns_dropped = static_cast<int>(refine_buildings_with_ortho(mask, cells, img.image, img.valid, ndsm, 20.0 / z_unit, segments, vegetation, ro));
             RoofSeamOptions so = o.seams;
             so.gsd_m = mo.gsd_m, so.ridge_rise_m /= z_unit, so.valley_depth_m /= z_unit;
             rep.seam_splits = split_at_roof_seams(mask, img.image, img.valid, ndsm, so);
