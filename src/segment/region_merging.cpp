@@ -6,6 +6,7 @@
 #include <cstddef>
 #include <cstdlib>
 #include <ctime>
+#include <atomic>
 #include <new>
 #include <tbb/task_arena.h>
 #include <tbb/parallel_reduce.h>
@@ -79,48 +80,55 @@ struct Neighbour {
     double cost = 0;  // fusion cost of the edge, cached by the nearest-neighbour strategies
 };
 
-// A candidate merge. Order: (cost, lower key, higher key) — keys are the
-// lowest input label of each region, so the order does not depend on which
-// storage slot a region lives in.
+// A candidate merge: (cost, lower key, higher key) orders the queue, the
+// nodes name the regions. A region keeps the node of its key (its lowest
+// input label) for life, so the loop accepts a popped entry if both regions
+// are alive and the cost is still the pair's current cost: then it is the
+// entry a fresh push would make, and stale entries need no version stamps.
 struct QueueEntry {
     double cost;
-    uint32_t ka, kb;  // keys, ka < kb
-    uint32_t a, b;    // nodes
-    uint32_t va, vb;  // versions of a and b when the cost was computed
+    uint64_t keys;  // lower key << 32 | higher key
+    uint32_t a, b;  // nodes of the lower and the higher key
     bool operator>(const QueueEntry& o) const {
         if (cost != o.cost) return cost > o.cost;
-        if (ka != o.ka) return ka > o.ka;
-        return kb > o.kb;
+        return keys > o.keys;
     }
 };
 
-// Region graph. A region lives in a node (storage slot); when two regions
-// merge, the one with the longer adjacency list keeps its slot (so a region
-// with thousands of neighbours is never copied and its neighbours' lists are
-// not rewritten), and the merged region takes the lower of the two keys. Keys
-// alone decide every tie, so the merge sequence is the one defined in the
-// header whatever slot a region lives in.
+// Region graph. A region lives in the node (storage slot) of its key, its
+// lowest input label: when two regions merge, the one with the lower key
+// keeps its slot and the other dies. Keys alone decide every tie, so the
+// merge sequence is the one defined in the header whatever the node
+// numbering. (Each merge rewrites the cached cost in every neighbour's list
+// anyway, so keeping the longer list in place would save little.)
 //
 // Everything the merge loop reads about a node sits in one cache-aligned
-// record: NodeHead, Σ and Σ² per band, then room for the adjacency of a
-// typical region (14 neighbours for 3 bands in 256 bytes; longer lists move
-// to a heap block). A cost evaluation, a nearest-neighbour offer or an
-// adjacency edit touches one record per neighbour, and the records of all
-// neighbours are prefetched together before they are used: the loop is bound
-// by these memory reads, not by arithmetic.
+// record: NodeHead (80 bytes), Σ and Σ² per band (48 bytes for 3 bands: the
+// two make two cache lines), then room for the adjacency of a typical
+// region (12 neighbours for 3 bands in 320 bytes; longer lists move to a
+// heap block). A cost evaluation, a nearest-neighbour offer or an adjacency
+// edit touches one record per neighbour, and the records of all neighbours
+// are prefetched together before they are used: the loop is bound by these
+// memory reads, not by arithmetic. The shape terms l·√n and n·l/b are
+// recomputed from n, l and the box where needed (bit for bit the same
+// values) rather than stored, to keep the head and sums in two lines.
 struct NodeHead {
     double n = 0, l = 0;           // area (pixels), perimeter (pixel edges)
-    double lsq = 0, smooth = 0;    // l·√n, n·l/b (b = bounding-box perimeter)
     double colour = 0;             // Σ_b w_b n σ_b
     double nn_cost = INFINITY;     // cost to the nearest neighbour
     int32_t x0 = INT32_MAX, y0 = INT32_MAX, x1 = -1, y1 = -1;  // bounding box, pixels
     uint32_t nn = 0;               // nearest neighbour node (0 = none)
     uint32_t key = 0;              // lowest input label of the region
-    uint32_t version = 0;          // bumped by every merge of the region
     uint32_t alive = 0;
+    uint32_t degree = 0;
     Neighbour* list = nullptr;     // sorted adjacency: the record's inline slots or a heap block
-    uint32_t degree = 0, capacity = 0;
+    uint32_t capacity = 0;
+    // l·√n and n·l/b (b = bounding-box perimeter) of the region.
+    double lsq() const { return l * std::sqrt(n); }
+    double smooth() const { return n * l / (2.0 * ((x1 - x0 + 1) + (y1 - y0 + 1))); }
 };
+
+static_assert(sizeof(NodeHead) == 80, "NodeHead and 3 bands of sums fill two cache lines");
 
 // Read-only view of a node's adjacency.
 struct NeighbourSpan {
@@ -158,13 +166,14 @@ public:
                 h->capacity = inline_capacity_;
             }
         });
+        number_nodes(labels);
         build(image, labels);
         alive_count_ = tbb::parallel_reduce(
             tbb::blocked_range<uint32_t>(1, std::max<uint32_t>(n_, 1), 1 << 14), uint32_t(0),
             [&](const tbb::blocked_range<uint32_t>& rr, uint32_t alive) {
                 for (uint32_t r = rr.begin(); r != rr.end(); ++r) {
                     NodeHead& R = head(r);
-                    R.key = r;
+                    R.key = label_of_node_[r];
                     R.alive = R.n > 0;
                     alive += R.alive;
                     derive(r);
@@ -174,6 +183,66 @@ public:
             [](uint32_t a, uint32_t b) { return a + b; });
     }
 
+    // Node order. The merge loop reads the records of a region and of its
+    // neighbours, all close together in the image; on 4 KB pages, records
+    // of neighbours far apart in memory cost one TLB miss each (the dearest
+    // part of a read on a virtual machine). Regions are numbered by the cell
+    // of their first pixel (raster order): 8 x 8 pixel cells in Morton order
+    // within blocks of 64 x 64 pixels, blocks left to right within stripes
+    // of kStripe rows, stripes top to bottom; within a cell by label. A
+    // region keeps its label as its key, and keys alone decide every tie, so
+    // the numbering changes no result. Fills node_of_label_ and label_of_node_.
+    static constexpr int kStripe = 64;
+    void number_nodes(const Image<uint32_t>& labels) {
+        const int w = labels.width, h = labels.height;
+        const uint32_t* lab = labels.band_data(0);
+        const int stripes = (h + kStripe - 1) / kStripe;
+        const uint64_t none = UINT64_MAX;
+        std::vector<std::atomic<uint64_t>> first(n_);
+        for (auto& f : first) f.store(none, std::memory_order_relaxed);
+        std::atomic<uint32_t> too_large{0};
+        tbb::parallel_for(0, stripes, [&](int st) {
+            for (int y = st * kStripe; y < std::min(h, (st + 1) * kStripe); ++y) {
+                const uint32_t* row = lab + std::size_t(y) * w;
+                uint32_t previous = 0;
+                for (int x = 0; x < w; ++x) {
+                    const uint32_t l = row[x];
+                    if (l == previous) continue;
+                    previous = l;
+                    if (l >= n_) {
+                        too_large.store(l, std::memory_order_relaxed);
+                        continue;
+                    }
+                    const uint64_t at = uint64_t(y) << 32 | uint32_t(x);
+                    uint64_t now = first[l].load(std::memory_order_relaxed);
+                    while (at < now && !first[l].compare_exchange_weak(now, at, std::memory_order_relaxed)) {
+                    }
+                }
+            }
+        });
+        if (too_large.load()) throw Error("region merging", "label " + std::to_string(too_large.load()) + " exceeds the region count");
+        const uint64_t blocks = (uint64_t(w) + 63) / 64;
+        const uint64_t cells = uint64_t(stripes) * blocks * 64 + 1;  // + 1: labels without pixels, last
+        auto cell_of = [&](uint32_t l) -> uint64_t {
+            const uint64_t at = first[l].load(std::memory_order_relaxed);
+            if (at == none) return cells - 1;
+            const uint32_t y = static_cast<uint32_t>(at >> 32), x = static_cast<uint32_t>(at);
+            const uint32_t cx = (x >> 3) & 7, cy = (y % kStripe) >> 3;
+            uint32_t m = 0;  // Morton code of the cell within its block
+            for (int bit = 0; bit < 3; ++bit) m |= ((cx >> bit) & 1u) << (2 * bit) | ((cy >> bit) & 1u) << (2 * bit + 1);
+            return (uint64_t(y / kStripe) * blocks + x / 64) * 64 + m;
+        };
+        std::vector<uint32_t> start(cells + 1, 0);
+        for (uint32_t l = 1; l < n_; ++l) ++start[cell_of(l) + 1];
+        for (uint64_t c = 0; c < cells; ++c) start[c + 1] += start[c];
+        node_of_label_.assign(n_, 0);
+        label_of_node_.assign(n_, 0);
+        for (uint32_t l = 1; l < n_; ++l) {
+            const uint32_t node = 1 + start[cell_of(l)]++;
+            node_of_label_[l] = node, label_of_node_[node] = l;
+        }
+    }
+
     // Region statistics and adjacency from the label raster, in parallel over
     // row blocks. Band values are accumulated as exact integers (fixed point,
     // 2^-k grey levels) so the totals do not depend on how rows were split
@@ -181,6 +250,7 @@ public:
     void build(const Image<float>& image, const Image<uint32_t>& labels) {
         const int w = labels.width, h = labels.height;
         const uint32_t* lab = labels.band_data(0);
+        const uint32_t* node = node_of_label_.data();  // label -> node (number_nodes)
         const float max_abs = tbb::parallel_reduce(
             tbb::blocked_range<std::size_t>(0, image.data.size(), 1 << 16), 0.0f,
             [&](const tbb::blocked_range<std::size_t>& r, float m) {
@@ -210,19 +280,22 @@ public:
             for (uint32_t r = rr.begin(); r != rr.end(); ++r)
                 init_acc(in_record ? new (inline_bytes(r)) int64_t[words] : outside.data() + std::size_t(r) * words);
         });
-        // Row bands. A band owns the labels above every label of the bands
-        // before it (with labels numbered in raster order of first
-        // appearance, nearly all of its labels) and adds their pixels
+        // Row bands (on stripe boundaries). A band owns the nodes above every
+        // node of the bands before it (with nodes numbered by the stripe of
+        // their first pixel, nearly all of its nodes) and adds their pixels
         // straight into the region's accumulator; no other band sees them.
         // Labels of earlier bands (regions crossing its top edge) are summed
         // in a small per-band table and added afterwards. Integer sums and
         // min/max: the totals do not depend on the split.
         const int n_bands = std::clamp(h / 32, 1, 4 * tbb::this_task_arena::max_concurrency());
-        auto band_row = [&](int j) { return static_cast<int>(static_cast<int64_t>(h) * j / n_bands); };
+        auto band_row = [&](int j) {  // on stripe boundaries (see number_nodes): each band owns its stripes' regions
+            if (j >= n_bands) return h;
+            return std::min(h, static_cast<int>(static_cast<int64_t>(h) * j / n_bands + kStripe / 2) / kStripe * kStripe);
+        };
         std::vector<uint32_t> band_max(n_bands, 0);
         tbb::parallel_for(0, n_bands, [&](int j) {
             uint32_t m = 0;
-            for (std::size_t i = std::size_t(band_row(j)) * w; i < std::size_t(band_row(j + 1)) * w; ++i) m = std::max(m, lab[i]);
+            for (std::size_t i = std::size_t(band_row(j)) * w; i < std::size_t(band_row(j + 1)) * w; ++i) m = std::max(m, node[lab[i]]);
             band_max[j] = m;
         });
         for (int j = 0; j < n_bands; ++j)
@@ -269,14 +342,15 @@ public:
                 uint64_t last_down = 0;  // runs of the same vertical neighbour pair collapse into one entry
                 int x = 0;
                 while (x < w) {
-                    const uint32_t a = row[x];
-                    if (!a) {
+                    const uint32_t la = row[x];  // label; a = its node
+                    if (!la) {
                         ++x;
                         continue;
                     }
+                    const uint32_t a = node[la];
                     // A run of pixels of region a: x .. end - 1.
                     int end = x + 1;
-                    while (end < w && row[end] == a) ++end;
+                    while (end < w && row[end] == la) ++end;
                     int64_t perimeter = 2;  // its left and right ends
                     std::fill(sum.begin(), sum.end(), 0);
                     std::fill(sumsq.begin(), sumsq.end(), 0);
@@ -289,9 +363,9 @@ public:
                             sumsq[b] += static_cast<int128>(q) * q;
                         }
                         const uint32_t up = above ? above[px] : 0, down = below ? below[px] : 0;
-                        perimeter += (up != a) + (down != a);
-                        if (down && down != a) {
-                            const uint64_t k = key(a, down);
+                        perimeter += (up != la) + (down != la);
+                        if (down && down != la) {
+                            const uint64_t k = key(a, node[down]);
                             if (k == last_down && !B.pairs.empty() && B.pairs.back().first == k) ++B.pairs.back().second;
                             else B.pairs.push_back({k, 1});
                             last_down = k;
@@ -299,7 +373,7 @@ public:
                             last_down = 0;
                         }
                     }
-                    if (end < w && row[end]) B.pairs.push_back({key(a, row[end]), 1});
+                    if (end < w && row[end]) B.pairs.push_back({key(a, node[row[end]]), 1});
                     int64_t* A = a >= B.owned_from ? acc(a) : foreign_acc(a);
                     A[0] += end - x, A[1] += perimeter;
                     A[2] = std::min<int64_t>(A[2], x), A[3] = std::min<int64_t>(A[3], y);
@@ -419,14 +493,22 @@ public:
     uint32_t size() const { return n_; }
     uint32_t alive_count() const { return alive_count_; }
     bool alive(uint32_t r) const { return head(r).alive; }
-    uint32_t version(uint32_t r) const { return head(r).version; }
+    // Cost cached on a's side of edge (a, b); NaN if they are not adjacent.
+    double edge_cost(uint32_t a, uint32_t b) {
+        NodeHead& A = head(a);
+        const Neighbour* it = find(A, b);
+        return it != A.list + A.degree && it->id == b ? it->cost : std::nan("");
+    }
     uint32_t key_of(uint32_t r) const { return head(r).key; }
+    // Node of input label l (0 for 0).
+    uint32_t node_of_label(uint32_t l) const { return node_of_label_[l]; }
     NeighbourSpan neighbours(uint32_t r) const { return {head(r).list, head(r).list + head(r).degree}; }
     // Starts loading the records of r's neighbours (they are about to be read).
     void prefetch_node(uint32_t r, int lines) const {
         const std::byte* p = storage_[static_cast<std::size_t>(r) * lines_].bytes;
         for (int l = 0; l < lines; ++l) __builtin_prefetch(p + l * sizeof(Line));
     }
+    int record_lines() const { return static_cast<int>(lines_); }
     void prefetch_neighbours(uint32_t r, int lines) const {
         for (const Neighbour& k : neighbours(r)) {
             const std::byte* p = storage_[static_cast<std::size_t>(k.id) * lines_].bytes;
@@ -468,8 +550,8 @@ public:
         if (wc_ >= 1.0) return hc;
         const double lm = A.l + B.l - 2.0 * shared;
         const double bbm = 2.0 * ((std::max(A.x1, B.x1) - std::min(A.x0, B.x0) + 1) + (std::max(A.y1, B.y1) - std::min(A.y0, B.y0) + 1));
-        const double h_cmpct = lm * std::sqrt(nm) - (A.lsq + B.lsq);
-        const double h_smooth = nm * lm / bbm - (A.smooth + B.smooth);
+        const double h_cmpct = lm * std::sqrt(nm) - (A.lsq() + B.lsq());
+        const double h_smooth = nm * lm / bbm - (A.smooth() + B.smooth());
         return wc_ * hc + (1.0 - wc_) * (wcmp_ * h_cmpct + (1.0 - wcmp_) * h_smooth);
     }
 
@@ -501,27 +583,6 @@ public:
         }
         set_nn(r, best, best_cost);
     }
-    // After a merge of a and b into m: one cost per neighbour of m, cached on
-    // both sides of the edge, gives m's nearest neighbour and is offered to
-    // the neighbour (its costs changed only towards m). Neighbours whose
-    // nearest neighbour was a or b go to `rescan`, those whose nearest
-    // neighbour became m to `changed`.
-    void score_merged(uint32_t m, uint32_t a, uint32_t b, std::vector<uint32_t>& changed, std::vector<uint32_t>& rescan) {
-        NodeHead& M = head(m);
-        uint32_t best = 0, best_key = UINT32_MAX;
-        double best_cost = INFINITY;
-        for (Neighbour* e = M.list; e != M.list + M.degree; ++e) {
-            const double c = e->cost = cost(m, e->id, e->shared);
-            NodeHead& K = head(e->id);
-            find(K, m)->cost = c;
-            if (c < best_cost || (c == best_cost && K.key < best_key)) best = e->id, best_cost = c, best_key = K.key;
-            // A neighbour that pointed at the merged pair always needs a
-            // fresh entry: its old one carries the pair's old versions.
-            if (K.nn == a || K.nn == b) rescan.push_back(e->id);
-            else if (offer_candidate(e->id, m, c)) changed.push_back(e->id);
-        }
-        set_nn(m, best, best_cost);
-    }
     // Makes `candidate` r's nearest neighbour if it beats the current one on (cost, key).
     bool offer_candidate(uint32_t r, uint32_t candidate, double c) {
         NodeHead& R = head(r);
@@ -535,10 +596,15 @@ public:
     uint32_t nn(uint32_t r) const { return head(r).nn; }
     double nn_cost(uint32_t r) const { return head(r).nn_cost; }
 
-    // Merges regions a and b; returns the node of the merged region.
-    uint32_t merge(uint32_t a, uint32_t b) {
-        const uint32_t s = head(a).degree >= head(b).degree ? a : b;  // survivor slot
-        const uint32_t t = s == a ? b : a;                            // dies
+    // Merges regions a and b; returns the node m of the merged region. In
+    // the same pass over m's neighbours (each neighbour's record is read
+    // once): the new fusion cost of every edge of m, cached on both sides;
+    // the neighbours' lists (t replaced by s); m's nearest neighbour; and,
+    // with `track_nn`, the neighbours whose nearest neighbour was a or b go
+    // to `rescan`, those whose nearest neighbour became m to `changed`.
+    uint32_t merge(uint32_t a, uint32_t b, bool track_nn, std::vector<uint32_t>& changed, std::vector<uint32_t>& rescan) {
+        const uint32_t s = head(a).key < head(b).key ? a : b;  // survivor slot: the lower key's
+        const uint32_t t = s == a ? b : a;                      // dies
         prefetch_neighbours(t, static_cast<int>(lines_));  // their lists are edited below
         prefetch_neighbours(s, static_cast<int>(lines_));  // scored, and their lists updated, after the merge
         NodeHead& S = head(s);
@@ -552,45 +618,56 @@ public:
         S.x0 = std::min(S.x0, T.x0), S.x1 = std::max(S.x1, T.x1);
         S.y0 = std::min(S.y0, T.y0), S.y1 = std::max(S.y1, T.y1);
         derive(s);
-        S.key = std::min(S.key, T.key);
-        // The dying region's neighbours now border the survivor instead: move
-        // their entry for t to s (one shift within their sorted list).
-        for (const Neighbour& k : neighbours(t)) {
-            if (k.id == s) continue;
-            NodeHead& K = head(k.id);
-            Neighbour* const end = K.list + K.degree;
-            Neighbour* it_t = find(K, t);
-            Neighbour* it_s = find(K, s);
-            if (it_s != end && it_s->id == s) {
-                it_s->shared += it_t->shared;
-                std::move(it_t + 1, end, it_t);
-                --K.degree;
-            } else {
-                const Neighbour moved{s, it_t->shared};
-                if (it_s <= it_t) std::move_backward(it_s, it_t, it_t + 1), *it_s = moved;
-                else std::move(it_t + 1, it_s, it_t), *(it_s - 1) = moved;
-            }
-        }
-        // Union of the two sorted lists without s and t.
+        // Union of the two sorted lists without s and t; for each neighbour
+        // K: the cost of (m, K), and K's entry for t moved to s (one shift
+        // within its sorted list) or summed into its entry for s.
         scratch_.clear();
         scratch_.reserve(std::size_t(S.degree) + T.degree);
+        uint32_t best = 0, best_key = UINT32_MAX;
+        double best_cost = INFINITY;
         const Neighbour *is = S.list, *it = T.list;
         const Neighbour *es = S.list + S.degree, *et = T.list + T.degree;
         while (is != es || it != et) {
             Neighbour next;
-            if (it == et || (is != es && is->id < it->id)) next = *is++;
-            else if (is == es || it->id < is->id) next = *it++;
-            else next = {is->id, is->shared + it->shared}, ++is, ++it;
-            if (next.id != s && next.id != t) scratch_.push_back(next);
+            int from;  // 1 = s only, 2 = t only, 3 = both
+            if (it == et || (is != es && is->id < it->id)) next = *is++, from = 1;
+            else if (is == es || it->id < is->id) next = *it++, from = 2;
+            else next = {is->id, is->shared + it->shared}, ++is, ++it, from = 3;
+            if (next.id == s || next.id == t) continue;
+            const double c = next.cost = cost(s, next.id, next.shared);
+            NodeHead& K = head(next.id);
+            Neighbour* const end = K.list + K.degree;
+            if (from == 1) {
+                find(K, s)->cost = c;
+            } else {
+                Neighbour* it_t = find(K, t);
+                Neighbour* it_s = find(K, s);  // with from == 2: where s goes
+                if (from == 3) {
+                    it_s->shared += it_t->shared, it_s->cost = c;
+                    std::move(it_t + 1, end, it_t);
+                    --K.degree;
+                } else {
+                    const Neighbour moved{s, it_t->shared, c};
+                    if (it_s <= it_t) std::move_backward(it_s, it_t, it_t + 1), *it_s = moved;
+                    else std::move(it_t + 1, it_s, it_t), *(it_s - 1) = moved;
+                }
+            }
+            if (c < best_cost || (c == best_cost && K.key < best_key)) best = next.id, best_cost = c, best_key = K.key;
+            if (track_nn) {
+                // A neighbour that pointed at the merged pair always needs a
+                // fresh nearest neighbour (and entry).
+                if (K.nn == a || K.nn == b) rescan.push_back(next.id);
+                else if (offer_candidate(next.id, s, c)) changed.push_back(next.id);
+            }
+            scratch_.push_back(next);
         }
         reserve(s, static_cast<uint32_t>(scratch_.size()));
         std::copy(scratch_.begin(), scratch_.end(), S.list);
         S.degree = static_cast<uint32_t>(scratch_.size());
+        set_nn(s, best, best_cost);
         release(t);
         T.alive = 0;
         --alive_count_;
-        ++S.version;
-        ++T.version;
         return s;
     }
 
@@ -662,15 +739,12 @@ private:
         if (h.list && h.list != inline_list(r)) std::free(h.list);
         h.list = inline_list(r), h.capacity = inline_capacity_, h.degree = 0;
     }
-    // Derived terms of r: l·√n, n·l/b and Σ_b w_b n σ_b.
+    // Derived term of r: Σ_b w_b n σ_b.
     void derive(uint32_t r) {
         NodeHead& R = head(r);
         const double* S = sums(r);
         const double n = R.n;
         if (!(n > 0)) return;
-        const double bb = 2.0 * ((R.x1 - R.x0 + 1) + (R.y1 - R.y0 + 1));
-        R.lsq = R.l * std::sqrt(n);
-        R.smooth = n * R.l / bb;
         const double inv = 1.0 / n;
         double t = 0.0;
         for (int b = 0; b < bands_; ++b) {
@@ -695,59 +769,87 @@ private:
     std::vector<Line> storage_;
     uint32_t inline_capacity_ = 0;
     std::vector<Neighbour> scratch_;
+    std::vector<uint32_t> node_of_label_, label_of_node_;  // see number_nodes
     uint32_t alive_count_ = 0;
 };
 
+// Allocator of cache-line-aligned blocks (for the heap below).
+template <typename T>
+struct LineAllocator {
+    using value_type = T;
+    LineAllocator() noexcept = default;
+    template <typename U>
+    LineAllocator(const LineAllocator<U>&) noexcept {}
+    T* allocate(std::size_t n) { return static_cast<T*>(::operator new(n * sizeof(T), std::align_val_t(64))); }
+    void deallocate(T* p, std::size_t) noexcept { ::operator delete(p, std::align_val_t(64)); }
+    template <typename U>
+    bool operator==(const LineAllocator<U>&) const noexcept { return true; }
+    template <typename U>
+    bool operator!=(const LineAllocator<U>&) const noexcept { return false; }
+};
+
 // Min-queue of candidate merges: a 4-ary heap (half the depth of a binary
-// heap, the four children of an entry in two cache lines), lowest entry first.
-// Its first entries can be looked at, to prefetch what the next merges touch.
+// heap), lowest entry first. A pop prefetches the children of all four
+// children while it compares them, so the walk down the heap does not wait
+// for one memory read per level. Its first entries can be looked at, to
+// prefetch what the next merges touch.
 class MergeQueue {
+    static constexpr std::size_t kPad = 0;  // slots before the root
+
 public:
-    explicit MergeQueue(std::vector<QueueEntry> entries) : h_(std::move(entries)) {
-        for (std::size_t i = h_.size() / 4 + 1; i-- > 0;)
-            if (i < h_.size()) sift_down(i);
+    explicit MergeQueue(const std::vector<QueueEntry>& entries) {
+        h_.reserve(entries.size() + kPad + 1);
+        h_.resize(kPad);
+        h_.insert(h_.end(), entries.begin(), entries.end());
+        for (std::size_t i = size() / 4 + 1; i-- > 0;)
+            if (i < size()) sift_down(i);
     }
-    bool empty() const { return h_.empty(); }
-    std::size_t size() const { return h_.size(); }
-    const QueueEntry& top() const { return h_.front(); }
-    const QueueEntry& entry(std::size_t i) const { return h_[i]; }
+    bool empty() const { return h_.size() == kPad; }
+    std::size_t size() const { return h_.size() - kPad; }
+    const QueueEntry& top() const { return h_[kPad]; }
+    const QueueEntry& entry(std::size_t i) const { return h_[kPad + i]; }
     void push(const QueueEntry& e) {
-        std::size_t i = h_.size();
+        std::size_t i = size();
         h_.push_back(e);
+        QueueEntry* h = h_.data() + kPad;
         while (i > 0) {
             const std::size_t parent = (i - 1) / 4;
-            if (!(h_[parent] > e)) break;
-            h_[i] = h_[parent];
+            if (!(h[parent] > e)) break;
+            h[i] = h[parent];
             i = parent;
         }
-        h_[i] = e;
+        h[i] = e;
     }
     void pop() {
         const QueueEntry last = h_.back();
         h_.pop_back();
-        if (h_.empty()) return;
-        h_[0] = last;
+        if (empty()) return;
+        h_[kPad] = last;
         sift_down(0);
     }
 
 private:
     void sift_down(std::size_t i) {
-        const QueueEntry e = h_[i];
-        const std::size_t n = h_.size();
+        QueueEntry* h = h_.data() + kPad;
+        const QueueEntry e = h[i];
+        const std::size_t n = size();
         for (;;) {
             const std::size_t first = 4 * i + 1;
             if (first >= n) break;
+            // The children lines of these four children: one of them is read next.
+            for (std::size_t c = 4 * first + 1; c < 4 * first + 17 && c < n; c += 4)
+                __builtin_prefetch(h + c), __builtin_prefetch(h + c + 3);
             std::size_t best = first;
             const std::size_t end = std::min(first + 4, n);
             for (std::size_t c = first + 1; c < end; ++c)
-                if (h_[best] > h_[c]) best = c;
-            if (!(e > h_[best])) break;
-            h_[i] = h_[best];
+                if (h[best] > h[c]) best = c;
+            if (!(e > h[best])) break;
+            h[i] = h[best];
             i = best;
         }
-        h_[i] = e;
+        h[i] = e;
     }
-    std::vector<QueueEntry> h_;
+    std::vector<QueueEntry, LineAllocator<QueueEntry>> h_;
 };
 
 }  // namespace
@@ -769,12 +871,12 @@ RegionMergingResult merge_regions(const Image<float>& image, const Image<uint32_
         while (uf[x] != x) x = uf[x] = uf[uf[x]];
         return x;
     };
-    const bool uses_nn = o.strategy != QueueStrategy::rag;
-    if (uses_nn)  // independent per region: in parallel, same result
-        tbb::parallel_for(tbb::blocked_range<uint32_t>(1, n, 4096), [&](const tbb::blocked_range<uint32_t>& rr) {
-            for (uint32_t r = rr.begin(); r != rr.end(); ++r)
-                if (g.alive(r)) g.update_nn(r);
-        });
+    // Every strategy caches the edge costs (rag checks its entries against
+    // them); independent per region: in parallel, same result.
+    tbb::parallel_for(tbb::blocked_range<uint32_t>(1, n, 4096), [&](const tbb::blocked_range<uint32_t>& rr) {
+        for (uint32_t r = rr.begin(); r != rr.end(); ++r)
+            if (g.alive(r)) g.update_nn(r);
+    });
 
     result.graph_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t_graph).count();
     const std::vector<double> initial_totals = o.verify_invariants ? g.totals() : std::vector<double>{};
@@ -784,7 +886,7 @@ RegionMergingResult merge_regions(const Image<float>& image, const Image<uint32_
     // of 320 bytes when 10 k regions are left).
     std::vector<uint32_t> live;
     for (uint32_t r = 1; r < n; ++r)
-        if (g.alive(r)) previous_compact[r] = r, live.push_back(r);
+        if (g.alive(r)) previous_compact[r] = g.key_of(r), live.push_back(r);
     uint32_t previous_count = region_count;
     std::vector<uint32_t> changed, rescan;
     for (std::size_t s = 0; s < o.scales.size(); ++s) {
@@ -796,8 +898,9 @@ RegionMergingResult merge_regions(const Image<float>& image, const Image<uint32_
         level.regions_before = g.alive_count();
         std::vector<QueueEntry> initial;
         auto entry = [&](uint32_t a, uint32_t b, double c) {
-            if (g.key_of(a) > g.key_of(b)) std::swap(a, b);
-            return QueueEntry{c, g.key_of(a), g.key_of(b), a, b, g.version(a), g.version(b)};
+            uint64_t ka = g.key_of(a), kb = g.key_of(b);
+            if (ka > kb) std::swap(a, b), std::swap(ka, kb);
+            return QueueEntry{c, ka << 32 | kb, a, b};
         };
         // r's nearest-neighbour pair if the strategy queues it.
         auto queued_nn = [&](uint32_t r) {
@@ -808,14 +911,15 @@ RegionMergingResult merge_regions(const Image<float>& image, const Image<uint32_
         for (uint32_t r : live) {
             if (o.strategy == QueueStrategy::rag) {
                 for (const Neighbour& k : g.neighbours(r))
-                    if (k.id > r) initial.push_back(entry(r, k.id, g.cost(r, k.id, k.shared)));
+                    if (k.id > r) initial.push_back(entry(r, k.id, k.cost));
             } else if ((o.strategy == QueueStrategy::nng || g.nn(r) > r) && queued_nn(r)) {
                 initial.push_back(entry(r, g.nn(r), g.nn_cost(r)));  // mutual pairs once, from their lower node
             }
         }
         level.initial_queue_length = initial.size();
         level.queue_pushes = initial.size();
-        MergeQueue heap(std::move(initial));
+        MergeQueue heap(initial);
+        std::vector<QueueEntry>().swap(initial);
         auto push_pair = [&](uint32_t a, uint32_t b, double c) {
             heap.push(entry(a, b, c));
             ++level.queue_pushes;
@@ -823,31 +927,42 @@ RegionMergingResult merge_regions(const Image<float>& image, const Image<uint32_
         auto offer_nn = [&](uint32_t r) {
             if (queued_nn(r)) push_pair(r, g.nn(r), g.nn_cost(r));
         };
+        // Is e the entry of a current pair at its current cost? Then it is
+        // the entry a fresh push would make (keys and cost equal).
+        auto current = [&](const QueueEntry& e, uint32_t a, uint32_t b) {
+            switch (o.strategy) {
+                case QueueStrategy::mutual: return g.nn(a) == b && g.nn(b) == a && g.nn_cost(a) == e.cost;
+                case QueueStrategy::nng:
+                    return (g.nn(a) == b && g.nn_cost(a) == e.cost) || (g.nn(b) == a && g.nn_cost(b) == e.cost);
+                case QueueStrategy::rag: return g.edge_cost(a, b) == e.cost;
+            }
+            return false;
+        };
         while (!heap.empty() && g.alive_count() > o.min_regions) {
             const QueueEntry e = heap.top();
             heap.pop();
             // The next pops are most likely the next merges: start loading
             // their records (and their neighbours') while this one is done.
             if (!heap.empty()) {
-                g.prefetch_neighbours(heap.entry(0).a, 2);
-                g.prefetch_neighbours(heap.entry(0).b, 2);
+                g.prefetch_neighbours(heap.entry(0).a, g.record_lines());
+                g.prefetch_neighbours(heap.entry(0).b, g.record_lines());
             }
-            for (std::size_t i = 1; i < 3 && i < heap.size(); ++i) {
-                g.prefetch_node(heap.entry(i).a, 5);
-                g.prefetch_node(heap.entry(i).b, 5);
+            for (std::size_t i = 1; i < 5 && i < heap.size(); ++i) {  // the next top is one of these
+                g.prefetch_node(heap.entry(i).a, 4);
+                g.prefetch_node(heap.entry(i).b, 4);
             }
-            if (!g.alive(e.a) || !g.alive(e.b) || g.version(e.a) != e.va || g.version(e.b) != e.vb) continue;
+            const uint32_t a = e.a, b = e.b;
+            if (!g.alive(a) || !g.alive(b) || !current(e, a, b)) continue;
             if (!(e.cost < threshold)) break;  // rag holds every pair: the cheapest is too dear
-            const uint32_t m = g.merge(e.a, e.b);
-            uf[m == e.a ? e.b : e.a] = m;
+            changed.clear(), rescan.clear();
+            const uint32_t m = g.merge(a, b, o.strategy != QueueStrategy::rag, changed, rescan);
+            uf[m == a ? b : a] = m;
             ++level.merges;
             level.max_degree = std::max(level.max_degree, static_cast<uint32_t>(g.neighbours(m).size()));
             if (o.strategy == QueueStrategy::rag) {
-                for (const Neighbour& k : g.neighbours(m)) push_pair(m, k.id, g.cost(m, k.id, k.shared));
+                for (const Neighbour& k : g.neighbours(m)) push_pair(m, k.id, k.cost);
                 continue;
             }
-            changed.clear(), rescan.clear();
-            g.score_merged(m, e.a, e.b, changed, rescan);
             for (uint32_t k : rescan) g.rescan_nn(k);
             if (o.strategy == QueueStrategy::mutual) {  // the offers read the nearest neighbours' records: load them together
                 for (uint32_t k : rescan) g.prefetch_node(g.nn(k), 1);
@@ -869,7 +984,7 @@ RegionMergingResult merge_regions(const Image<float>& image, const Image<uint32_
         uint32_t next = 0;
         for (const auto& kr : by_key) compact[kr.second] = ++next;
         level.label_of_input.assign(n, 0);
-        for (uint32_t r = 1; r < n; ++r) level.label_of_input[r] = compact[find(r)];
+        for (uint32_t l = 1; l < n; ++l) level.label_of_input[l] = compact[find(g.node_of_label(l))];
         level.parent.assign(previous_count + 1, 0);
         for (uint32_t r : live) level.parent[previous_compact[r]] = compact[find(r)];
         live.clear();
