@@ -27,7 +27,9 @@ void remove_stale_temporaries_beside(const std::string& path) {
 void warn_without_vertical_crs(const std::string& cloud, const std::string& cloud_crs, const std::string& what, const std::string& remedy) {
     const CrsInfo c = resolve_cloud_crs(cloud, cloud_crs).crs;
     if (c.empty() || c.vertical_epsg || !c.vertical_name.empty()) return;
-    log::warning(cloud + ": no vertical CRS (" + c.label() + "): " + what + " are written without a named height datum; " + remedy);
+    log::warning(cloud + ": no vertical CRS (" + c.label() + "): " + what + " are written without a named height datum; " + remedy +
+                 (c.horizontal_epsg ? " EPSG:" + std::to_string(*c.horizontal_epsg) + "+<vertical EPSG code>" : std::string(" a compound CRS")) +
+                 " (e.g. 5703 NAVD88, 5709 NAP, 5720 NGF-IGN69 height)");
 }
 
 void refuse_existing_output(const GlobalFlags& g, const std::string& path) {

@@ -29,7 +29,7 @@ void refuse_existing_output(const GlobalFlags& g, const std::string& path);
 
 // Warns when the cloud's CRS (`cloud_crs` overriding the file's) has no
 // vertical part: the heights `what` names are then written without a named
-// datum; `remedy` says which option gives one. Nothing when the cloud has no
+// datum; `remedy` names the option that gives one (the CRS to give follows). Nothing when the cloud has no
 // CRS at all (the command refuses it) or names its vertical CRS.
 void warn_without_vertical_crs(const std::string& cloud, const std::string& cloud_crs, const std::string& what, const std::string& remedy);
 

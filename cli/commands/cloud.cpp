@@ -33,8 +33,7 @@ void add_rasterize_command(CLI::App& cloud, const GlobalFlags& g, CommandList& o
                        opt.ground.trust_classification = !s->recompute_ground;
                        refuse_existing_output(g, s->out);
                        const RasterizeReport r = rasterize_run(s->cloud, s->out, opt, make_progress(g));
-                       warn_without_vertical_crs(s->cloud, opt.cloud_crs, "the DSM and DTM",
-                                                 "give --cloud-crs with one, e.g. EPSG:2154+5720 (Lambert-93 + NGF-IGN69 height)");
+                       warn_without_vertical_crs(s->cloud, opt.cloud_crs, "the DSM and DTM", "give --cloud-crs");
                        if (!g.quiet)
                            std::fprintf(stderr, "cityforge: rasters %d x %d (%s) from %llu points, %zu ground (%s) in %.1f s -> %s\n",
                                         r.width, r.height, r.crs.c_str(), static_cast<unsigned long long>(r.points), r.ground_points,

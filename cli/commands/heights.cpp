@@ -51,8 +51,7 @@ void add_heights_command(CLI::App& parent, const GlobalFlags& g, CommandList& ou
                        opt.heights.ground_method = ground_method_from_string(s->ground_method);
                        refuse_existing_output(g, s->out);
                        const HeightsRunReport r = run_heights(s->footprints, s->cloud, s->out, opt, make_progress(g));
-                       warn_without_vertical_crs(s->cloud, opt.cloud_crs, "ground_z and the roof heights",
-                                                 "give --cloud-crs with one, e.g. EPSG:2154+5720 (Lambert-93 + NGF-IGN69 height)");
+                       warn_without_vertical_crs(s->cloud, opt.cloud_crs, "ground_z and the roof heights", "give --cloud-crs");
                        if (!g.quiet) {
                            std::string q;
                            for (const auto& [k, v] : r.quality_counts) q += " " + k + "=" + std::to_string(v);

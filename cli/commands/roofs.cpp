@@ -56,7 +56,7 @@ void add_roofs_command(CLI::App& parent, const GlobalFlags& g, CommandList& out)
                        refuse_existing_output(g, s->out);
                        const RoofsRunReport r = run_roofs(s->footprints, s->cloud, s->out, opt, make_progress(g));
                        if (!r.model.vertical_known)
-                           log::warning(s->cloud + ": no vertical CRS: the city models' heights are written without a named height datum; give --vertical-crs, e.g. EPSG:5720");
+                           log::warning(s->cloud + ": no vertical CRS: the city models' heights are written without a named height datum; give --vertical-crs (e.g. EPSG:5703 NAVD88, 5709 NAP, 5720 NGF-IGN69 height)");
                        if (!g.quiet) {
                            std::string types;
                            for (const auto& [k, v] : r.roof_types) types += " " + k + "=" + std::to_string(v);

@@ -7,6 +7,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cpl_string.h>
+#include <cctype>
 #include <filesystem>
 #include <set>
 #include <gdal_priv.h>
@@ -19,12 +20,28 @@
 
 namespace cityforge {
 
+namespace {
+// Why OGR could not open `path`, in words a user can act on.
+std::string unreadable_vector(const std::string& path, const std::string& gdal_suffix) {
+    namespace fs = std::filesystem;
+    std::error_code ec;
+    if (fs::is_directory(path, ec)) return "is a directory, not a vector dataset OGR can read";
+    if (fs::is_regular_file(path, ec) && fs::file_size(path, ec) == 0 && !ec) return "empty file (0 bytes)";
+    std::string name = fs::path(path).filename().string();
+    for (char& c : name) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
+    const auto ends = [&](const std::string& tail) { return name.size() >= tail.size() && name.compare(name.size() - tail.size(), tail.size(), tail) == 0; };
+    if (ends(".city.json") || ends(".city.jsonl") || ends(".glb") || ends(".gltf"))
+        return "a city model (CityJSON / glTF), not a vector layer: give the building table (e.g. the buildings.gpkg or .geojson written beside it)";
+    return "not a vector dataset OGR can read" + gdal_suffix;
+}
+}  // namespace
+
 VectorInfo read_vector_info(const std::string& path) {
     ensure_gdal_registered();
     require_dataset_exists(path);
     GdalErrorCapture capture;
     std::unique_ptr<GDALDataset> ds(GDALDataset::Open(path.c_str(), GDAL_OF_VECTOR | GDAL_OF_READONLY));
-    if (!ds) throw Error(path, "not a vector dataset OGR can read" + capture.suffix());
+    if (!ds) throw Error(path, unreadable_vector(path, capture.suffix()));
     VectorInfo info;
     info.path = path;
     info.driver = ds->GetDriver() ? ds->GetDriver()->GetDescription() : "";
@@ -339,7 +356,7 @@ PolygonLayer read_polygon_layer(const std::string& name, const std::string& laye
     require_dataset_exists(path);
     GdalErrorCapture capture;
     std::unique_ptr<GDALDataset> ds(GDALDataset::Open(path.c_str(), GDAL_OF_VECTOR | GDAL_OF_READONLY));
-    if (!ds) throw Error(path, "not a vector dataset OGR can read" + capture.suffix());
+    if (!ds) throw Error(path, unreadable_vector(path, capture.suffix()));
     // The layer: the one named, else the only polygon layer (a GeoPackage may
     // also hold tables without geometry); several are ambiguous, never "the first".
     std::vector<OGRLayer*> polygon_layers;

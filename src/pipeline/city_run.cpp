@@ -1095,7 +1095,7 @@ RunReport merge_tiles(const RunManifest& m, const std::string& out_dir, const Pr
     if (!m.options.buildings.model.vertical_crs.empty() && !crs.vertical_epsg)
         crs = combine_with_vertical(crs, crs_from_user_input(m.options.buildings.model.vertical_crs, "--vertical-crs"));
     if (!m.options.cloud.empty() && !crs.vertical_epsg && crs.vertical_name.empty()) {
-        rep.warnings.push_back(m.options.cloud + ": no vertical CRS: the city models' heights are written without a named height datum (give --vertical-crs, e.g. EPSG:5720)");
+        rep.warnings.push_back(m.options.cloud + ": no vertical CRS: the city models' heights are written without a named height datum (give --vertical-crs, e.g. EPSG:5703 NAVD88, 5709 NAP, 5720 NGF-IGN69 height)");
         log::warning(rep.warnings.back());
     }
     CityModel model;

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
 
 #include "cloud/cloud_reader.hpp"
 #include "core/error.hpp"
@@ -121,20 +122,83 @@ DensestSquare densest_square(const std::string& cloud_path, const std::string& c
     return best;
 }
 
-Extent cloud_point_bounds(const std::string& cloud_path) {
+namespace {
+// One streamed pass over the cloud's points.
+template <class Visit>
+void for_each_point(const std::string& cloud_path, Visit&& visit) {
     CloudReader reader(cloud_path);
-    Extent e = empty_extent();
     PointCloud chunk;
     while (true) {
         chunk.clear();
         if (reader.read_chunk(chunk, 1u << 20) == 0) break;
-        for (std::size_t i = 0; i < chunk.size(); ++i) {
-            e.min_x = std::min(e.min_x, chunk.x[i]), e.max_x = std::max(e.max_x, chunk.x[i]);
-            e.min_y = std::min(e.min_y, chunk.y[i]), e.max_y = std::max(e.max_y, chunk.y[i]);
-        }
+        for (std::size_t i = 0; i < chunk.size(); ++i) visit(chunk.x[i], chunk.y[i]);
     }
+}
+}  // namespace
+
+Extent cloud_point_bounds(const std::string& cloud_path) {
+    Extent e = empty_extent();
+    uint64_t n = 0;
+    for_each_point(cloud_path, [&](double x, double y) {
+        e.min_x = std::min(e.min_x, x), e.max_x = std::max(e.max_x, x);
+        e.min_y = std::min(e.min_y, y), e.max_y = std::max(e.max_y, y);
+        ++n;
+    });
     if (!(e.min_x <= e.max_x)) throw Error(cloud_path, "point cloud is empty");
-    return e;
+    // A box this empty (over 100 square units a point: 0.01 points per m2)
+    // may be stretched by a few far points (a z of -1700 m is harmless here, a
+    // point 10 km away makes a grid of 10 km). A second pass counts the points
+    // on 512 squares along the longer side: points in squares that hold under a
+    // tenth of a typical square's points and whose 8 neighbours are as empty
+    // (so at least a square's width from any populated part) are left out of
+    // the box, when they are at most 1 % of the points. Otherwise the box is
+    // every point's, as before.
+    if (n < 1000 || !(e.width() * e.height() > 100.0 * static_cast<double>(n))) return e;
+    const double cell = std::max(e.width(), e.height()) / 512.0;
+    const auto nx = static_cast<std::size_t>(std::floor(e.width() / cell)) + 1, ny = static_cast<std::size_t>(std::floor(e.height() / cell)) + 1;
+    struct Square {
+        uint32_t points = 0;
+        Extent box = empty_extent();
+    };
+    std::vector<Square> sq(nx * ny);
+    for_each_point(cloud_path, [&](double x, double y) {
+        const auto c = std::min(nx - 1, static_cast<std::size_t>((x - e.min_x) / cell)), r = std::min(ny - 1, static_cast<std::size_t>((y - e.min_y) / cell));
+        Square& s = sq[r * nx + c];
+        if (s.points < UINT32_MAX) ++s.points;
+        include(s.box, Extent{x, y, x, y});
+    });
+    std::vector<uint32_t> counts;
+    for (const Square& s : sq)
+        if (s.points) counts.push_back(s.points);
+    const auto mid = counts.begin() + static_cast<std::ptrdiff_t>(counts.size() / 2);
+    std::nth_element(counts.begin(), mid, counts.end());
+    const uint32_t populated = std::max<uint32_t>(1, *mid / 10);
+    Extent kept = empty_extent();
+    uint64_t dropped = 0;
+    for (std::size_t r = 0; r < ny; ++r)
+        for (std::size_t c = 0; c < nx; ++c) {
+            const Square& s = sq[r * nx + c];
+            if (!s.points) continue;
+            bool isolated = s.points < populated;
+            for (std::size_t rr = r ? r - 1 : 0; isolated && rr <= std::min(ny - 1, r + 1); ++rr)
+                for (std::size_t cc = c ? c - 1 : 0; isolated && cc <= std::min(nx - 1, c + 1); ++cc)
+                    isolated = sq[rr * nx + cc].points < populated;
+            if (isolated) dropped += s.points;
+            else include(kept, s.box);
+        }
+    if (dropped == 0 || dropped * 100 > n) return e;
+    // What the smaller box leaves out (isolated squares inside it stay in).
+    uint64_t outside = 0;
+    for_each_point(cloud_path, [&](double x, double y) { outside += x < kept.min_x || x > kept.max_x || y < kept.min_y || y > kept.max_y; });
+    if (outside == 0) return e;  // cannot be: every point is then in `kept`, which is `e`
+    char text[400];
+    std::snprintf(text, sizeof text,
+                  "%llu of %llu points lie over %.0f CRS units from every populated part of the cloud: the grid covers the rest, "
+                  "%.1f, %.1f - %.1f, %.1f instead of %.1f, %.1f - %.1f, %.1f",
+                  static_cast<unsigned long long>(outside), static_cast<unsigned long long>(n), cell, kept.min_x, kept.min_y, kept.max_x,
+                  kept.max_y, e.min_x, e.min_y, e.max_x, e.max_y);
+    log::warning(cloud_path + ": " + text);
+    return kept;
 }
 
 Extent cloud_bounds_in(const std::string& cloud_path, const std::string& cloud_crs_override, const CrsInfo& target) {

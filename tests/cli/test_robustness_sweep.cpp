@@ -114,6 +114,7 @@ TEST_CASE("Empty and cut files are named as such: a 0-byte LAS, a LAS cut in its
     ScratchDir dir("sweep_cut");
     std::ofstream(dir / "empty.las").flush();
     std::ofstream(dir / "empty.tif").flush();
+    std::filesystem::create_directories(dir / "folder");
     const std::string las = slurp(shared_data("autzen_oregon/autzen_trim.las"));
     std::ofstream(dir / "head.las", std::ios::binary) << las.substr(0, 200);
     const std::string geojson = slurp(shared_data("ign_lidarhd_bdtopo_west/bdtopo_buildings_west.geojson"));
@@ -123,8 +124,9 @@ TEST_CASE("Empty and cut files are named as such: a 0-byte LAS, a LAS cut in its
     struct Case {
         std::string args, file, problem;
     };
-    // Before: "not a LAS file (no LASF signature)" for the first three, and
-    // "not a raster, LAS point cloud or vector file" for the last four.
+    // Before: "not a LAS file (no LASF signature)" for the first three,
+    // "not a raster, LAS point cloud or vector file" for the next four and
+    // "not a vector dataset OGR can read" for the last three.
     const std::vector<Case> cases = {
         {"heights --footprints " + fp + " --cloud " + (dir / "empty.las") + " --out " + (dir / "h.gpkg"), dir / "empty.las", "empty file (0 bytes)"},
         {"info " + (dir / "head.las"), dir / "head.las", "truncated LAS header: the file ends after 200 bytes"},
@@ -133,6 +135,11 @@ TEST_CASE("Empty and cut files are named as such: a 0-byte LAS, a LAS cut in its
         {"info " + (dir / "empty.las"), dir / "empty.las", "empty file (0 bytes)"},
         {"info " + (dir / "cut.geojson"), dir / "cut.geojson", "GeoJSON"},
         {"info " + (dir / "model.city.json"), dir / "model.city.json", "a city model"},
+        {"export --in " + (dir / "model.city.json") + " --out " + (dir / "e"), dir / "model.city.json", "a city model (CityJSON / glTF), not a vector layer"},
+        {"heights --footprints " + (dir / "empty.tif") + " --cloud " + shared_data("autzen_oregon/autzen_trim.las") + " --out " + (dir / "h.gpkg"),
+         dir / "empty.tif", "empty file (0 bytes)"},
+        {"run --footprints " + (dir / "folder") + " --cloud " + shared_data("autzen_oregon/autzen_trim.las") + " --out " + (dir / "run"),
+         dir / "folder", "is a directory, not a vector dataset"},
     };
     for (const Case& c : cases) {
         const auto r = run_cli(c.args);
@@ -144,6 +151,8 @@ TEST_CASE("Empty and cut files are named as such: a 0-byte LAS, a LAS cut in its
     }
     CHECK_FALSE(std::filesystem::exists(dir / "h.gpkg"));
     CHECK_FALSE(std::filesystem::exists(dir / "r"));
+    CHECK_FALSE(std::filesystem::exists(dir / "e"));
+    CHECK_FALSE(std::filesystem::exists(dir / "run"));
 }
 
 TEST_CASE("export of footprints without heights to every format is refused naming the input, before any file is written", "[cli][export][sweep]") {
@@ -232,4 +241,29 @@ TEST_CASE("Heights from a cloud without a vertical CRS (IGN Lidar HD, EPSG:2154 
     CHECK(roofs2.err.find("no vertical CRS") == std::string::npos);
     // EPSG:5698 = RGF93 / Lambert-93 + NGF-IGN69 height.
     CHECK(json::parse(slurp(dir / "roofs2/buildings.city.json"))["metadata"]["referenceSystem"] == "https://www.opengis.net/def/crs/EPSG/0/5698");
+}
+
+TEST_CASE("A few points km away do not make the grid of cloud rasterize and cloud-only footprints (Autzen)", "[cli][cloud][sweep]") {
+    ScratchDir dir("sweep_far_grid");
+    const std::string src = shared_data("autzen_oregon/autzen_trim.las");
+    std::vector<FarPoint> far = kAutzenFar;
+    far.insert(far.end(), kAutzenLow.begin(), kAutzenLow.end());
+    write_with_points(src, dir / "far.las", far);
+    // Before: footprints exited 3 (out of memory: a grid of 18289 x 12193
+    // cells needing 19.6 GB); rasterize wrote 9145 x 6097 rasters in 43 s.
+    const auto fp = run_cli("footprints --cloud " + (dir / "far.las") + " --out " + (dir / "far.gpkg"));
+    INFO(fp.err);
+    REQUIRE(fp.exit_code == 0);
+    CHECK(fp.err.find("warning: " + (dir / "far.las") + ": 3 of 110006 points lie over") != std::string::npos);
+    REQUIRE(run_cli("footprints --quiet --cloud " + src + " --out " + (dir / "clean.gpkg")).exit_code == 0);
+    const auto count = [](const std::string& path) {
+        return json::parse(run_cli("info --json " + path).out)["layers"][0]["feature_count"].get<int>();
+    };
+    CHECK(count(dir / "far.gpkg") == count(dir / "clean.gpkg"));
+    const auto ras = run_cli("cloud rasterize --quiet --cloud " + (dir / "far.las") + " --gsd 1 --out " + (dir / "rf"));
+    INFO(ras.err);
+    REQUIRE(ras.exit_code == 0);
+    REQUIRE(run_cli("cloud rasterize --quiet --cloud " + src + " --gsd 1 --out " + (dir / "rc")).exit_code == 0);
+    CHECK(slurp(dir / "rf/dsm.tif") == slurp(dir / "rc/dsm.tif"));
+    CHECK(slurp(dir / "rf/dtm.tif") == slurp(dir / "rc/dtm.tif"));
 }

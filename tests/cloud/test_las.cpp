@@ -134,7 +134,7 @@ TEST_CASE("Corrupt LAS input gets a clear error naming the file", "[cloud][las][
     {
         const std::string p = dir / "short.las";
         std::ofstream(p, std::ios::binary) << bytes.substr(0, 100);
-        CHECK_THROWS_WITH(read_las(p), Catch::Contains("short.las") && Catch::Contains("not a LAS file"));
+        CHECK_THROWS_WITH(read_las(p), Catch::Contains("short.las") && Catch::Contains("truncated LAS header"));
     }
     {
         const std::string p = dir / "cut.las";
