@@ -245,14 +245,18 @@ TEST_CASE("Cross-validated detection on the real UInt16 pan tile (SpaceNet 4 Atl
     o.labels = {test::shared_data("spacenet4_atlanta_pan_west/buildings_west.geojson")};
     o.detector.segmentation.reference_gsd_m = 0.3;
     o.detector.pixel.cell_m = 0.8;
+    o.detector.segmentation.watershed.h_minima = 6.0;  // as scripts/train_default_models.sh trains the pan model
+    o.detector.min_label_share = 0.35;
     const TrainReport r = run_train(dir / "a.cfdet", o);
     std::printf("detect Atlanta pan dev CV: P %.3f R %.3f F1 %.3f (%zu/%zu/%zu); segment pixels F1 %.3f; threshold %.2f\n", r.pooled_objects.precision,
                 r.pooled_objects.recall, r.pooled_objects.f1, r.pooled_objects.tp, r.pooled_objects.predicted, r.pooled_objects.reference,
                 r.pooled_segments.f1, r.threshold);
     CHECK(r.bands == "pan");
     CHECK(r.reference_buildings == 25);
-    CHECK(r.pooled_objects.tp >= 2);      // measured 2 of 12 predicted (F1 0.108; 1 of 7, F1 0.062, read linearly)
-    CHECK(r.pooled_segments.f1 >= 0.18);  // measured 0.208 (0.082 read linearly)
+    // Measured 3 of 8 predicted, F1 0.182, segment pixels 0.270 (h-minima 4,
+    // label share 0.5: 2 of 12, 0.108, 0.208; read linearly: 1 of 7, 0.062, 0.082).
+    CHECK(r.pooled_objects.tp >= 2);
+    CHECK(r.pooled_segments.f1 >= 0.22);
 }
 
 TEST_CASE("footprints with the shipped model on a lon/lat tile (SpaceNet 1 Rio dev in EPSG:4326) puts the buildings on their roofs", "[detect][real]") {
