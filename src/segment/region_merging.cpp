@@ -81,26 +81,27 @@ struct Neighbour {
 };
 
 // A candidate merge: (cost, lower key, higher key) orders the queue, the
-// nodes name the regions. A region keeps the node of its key (its lowest
-// input label) for life, so the loop accepts a popped entry if both regions
-// are alive and the cost is still the pair's current cost: then it is the
-// entry a fresh push would make, and stale entries need no version stamps.
+// nodes name the regions. The loop accepts a popped entry if both regions
+// are alive, still have these keys, and the cost is still the pair's
+// current cost: then it is the entry a fresh push would make, so stale
+// entries need no version stamps.
 struct QueueEntry {
     double cost;
     uint64_t keys;  // lower key << 32 | higher key
-    uint32_t a, b;  // nodes of the lower and the higher key
+    uint32_t a, b;  // nodes of the lower and the higher key when pushed
     bool operator>(const QueueEntry& o) const {
         if (cost != o.cost) return cost > o.cost;
         return keys > o.keys;
     }
 };
 
-// Region graph. A region lives in the node (storage slot) of its key, its
-// lowest input label: when two regions merge, the one with the lower key
-// keeps its slot and the other dies. Keys alone decide every tie, so the
-// merge sequence is the one defined in the header whatever the node
-// numbering. (Each merge rewrites the cached cost in every neighbour's list
-// anyway, so keeping the longer list in place would save little.)
+// Region graph. A region lives in a node (storage slot); when two regions
+// merge, the one with the longer adjacency list keeps its slot (so a region
+// with thousands of neighbours is never copied and fewer neighbours' lists
+// are rewritten), and the merged region takes the lower of the two keys
+// (key = lowest input label). Keys alone decide every tie, so the merge
+// sequence is the one defined in the header whatever slot a region lives in
+// and however nodes are numbered.
 //
 // Everything the merge loop reads about a node sits in one cache-aligned
 // record: NodeHead (80 bytes), Σ and Σ² per band (48 bytes for 3 bands: the
@@ -603,8 +604,8 @@ public:
     // with `track_nn`, the neighbours whose nearest neighbour was a or b go
     // to `rescan`, those whose nearest neighbour became m to `changed`.
     uint32_t merge(uint32_t a, uint32_t b, bool track_nn, std::vector<uint32_t>& changed, std::vector<uint32_t>& rescan) {
-        const uint32_t s = head(a).key < head(b).key ? a : b;  // survivor slot: the lower key's
-        const uint32_t t = s == a ? b : a;                      // dies
+        const uint32_t s = head(a).degree >= head(b).degree ? a : b;  // survivor slot
+        const uint32_t t = s == a ? b : a;                            // dies
         prefetch_neighbours(t, static_cast<int>(lines_));  // their lists are edited below
         prefetch_neighbours(s, static_cast<int>(lines_));  // scored, and their lists updated, after the merge
         NodeHead& S = head(s);
@@ -618,6 +619,7 @@ public:
         S.x0 = std::min(S.x0, T.x0), S.x1 = std::max(S.x1, T.x1);
         S.y0 = std::min(S.y0, T.y0), S.y1 = std::max(S.y1, T.y1);
         derive(s);
+        S.key = std::min(S.key, T.key);
         // Union of the two sorted lists without s and t; for each neighbour
         // K: the cost of (m, K), and K's entry for t moved to s (one shift
         // within its sorted list) or summed into its entry for s.
@@ -952,7 +954,7 @@ RegionMergingResult merge_regions(const Image<float>& image, const Image<uint32_
                 g.prefetch_node(heap.entry(i).b, 4);
             }
             const uint32_t a = e.a, b = e.b;
-            if (!g.alive(a) || !g.alive(b) || !current(e, a, b)) continue;
+            if (!g.alive(a) || !g.alive(b) || (uint64_t(g.key_of(a)) << 32 | g.key_of(b)) != e.keys || !current(e, a, b)) continue;
             if (!(e.cost < threshold)) break;  // rag holds every pair: the cheapest is too dear
             changed.clear(), rescan.clear();
             const uint32_t m = g.merge(a, b, o.strategy != QueueStrategy::rag, changed, rescan);
