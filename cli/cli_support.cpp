@@ -9,6 +9,7 @@
 #include "core/error.hpp"
 #include "core/log.hpp"
 #include "io/cloud_crs.hpp"
+#include "raster/raster.hpp"
 
 namespace cityforge::cli {
 
@@ -119,13 +120,28 @@ std::vector<int> parse_lods(const std::string& text) {
 }
 
 nlohmann::json read_json_file(const std::string& path) {
+    std::error_code ec;
+    if (std::filesystem::is_directory(path, ec)) throw Error(path, "is a directory, not a JSON config file");
     std::ifstream in(path);
     if (!in) throw Error(path, "cannot open config file");
     try {
         return nlohmann::json::parse(in);
     } catch (const nlohmann::json::exception& e) {
         throw Error(path, std::string("invalid JSON: ") + e.what());
+    } catch (const std::ios_base::failure& e) {
+        throw Error(path, std::string("cannot read: ") + e.what());
     }
+}
+
+CrsInfo vertical_crs_option(const std::string& text, const std::string& option) {
+    const CrsInfo v = crs_from_user_input(text, option);
+    if (!v.vertical_epsg && v.vertical_name.empty())
+        throw Error(option, v.label() + " is not a vertical CRS (e.g. EPSG:5703 NAVD88, 5709 NAP, 5720 NGF-IGN69 height)");
+    return v;
+}
+
+void require_readable_raster(const std::string& path) {
+    if (!path.empty()) read_raster_info(path);
 }
 
 }  // namespace cityforge::cli

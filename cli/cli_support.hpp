@@ -10,6 +10,7 @@
 #include <nlohmann/json.hpp>
 
 #include "core/progress.hpp"
+#include "crs/crs.hpp"
 
 namespace cityforge::cli {
 
@@ -71,5 +72,14 @@ std::vector<int> parse_lods(const std::string& text);
 
 // Parses a JSON file or throws Error naming it.
 nlohmann::json read_json_file(const std::string& path);
+
+// The CRS a --vertical-crs option names; Error naming `option` when it has no
+// vertical part (e.g. a projected CRS given by mistake).
+CrsInfo vertical_crs_option(const std::string& text, const std::string& option = "--vertical-crs");
+
+// Error naming `path` when it is not a raster GDAL reads (missing, a folder,
+// empty, not georeferenced): options read late in a command (--texture-ortho)
+// are checked before anything is written. Nothing for an empty path.
+void require_readable_raster(const std::string& path);
 
 }  // namespace cityforge::cli

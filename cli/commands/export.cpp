@@ -38,6 +38,8 @@ void add_export_command(CLI::App& parent, const GlobalFlags& g, CommandList& out
                        opt.formats = split_list(s->formats);
                        opt.lods = parse_lods(s->lods);
                        refuse_existing_output(g, s->out);
+                       if (!opt.vertical_crs.empty()) vertical_crs_option(opt.vertical_crs);
+                       require_readable_raster(opt.texture_ortho);
                        const ExportReport r = run_export(s->in, s->out, opt, make_progress(g));
                        if (!g.quiet) {
                            std::string files, statuses;

@@ -54,6 +54,8 @@ void add_roofs_command(CLI::App& parent, const GlobalFlags& g, CommandList& out)
                        opt.model.formats = split_list(s->formats);
                        opt.model.lods = parse_lods(s->lods);
                        refuse_existing_output(g, s->out);
+                       if (!opt.model.vertical_crs.empty()) vertical_crs_option(opt.model.vertical_crs);
+                       require_readable_raster(opt.model.texture_ortho);
                        const RoofsRunReport r = run_roofs(s->footprints, s->cloud, s->out, opt, make_progress(g));
                        if (!r.model.vertical_known)
                            log::warning(s->cloud + ": no vertical CRS: the city models' heights are written without a named height datum; give --vertical-crs (e.g. EPSG:5703 NAVD88, 5709 NAP, 5720 NGF-IGN69 height)");

@@ -145,6 +145,8 @@ void add_run_commands(CLI::App& parent, const GlobalFlags& g, CommandList& out) 
                        }
                        RunShare share;
                        if (rs->mpi) share = mpi_share();
+                       if (!manifest.options.buildings.model.vertical_crs.empty()) vertical_crs_option(manifest.options.buildings.model.vertical_crs);
+                       require_readable_raster(manifest.options.buildings.model.texture_ortho);
                        if (share.rank == 0) prepare_run_folder(g, rs->out, manifest);
                        const RunReport r = run_city(manifest, rs->out, share, make_progress(g));
                        if (!g.quiet && share.rank == 0) {

@@ -464,6 +464,8 @@ void write_manifest(const std::string& path, const RunManifest& m) {
 }
 
 RunManifest read_manifest(const std::string& path) {
+    std::error_code ec;
+    if (fs::is_directory(path, ec)) throw Error(path, "is a directory, not a manifest (make one with `cityforge plan`)");
     std::ifstream in(path);
     if (!in) throw Error(path, "cannot open the manifest");
     json j;

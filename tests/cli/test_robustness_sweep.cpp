@@ -267,3 +267,33 @@ TEST_CASE("A few points km away do not make the grid of cloud rasterize and clou
     CHECK(slurp(dir / "rf/dsm.tif") == slurp(dir / "rc/dsm.tif"));
     CHECK(slurp(dir / "rf/dtm.tif") == slurp(dir / "rc/dtm.tif"));
 }
+
+TEST_CASE("Options read late are checked first: a folder as --config or --manifest, a projected --vertical-crs, a missing --texture-ortho", "[cli][errors][sweep]") {
+    ScratchDir dir("sweep_options");
+    std::filesystem::create_directories(dir / "folder");
+    const std::string ign = shared_data("ign_lidarhd_bdtopo_west/");
+    const std::string roofs = "roofs --footprints " + ign + "bdtopo_buildings_west.geojson --cloud " + ign + "lidarhd_870200_6617083_west.las";
+    struct Case {
+        std::string args, subject, problem, out;
+    };
+    // Before: exit 70 "internal error: basic_filebuf::underflow ..." for the
+    // folders; EPSG:2154 taken as the vertical CRS without a word (exit 0);
+    // a missing texture ortho refused after geojson, gpkg and CityGML were written.
+    const std::vector<Case> cases = {
+        {"run --config " + (dir / "folder") + " --ortho " + ign + "rgb_from_points_0p5m_west.tif --out " + (dir / "a"), dir / "folder",
+         "is a directory", dir / "a"},
+        {"run --manifest " + (dir / "folder") + " --out " + (dir / "b"), dir / "folder", "is a directory", dir / "b"},
+        {roofs + " --vertical-crs EPSG:2154 --out " + (dir / "c"), "--vertical-crs", "is not a vertical CRS", dir / "c"},
+        {roofs + " --texture-ortho " + (dir / "missing.tif") + " --out " + (dir / "d"), dir / "missing.tif", "file not found", dir / "d"},
+        {"export --in " + shared_data("delft_ahn3_bgt_west/bgt_pand_west_with_ref_heights.geojson") + " --vertical-crs EPSG:28992 --out " + (dir / "e"),
+         "--vertical-crs", "is not a vertical CRS", dir / "e"},
+    };
+    for (const Case& c : cases) {
+        const auto r = run_cli(c.args);
+        INFO(c.args << "\n" << r.err);
+        CHECK(r.exit_code == 1);
+        CHECK(r.err.rfind("cityforge: error: " + c.subject + ": ", 0) == 0);
+        CHECK(r.err.find(c.problem) != std::string::npos);
+        CHECK_FALSE(std::filesystem::exists(c.out));
+    }
+}
