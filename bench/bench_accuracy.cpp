@@ -9,7 +9,8 @@
 //   build/bin/bench_accuracy [key=value ...]
 //   keys: size seed density sigma sun_az sun_el slope undulation dark trees
 //         ground_like terraced oblique round families(0/1) centroid(0/1)
-//         stages=heights,roofs,outlines dir=PATH ground=plane|percentile seams(0/1)
+//         stages=heights,roofs,outlines dir=PATH ground=plane|percentile seams(0/1) classes(0/1: an unclassified cloud) crown(sigma m, 0 = off)
+//         peel(rings) crown_fill(cells, -1 = off)
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
@@ -157,6 +158,10 @@ int main(int argc, char** argv) try {
         fo.ortho = s.ortho_path;
         fo.cloud = s.cloud_path;
         fo.seams.enabled = num("seams", 1) != 0;  // terraces split at roof seams (seams=0 turns it off)
+        if (kv.count("classes")) fo.mask.use_classes = num("classes", 1) != 0 ? 1 : 0;  // classes=0: an unclassified cloud
+        fo.segmentation.max_crown_plane_sigma_m = num("crown", fo.segmentation.max_crown_plane_sigma_m);  // crown=0 turns the crown cue off
+        fo.segmentation.cloud_peel_rings = static_cast<int>(num("peel", fo.segmentation.cloud_peel_rings));
+        fo.mask.crown_fill_rectangle_cells = static_cast<int>(num("crown_fill", fo.mask.crown_fill_rectangle_cells));
         fo.outliers.enabled = num("outliers", 1) != 0;
         const std::string out = dir + "/footprints.gpkg";
         const FootprintsReport fr = run_footprints(out, fo);

@@ -49,6 +49,10 @@ void add_footprints_command(CLI::App& parent, const GlobalFlags& g, CommandList&
                     "ortho_cloud with a classified cloud: prior odds of the ortho's edge where an outline pixel has only ground points, weighed by "
                     "the roof's and the ground's return rates (sparse, dark roofs); 0 = the cloud's points decide the edge")
         ->capture_default_str();
+    cmd->add_option("--crown-plane-sigma-m", o.segmentation.max_crown_plane_sigma_m,
+                    "ortho_cloud without point classes: segments of vegetation colours (weak ones included) whose heights scatter about "
+                    "their roof planes by more than this (metres) are tree crowns, cut from buildings; 0 = off")
+        ->capture_default_str();
     cmd->add_option("--min-segment-building-share", o.segmentation.min_segment_building_share,
                     "ortho_cloud: share of a segment's pixels that must be cloud building cells")
         ->capture_default_str();
@@ -101,6 +105,9 @@ void add_footprints_command(CLI::App& parent, const GlobalFlags& g, CommandList&
                                         r.mean_abs_fit_area_error_pct, s->out.c_str());
                        if (!g.quiet && r.hidden_completed_cells > 0)
                            std::fprintf(stderr, "cityforge: %zu unmeasured roof cells completed (dark roofs, crowns over roofs)\n", r.hidden_completed_cells);
+                       if (!g.quiet && r.crowns_dropped > 0)
+                           std::fprintf(stderr, "cityforge: %d tree crowns dropped (vegetation colours on a surface that is no plane; no point classes)\n",
+                                        r.crowns_dropped);
                        if (!g.quiet && !r.self_training.empty())
                            std::fprintf(stderr, "cityforge: %zu from the heights, %zu from the image; %.0f %% of the ortho outside the heights; %s\n",
                                         r.from_heights, r.from_image, r.uncovered_share * 100.0, r.self_training.c_str());

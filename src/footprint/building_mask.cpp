@@ -73,6 +73,45 @@ BuildingMask buildings_from_cells(const BuildingCells& cells, int w, int h, cons
     return mask;
 }
 
+namespace {
+// Crown-only cells that the fill made building (mask 1, no evidence) and
+// that lie outside the minimum-area rectangle of the measured building cells
+// of their component, grown by `tolerance` cells, go back to not building.
+// Each component is judged on its own cells alone.
+void trim_crown_fill(std::vector<uint8_t>& mask, const std::vector<uint8_t>& crown_only, const std::vector<uint8_t>& evidence, int w, int h,
+                     int tolerance) {
+    std::vector<uint32_t> labels, sizes;
+    const uint32_t count = label_components(mask, 1, w, h, labels, sizes);
+    std::vector<std::vector<std::size_t>> measured(count + 1);
+    std::vector<uint8_t> has_crown_fill(count + 1, 0);
+    for (std::size_t k = 0; k < mask.size(); ++k)
+        if (const uint32_t l = labels[k]) {
+            if (evidence[k]) measured[l].push_back(k);
+            else if (crown_only[k]) has_crown_fill[l] = 1;
+        }
+    for (uint32_t l = 1; l <= count; ++l) {
+        if (!has_crown_fill[l] || measured[l].empty()) continue;
+        Polygon corners;
+        corners.outer.reserve(measured[l].size() * 4);
+        for (const std::size_t k : measured[l]) {
+            const double x = static_cast<double>(k % static_cast<std::size_t>(w)), y = static_cast<double>(k / static_cast<std::size_t>(w));
+            for (const auto& [dx, dy] : {std::pair{0, 0}, std::pair{1, 0}, std::pair{0, 1}, std::pair{1, 1}}) corners.outer.push_back({x + dx, y + dy});
+        }
+        OrientedRectangle rect;
+        try {
+            rect = minimum_area_rectangle(corners);
+        } catch (const Error&) {
+            continue;
+        }
+        rect.length += 2.0 * tolerance, rect.width += 2.0 * tolerance;
+        for (std::size_t k = 0; k < mask.size(); ++k)
+            if (labels[k] == l && !evidence[k] && crown_only[k] &&
+                !rect.contains({static_cast<double>(k % static_cast<std::size_t>(w)) + 0.5, static_cast<double>(k / static_cast<std::size_t>(w)) + 0.5}))
+                mask[k] = 0;
+    }
+}
+}  // namespace
+
 bool point_classes_present(const Image<float>& building_share, const Image<float>& vegetation_share) {
     std::size_t classified = 0, with_points = 0;
     const std::size_t n = std::min(building_share.pixel_count(), vegetation_share.pixel_count());
@@ -97,7 +136,7 @@ BuildingCells building_cells(const Image<float>& ndsm, const Image<float>& dsm, 
     // point, or only crown points over something high). Unknown cells are
     // decided by their neighbours below.
     constexpr uint8_t kUnknown = 2;
-    std::vector<uint8_t> mask(n, 0);
+    std::vector<uint8_t> mask(n, 0), crown_only(n, 0);
     for (int y = 0; y < h; ++y)
         for (int x = 0; x < w; ++x) {
             const std::size_t k = static_cast<std::size_t>(y) * w + x;
@@ -111,7 +150,7 @@ BuildingCells building_cells(const Image<float>& ndsm, const Image<float>& dsm, 
                 const float b = building_share.data[k], v = vegetation_share.data[k];
                 if (std::isnan(b)) {
                     // Crown points only: a roof may lie under the crown.
-                    if (!std::isnan(v)) mask[k] = kUnknown;
+                    if (!std::isnan(v)) mask[k] = kUnknown, crown_only[k] = 1;
                     continue;
                 }
                 // Exact ties (a cell with as many building as other points, common
@@ -163,6 +202,7 @@ BuildingCells building_cells(const Image<float>& ndsm, const Image<float>& dsm, 
         mask.swap(next);
         if (!changed) break;
     }
+    if (out.used_classes && o.crown_fill_rectangle_cells >= 0) trim_crown_fill(mask, crown_only, out.evidence, w, h, o.crown_fill_rectangle_cells);
     // Heights for the step split: only cells with their own evidence (a crown
     // over a roof would otherwise look like a taller building).
     out.step_dsm = dsm;

@@ -16,6 +16,11 @@ struct BuildingMaskOptions {
     double min_height_m = 2.5;          ///< nDSM threshold, metres above ground
     double min_building_share = 0.5;    ///< with classes: share of class-6 points among the cell's non-vegetation points
     int fill_passes = 6;                ///< passes deciding cells without evidence (gaps, crown-only) from their neighbours
+    /// With classes: crown-only cells taken from their neighbours stay
+    /// building only within this many cells of the minimum-area rectangle
+    /// of the measured roof cells they joined (a crown over a roof's edge or
+    /// corner completes its rectangle; one beside a wall does not); < 0 = off.
+    int crown_fill_rectangle_cells = 1;
     double max_roughness_m = 0.35;      ///< without classes: local DSM plane residual (3x3) above this -> vegetation
     double min_area_m2 = 20.0;          ///< smaller components are dropped
     double min_hole_m2 = 6.0;           ///< smaller holes (data gaps) are filled; larger ones (courtyards) kept

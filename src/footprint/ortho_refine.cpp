@@ -1,7 +1,9 @@
 #include "footprint/ortho_refine.hpp"
 
 #include <algorithm>
+#include <array>
 #include <cmath>
+#include <limits>
 #include <map>
 
 #include "core/error.hpp"
@@ -19,9 +21,110 @@ void OrthoRefineOptions::validate() const {
     if (!(min_iou_with_heights >= 0 && min_iou_with_heights <= 1)) throw Error("ortho refinement", "IoU limit must be in [0, 1]");
     if (!(ortho_edge_odds >= 0)) throw Error("--ortho-edge-odds", "must be >= 0");
     if (margin_px < 1 || margin_px > 200) throw Error("ortho margin", "must be between 1 and 200 pixels");
+    if (cloud_peel_rings < 0 || cloud_peel_rings > 100) throw Error("cloud_peel_rings", "must be between 0 and 100");
+    if (!(max_crown_plane_sigma_m >= 0)) throw Error("crown_plane_sigma_m", "must be >= 0 (0 = off)");
+    if (!(min_crown_local_roughness_m >= 0)) throw Error("crown_local_roughness_m", "must be >= 0");
+    if (!(crown_local_radius_m > 0 && gsd_m > 0)) throw Error("ortho refinement", "the crown's local radius and the pixel size must be > 0");
+    if (!(max_vegetation_share > 0 && max_vegetation_share <= 1)) throw Error("max_vegetation_share", "must be in (0, 1]");
 }
 
 namespace {
+// Robust scatter of heights about their plane: least squares refitted
+// three times on the points within 2.5 sigma (sigma = 1.4826 x the median
+// absolute residual), so a few pixels of wall or ground along a segment's
+// edge do not count; returns the final sigma over all points (the unit of
+// z), 0 below 6 points or for a degenerate (line-like) set.
+double robust_plane_sigma(const std::vector<std::array<double, 3>>& p) {
+    if (p.size() < 6) return 0.0;
+    std::vector<uint8_t> in(p.size(), 1);
+    std::vector<double> r(p.size());
+    double sigma = 0.0;
+    for (int iteration = 0; iteration < 4; ++iteration) {
+        double n = 0, sx = 0, sy = 0, sz = 0;
+        for (std::size_t i = 0; i < p.size(); ++i)
+            if (in[i]) n += 1, sx += p[i][0], sy += p[i][1], sz += p[i][2];
+        if (n < 3) break;
+        const double mx = sx / n, my = sy / n, mz = sz / n;
+        double xx = 0, xy = 0, yy = 0, xz = 0, yz = 0;
+        for (std::size_t i = 0; i < p.size(); ++i)
+            if (in[i]) {
+                const double dx = p[i][0] - mx, dy = p[i][1] - my, dz = p[i][2] - mz;
+                xx += dx * dx, xy += dx * dy, yy += dy * dy, xz += dx * dz, yz += dy * dz;
+            }
+        const double det = xx * yy - xy * xy;
+        if (!(det > 1e-9 * std::max(1.0, xx * yy))) return 0.0;
+        const double a = (xz * yy - yz * xy) / det, b = (yz * xx - xz * xy) / det;
+        for (std::size_t i = 0; i < p.size(); ++i) r[i] = std::abs(p[i][2] - mz - a * (p[i][0] - mx) - b * (p[i][1] - my));
+        std::vector<double> sorted = r;
+        std::nth_element(sorted.begin(), sorted.begin() + static_cast<std::ptrdiff_t>(sorted.size() / 2), sorted.end());
+        sigma = 1.4826 * sorted[sorted.size() / 2];
+        for (std::size_t i = 0; i < p.size(); ++i) in[i] = r[i] <= 2.5 * sigma + 1e-9;
+    }
+    return sigma;
+}
+
+// Scatter of a segment's heights about its roof: the least of one robust
+// plane and two, split through the centroid along either principal axis of
+// the segment's pixels (a gable's ridge, or a valley, in one segment).
+double roof_plane_sigma(const std::vector<std::array<double, 3>>& p) {
+    double best = robust_plane_sigma(p);
+    if (p.size() < 12) return best;
+    double mx = 0, my = 0;
+    for (const auto& q : p) mx += q[0], my += q[1];
+    mx /= static_cast<double>(p.size()), my /= static_cast<double>(p.size());
+    double xx = 0, xy = 0, yy = 0;
+    for (const auto& q : p) xx += (q[0] - mx) * (q[0] - mx), xy += (q[0] - mx) * (q[1] - my), yy += (q[1] - my) * (q[1] - my);
+    const double angle = 0.5 * std::atan2(2.0 * xy, xx - yy);  // the major axis
+    const double axes[2][2] = {{std::cos(angle), std::sin(angle)}, {-std::sin(angle), std::cos(angle)}};
+    for (const auto& d : axes) {
+        std::vector<std::array<double, 3>> side[2];
+        for (const auto& q : p) side[(q[0] - mx) * d[0] + (q[1] - my) * d[1] < 0.0 ? 0 : 1].push_back(q);
+        if (side[0].size() < 6 || side[1].size() < 6) continue;
+        const double s0 = robust_plane_sigma(side[0]), s1 = robust_plane_sigma(side[1]);
+        const double n0 = static_cast<double>(side[0].size()), n1 = static_cast<double>(side[1].size());
+        best = std::min(best, std::sqrt((n0 * s0 * s0 + n1 * s1 * s1) / (n0 + n1)));
+    }
+    return best;
+}
+
+// Local roughness of a segment's heights: at each sample, the RMS residual
+// of the samples within `radius` pixels (of the same segment, at least 9)
+// about their least-squares plane; the median over the samples. Roof facets
+// are locally planar (ridges and hips touch few samples), crowns are not.
+double local_roughness(const std::vector<std::array<double, 3>>& p, int radius) {
+    if (p.size() < 9) return 0.0;
+    double x0 = p[0][0], y0 = p[0][1], x1 = x0, y1 = y0;
+    for (const auto& q : p) x0 = std::min(x0, q[0]), y0 = std::min(y0, q[1]), x1 = std::max(x1, q[0]), y1 = std::max(y1, q[1]);
+    const int gw = static_cast<int>(x1 - x0) + 1, gh = static_cast<int>(y1 - y0) + 1;
+    std::vector<double> z(static_cast<std::size_t>(gw) * gh, std::numeric_limits<double>::quiet_NaN());
+    for (const auto& q : p) z[static_cast<std::size_t>(q[1] - y0) * gw + static_cast<std::size_t>(q[0] - x0)] = q[2];
+    std::vector<double> rough;
+    rough.reserve(p.size());
+    for (const auto& q : p) {
+        const int cx = static_cast<int>(q[0] - x0), cy = static_cast<int>(q[1] - y0);
+        double n = 0, sx = 0, sy = 0, sz = 0, xx = 0, xy = 0, yy = 0, xz = 0, yz = 0, zz = 0;
+        for (int dy = -radius; dy <= radius; ++dy)
+            for (int dx = -radius; dx <= radius; ++dx) {
+                const int x = cx + dx, y = cy + dy;
+                if (x < 0 || y < 0 || x >= gw || y >= gh) continue;
+                const double v = z[static_cast<std::size_t>(y) * gw + x];
+                if (std::isnan(v)) continue;
+                n += 1, sx += dx, sy += dy, sz += v, xx += dx * dx, xy += dx * dy, yy += dy * dy, xz += dx * v, yz += dy * v, zz += v * v;
+            }
+        if (n < 9) continue;
+        const double mx = sx / n, my = sy / n, mz = sz / n;
+        const double cxx = xx - n * mx * mx, cxy = xy - n * mx * my, cyy = yy - n * my * my;
+        const double cxz = xz - n * mx * mz, cyz = yz - n * my * mz, czz = zz - n * mz * mz;
+        const double det = cxx * cyy - cxy * cxy;
+        if (!(det > 1e-9)) continue;
+        const double a = (cxz * cyy - cyz * cxy) / det, b = (cyz * cxx - cxz * cxy) / det;
+        rough.push_back(std::sqrt(std::max(0.0, czz - a * cxz - b * cyz) / n));
+    }
+    if (rough.empty()) return 0.0;
+    std::nth_element(rough.begin(), rough.begin() + static_cast<std::ptrdiff_t>(rough.size() / 2), rough.end());
+    return rough[rough.size() / 2];
+}
+
 struct Box {
     int x0 = 0, y0 = 0, x1 = -1, y1 = -1;  // inclusive
 };
@@ -72,7 +175,7 @@ Image<uint32_t> crop_segments(const Box& b, const Image<float>& colours, const s
 }
 }  // namespace
 
-void refine_buildings_with_ortho(BuildingMask& mask, const BuildingCells& cells, const Image<float>& colours,
+std::size_t refine_buildings_with_ortho(BuildingMask& mask, const BuildingCells& cells, const Image<float>& colours,
                                  const std::vector<uint8_t>& valid, const Image<float>& ndsm, double full_scale,
                                  const Image<uint32_t>& segments, const std::vector<uint8_t>& vegetation,
                                  const OrthoRefineOptions& o) {
@@ -82,7 +185,9 @@ void refine_buildings_with_ortho(BuildingMask& mask, const BuildingCells& cells,
     if (colours.pixel_count() != n || valid.size() != n || ndsm.pixel_count() != n || cells.cells.size() != n ||
         (!segments.data.empty() && segments.pixel_count() != n) || (!vegetation.empty() && vegetation.size() != n))
         throw Error("ortho refinement", "rasters differ in size");
-    if (mask.count == 0) return;
+    if (mask.count == 0) return 0;
+    std::size_t crowns = 0;
+    const int local_radius_px = std::max(1, static_cast<int>(std::lround(o.crown_local_radius_m / o.gsd_m)));
     const std::vector<uint32_t> old(mask.labels.data.begin(), mask.labels.data.end());
     std::vector<Box> box(mask.count + 1, Box{w, h, -1, -1});
     for (int y = 0; y < h; ++y)
@@ -107,23 +212,33 @@ void refine_buildings_with_ortho(BuildingMask& mask, const BuildingCells& cells,
         // decided by all its cells, measured or inferred from their neighbours
         // (a sparse roof -- dark, or at a few points per m2 -- has most cells
         // inferred, and its measured cells may lie all along its edge).
-        std::vector<uint32_t> seen(count + 1, 0), votes(count + 1, 0), yes(count + 1, 0), size(count + 1, 0), green(count + 1, 0);
-        std::vector<uint8_t> vetoed(count + 1, 0);
+        std::vector<uint32_t> seen(count + 1, 0), votes(count + 1, 0), yes(count + 1, 0), size(count + 1, 0), green(count + 1, 0),
+            weak(count + 1, 0);
+        std::vector<uint8_t> vetoed(count + 1, 0), crown(count + 1, 0);
+        // Each segment's nDSM samples (crop pixel coordinates), for its plane.
+        std::vector<std::vector<std::array<double, 3>>> plane(vegetation.empty() || o.max_crown_plane_sigma_m <= 0 ? 0 : count + 1);
         for (int y = 0; y < ch; ++y)
             for (int x = 0; x < cw; ++x) {
                 const uint32_t s = seg.at(0, x, y);
                 if (!s) continue;
                 const std::size_t k = global(x, y);
                 ++size[s];
-                if (!vegetation.empty()) green[s] += vegetation[k];
+                if (!vegetation.empty()) green[s] += vegetation[k] >= 2, weak[s] += vegetation[k] >= 1;
+                if (!plane.empty() && std::isfinite(ndsm.data[k])) plane[s].push_back({double(x), double(y), double(ndsm.data[k])});
                 seen[s] += cells.evidence[k];
                 ++votes[s], yes[s] += cells.cells[k];
                 // A segment reaching the crop's edge (inside the grid) runs on
                 // beyond the building: ground, or roof merged with ground.
                 if ((x == 0 && b.x0 > 0) || (y == 0 && b.y0 > 0) || (x == cw - 1 && b.x1 < w - 1) || (y == ch - 1 && b.y1 < h - 1)) vetoed[s] = 1;
             }
-        for (uint32_t s = 1; s <= count; ++s)
-            if (2 * green[s] > size[s]) vetoed[s] = 1;  // vegetation colours: a crown
+        for (uint32_t s = 1; s <= count; ++s) {
+            // Vegetation colours: never building (the ortho cannot draw it;
+            // a grass-coloured roof keeps its heights' outline). Vegetation
+            // colours, even weak ones, on a surface that is no plane: a crown.
+            crown[s] = !plane.empty() && 2 * weak[s] > size[s] && roof_plane_sigma(plane[s]) > o.max_crown_plane_sigma_m &&
+                       local_roughness(plane[s], local_radius_px) > o.min_crown_local_roughness_m;
+            vetoed[s] |= 2 * green[s] > size[s] || crown[s];
+        }
         std::vector<uint8_t> voted(static_cast<std::size_t>(cw) * ch, 0);
         for (int y = 0; y < ch; ++y)
             for (int x = 0; x < cw; ++x) {
@@ -181,6 +296,24 @@ void refine_buildings_with_ortho(BuildingMask& mask, const BuildingCells& cells,
                     if (!weak_ground) edged[c] = cells.cells[k];
                 }
             voted.swap(edged);
+            // A segment of the ortho may run on beyond the roof (a dark crown
+            // against a dark roof): its pixels the cloud measured as not
+            // building are peeled off from the outline inward, ring by ring
+            // (only removed, never added; weak ground evidence as above).
+            for (int pass = 0; pass < o.cloud_peel_rings; ++pass) {
+                std::vector<std::size_t> peel;
+                for (int y = 0; y < ch; ++y)
+                    for (int x = 0; x < cw; ++x) {
+                        const std::size_t c = static_cast<std::size_t>(y) * cw + x, k = global(x, y);
+                        if (!voted[c] || !cells.evidence[k] || cells.cells[k] || (old[k] && old[k] != l)) continue;
+                        const bool outline = x == 0 || y == 0 || x == cw - 1 || y == ch - 1 || !voted[c - 1] || !voted[c + 1] ||
+                                             !voted[c - static_cast<std::size_t>(cw)] || !voted[c + static_cast<std::size_t>(cw)];
+                        const bool weak_ground = edge_lr_base > 0 && cells.roof_points[k] == 0 && edge_lr_base >= cells.ground_points[k] * kLn3;
+                        if (outline && !weak_ground) peel.push_back(c);
+                    }
+                if (peel.empty()) break;
+                for (const std::size_t c : peel) voted[c] = 0;
+            }
         }
         // The building: voted pixels connected to its own cells.
         std::vector<uint8_t> keep(voted.size(), 0);
@@ -203,17 +336,28 @@ void refine_buildings_with_ortho(BuildingMask& mask, const BuildingCells& cells,
         }
         // A redrawing that strays far from the heights' outline (a roof
         // merged with its surroundings, or lost) keeps the heights' outline.
-        long inter = 0, kept = 0, own = 0;
+        // Its cells in crown segments do not count against the redrawing; a
+        // building mostly in crowns is one (photo clouds: no point classes).
+        // (The share is of its cells the ortho sees: a true ortho made from a
+        // photo cloud has gaps.)
+        long inter = 0, kept = 0, own = 0, own_seen = 0, own_crown = 0;
         for (int y = 0; y < ch; ++y)
             for (int x = 0; x < cw; ++x) {
                 const bool k1 = keep[static_cast<std::size_t>(y) * cw + x], k0 = old[global(x, y)] == l;
-                inter += k1 && k0, kept += k1, own += k0;
+                const uint32_t s = seg.at(0, x, y);
+                inter += k1 && k0, kept += k1, own += k0, own_seen += k0 && valid[global(x, y)], own_crown += k0 && s && crown[s];
             }
-        const bool redrawn = static_cast<double>(inter) >= o.min_iou_with_heights * static_cast<double>(kept + own - inter);
+        if (own_crown > 0 && static_cast<double>(own_crown) >= o.max_vegetation_share * static_cast<double>(own_seen)) {
+            ++crowns;
+            continue;
+        }
+        const bool redrawn = static_cast<double>(inter) >= o.min_iou_with_heights * static_cast<double>(kept + own - own_crown - inter);
         // First come, first served in label (raster) order.
         for (int y = 0; y < ch; ++y)
             for (int x = 0; x < cw; ++x) {
-                const bool take = redrawn ? keep[static_cast<std::size_t>(y) * cw + x] != 0 : old[global(x, y)] == l;
+                // Not redrawn: the heights' outline without its crown segments.
+                const uint32_t s = seg.at(0, x, y);
+                const bool take = redrawn ? keep[static_cast<std::size_t>(y) * cw + x] != 0 : old[global(x, y)] == l && !(s && crown[s]);
                 if (take && !out[global(x, y)]) out[global(x, y)] = l;
             }
     }
@@ -222,6 +366,7 @@ void refine_buildings_with_ortho(BuildingMask& mask, const BuildingCells& cells,
     // building took the pixels between, an outline pixel went back to the
     // cloud's decision): each building stays one part.
     keep_largest_parts(mask);
+    return crowns;
 }
 
 }  // namespace cityforge

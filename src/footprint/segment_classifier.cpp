@@ -16,6 +16,8 @@ void SegmentClassifierOptions::validate() const {
     if (!(gsd_m > 0)) throw Error("--gsd", "must be > 0");
     if (!(min_area_m2 >= 0 && max_area_m2 > min_area_m2)) throw Error("--min-area-m2", "must be below the maximum area");
     if (!(max_ndvi > -1 && max_ndvi < 1)) throw Error("--max-ndvi", "must be between -1 and 1");
+    if (!(weak_vegetation_index <= max_vegetation_index)) throw Error("weak_vegetation_index", "must not exceed --max-vegetation-index");
+    if (!(weak_ndvi > -1 && weak_ndvi <= max_ndvi)) throw Error("weak_ndvi", "must be between -1 and --max-ndvi");
     if (!(min_rectangularity >= 0 && min_rectangularity <= 1)) throw Error("--min-rectangularity", "must be between 0 and 1");
 }
 
@@ -34,8 +36,11 @@ std::vector<uint8_t> vegetation_pixels(const Image<float>& image, const SegmentC
     std::vector<uint8_t> out(n, 0);
     for (std::size_t i = 0; i < n; ++i) {
         const double r = image.band_data(0)[i];
-        out[i] = (rgb && excess_green(r, image.band_data(1)[i], image.band_data(2)[i]) > o.max_vegetation_index) ||
-                 (nir && ndvi_of(image.band_data(o.nir_band)[i], r) > o.max_ndvi);
+        const double exg = rgb ? excess_green(r, image.band_data(1)[i], image.band_data(2)[i]) : -1.0;
+        const double ndvi = nir ? ndvi_of(image.band_data(o.nir_band)[i], r) : -1.0;
+        out[i] = (rgb && exg > o.max_vegetation_index) || (nir && ndvi > o.max_ndvi) ? 2
+                 : (rgb && exg > o.weak_vegetation_index) || (nir && ndvi > o.weak_ndvi) ? 1
+                                                                                          : 0;
     }
     return out;
 }

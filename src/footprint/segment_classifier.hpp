@@ -14,6 +14,11 @@ struct SegmentClassifierOptions {
     double max_vegetation_index = 0.25;  ///< ExG = (2G - R - B) / (R + G + B) above this -> vegetation (RGB only)
     int nir_band = -1;                   ///< 0-based band holding near infrared (-1 = none); red is band 0
     double max_ndvi = 0.3;               ///< with NIR: NDVI = (NIR - R) / (NIR + R) above this -> vegetation
+    /// Weaker vegetation colours (crowns in shade, the true orthos of photo
+    /// clouds): ExG / NDVI above these mark a pixel "possibly vegetation",
+    /// which decides only together with a rough surface (ortho refinement).
+    double weak_vegetation_index = 0.08;
+    double weak_ndvi = 0.15;
     double min_brightness = 0.2;         ///< mean (R+G+B)/3 relative to the image's 99th percentile; darker -> shadow
     double min_area_m2 = 20.0;
     double max_area_m2 = 5000.0;
@@ -41,8 +46,10 @@ struct SegmentFeatures {
     bool building = false;          ///< in a group that passed the shape rules
 };
 
-/// Pixels whose colours say vegetation (ExG above its limit with 3+ bands,
-/// NDVI above its limit with a NIR band); empty when the image has neither.
+/// Pixels whose colours say vegetation: 2 = ExG above max_vegetation_index
+/// with 3+ bands or NDVI above max_ndvi with a NIR band; 1 = only above the
+/// weak limits (possibly vegetation); 0 = neither. Empty when the image has
+/// neither colours nor NIR.
 std::vector<uint8_t> vegetation_pixels(const Image<float>& image, const SegmentClassifierOptions& options);
 
 /// Spectral features of every segment (index = label; 0 and empty labels

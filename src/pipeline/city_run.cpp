@@ -96,7 +96,7 @@ void RunOptions::validate() const {
     if (threads < 0) throw Error("--threads", "must be >= 0");
     if (!(footprint_grid_m > 0)) throw Error("footprint_grid_m", "must be > 0");
     buildings.validate();
-    if (footprints.empty()) extraction.mask.validate();
+    if (footprints.empty()) extraction.mask.validate(), extraction.segmentation.validate();
     if (!cloud.empty() && extraction.mode == DetectionMode::ortho_only)
         throw Error("extraction.mode", "ortho_only would ignore the cloud: choose auto, ortho_cloud or cloud_only, or drop the cloud");
     if (cloud.empty() && (extraction.mode == DetectionMode::ortho_cloud || extraction.mode == DetectionMode::cloud_only))
@@ -129,6 +129,7 @@ json to_json(const RunOptions& o) {
               {"use_point_classes", o.extraction.mask.use_classes < 0 ? "auto" : o.extraction.mask.use_classes ? "yes" : "no"},
               {"split_step_m", m.split_step_m},
               {"roof_seams", o.extraction.seams.enabled},
+              {"crown_plane_sigma_m", o.extraction.segmentation.max_crown_plane_sigma_m},
               {"min_split_part_m2", m.min_split_part_m2},
               {"fit", to_string(o.extraction.fit)},
               {"fit_tolerance_pct", o.extraction.recursive.tolerance_pct},
@@ -170,13 +171,14 @@ RunOptions run_options_from_json(const json& j, const std::string& where, RunOpt
     if (j.contains("extraction")) {
         const json& x = j["extraction"];
         const std::string w = where + ": extraction";
-        check_keys(x, {"mode", "cloud_cell_px", "use_point_classes", "min_height_m", "min_area_m2", "min_hole_m2", "opening_px", "hidden_completion_max_share", "split_step_m", "roof_seams", "min_split_part_m2", "fit", "fit_tolerance_pct", "simplify_m", "footprint_grid_m", "detector", "model"}, w);
+        check_keys(x, {"mode", "cloud_cell_px", "use_point_classes", "min_height_m", "min_area_m2", "min_hole_m2", "opening_px", "hidden_completion_max_share", "split_step_m", "roof_seams", "crown_plane_sigma_m", "min_split_part_m2", "fit", "fit_tolerance_pct", "simplify_m", "footprint_grid_m", "detector", "model"}, w);
         take(x, "min_height_m", o.extraction.mask.min_height_m, w), take(x, "min_area_m2", o.extraction.mask.min_area_m2, w);
         take(x, "min_hole_m2", o.extraction.mask.min_hole_m2, w), take(x, "opening_px", o.extraction.mask.opening_radius_px, w);
         take(x, "hidden_completion_max_share", o.extraction.mask.hidden_completion_max_share, w);
         take(x, "cloud_cell_px", o.extraction.cloud_cell_factor, w);
         take(x, "split_step_m", o.extraction.mask.split_step_m, w), take(x, "min_split_part_m2", o.extraction.mask.min_split_part_m2, w);
         take(x, "roof_seams", o.extraction.seams.enabled, w);
+        take(x, "crown_plane_sigma_m", o.extraction.segmentation.max_crown_plane_sigma_m, w);
         take(x, "fit_tolerance_pct", o.extraction.recursive.tolerance_pct, w), take(x, "simplify_m", o.extraction.simplify_m, w);
         take(x, "footprint_grid_m", o.footprint_grid_m, w);
         take(x, "model", o.extraction.model, w);
@@ -714,6 +716,7 @@ WindowBuildings detect_on_window(const RunManifest& m, const PixelWindow& win, P
         const std::vector<uint8_t> vegetation = cells.used_classes ? std::vector<uint8_t>{} : vegetation_pixels(colours, co);
         OrthoRefineOptions ro = o.extraction.segmentation;
         ro.cloud_edges = o.extraction.cloud_cell_factor <= 1;
+        ro.max_crown_plane_sigma_m /= pc.crs.z_unit_m, ro.min_crown_local_roughness_m /= pc.crs.z_unit_m, ro.gsd_m = mo.gsd_m;
         refine_buildings_with_ortho(d.mask, cells, colours, valid, wc.rasters.ndsm, 20.0 / pc.crs.z_unit_m, {}, vegetation, ro);
         RoofSeamOptions so = o.extraction.seams;
         so.gsd_m = mo.gsd_m, so.ridge_rise_m /= pc.crs.z_unit_m, so.valley_depth_m /= pc.crs.z_unit_m;

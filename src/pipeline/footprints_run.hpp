@@ -146,6 +146,7 @@ struct FootprintsReport {
     std::string working_crs;       ///< CRS the detection worked in (metres)
     std::size_t buildings = 0;
     int seam_splits = 0;           ///< ortho_cloud: seams cut between touching roofs (terraces)
+    int crowns_dropped = 0;        ///< ortho_cloud without point classes: buildings dropped as tree crowns (colours + no plane)
     std::size_t hidden_completed_cells = 0;  ///< unmeasured cells completed inside buildings' rectangles (complete_hidden_roofs)
     bool used_classes = false;
     int width = 0, height = 0;

@@ -107,6 +107,42 @@ TEST_CASE("A roof under an overhanging crown stays building", "[footprint][mask]
     CHECK(outside <= 30 * 2);                  // at most a cell's width spills past the roof edge under the crown
 }
 
+TEST_CASE("A dense crown beside a wall, with no return from under it, stays out of the building", "[footprint][mask]") {
+    // A 20 x 15 m roof at 9 m (cells 10..49 x 10..39); a crown 3.5 m wide
+    // against its east wall (cells 50..56 x 15..30) returns crown points
+    // only. A second crown covers the roof's north-west corner (crown points
+    // only there too): a roof may lie under it, inside the roof's rectangle.
+    const int w = 80, h = 50;
+    Image<float> ndsm(w, h, 1, 0.0f), building(w, h, 1, NAN), vegetation(w, h, 1, NAN);
+    for (int y = 10; y <= 39; ++y)
+        for (int x = 10; x <= 49; ++x) ndsm.at(0, x, y) = 9.0f, building.at(0, x, y) = 1.0f, vegetation.at(0, x, y) = 0.0f;
+    auto crown = [&](int x0, int y0, int x1, int y1) {
+        for (int y = y0; y <= y1; ++y)
+            for (int x = x0; x <= x1; ++x) ndsm.at(0, x, y) = 10.0f, building.at(0, x, y) = NAN, vegetation.at(0, x, y) = 1.0f;
+    };
+    crown(50, 15, 56, 30);
+    crown(10, 10, 15, 15);
+    for (int y = 0; y < h; ++y)  // ground elsewhere: measured, not building
+        for (int x = 0; x < w; ++x)
+            if (ndsm.at(0, x, y) == 0.0f) building.at(0, x, y) = 0.0f, vegetation.at(0, x, y) = 0.0f;
+    const Image<float> dsm = ndsm;
+    auto count = [&](const BuildingCells& c, int x0, int y0, int x1, int y1) {
+        long n = 0;
+        for (int y = y0; y <= y1; ++y)
+            for (int x = x0; x <= x1; ++x) n += c.cells[static_cast<std::size_t>(y) * w + x];
+        return n;
+    };
+    BuildingMaskOptions o;
+    const BuildingCells trimmed = building_cells(ndsm, dsm, building, vegetation, o);
+    REQUIRE(trimmed.used_classes);
+    CHECK(count(trimmed, 51, 15, 56, 30) == 0);   // beyond a cell from the wall: out
+    CHECK(count(trimmed, 10, 10, 15, 15) >= 35);  // the corner under the crown: roof (the outermost corner cell may stay out)
+    CHECK(count(trimmed, 10, 10, 49, 39) >= 1199);
+    o.crown_fill_rectangle_cells = -1;  // off: the fill takes the crown beside the wall
+    const BuildingCells filled = building_cells(ndsm, dsm, building, vegetation, o);
+    CHECK(count(filled, 51, 15, 56, 30) >= 60);
+}
+
 TEST_CASE("Roofs the data hides are completed inside the building's rectangle, never over measured ground or another building", "[footprint][mask]") {
     // A 20 x 12 building with its lower-right 4 x 4 corner unmeasured (a
     // crown or a dark roof: no evidence), a measured-ground strip beyond it,

@@ -99,7 +99,7 @@ TEST_CASE("Crowns by colour are vetoed and rasters of another size refused", "[f
     const auto before = m.labels.data;
     // Every pixel looks like vegetation: no segment may become building, so
     // the redrawing strays and the heights' outline stays.
-    const std::vector<uint8_t> green(s.valid.size(), 1);
+    const std::vector<uint8_t> green(s.valid.size(), 2);
     refine_buildings_with_ortho(m, s.cells, s.colours, s.valid, s.ndsm, 20.0, {}, green, OrthoRefineOptions{});
     CHECK(m.labels.data == before);
     const std::vector<uint8_t> short_valid(10, 1);
@@ -160,4 +160,129 @@ TEST_CASE("A sparse (dark) roof keeps the ortho's edge where the cloud has only 
     CHECK(wrong_pixels(b) == 116);
     o.ortho_edge_odds = -1.0;
     CHECK_THROWS_WITH(o.validate(), Catch::StartsWith("--ortho-edge-odds"));
+}
+
+namespace {
+// A grey flat roof [20, 49] x [15, 44] with a tree crown [50, 64] x [15, 44]
+// against it (weakly green, its heights a rough dome about 9 m), on grass;
+// the heights' cells cover both (a photo cloud: no point classes).
+// `roof_is_crown`: the roof is crown too; `green_roof`: the roof
+// itself has the crown's weak green colour (a planar green roof); `gable`:
+// the roof is a gable, its ridge along x, 30 degrees.
+Scene crown_scene(bool roof_is_crown, bool green_roof, bool gable = false) {
+    const int w = 80, h = 60;
+    Scene s = empty_scene(w, h);
+    for (int y = 0; y < h; ++y)
+        for (int x = 0; x < w; ++x) {
+            const bool roof = x >= 20 && x <= 49 && y >= 15 && y <= 44;
+            const bool tree = (x >= 50 && x <= 64 && y >= 15 && y <= 44) || (roof && roof_is_crown);
+            const float noise = static_cast<float>((x * 7 + y * 13) % 9) - 4.0f;
+            float rgb[3] = {60.0f, 130.0f, 50.0f};                                          // grass: ExG 0.40
+            if (roof) rgb[0] = 150.0f, rgb[1] = 150.0f, rgb[2] = 145.0f;                   // grey: ExG 0.01
+            if (roof && green_roof) rgb[0] = 100.0f, rgb[1] = 125.0f, rgb[2] = 105.0f;     // ExG 0.14
+            if (tree) rgb[0] = 85.0f, rgb[1] = 105.0f, rgb[2] = 80.0f;                     // ExG 0.16
+            for (int b = 0; b < 3; ++b) s.colours.at(b, x, y) = rgb[b] + noise;
+            // The crown: a dome with leaves 0.6 m up and down pixel by pixel.
+            const float dome = 9.0f - 0.02f * static_cast<float>((x - 57) * (x - 57) + (y - 30) * (y - 30)) / 4.0f;
+            const float leaves = ((x * 3 + y * 5) % 4 < 2) ? 0.6f : -0.6f;
+            const float roof_z = gable ? 9.0f - 0.5f * 0.577f * std::abs(static_cast<float>(y) - 29.5f) : 9.0f;
+            s.ndsm.at(0, x, y) = tree ? dome + leaves : roof ? roof_z : 0.1f;
+            const bool cell = roof || tree;
+            s.cells.cells[static_cast<std::size_t>(y) * w + x] = cell;
+            if (cell) s.cells.step_dsm.at(0, x, y) = s.ndsm.at(0, x, y);
+        }
+    return s;
+}
+// Levels of vegetation_pixels for the scene's colours: ExG above 0.25 -> 2, above 0.08 -> 1.
+std::vector<uint8_t> vegetation_levels(const Scene& s) {
+    std::vector<uint8_t> v(s.valid.size(), 0);
+    for (std::size_t k = 0; k < v.size(); ++k) {
+        const double r = s.colours.band_data(0)[k], g = s.colours.band_data(1)[k], b = s.colours.band_data(2)[k];
+        const double exg = (2 * g - r - b) / (r + g + b);
+        v[k] = exg > 0.25 ? 2 : exg > 0.08 ? 1 : 0;
+    }
+    return v;
+}
+long pixels_of(const BuildingMask& m, int x0, int x1) {
+    long n = 0;
+    for (int y = 0; y < 60; ++y)
+        for (int x = x0; x <= x1; ++x) n += m.labels.at(0, x, y) != 0;
+    return n;
+}
+}  // namespace
+
+TEST_CASE("Without point classes a crown against a roof is cut off and a building of crown alone dropped", "[footprint][ortho][crown]") {
+    OrthoRefineOptions o;
+    {
+        const Scene s = crown_scene(false, false);
+        BuildingMask m = mask_of(s.cells, 80, 60);
+        REQUIRE(m.count == 1);
+        CHECK(refine_buildings_with_ortho(m, s.cells, s.colours, s.valid, s.ndsm, 20.0, {}, vegetation_levels(s), o) == 0);
+        CHECK(pixels_of(m, 20, 49) >= 880);  // the roof: 900 pixels
+        CHECK(pixels_of(m, 50, 79) <= 20);   // the crown's 450 are gone
+        // Off: the crown stays with the roof (the heights' outline is kept).
+        OrthoRefineOptions off = o;
+        off.max_crown_plane_sigma_m = 0.0;
+        BuildingMask k = mask_of(s.cells, 80, 60);
+        refine_buildings_with_ortho(k, s.cells, s.colours, s.valid, s.ndsm, 20.0, {}, vegetation_levels(s), off);
+        CHECK(pixels_of(k, 50, 79) >= 400);
+    }
+    {
+        const Scene s = crown_scene(true, false);  // nothing but crown
+        BuildingMask m = mask_of(s.cells, 80, 60);
+        REQUIRE(m.count == 1);
+        CHECK(refine_buildings_with_ortho(m, s.cells, s.colours, s.valid, s.ndsm, 20.0, {}, vegetation_levels(s), o) == 1);
+        CHECK(pixels_of(m, 0, 79) == 0);
+    }
+    {
+        // A planar roof of the same weak green keeps its pixels: colour alone is no crown.
+        for (const bool gable : {false, true}) {
+            const Scene s = crown_scene(false, true, gable);
+            BuildingMask m = mask_of(s.cells, 80, 60);
+            CHECK(refine_buildings_with_ortho(m, s.cells, s.colours, s.valid, s.ndsm, 20.0, {}, vegetation_levels(s), o) == 0);
+            CHECK(pixels_of(m, 20, 49) >= 880);
+        }
+    }
+    o.max_crown_plane_sigma_m = -1.0;
+    CHECK_THROWS_WITH(o.validate(), Catch::StartsWith("crown_plane_sigma_m"));
+}
+
+TEST_CASE("With a classified cloud, pixels of a segment running on beyond the roof are peeled off where the cloud measured no roof", "[footprint][ortho][crown]") {
+    // A dark roof [20, 49] x [15, 44] and a dark crown [50, 59] x [20, 39]
+    // against it, of one colour in the ortho (one segment); the classified
+    // cloud measured the crown's cells as not building (ground returns
+    // under it: 3 per cell), the roof's as building (4 roof points per cell).
+    const int w = 80, h = 60;
+    Scene s = empty_scene(w, h);
+    s.cells.used_classes = true;
+    s.cells.roof_points.assign(s.valid.size(), 0);
+    s.cells.ground_points.assign(s.valid.size(), 3);
+    for (int y = 0; y < h; ++y)
+        for (int x = 0; x < w; ++x) {
+            const std::size_t k = static_cast<std::size_t>(y) * w + x;
+            const bool roof = x >= 20 && x <= 49 && y >= 15 && y <= 44;
+            const bool crown = x >= 50 && x <= 59 && y >= 20 && y <= 39;
+            const float noise = static_cast<float>((x * 7 + y * 13) % 9) - 4.0f;
+            const float v = roof || crown ? 40.0f : 140.0f;
+            for (int b = 0; b < 3; ++b) s.colours.at(b, x, y) = v + noise;
+            s.ndsm.at(0, x, y) = roof ? 6.0f : crown ? 5.0f : 0.1f;
+            s.cells.cells[k] = roof;
+            if (roof) s.cells.step_dsm.at(0, x, y) = 6.0f, s.cells.roof_points[k] = 4, s.cells.ground_points[k] = 0;
+        }
+    auto crown_pixels = [](const BuildingMask& m) {
+        long n = 0;
+        for (int y = 20; y <= 39; ++y)
+            for (int x = 50; x <= 59; ++x) n += m.labels.at(0, x, y) != 0;
+        return n;
+    };
+    OrthoRefineOptions o;
+    o.ndsm_band_weight = 0.0;  // the image alone: roof and crown are one segment
+    BuildingMask peeled = mask_of(s.cells, w, h);
+    refine_buildings_with_ortho(peeled, s.cells, s.colours, s.valid, s.ndsm, 20.0, {}, {}, o);
+    CHECK(crown_pixels(peeled) == 0);
+    CHECK(pixels_of(peeled, 20, 49) == 900);
+    o.cloud_peel_rings = 0;  // the outline ring alone goes back to the cloud
+    BuildingMask ring = mask_of(s.cells, w, h);
+    refine_buildings_with_ortho(ring, s.cells, s.colours, s.valid, s.ndsm, 20.0, {}, {}, o);
+    CHECK(crown_pixels(ring) > 100);
 }
