@@ -16,6 +16,7 @@
 #include "crs/crs.hpp"
 #include "io/cloud_crs.hpp"
 #include "io/vector.hpp"
+#include "pipeline/prepared_cloud.hpp"
 #include "raster/quicklook.hpp"
 #include "raster/raster.hpp"
 
@@ -77,6 +78,18 @@ std::string md_cell(const std::string& text) {
     return out;
 }
 
+// Predictions and references side by side in one CRS that do not meet give no measure, only zeros:
+// an error naming both files and their extents. An empty side (no feature, no point) is left to the
+// measures (nothing predicted is a result).
+void require_extents_overlap(const Extent& pred, const Extent& ref, const CrsInfo& crs, const std::string& pred_path,
+                             const std::string& ref_path) {
+    const auto empty = [](const Extent& e) { return !(e.min_x <= e.max_x && e.min_y <= e.max_y); };
+    if (empty(pred) || empty(ref)) return;
+    if (pred.max_x < ref.min_x || ref.max_x < pred.min_x || pred.max_y < ref.min_y || ref.max_y < pred.min_y)
+        throw Error(pred_path, "does not overlap the reference " + ref_path + ": predicted " + describe_extent(pred, crs) + ", reference " +
+                                   describe_extent(ref, crs) + "; nothing to compare");
+}
+
 // Reads both layers and brings the prediction into the reference's CRS.
 struct LayerPair {
     PolygonLayer pred, ref;
@@ -92,6 +105,10 @@ LayerPair read_pair(const std::string& pred_path, const std::string& ref_path, c
         put_layer_on(lp.ref, lp.pred.crs.geographic ? working_crs_for_layer(lp.ref, {}, ref_path) : lp.pred.crs, ref_path);
     lp.reprojected = !same_horizontal_crs(lp.pred.crs, lp.ref.crs);
     put_layer_on(lp.pred, lp.ref.crs, pred_path);
+    Extent pe = empty_extent(), re = empty_extent();
+    for (const Feature& f : lp.pred.features) include(pe, parts_extent(f.geometry));
+    for (const Feature& f : lp.ref.features) include(re, parts_extent(f.geometry));
+    require_extents_overlap(pe, re, lp.ref.crs, pred_path, ref_path);
     return lp;
 }
 
@@ -487,6 +504,16 @@ CloudAuditReport audit_clouds(const std::string& pred_path, const std::string& r
         rep.reprojected = true;
     }
     rep.crs = ref_crs.empty() ? "none (both clouds without CRS, assumed the same)" : ref_crs.label();
+    {
+        const auto xy_extent = [](const PointCloud& c) {
+            Extent e = empty_extent();
+            for (std::size_t i = 0; i < c.x.size(); ++i)
+                e.min_x = std::min(e.min_x, c.x[i]), e.max_x = std::max(e.max_x, c.x[i]), e.min_y = std::min(e.min_y, c.y[i]),
+                e.max_y = std::max(e.max_y, c.y[i]);
+            return e;
+        };
+        require_extents_overlap(xy_extent(pred), xy_extent(ref), ref_crs, pred_path, ref_path);
+    }
     const double unit = ref_crs.empty() ? 1.0 : ref_crs.linear_unit_m;
     std::vector<double> taus;
     for (double t : o.taus_m) taus.push_back(t / unit);

@@ -296,10 +296,15 @@ ExportReport write_city_model(const CityModel& model, const CrsInfo& crs, const 
 
 ExportReport run_export(const std::string& in_path, const std::string& out_dir, const ExportOptions& o, const Progress& progress) {
     o.validate();
-    const PolygonLayer layer = read_polygon_layer(in_path, o.layer);
+    PolygonLayer layer = read_polygon_layer(in_path, o.layer);
     if (layer.crs.empty()) throw Error(in_path, "buildings have no CRS; city models need one (assign it with ogr2ogr -a_srs)");
-    if (layer.crs.geographic)
-        throw Error(in_path, "buildings are in a geographic CRS; city models need a projected CRS (reproject with ogr2ogr -t_srs)");
+    // City models need metres: lon/lat buildings (our own RFC 7946 buildings.geojson, OpenStreetMap
+    // extracts) are worked on the UTM zone of their centre, as `run` and `footprints` work a lon/lat ortho.
+    if (layer.crs.geographic) {
+        const CrsInfo work = working_crs_for_layer(layer, {}, in_path);
+        put_layer_on(layer, work, in_path);
+        log::info(in_path + ": lon/lat buildings; the city models are written in " + work.label() + " (the UTM zone of their centre)");
+    }
     CrsInfo crs = layer.crs;
     if (!o.vertical_crs.empty()) {
         const CrsInfo v = crs_from_user_input(o.vertical_crs, "--vertical-crs");

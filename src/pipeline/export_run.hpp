@@ -72,9 +72,10 @@ CityModel build_city_model(const PolygonLayer& layer, const CrsInfo& crs, const 
 
 /// Reads `in_path`, builds the model and writes `out_dir`/buildings.geojson,
 /// buildings.gpkg, buildings_lod1.gml, buildings_lod2.gml (when LOD 2 is
-/// asked for), buildings.city.json and buildings.city.jsonl. Throws Error
-/// naming the file for unreadable input, a missing CRS, a geographic CRS, or
-/// a height field of the wrong type.
+/// asked for), buildings.city.json and buildings.city.jsonl. Lon/lat input
+/// is worked on the UTM zone of its centre (working_crs_for_layer); the
+/// report's `crs` names the CRS written. Throws Error naming the file for
+/// unreadable input, a missing CRS, or a height field of the wrong type.
 ExportReport run_export(const std::string& in_path, const std::string& out_dir, const ExportOptions& options,
                         const Progress& progress = {});
 

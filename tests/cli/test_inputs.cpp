@@ -325,7 +325,8 @@ TEST_CASE("CLI habits: usage errors exit 2 with a suggestion, existing outputs r
 
 TEST_CASE("A footprint audit without a match says n/a (null) for the means over matches - report.md tables stay tables", "[inputs][audit]") {
     ScratchDir dir("inputs_audit");
-    write_squares(dir / "far.geojson", {{90000.0, 447560.0}});
+    // A square in a gap between the reference's buildings (inputs that do not overlap at all are an error).
+    write_squares(dir / "far.geojson", {{84830.0, 447480.0}});
     const auto r = run_cli("audit footprints --pred " + (dir / "far.geojson") + " --ref " +
                            shared_data("delft_ahn3_bgt_west/bgt_pand_west_with_ref_heights.geojson") + " --out " + (dir / "a"));
     INFO(r.err);
@@ -344,7 +345,8 @@ TEST_CASE("Rectangle and height audits without a comparable building say n/a (nu
     ScratchDir dir("inputs_audit_na");
     const std::string ref = shared_data("delft_ahn3_bgt_west/bgt_pand_west_with_ref_heights.geojson");
     const std::string schema = cityforge::test::source_dir() + "/schemas/audit_report.schema.json";
-    write_squares(dir / "far.geojson", {{90000.0, 447560.0}}, 4.0, R"({"height_m": 7.5})");
+    // A square in a gap between the reference's buildings (inputs that do not overlap at all are an error).
+    write_squares(dir / "far.geojson", {{84830.0, 447480.0}}, 4.0, R"({"height_m": 7.5})");
     // Heights: the one prediction matches no reference footprint.
     const auto h = run_cli("audit heights --pred " + (dir / "far.geojson") + " --ref " + ref + " --ref-field ref_height_m --out " + (dir / "h"));
     INFO(h.err);

@@ -2,6 +2,7 @@
 // case as it was found. Real files from ../shared/data, altered as named.
 #include <catch2/catch.hpp>
 #include <algorithm>
+#include <cmath>
 #include <cstdint>
 #include <cstring>
 #include <filesystem>
@@ -296,4 +297,58 @@ TEST_CASE("Options read late are checked first: a folder as --config or --manife
         CHECK(r.err.find(c.problem) != std::string::npos);
         CHECK_FALSE(std::filesystem::exists(c.out));
     }
+}
+
+TEST_CASE("export of a run's own buildings.geojson (RFC 7946 lon/lat) works in the UTM zone of its centre and names it", "[cli][export][sweep]") {
+    ScratchDir dir("sweep_export_lonlat");
+    REQUIRE(run_cli("synth --quiet --out " + (dir / "s") + " --size-m 200 --seed 5").exit_code == 0);
+    const auto run = run_cli("run --quiet --ortho " + (dir / "s/ortho.tif") + " --cloud " + (dir / "s/cloud.las") + " --out " + (dir / "r"));
+    INFO(run.err);
+    REQUIRE(run.exit_code == 0);
+    const auto r = run_cli("export --in " + (dir / "r/buildings.geojson") + " --out " + (dir / "e"));
+    INFO(r.err);
+    // Before: exit 1 "buildings are in a geographic CRS; ... reproject with ogr2ogr -t_srs".
+    REQUIRE(r.exit_code == 0);
+    CHECK(r.err.find("29 buildings (EPSG:32650") != std::string::npos);  // the summary names the CRS written
+    const json mine = json::parse(slurp(dir / "e/buildings.city.json"));
+    const json runs = json::parse(slurp(dir / "r/buildings.city.json"));  // the run's own model, in its working CRS (UTM 50N)
+    CHECK(mine["metadata"]["referenceSystem"] == "https://www.opengis.net/def/crs/EPSG/0/32650");
+    CHECK(mine["metadata"]["referenceSystem"] == runs["metadata"]["referenceSystem"]);
+    std::size_t run_buildings = 0;  // the run's model also has LOD2 building parts
+    for (const auto& [id, o] : runs["CityObjects"].items()) run_buildings += o["type"] == "Building";
+    CHECK(mine["CityObjects"].size() == run_buildings);
+    // The same place to a centimetre (the GeoJSON's lon/lat have 7 decimals).
+    for (int k : {0, 1, 3, 4}) CHECK(std::abs(mine["metadata"]["geographicalExtent"][k].get<double>() - runs["metadata"]["geographicalExtent"][k].get<double>()) < 0.02);
+    CHECK(std::filesystem::exists(dir / "e/buildings.glb"));
+}
+
+TEST_CASE("audits of inputs that do not overlap are an error naming both files and their extents, with nothing written", "[cli][audit][sweep]") {
+    ScratchDir dir("sweep_audit_apart");
+    // Kampala (OpenStreetMap, EPSG:3857) against BD TOPO in Brittany (EPSG:2154); IGN Lidar HD against Autzen, Oregon.
+    const std::string kampala = shared_data("oam_kampala_rgba/kampala_z19_east_buildings.geojson");
+    const std::string bdtopo = shared_data("ign_lidarhd_bdtopo_west/bdtopo_buildings_west.geojson");
+    const std::string ign_las = shared_data("ign_lidarhd_bdtopo_west/lidarhd_870200_6617083_west.las");
+    const std::string autzen = shared_data("autzen_oregon/autzen_trim.las");
+    struct Case {
+        std::string args, pred, ref, out;
+    };
+    // Before: exit 0 with F1 0 (and all-zero reports written) for each.
+    const std::vector<Case> cases = {
+        {"audit footprints --pred " + kampala + " --ref " + bdtopo, kampala, bdtopo, dir / "f"},
+        {"audit heights --ref-field hauteur --pred " + kampala + " --ref " + bdtopo, kampala, bdtopo, dir / "h"},
+        {"audit rectangles --in " + kampala + " --original " + bdtopo, kampala, bdtopo, dir / "r"},
+        {"audit clouds --pred " + ign_las + " --ref " + autzen, ign_las, autzen, dir / "c"},
+    };
+    for (const Case& c : cases) {
+        const auto r = run_cli(c.args + " --out " + c.out);
+        INFO(c.args << "\n" << r.err);
+        CHECK(r.exit_code == 1);
+        CHECK(r.err.rfind("cityforge: error: " + c.pred + ": does not overlap the reference " + c.ref + ": predicted ", 0) == 0);
+        CHECK(r.err.find(", reference ") != std::string::npos);
+        CHECK(std::count(r.err.begin(), r.err.end(), '\n') == 1);
+        CHECK_FALSE(std::filesystem::exists(c.out));
+    }
+    // Both in EPSG:2154, the reference's CRS: Kampala's extent is far off the Lambert-93 zone.
+    const auto f = run_cli(cases[0].args + " --out " + (dir / "f"));
+    CHECK(f.err.find("870205.2, 6617091.1 - 870231.6, 6617142.3 EPSG:2154") != std::string::npos);
 }
