@@ -4,6 +4,7 @@
 #include <cmath>
 #include <limits>
 #include <map>
+#include <optional>
 #include <set>
 #include <vector>
 
@@ -74,6 +75,22 @@ BuildingMask buildings_from_cells(const BuildingCells& cells, int w, int h, cons
 }
 
 namespace {
+// Minimum-area rectangle of the corners of cells (indices into a w-wide
+// grid; pixel units); none for a single line of cells.
+std::optional<OrientedRectangle> cells_rectangle(const std::vector<std::size_t>& cells, int w) {
+    Polygon corners;
+    corners.outer.reserve(cells.size() * 4);
+    for (const std::size_t k : cells) {
+        const double x = static_cast<double>(k % static_cast<std::size_t>(w)), y = static_cast<double>(k / static_cast<std::size_t>(w));
+        for (const auto& [dx, dy] : {std::pair{0, 0}, std::pair{1, 0}, std::pair{0, 1}, std::pair{1, 1}}) corners.outer.push_back({x + dx, y + dy});
+    }
+    try {
+        return minimum_area_rectangle(corners);
+    } catch (const Error&) {
+        return std::nullopt;
+    }
+}
+
 // Crown-only cells that the fill made building (mask 1, no evidence) and
 // that lie outside the minimum-area rectangle of the measured building cells
 // of their component, grown by `tolerance` cells, go back to not building.
@@ -91,22 +108,12 @@ void trim_crown_fill(std::vector<uint8_t>& mask, const std::vector<uint8_t>& cro
         }
     for (uint32_t l = 1; l <= count; ++l) {
         if (!has_crown_fill[l] || measured[l].empty()) continue;
-        Polygon corners;
-        corners.outer.reserve(measured[l].size() * 4);
-        for (const std::size_t k : measured[l]) {
-            const double x = static_cast<double>(k % static_cast<std::size_t>(w)), y = static_cast<double>(k / static_cast<std::size_t>(w));
-            for (const auto& [dx, dy] : {std::pair{0, 0}, std::pair{1, 0}, std::pair{0, 1}, std::pair{1, 1}}) corners.outer.push_back({x + dx, y + dy});
-        }
-        OrientedRectangle rect;
-        try {
-            rect = minimum_area_rectangle(corners);
-        } catch (const Error&) {
-            continue;
-        }
-        rect.length += 2.0 * tolerance, rect.width += 2.0 * tolerance;
+        std::optional<OrientedRectangle> rect = cells_rectangle(measured[l], w);
+        if (!rect) continue;
+        rect->length += 2.0 * tolerance, rect->width += 2.0 * tolerance;
         for (std::size_t k = 0; k < mask.size(); ++k)
             if (labels[k] == l && !evidence[k] && crown_only[k] &&
-                !rect.contains({static_cast<double>(k % static_cast<std::size_t>(w)) + 0.5, static_cast<double>(k / static_cast<std::size_t>(w)) + 0.5}))
+                !rect->contains({static_cast<double>(k % static_cast<std::size_t>(w)) + 0.5, static_cast<double>(k / static_cast<std::size_t>(w)) + 0.5}))
                 mask[k] = 0;
     }
 }
@@ -468,19 +475,9 @@ std::size_t complete_hidden_roofs(BuildingMask& mask, const BuildingCells& cells
         if (!near) continue;
         // Its minimum-area rectangle (pixel units; a corner cut off at an
         // oblique angle, by the data or by the building, does not turn it).
-        Polygon cells_outline;
-        cells_outline.outer.reserve(own.size() * 4);
-        for (const std::size_t k : own) {
-            const double x = static_cast<double>(k % static_cast<std::size_t>(w)), y = static_cast<double>(k / static_cast<std::size_t>(w));
-            for (const auto& [dx, dy] : {std::pair{0, 0}, std::pair{1, 0}, std::pair{0, 1}, std::pair{1, 1}}) cells_outline.outer.push_back({x + dx, y + dy});
-        }
-        OrientedRectangle rect;
-        try {
-            rect = minimum_area_rectangle(cells_outline);
-        } catch (const Error&) {
-            continue;  // a single line of cells: no area to complete
-        }
-        auto inside = [&](int x, int y) { return rect.contains({x + 0.5, y + 0.5}); };  // the cell's centre
+        const std::optional<OrientedRectangle> rect = cells_rectangle(own, w);
+        if (!rect) continue;  // a single line of cells: no area to complete
+        auto inside = [&](int x, int y) { return rect->contains({x + 0.5, y + 0.5}); };  // the cell's centre
         std::vector<std::size_t>& add = claims[l];
         stack.assign(own.begin(), own.end());
         while (!stack.empty()) {
