@@ -380,8 +380,10 @@ RunManifest plan_run(const RunOptions& in) {
         check_footprints_within(bounds(), crs_from_wkt(m.crs_wkt, "grid"), o.cloud, footprint_extents, o.footprints);
     }
     // What must be alike in every tile is measured once, on a sample fixed by
-    // the grid (its central 400 m square): the outlier filter's limit, the
-    // cloud cells' size, and whether point classes decide building cells.
+    // where the cloud is on the grid (the central 400 m square of the part it
+    // covers, so an ortho cropped around the cloud decides as the whole ortho
+    // does): the outlier filter's limit, the cloud cells' size, and whether
+    // point classes decide building cells.
     auto& outliers = m.options.buildings.heights.outliers;
     auto& ex = m.options.extraction;
     const bool need_limit = outliers.enabled && !(outliers.max_mean_distance > 0);
@@ -389,20 +391,13 @@ RunManifest plan_run(const RunOptions& in) {
     if (need_limit || (extract && (ex.cloud_cell_factor == 0 || ex.mask.use_classes < 0))) {
         const CrsInfo grid_crs = crs_from_wkt(m.crs_wkt, "grid");
         PreparedCloud points;
-        MapPoint centre = m.grid.transform.pixel_to_map({m.grid.width / 2.0, m.grid.height / 2.0});
+        const Extent covered = covered_part(m, bounds());
+        MapPoint centre{0.5 * (covered.min_x + covered.max_x), 0.5 * (covered.min_y + covered.max_y)};
         CloudSample sample = sample_cloud(o.cloud, o.cloud_crs, grid_crs, outliers, centre, &points);
-        // Too few points around the grid's centre to measure anything: the
-        // centre of the part the cloud covers, and if its box says little of
-        // where the points are (far outliers, an L-shaped survey), the
-        // grid's most populated 400 m square.
+        // Too few points there to measure anything (the box says little of
+        // where the points are: an L-shaped survey): the grid's most
+        // populated 400 m square.
         constexpr std::size_t kMinSample = 100;
-        if (points.cloud.size() < kMinSample) {
-            const Extent covered = covered_part(m, bounds());
-            const MapPoint mid{0.5 * (covered.min_x + covered.max_x), 0.5 * (covered.min_y + covered.max_y)};
-            PreparedCloud p;
-            CloudSample s = sample_cloud(o.cloud, o.cloud_crs, grid_crs, outliers, mid, &p);
-            if (p.cloud.size() > points.cloud.size()) centre = mid, sample = s, points = std::move(p);
-        }
         if (points.cloud.size() < kMinSample) {
             const DensestSquare d = densest_square(o.cloud, o.cloud_crs, grid_crs, grid_extent(m), 400.0 / grid_metres_per_unit(m));
             if (d.points > points.cloud.size()) {

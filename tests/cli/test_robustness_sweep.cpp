@@ -352,3 +352,29 @@ TEST_CASE("audits of inputs that do not overlap are an error naming both files a
     const auto f = run_cli(cases[0].args + " --out " + (dir / "f"));
     CHECK(f.err.find("870205.2, 6617091.1 - 870231.6, 6617142.3 EPSG:2154") != std::string::npos);
 }
+
+TEST_CASE("The whole-run decisions of a cloud on a larger ortho do not depend on how far the ortho reaches (Autzen)", "[cli][run][sweep]") {
+    ScratchDir dir("sweep_plan_sample");
+    const std::string ortho = shared_data("autzen_oregon/autzen_ortho_1ft_epsg2994.tif");
+    const std::string cloud = shared_data("autzen_oregon/autzen_trim.las");
+    // The ortho's last 714 rows, its whole width: the cloud lies in them; their centre is ~60 m east of the cloud.
+    REQUIRE(run_command("gdal_translate -q -srcwin 0 3671 3248 714 " + ortho + " " + (dir / "strip.tif")).exit_code == 0);
+    // A crop around the cloud (gdal_translate -projwin on its extent, clipped at the ortho's lower edge).
+    REQUIRE(run_command("gdal_translate -q -srcwin 384 3864 1182 521 " + ortho + " " + (dir / "crop.tif")).exit_code == 0);
+    std::vector<json> plans;
+    for (const std::string& o : {ortho, dir / "strip.tif", dir / "crop.tif"}) {
+        const std::string out = dir / ("plan" + std::to_string(plans.size()) + ".json");
+        const auto r = run_cli("plan --quiet --ortho " + o + " --cloud " + cloud + " --out " + out);
+        INFO(r.err);
+        REQUIRE(r.exit_code == 0);
+        plans.push_back(json::parse(slurp(out))["options"]);
+    }
+    // Before: the strip sampled the 400 m around its own centre (outlier limit 2.33 ft against 2.03).
+    for (std::size_t k = 1; k < plans.size(); ++k) {
+        INFO(k);
+        CHECK(plans[k]["cleaning"]["outlier_limit_m"] == plans[0]["cleaning"]["outlier_limit_m"]);
+        CHECK(plans[k]["extraction"]["cloud_cell_px"] == plans[0]["extraction"]["cloud_cell_px"]);
+        CHECK(plans[k]["extraction"]["use_point_classes"] == plans[0]["extraction"]["use_point_classes"]);
+    }
+    CHECK(plans[0]["cleaning"]["outlier_limit_m"].get<double>() > 1.0);
+}
