@@ -5,8 +5,10 @@
 #include <cmath>
 #include <limits>
 #include <map>
+#include <optional>
 
 #include "core/error.hpp"
+#include "core/statistics.hpp"
 #include "core/grid_fill.hpp"
 #include "segment/boundary_refine.hpp"
 #include "segment/region_merging.hpp"
@@ -29,38 +31,19 @@ void OrthoRefineOptions::validate() const {
 }
 
 namespace {
-// Robust scatter of heights about their plane: least squares refitted
-// three times on the points within 2.5 sigma (sigma = 1.4826 x the median
-// absolute residual), so a few pixels of wall or ground along a segment's
-// edge do not count; returns the final sigma over all points (the unit of
-// z), 0 below 6 points or for a degenerate (line-like) set.
+// Robust scatter of heights about their plane: the trimmed least-squares
+// plane (fit_trimmed_plane, 2.5 sigma), so a few pixels of wall or ground
+// along a segment's edge do not count; then sigma = 1.4826 x the median
+// absolute residual of all the points (the unit of z). 0 below 6 points or
+// for a line-like set.
 double robust_plane_sigma(const std::vector<std::array<double, 3>>& p) {
-    if (p.size() < 6) return 0.0;
-    std::vector<uint8_t> in(p.size(), 1);
+    TrimmedPlaneOptions o;
+    o.trim_sigmas = 2.5;
+    const std::optional<TrimmedPlane> plane = fit_trimmed_plane(p, o);
+    if (!plane) return 0.0;
     std::vector<double> r(p.size());
-    double sigma = 0.0;
-    for (int iteration = 0; iteration < 4; ++iteration) {
-        double n = 0, sx = 0, sy = 0, sz = 0;
-        for (std::size_t i = 0; i < p.size(); ++i)
-            if (in[i]) n += 1, sx += p[i][0], sy += p[i][1], sz += p[i][2];
-        if (n < 3) break;
-        const double mx = sx / n, my = sy / n, mz = sz / n;
-        double xx = 0, xy = 0, yy = 0, xz = 0, yz = 0;
-        for (std::size_t i = 0; i < p.size(); ++i)
-            if (in[i]) {
-                const double dx = p[i][0] - mx, dy = p[i][1] - my, dz = p[i][2] - mz;
-                xx += dx * dx, xy += dx * dy, yy += dy * dy, xz += dx * dz, yz += dy * dz;
-            }
-        const double det = xx * yy - xy * xy;
-        if (!(det > 1e-9 * std::max(1.0, xx * yy))) return 0.0;
-        const double a = (xz * yy - yz * xy) / det, b = (yz * xx - xz * xy) / det;
-        for (std::size_t i = 0; i < p.size(); ++i) r[i] = std::abs(p[i][2] - mz - a * (p[i][0] - mx) - b * (p[i][1] - my));
-        std::vector<double> sorted = r;
-        std::nth_element(sorted.begin(), sorted.begin() + static_cast<std::ptrdiff_t>(sorted.size() / 2), sorted.end());
-        sigma = 1.4826 * sorted[sorted.size() / 2];
-        for (std::size_t i = 0; i < p.size(); ++i) in[i] = r[i] <= 2.5 * sigma + 1e-9;
-    }
-    return sigma;
+    for (std::size_t i = 0; i < p.size(); ++i) r[i] = std::abs(p[i][2] - plane->z(p[i][0], p[i][1]));
+    return 1.4826 * *percentile(r, 50.0);
 }
 
 // Scatter of a segment's heights about its roof: the least of one robust
@@ -215,8 +198,6 @@ std::size_t refine_buildings_with_ortho(BuildingMask& mask, const BuildingCells&
         std::vector<uint32_t> seen(count + 1, 0), votes(count + 1, 0), yes(count + 1, 0), size(count + 1, 0), green(count + 1, 0),
             weak(count + 1, 0);
         std::vector<uint8_t> vetoed(count + 1, 0), crown(count + 1, 0);
-        // Each segment's nDSM samples (crop pixel coordinates), for its plane.
-        std::vector<std::vector<std::array<double, 3>>> plane(vegetation.empty() || o.max_crown_plane_sigma_m <= 0 ? 0 : count + 1);
         for (int y = 0; y < ch; ++y)
             for (int x = 0; x < cw; ++x) {
                 const uint32_t s = seg.at(0, x, y);
@@ -224,19 +205,27 @@ std::size_t refine_buildings_with_ortho(BuildingMask& mask, const BuildingCells&
                 const std::size_t k = global(x, y);
                 ++size[s];
                 if (!vegetation.empty()) green[s] += vegetation[k] >= 2, weak[s] += vegetation[k] >= 1;
-                if (!plane.empty() && std::isfinite(ndsm.data[k])) plane[s].push_back({double(x), double(y), double(ndsm.data[k])});
                 seen[s] += cells.evidence[k];
                 ++votes[s], yes[s] += cells.cells[k];
                 // A segment reaching the crop's edge (inside the grid) runs on
                 // beyond the building: ground, or roof merged with ground.
                 if ((x == 0 && b.x0 > 0) || (y == 0 && b.y0 > 0) || (x == cw - 1 && b.x1 < w - 1) || (y == ch - 1 && b.y1 < h - 1)) vetoed[s] = 1;
             }
+        // Vegetation colours: never building (the ortho cannot draw it; a
+        // grass-coloured roof keeps its heights' outline). Vegetation colours,
+        // even weak ones, on a surface that is no plane: a crown. The nDSM
+        // samples (crop pixel coordinates) are gathered for those segments only.
+        std::vector<std::vector<std::array<double, 3>>> samples(!vegetation.empty() && o.max_crown_plane_sigma_m > 0 ? count + 1 : 0);
+        if (!samples.empty())
+            for (int y = 0; y < ch; ++y)
+                for (int x = 0; x < cw; ++x) {
+                    const uint32_t s = seg.at(0, x, y);
+                    const float z = ndsm.data[global(x, y)];
+                    if (s && 2 * weak[s] > size[s] && std::isfinite(z)) samples[s].push_back({double(x), double(y), double(z)});
+                }
         for (uint32_t s = 1; s <= count; ++s) {
-            // Vegetation colours: never building (the ortho cannot draw it;
-            // a grass-coloured roof keeps its heights' outline). Vegetation
-            // colours, even weak ones, on a surface that is no plane: a crown.
-            crown[s] = !plane.empty() && 2 * weak[s] > size[s] && roof_plane_sigma(plane[s]) > o.max_crown_plane_sigma_m &&
-                       local_roughness(plane[s], local_radius_px) > o.min_crown_local_roughness_m;
+            crown[s] = !samples.empty() && !samples[s].empty() && roof_plane_sigma(samples[s]) > o.max_crown_plane_sigma_m &&
+                       local_roughness(samples[s], local_radius_px) > o.min_crown_local_roughness_m;
             vetoed[s] |= 2 * green[s] > size[s] || crown[s];
         }
         std::vector<uint8_t> voted(static_cast<std::size_t>(cw) * ch, 0);
@@ -277,6 +266,11 @@ std::size_t refine_buildings_with_ortho(BuildingMask& mask, const BuildingCells&
                     edge_lr_base = 0.5 * (g - r) + std::log(o.ortho_edge_odds);
                 }
             }
+            // A cell with no roof point whose ground points are too few
+            // against the ortho's prior: the ortho keeps its vote there.
+            auto weak_ground = [&](std::size_t k) {
+                return edge_lr_base > 0 && cells.roof_points[k] == 0 && edge_lr_base >= cells.ground_points[k] * kLn3;
+            };
             std::vector<uint8_t> edged = voted;
             for (int y = 0; y < ch; ++y)
                 for (int x = 0; x < cw; ++x) {
@@ -291,9 +285,7 @@ std::size_t refine_buildings_with_ortho(BuildingMask& mask, const BuildingCells&
                         }
                     if (!edge) continue;
                     const std::size_t c = static_cast<std::size_t>(y) * cw + x;
-                    const bool weak_ground = voted[c] && !cells.cells[k] && edge_lr_base > 0 && cells.roof_points[k] == 0 &&
-                                             edge_lr_base >= cells.ground_points[k] * kLn3;
-                    if (!weak_ground) edged[c] = cells.cells[k];
+                    if (!(voted[c] && !cells.cells[k] && weak_ground(k))) edged[c] = cells.cells[k];
                 }
             voted.swap(edged);
             // A segment of the ortho may run on beyond the roof (a dark crown
@@ -308,8 +300,7 @@ std::size_t refine_buildings_with_ortho(BuildingMask& mask, const BuildingCells&
                         if (!voted[c] || !cells.evidence[k] || cells.cells[k] || (old[k] && old[k] != l)) continue;
                         const bool outline = x == 0 || y == 0 || x == cw - 1 || y == ch - 1 || !voted[c - 1] || !voted[c + 1] ||
                                              !voted[c - static_cast<std::size_t>(cw)] || !voted[c + static_cast<std::size_t>(cw)];
-                        const bool weak_ground = edge_lr_base > 0 && cells.roof_points[k] == 0 && edge_lr_base >= cells.ground_points[k] * kLn3;
-                        if (outline && !weak_ground) peel.push_back(c);
+                        if (outline && !weak_ground(k)) peel.push_back(c);
                     }
                 if (peel.empty()) break;
                 for (const std::size_t c : peel) voted[c] = 0;

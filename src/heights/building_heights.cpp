@@ -30,15 +30,6 @@ void HeightOptions::validate() const {
     if (!(unit_m > 0.0) || !(z_unit_m > 0.0)) throw Error("units", "CRS units must be > 0 metres");
 }
 
-std::optional<double> percentile(std::vector<double>& v, double p) {
-    if (v.empty()) return std::nullopt;
-    std::sort(v.begin(), v.end());
-    const double pos = p / 100.0 * static_cast<double>(v.size() - 1);
-    const auto lo = static_cast<std::size_t>(std::floor(pos));
-    const std::size_t hi = std::min(lo + 1, v.size() - 1);
-    return v[lo] + (v[hi] - v[lo]) * (pos - static_cast<double>(lo));
-}
-
 namespace {
 
 // Points binned in a regular grid (CSR layout) for bounding-box queries.
@@ -176,43 +167,13 @@ GroundFit fit_ground(const std::vector<std::array<double, 3>>& q, double outlier
         m.rmse_m = n ? std::sqrt(s2 / double(n)) : 0.0;
         return m;
     };
-    if (q.size() < 6) return median_fit();
-    std::vector<uint8_t> use(q.size(), 1);
-    double a = 0, b = 0, c = med;
-    for (int iter = 0; iter < 4; ++iter) {
-        double n = 0, mx = 0, my = 0, mz = 0;
-        for (std::size_t i = 0; i < q.size(); ++i)
-            if (use[i]) n += 1, mx += q[i][0], my += q[i][1], mz += q[i][2];
-        if (n < 6) return median_fit();
-        mx /= n, my /= n, mz /= n;
-        double sxx = 0, sxy = 0, syy = 0, sxz = 0, syz = 0;
-        for (std::size_t i = 0; i < q.size(); ++i)
-            if (use[i]) {
-                const double dx = q[i][0] - mx, dy = q[i][1] - my, dz = q[i][2] - mz;
-                sxx += dx * dx, sxy += dx * dy, syy += dy * dy, sxz += dx * dz, syz += dy * dz;
-            }
-        // Spread across the narrowest direction: the smaller eigenvalue of the xy covariance.
-        const double tr = (sxx + syy) / n, det = (sxx * syy - sxy * sxy) / (n * n);
-        const double lmin = 0.5 * tr - std::sqrt(std::max(0.0, 0.25 * tr * tr - det));
-        if (!(lmin > 1.0)) return median_fit();  // std < 1 m across: the ring is a line
-        const double d = sxx * syy - sxy * sxy;
-        a = (sxz * syy - syz * sxy) / d, b = (syz * sxx - sxz * sxy) / d;
-        c = mz - a * mx - b * my;
-        std::vector<double> res;
-        for (std::size_t i = 0; i < q.size(); ++i) res.push_back(std::abs(q[i][2] - (a * q[i][0] + b * q[i][1] + c)));
-        std::vector<double> kept;
-        for (std::size_t i = 0; i < q.size(); ++i)
-            if (use[i]) kept.push_back(res[i]);
-        const double mad = *percentile(kept, 50.0);
-        const double lim = std::max(outlier_m, 3.0 * 1.4826 * mad);
-        bool changed = false;
-        for (std::size_t i = 0; i < q.size(); ++i) {
-            const uint8_t u = res[i] <= lim;
-            changed = changed || u != use[i];
-            use[i] = u;
-        }
-        if (!changed && iter > 0) break;
-    }
+    TrimmedPlaneOptions po;
+    po.min_trim = outlier_m, po.trim_sigmas = 3.0, po.min_points = 6;
+    po.min_spread_sq = 1.0;  // std < 1 m across: the ring is a line
+    const std::optional<TrimmedPlane> fit = fit_trimmed_plane(q, po);
+    if (!fit) return median_fit();
+    const double a = fit->a, b = fit->b, c = fit->c;
+    const std::vector<uint8_t>& use = fit->inlier;
     if (!(c >= zmin - 0.5 && c <= zmax + 0.5) || !std::isfinite(c)) return median_fit();
     g.plane = true;
     g.z = c;

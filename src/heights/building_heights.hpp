@@ -10,6 +10,7 @@
 #include <string>
 #include <vector>
 
+#include "core/statistics.hpp"  // percentile
 #include "cloud/point_cloud.hpp"
 #include "core/geometry.hpp"
 #include "core/progress.hpp"
@@ -78,10 +79,6 @@ struct BuildingHeight {
     std::string height_quality;
     std::vector<uint32_t> roof_points;  ///< indices of the roof points in the cloud (only with keep_roof_points)
 };
-
-/// Percentile (0..100) by linear interpolation between order statistics
-/// (NumPy's default); sorts `values`. Empty input -> nullopt.
-std::optional<double> percentile(std::vector<double>& values, double p);
 
 /// Heights of every footprint (a footprint may have several parts). Points
 /// with keep[i] == 0 are ignored; is_ground marks ground points. Cost grows

@@ -151,3 +151,23 @@ TEST_CASE("run refuses detection modes its inputs cannot serve", "[run][errors]"
     o.extraction.mode = DetectionMode::ortho_cloud;
     CHECK_THROWS_WITH(o.validate(), Catch::StartsWith("extraction.mode") && Catch::Contains("needs a cloud"));
 }
+
+TEST_CASE("run config: roof_seams and crown_plane_sigma_m are read, schema-valid and recorded - a negative sigma is refused", "[run][config]") {
+    ScratchDir dir("run_config_crowns");
+    const nlohmann::json j = nlohmann::json::parse(R"({"extraction": {"roof_seams": false, "crown_plane_sigma_m": 0.45}})");
+    {
+        std::ofstream f(dir / "c.json");
+        f << j.dump();
+    }
+    CHECK(test::validate_json(test::source_dir() + "/schemas/run_config.schema.json", dir / "c.json").exit_code == 0);
+    RunOptions base;
+    base.ortho = "o.tif", base.cloud = "c.las";
+    const RunOptions o = run_options_from_json(j, "c.json", base);
+    CHECK_FALSE(o.extraction.seams.enabled);
+    CHECK(o.extraction.segmentation.max_crown_plane_sigma_m == 0.45);
+    const nlohmann::json back = to_json(o);
+    CHECK(back["extraction"]["crown_plane_sigma_m"] == 0.45);
+    CHECK(back["extraction"]["roof_seams"] == false);
+    RunOptions bad = run_options_from_json(nlohmann::json::parse(R"({"extraction": {"crown_plane_sigma_m": -1}})"), "b.json", base);
+    CHECK_THROWS_WITH(bad.validate(), Catch::StartsWith("crown_plane_sigma_m"));
+}
