@@ -7,10 +7,7 @@
 #include <string>
 #include <sys/mman.h>
 #include <atomic>
-#include <exception>
-#include <tbb/global_control.h>
 #include <tbb/parallel_for.h>
-#include <thread>
 #include <unistd.h>
 
 #include "core/error.hpp"
@@ -228,136 +225,185 @@ LargeVector<uint16_t> smoothed_gradient_levels(const Image<float>& image, const 
     return level;
 }
 
-// Rows of the stripes the two flooding threads own alternately.
-constexpr int kStripeRows = 64;
-
-struct FloodInput {
-    int w, h;
-    uint32_t n_valid;
+// The flooding without dynamics (h = 0), in any order and on any number of
+// threads, with exactly the result of the sequential flooding in (level,
+// index) order. Without dynamics no basin is ever absorbed, so a pixel's
+// basin seed is decided when it is flooded and never changes, and it is a
+// function of its neighbours flooded before it alone: those that come first
+// in (level, index) order ("lower"; nodata never is). Up, left, right, down:
+// their seeds without repeats, each taken through the first neighbour that
+// has it; none: the pixel is a new seed; one: that seed; several: the one
+// whose neighbour is closest in colour (the first on ties). So seeds are
+// found by a depth-first walk down this order: a pixel waits on a stack
+// until its lower neighbours have their seeds. Row blocks are walked in
+// parallel, in raster order within a block (the walk goes on into other
+// blocks where it must); two threads that reach the same pixel write the
+// same seed, so the result does not depend on the thread count or timing.
+// The walk reads the image nearly in raster order instead of in level
+// order (every pixel a cache miss), and needs no sort of the pixels.
+struct DescentInput {
+    uint32_t w, h;
+    const uint8_t* valid;  // null = all valid
+    const uint8_t* mask;   // lower neighbours of each pixel (lower_neighbour_masks)
     int bands;
     const float* const* band;
-    const uint32_t* order;    // valid pixels by (level, index)
-    const uint32_t* level_end;  // level_end[l] = end of level l's run in order
-    const uint16_t* level;    // level of every pixel
-    const uint8_t* valid;     // null = all valid
-    uint32_t* parent;         // kNone = not flooded; else the pixel's basin seed
+    uint32_t* parent;      // kNone = no seed yet
 };
 
-// The flooding without dynamics (h = 0) on two threads, with exactly the
-// sequential result. Without dynamics no basin is ever absorbed, so a
-// flooded pixel's parent is its basin's seed from the moment it is written
-// and never changes. Row stripes of kStripeRows go alternately to the two
-// threads; each walks the whole level order and floods its own pixels in
-// that order, so a neighbour in its own stripes is flooded exactly when it
-// would be in the sequential run. A neighbour in the other thread's row
-// (above the stripe's first row or below its last) counts as flooded when it
-// comes first in the order (level, then index; nodata never does), and the
-// thread then waits until the other one has passed it, and reads its seed.
-// Each thread publishes how far it is in the order after every pixel, its
-// own or not, so neither waits for the other forever: the one further back
-// never waits.
-void flood_two_threads(const FloodInput& in, const Progress& progress) {
-    constexpr uint32_t kNone = 0xFFFFFFFFu;
-    struct alignas(64) Done {
-        std::atomic<uint64_t> key{0};  // order key (level << 32 | index) of the last element passed
-    };
-    Done done[2];
-    const uint32_t w = static_cast<uint32_t>(in.w);
-    const std::size_t n = std::size_t(w) * static_cast<std::size_t>(in.h);
-    auto owner = [](uint32_t y) { return (y / kStripeRows) & 1u; };
-    auto run = [&](uint32_t t) {
-        const Done& other = done[1 - t];
-        uint32_t lp = 0;
-        for (uint32_t k = 0; k < in.n_valid; ++k) {
-            if (t == 0 && (k & 0xFFFFF) == 0) progress(0.5 + 0.4 * k / in.n_valid, "flooding");
-            while (k >= in.level_end[lp]) ++lp;
-            if (k + 16 < in.n_valid) {
-                const uint32_t q = in.order[k + 16];
-                if (owner(q / w) == t) {
-                    __builtin_prefetch(in.parent + q, 1);
-                    if (q >= w) __builtin_prefetch(in.parent + q - w, 1);
-                    const bool below = q + w < n;
-                    if (below) __builtin_prefetch(in.parent + q + w, 1);
-                    for (int b = 0; b < in.bands; ++b) {
-                        __builtin_prefetch(in.band[b] + q);
-                        if (q >= w) __builtin_prefetch(in.band[b] + q - w);
-                        if (below) __builtin_prefetch(in.band[b] + q + w);
-                    }
+// Bit 0 up, 1 left, 2 right, 3 down: the valid neighbours of each pixel that
+// come before it in (level, index) order: up and left when their level is
+// not higher, right and down when it is lower.
+LargeVector<uint8_t> lower_neighbour_masks(uint32_t w, uint32_t h, const uint16_t* level, const uint8_t* valid) {
+    LargeVector<uint8_t> mask = small_page_vector<uint8_t>(std::size_t(w) * h);
+    mask.resize(std::size_t(w) * h);
+    tbb::parallel_for(tbb::blocked_range<uint32_t>(0, h, 16), [&](const tbb::blocked_range<uint32_t>& rows) {
+        for (uint32_t y = rows.begin(); y != rows.end(); ++y) {
+            const std::size_t row = std::size_t(y) * w;
+            const uint16_t* l = level + row;
+            const uint16_t* up = y > 0 ? l - w : l;        // the row itself: never lower
+            const uint16_t* down = y + 1 < h ? l + w : l;
+            const unsigned up_bit = y > 0 ? 1u : 0u, down_bit = y + 1 < h ? 8u : 0u;
+            uint8_t* m = mask.data() + row;
+            auto one = [&](uint32_t x) {
+                unsigned b = (up[x] <= l[x] ? up_bit : 0u) | (down[x] < l[x] ? down_bit : 0u);
+                if (x > 0 && l[x - 1] <= l[x]) b |= 2u;
+                if (x + 1 < w && l[x + 1] < l[x]) b |= 4u;
+                return static_cast<uint8_t>(b);
+            };
+            if (w < 3) {
+                for (uint32_t x = 0; x < w; ++x) m[x] = one(x);
+            } else {
+                m[0] = one(0);
+                for (uint32_t x = 1; x + 1 < w; ++x)
+                    m[x] = static_cast<uint8_t>((up[x] <= l[x] ? up_bit : 0u) | (l[x - 1] <= l[x] ? 2u : 0u) | (l[x + 1] < l[x] ? 4u : 0u) |
+                                                (down[x] < l[x] ? down_bit : 0u));
+                m[w - 1] = one(w - 1);
+            }
+            if (valid) {
+                const uint8_t* v = valid + row;
+                const uint8_t* vu = y > 0 ? v - w : v;
+                const uint8_t* vd = y + 1 < h ? v + w : v;
+                for (uint32_t x = 0; x < w; ++x) {
+                    unsigned keep = (vu[x] ? 1u : 0u) | (vd[x] ? 8u : 0u) | (x > 0 && v[x - 1] ? 2u : 0u) | (x + 1 < w && v[x + 1] ? 4u : 0u);
+                    m[x] = static_cast<uint8_t>(m[x] & keep);
                 }
             }
-            const uint32_t p = in.order[k];
-            const uint64_t key_p = uint64_t(lp) << 32 | p;
-            const uint32_t y = p / w, x = p - y * w;
-            if (owner(y) != t) {
-                done[t].key.store(key_p, std::memory_order_release);
-                continue;
-            }
-            uint32_t roots[4], via[4];
-            int nr = 0;
-            auto add = [&](uint32_t q, uint32_t r) {
-                for (int i = 0; i < nr; ++i)
-                    if (roots[i] == r) return;
-                via[nr] = q;
-                roots[nr++] = r;
-            };
-            auto visit = [&](uint32_t q) {
-                const uint32_t r = in.parent[q];
-                if (r != kNone) add(q, r);
-            };
-            auto visit_other = [&](uint32_t q) {  // q is in the other thread's row
-                if (in.valid && !in.valid[q]) return;
-                const uint64_t key_q = uint64_t(in.level[q]) << 32 | q;
-                if (key_q > key_p) return;  // flooded after p
-                for (int spins = 0; other.key.load(std::memory_order_acquire) < key_q; ++spins)
-                    if (spins > 64) std::this_thread::yield();
-                add(q, in.parent[q]);
-            };
-            if (y > 0) {
-                if (owner(y - 1) == t) visit(p - w);
-                else visit_other(p - w);
-            }
-            if (x > 0) visit(p - 1);
-            if (x < w - 1) visit(p + 1);
-            if (y + 1 < static_cast<uint32_t>(in.h)) {
-                if (owner(y + 1) == t) visit(p + w);
-                else visit_other(p + w);
-            }
-            uint32_t seed = p;
-            if (nr == 1) {
-                seed = roots[0];
-            } else if (nr > 1) {  // the flooded neighbour closest in colour, as in the sequential loop
-                float closest = INFINITY;
-                for (int i = 0; i < nr; ++i) {
-                    float d = 0.0f;
-                    for (int b = 0; b < in.bands; ++b) {
-                        const float diff = in.band[b][p] - in.band[b][via[i]];
-                        d += diff * diff;
-                    }
-                    if (d < closest) closest = d, seed = roots[i];
-                }
-            }
-            in.parent[p] = seed;
-            done[t].key.store(key_p, std::memory_order_release);
-        }
-        done[t].key.store(UINT64_MAX, std::memory_order_release);
-    };
-    std::exception_ptr error;
-    std::thread second([&] {
-        try {
-            run(1);
-        } catch (...) {
-            error = std::current_exception();
         }
     });
-    try {
-        run(0);  // the progress callback may throw (interrupted)
-    } catch (...) {
-        done[0].key.store(UINT64_MAX, std::memory_order_release);  // let the other thread finish, then rethrow
-        second.join();
-        throw;
+    return mask;
+}
+
+template <int kBands, bool kValid>  // kBands 0 = in.bands
+void descend_rows(const DescentInput& in, std::size_t first, std::size_t last, std::vector<uint32_t>& stack) {
+    constexpr uint32_t kNone = 0xFFFFFFFFu;
+    const uint32_t w = in.w;
+    const uint8_t* const mask = in.mask;
+    const uint8_t* const valid = in.valid;
+    uint32_t* const parent = in.parent;
+    const int bands = kBands ? kBands : in.bands;
+    const float* band[4] = {};
+    for (int b = 0; b < std::min(bands, 4); ++b) band[b] = in.band[b];
+    const float* const* bands_ptr = kBands ? band : in.band;
+    auto seed_of = [parent](uint32_t q) { return std::atomic_ref<uint32_t>(parent[q]).load(std::memory_order_relaxed); };
+    std::size_t top = 0;  // stack[0, top): pixels waiting on their lower neighbours
+    for (std::size_t i = first; i < last; ++i) {
+        if ((kValid && !valid[i]) || seed_of(static_cast<uint32_t>(i)) != kNone) continue;
+        uint32_t p = static_cast<uint32_t>(i);
+        for (;;) {
+            const unsigned lower = mask[p];  // lower neighbours: bit 0 up, 1 left, 2 right, 3 down
+            const uint32_t q[4] = {p - w, p - 1, p + 1, p + w};
+            uint32_t s[4] = {kNone, kNone, kNone, kNone};
+            unsigned wait = 0;
+            for (unsigned m = lower; m; m &= m - 1) {
+                const int j = __builtin_ctz(m);
+                s[j] = seed_of(q[j]);
+                wait |= unsigned(s[j] == kNone) << j;
+            }
+            if (wait) {  // p waits under its lower neighbours; walk on to the last of them
+                if (top + 5 > stack.size()) stack.resize(2 * stack.size() + 8);
+                stack[top++] = p;
+                for (unsigned m = wait; m; m &= m - 1) stack[top++] = q[__builtin_ctz(m)];
+                p = stack[--top];
+                continue;
+            }
+            uint32_t seed = p;
+            if (lower) {
+                // The first lower neighbour of each seed (up, left, right, down).
+                unsigned firsts = lower;
+                for (int j = 1; j < 4; ++j)
+                    for (int k = 0; k < j; ++k) firsts &= ~(unsigned((lower >> k) & (lower >> j) & 1u & (s[k] == s[j])) << j);
+                seed = s[__builtin_ctz(firsts)];
+                if (firsts & (firsts - 1)) {  // several seeds: the flooded neighbour closest in colour
+                    float closest = INFINITY;
+                    for (unsigned m = firsts; m; m &= m - 1) {
+                        const int j = __builtin_ctz(m);
+                        float d = 0.0f;
+                        for (int b = 0; b < bands; ++b) {
+                            const float diff = bands_ptr[b][p] - bands_ptr[b][q[j]];
+                            d += diff * diff;
+                        }
+                        if (d < closest) closest = d, seed = s[j];
+                    }
+                }
+            }
+            std::atomic_ref<uint32_t>(parent[p]).store(seed, std::memory_order_relaxed);
+            while (top > 0 && seed_of(stack[top - 1]) != kNone) --top;  // reached twice
+            if (top == 0) break;
+            p = stack[--top];
+        }
     }
-    second.join();
-    if (error) std::rethrow_exception(error);
+}
+
+void flood_descent(const DescentInput& in, const Progress& progress) {
+    constexpr uint32_t kBlockRows = 32;
+    const uint32_t blocks = (in.h + kBlockRows - 1) / kBlockRows;
+    const std::size_t n = std::size_t(in.w) * in.h;
+    auto walk = [&](std::size_t first, std::size_t last, std::vector<uint32_t>& stack) {
+        if (in.valid) {
+            if (in.bands == 3) descend_rows<3, true>(in, first, last, stack);
+            else descend_rows<0, true>(in, first, last, stack);
+        } else {
+            if (in.bands == 3) descend_rows<3, false>(in, first, last, stack);
+            else descend_rows<0, false>(in, first, last, stack);
+        }
+    };
+    // Stages of blocks, so that progress is reported from the calling thread.
+    const uint32_t per_stage = std::max<uint32_t>(8, (blocks + 7) / 8);
+    for (uint32_t stage = 0; stage < blocks; stage += per_stage) {
+        tbb::parallel_for(tbb::blocked_range<uint32_t>(stage, std::min(blocks, stage + per_stage), 1),
+                          [&](const tbb::blocked_range<uint32_t>& range) {
+                              std::vector<uint32_t> stack(1024);
+                              for (uint32_t blk = range.begin(); blk != range.end(); ++blk) {
+                                  const std::size_t first = std::size_t(blk) * kBlockRows * in.w;
+                                  walk(first, std::min(n, first + std::size_t(kBlockRows) * in.w), stack);
+                              }
+                          });
+        progress(0.5 + 0.4 * std::min(blocks, stage + per_stage) / blocks, "flooding");
+    }
+}
+
+// Labels of the basins: parent[i] (a basin's seed pixel, or kNone for
+// nodata) becomes the basin's label, numbered in raster order of first
+// appearance; root_label (n zeros) is the seed -> label table.
+Oversegmentation label_basins(LargeVector<uint32_t>&& parent, LargeVector<uint32_t>& root_label, int w, int h, const Progress& progress) {
+    constexpr uint32_t kNone = 0xFFFFFFFFu;
+    const std::size_t n = parent.size();
+    uint32_t next = 0;
+    for (std::size_t i = 0; i < n; ++i) {
+        const uint32_t r = parent[i];
+        if (r == kNone) {
+            parent[i] = 0;
+            continue;
+        }
+        if (!root_label[r]) root_label[r] = ++next;
+        parent[i] = root_label[r];
+    }
+    Oversegmentation out;
+    out.labels.width = w, out.labels.height = h, out.labels.bands = 1;
+    out.labels.data = std::move(parent);
+    out.region_count = next;
+    progress(1.0, "watershed");
+    return out;
 }
 
 }  // namespace
@@ -409,6 +455,24 @@ Oversegmentation watershed_oversegment(const Image<float>& image, const std::vec
     if (options.smoothing_sigma_px > 0.0) level = smoothed_gradient_levels(image, options);
     else level = unsmoothed_gradient_levels(image, options);
     progress(0.3, "gradient");
+    constexpr uint32_t kNone = 0xFFFFFFFFu;
+    const auto h_levels = static_cast<uint32_t>(std::lround(options.h_minima * kLevelsPerUnit));
+    // Band pointers in locals: stores to parent[] could otherwise alias the image's fields.
+    const int bands = image.bands;
+    std::vector<const float*> band_ptrs(bands);
+    for (int b = 0; b < bands; ++b) band_ptrs[b] = image.band_data(b);
+    const float* const* band = band_ptrs.data();
+    if (h_levels == 0) {  // without dynamics: no sort, a parallel walk (flood_descent) gives the same seeds
+        LargeVector<uint32_t> parent = small_page_vector<uint32_t>(n);
+        parent.resize(n, kNone);
+        const uint8_t* valid_ptr = valid.empty() ? nullptr : valid.data();
+        LargeVector<uint8_t> mask = lower_neighbour_masks(static_cast<uint32_t>(w), static_cast<uint32_t>(h), level.data(), valid_ptr);
+        LargeVector<uint16_t>().swap(level);
+        flood_descent(DescentInput{static_cast<uint32_t>(w), static_cast<uint32_t>(h), valid_ptr, mask.data(), bands, band, parent.data()}, progress);
+        LargeVector<uint32_t> root_label = small_page_vector<uint32_t>(n);
+        root_label.resize(n, 0);
+        return label_basins(std::move(parent), root_label, w, h, progress);
+    }
 
     // Counting sort of valid pixels by level; ties stay in raster order
     // (deterministic). Counted and scattered in parallel by row chunks:
@@ -462,23 +526,14 @@ Oversegmentation watershed_oversegment(const Image<float>& image, const std::vec
     for (std::size_t l = 0; l < n_levels; ++l) count[l] = count[l + 1];
     progress(0.5, "sorting");
 
-    // Union-find flooding. parent == kNone: not yet flooded. Each root keeps the
+    // Union-find flooding (h > 0). parent == kNone: not yet flooded. Each root keeps the
     // level of its basin's minimum; basins meeting at level L merge when the
     // shallower one's depth (L - its minimum) is below h.
-    constexpr uint32_t kNone = 0xFFFFFFFFu;
     LargeVector<uint32_t> parent = small_page_vector<uint32_t>(n);
     parent.resize(n, kNone);
-    const auto h_levels = static_cast<uint32_t>(std::lround(options.h_minima * kLevelsPerUnit));
     // The flooding reads levels from `count`; the level buffer holds the
-    // basins' minima instead (written when a basin starts, read only for
-    // roots). Without dynamics (h = 0) no basin is absorbed and they are not read.
-    // Without dynamics the flooding can run on two threads (see below); it
-    // then reads the levels of pixels next to the other thread's rows.
-    const bool two_threads = h_levels == 0 && h >= 4 * kStripeRows && n >= (std::size_t(1) << 18) &&
-                             tbb::global_control::active_value(tbb::global_control::max_allowed_parallelism) >= 2;
-    LargeVector<uint16_t> min_level;
-    if (h_levels > 0) min_level = std::move(level);
-    else if (!two_threads) LargeVector<uint16_t>().swap(level);
+    // basins' minima instead (written when a basin starts, read only for roots).
+    LargeVector<uint16_t> min_level = std::move(level);
     // absorbed[r] (one bit per pixel, small enough to stay in cache) is set
     // when root r is merged into another basin. A flooded pixel points at a
     // root that usually still is one: one bit test then replaces the load of
@@ -496,11 +551,6 @@ Oversegmentation watershed_oversegment(const Image<float>& image, const std::vec
         }
         return r;
     };
-    // Band pointers in locals: stores to parent[] could otherwise alias the image's fields.
-    const int bands = image.bands;
-    std::vector<const float*> band_ptrs(bands);
-    for (int b = 0; b < bands; ++b) band_ptrs[b] = image.band_data(b);
-    const float* const* band = band_ptrs.data();
     // count[l] is now the end of level l's run in `order` (the start of l + 1's).
     uint32_t lp = 0;
     // Pixels come in level order, scattered over the image: each one's
@@ -519,13 +569,7 @@ Oversegmentation watershed_oversegment(const Image<float>& image, const std::vec
             if (q + row < n) __builtin_prefetch(band[b] + q + row);
         }
     };
-    if (two_threads) {
-        flood_two_threads(FloodInput{w, h, n_valid, bands, band, order.data(), count.data(), level.data(),
-                                     valid.empty() ? nullptr : valid.data(), parent.data()},
-                          progress);
-        LargeVector<uint16_t>().swap(level);
-    }
-    for (uint32_t k = two_threads ? n_valid : 0; k < n_valid; ++k) {
+    for (uint32_t k = 0; k < n_valid; ++k) {
         if ((k & 0xFFFFF) == 0) progress(0.5 + 0.4 * k / n_valid, "flooding");
         while (k >= count[lp]) ++lp;  // the level of order[k], without reading level[]
         if (k + kAhead < n_valid) prefetch_pixel(order[k + kAhead]);
@@ -566,10 +610,6 @@ Oversegmentation watershed_oversegment(const Image<float>& image, const std::vec
             }
             if (d < closest) closest = d, closest_root = roots[i];
         }
-        if (h_levels == 0) {  // no basin is ever absorbed: p joins the closest one
-            parent[p] = closest_root;
-            continue;
-        }
         // Deepest basin first (lowest minimum, then lowest root index).
         auto deeper = [&](uint32_t a, uint32_t b) {
             return min_level[a] != min_level[b] ? min_level[a] < min_level[b] : a < b;
@@ -593,22 +633,7 @@ Oversegmentation watershed_oversegment(const Image<float>& image, const std::vec
         if (parent[i] != kNone) parent[i] = find(static_cast<uint32_t>(i));
     LargeVector<uint32_t>& root_label = order;
     root_label.assign(n, 0);
-    uint32_t next = 0;
-    for (std::size_t i = 0; i < n; ++i) {
-        const uint32_t r = parent[i];
-        if (r == kNone) {
-            parent[i] = 0;
-            continue;
-        }
-        if (!root_label[r]) root_label[r] = ++next;
-        parent[i] = root_label[r];
-    }
-    Oversegmentation out;
-    out.labels.width = w, out.labels.height = h, out.labels.bands = 1;
-    out.labels.data = std::move(parent);
-    out.region_count = next;
-    progress(1.0, "watershed");
-    return out;
+    return label_basins(std::move(parent), root_label, w, h, progress);
 }
 
 }  // namespace cityforge
