@@ -48,6 +48,11 @@ void add_train_command(CLI::App& parent, const GlobalFlags& g, CommandList& out)
                     "Candidate thresholds of the pair classifier grouping adjacent building segments into buildings (tried against the split "
                     "levels; the best pooled CV F1 is kept)")
         ->delimiter(',');
+    cmd->add_option("--neck-splits-m", o.neck_split_candidates_m,
+                    "Candidate neck splits, metres: touching buildings joined by a neck narrower than about twice this are cut apart "
+                    "(tried after the grouping; the best pooled CV F1 is kept; none = never)")
+        ->delimiter(',');
+    cmd->add_option("--neck-split-m", d.neck_split_m, "Neck split, metres, when there is no cross-validation (0 = off)")->capture_default_str();
     cmd->add_flag("--no-pair-classifier", s->no_pairs, "Buildings from the split levels only (no pair classifier is trained)");
     cmd->add_option("--split-level", d.object_split_level, "Object split level when there is no cross-validation")->capture_default_str();
     cmd->add_option("--threshold", d.threshold, "Probability threshold when there is no cross-validation")->capture_default_str();

@@ -52,6 +52,7 @@ void DetectorOptions::validate(int bands) const {
     if (pixel_object_threshold > 0.0 && !pixel.enabled) throw Error("pixel_object_threshold", "needs the pixel stage");
     if (!(min_hole_m2 >= 0.0)) throw Error("min_hole_m2", "must be >= 0");
     if (!(merge_threshold >= 0.0 && merge_threshold < 1.0)) throw Error("merge_threshold", "must be in [0, 1) (0 = off)");
+    if (!(neck_split_m >= 0.0 && neck_split_m <= 20.0)) throw Error("neck_split_m", "must be in [0, 20] metres (0 = off)");
 }
 
 void encode_linear_counts(Image<float>& image, int band) {
@@ -118,6 +119,7 @@ nlohmann::json to_json(const DetectorOptions& o) {
             {"min_hole_m2", o.min_hole_m2}};
     // Written only when on: models without the pair classifier keep their header bytes.
     if (o.merge_threshold > 0.0) j["merge_threshold"] = o.merge_threshold;
+    if (o.neck_split_m > 0.0) j["neck_split_m"] = o.neck_split_m;  // likewise
     return j;
 }
 
@@ -156,6 +158,7 @@ DetectorOptions detector_options_from_json(const nlohmann::json& j) {
     o.object_split_level = j.value("object_split_level", 0);
     o.pixel_object_threshold = j.value("pixel_object_threshold", 0.0);
     o.merge_threshold = j.value("merge_threshold", 0.0);
+    o.neck_split_m = j.value("neck_split_m", 0.0);
     o.threshold = j.at("threshold").get<double>();
     o.min_area_m2 = j.at("min_area_m2").get<double>();
     o.min_hole_m2 = j.at("min_hole_m2").get<double>();
@@ -315,6 +318,96 @@ std::vector<uint8_t> building_pixels(const SceneSegments& s, const std::vector<f
     return out;
 }
 
+std::vector<uint8_t> split_at_necks(const std::vector<uint8_t>& building, int w, int h, int radius_px, int min_core_px) {
+    const std::size_t n = std::size_t(w) * std::size_t(h);
+    if (building.size() != n) throw Error("split_at_necks", "internal: mask size");
+    if (radius_px <= 0 || n == 0) return building;
+    // Chessboard distance to the nearest non-building pixel (or the border), two passes.
+    const int big = w + h + 2;
+    std::vector<int> d(n);
+    for (int y = 0; y < h; ++y)
+        for (int x = 0; x < w; ++x) {
+            const std::size_t i = std::size_t(y) * w + x;
+            if (!building[i]) { d[i] = 0; continue; }
+            int v = big;
+            if (x == 0 || y == 0) v = 1;
+            else {
+                v = std::min(v, d[i - 1] + 1);
+                v = std::min(v, d[i - w] + 1);
+                v = std::min(v, d[i - w - 1] + 1);
+                if (x + 1 < w) v = std::min(v, d[i - w + 1] + 1);
+            }
+            d[i] = v;
+        }
+    for (int y = h - 1; y >= 0; --y)
+        for (int x = w - 1; x >= 0; --x) {
+            const std::size_t i = std::size_t(y) * w + x;
+            if (!d[i]) continue;
+            int v = d[i];
+            if (x + 1 == w || y + 1 == h) v = 1;
+            else {
+                v = std::min(v, d[i + 1] + 1);
+                v = std::min(v, d[i + w] + 1);
+                v = std::min(v, d[i + w + 1] + 1);
+                if (x > 0) v = std::min(v, d[i + w - 1] + 1);
+            }
+            d[i] = v;
+        }
+    // Cores: 4-connected components of the pixels deeper than the radius.
+    std::vector<uint32_t> inst(n, 0);
+    std::vector<std::size_t> queue;
+    std::vector<uint32_t> core_size{0};
+    uint32_t next = 0;
+    auto neighbours = [&](std::size_t i, auto&& visit) {
+        const int x = int(i % std::size_t(w)), y = int(i / std::size_t(w));
+        if (x > 0) visit(i - 1);
+        if (x + 1 < w) visit(i + 1);
+        if (y > 0) visit(i - w);
+        if (y + 1 < h) visit(i + w);
+    };
+    for (std::size_t s = 0; s < n; ++s) {
+        if (d[s] <= radius_px || inst[s]) continue;
+        ++next;
+        const std::size_t first = queue.size();
+        inst[s] = next, queue.push_back(s);
+        for (std::size_t q = first; q < queue.size(); ++q)
+            neighbours(queue[q], [&](std::size_t j) {
+                if (d[j] > radius_px && !inst[j]) inst[j] = next, queue.push_back(j);
+            });
+        core_size.push_back(uint32_t(queue.size() - first));
+    }
+    // Small cores are no building of their own.
+    std::vector<std::size_t> front;
+    for (const std::size_t i : queue) {
+        if (core_size[inst[i]] < uint32_t(std::max(1, min_core_px))) inst[i] = 0;
+        else front.push_back(i);
+    }
+    // Grow the cores back over the building pixels, breadth first.
+    for (std::size_t q = 0; q < front.size(); ++q) {
+        const std::size_t i = front[q];
+        neighbours(i, [&](std::size_t j) {
+            if (building[j] && !inst[j]) inst[j] = inst[i], front.push_back(j);
+        });
+    }
+    std::vector<uint8_t> out = building;
+    for (int y = 0; y < h; ++y)
+        for (int x = 0; x < w; ++x) {
+            const std::size_t i = std::size_t(y) * w + x;
+            const uint32_t a = inst[i];
+            if (!building[i] || !a) continue;
+            if ((x + 1 < w && building[i + 1] && inst[i + 1] && inst[i + 1] != a) || (y + 1 < h && building[i + w] && inst[i + w] && inst[i + w] != a))
+                out[i] = 0;
+        }
+    return out;
+}
+
+std::vector<uint8_t> split_at_necks(std::vector<uint8_t> building, int w, int h, const DetectorOptions& options, double gsd_m) {
+    if (!(options.neck_split_m > 0.0) || !(gsd_m > 0.0)) return building;
+    const int radius = std::max(1, static_cast<int>(std::lround(options.neck_split_m / gsd_m)));
+    const int min_core = std::max(1, static_cast<int>(std::lround(3.0 / (gsd_m * gsd_m))));
+    return split_at_necks(building, w, h, radius, min_core);
+}
+
 Detection detect_buildings(const DetectorModel& model, const Image<float>& normalised, const std::vector<uint8_t>& valid, double gsd_m,
                            int threads, const Progress& progress) {
     Detection d;
@@ -336,6 +429,7 @@ Detection detect_buildings(const DetectorModel& model, const Image<float>& norma
     }
     d.building = building_pixels(d.segments, d.probability, model.options.threshold, model.options.object_split_level,
                                  pixel ? &d.pixel_probability : nullptr, model.options.pixel_object_threshold, d.groups.empty() ? nullptr : &d.groups);
+    d.building = split_at_necks(std::move(d.building), d.segments.labels.width, d.segments.labels.height, model.options, gsd_m);
     progress(1.0, "classified");
     return d;
 }

@@ -47,6 +47,11 @@ struct DetectorOptions {
     /// are cut apart along a one-pixel line (replaces object_split_level);
     /// 0 = off (the training command picks it by cross-validation).
     double merge_threshold = 0.0;
+    /// > 0: touching buildings joined by a neck narrower than about twice
+    /// this (metres) are cut apart (split_at_necks: cores left by an erosion
+    /// of this radius, grown back over the building pixels); 0 = off (the
+    /// training command picks it by cross-validation).
+    double neck_split_m = 0.0;
     double min_area_m2 = 8.0;  ///< building components smaller than this are dropped
     double min_hole_m2 = 6.0;  ///< holes smaller than this are filled
     void validate(int bands) const;
@@ -108,6 +113,20 @@ std::vector<float> segment_probabilities(const DetectorModel& model, const Featu
 std::vector<uint8_t> building_pixels(const SceneSegments& segments, const std::vector<float>& probability, double threshold,
                                      int split_level = 0, const std::vector<float>* pixel_probability = nullptr, double pixel_threshold = 0.0,
                                      const std::vector<uint32_t>* groups = nullptr);
+
+/// Instance separation of a building mask (w x h, 1 = building): the cores
+/// left by an erosion of `radius_px` (chessboard distance to the nearest
+/// non-building pixel above it) of at least `min_core_px` pixels are grown
+/// back over the building pixels (breadth first, 4-neighbours, cores in
+/// raster order), and a building pixel whose right or lower neighbour was
+/// reached from another core leaves the mask: a one-pixel cut at each neck
+/// narrower than about 2 * radius_px + 1 between two cores. Pixels no core
+/// reaches (parts thinner than the erosion) stay as they are. radius_px <= 0
+/// returns the mask unchanged.
+std::vector<uint8_t> split_at_necks(const std::vector<uint8_t>& building, int w, int h, int radius_px, int min_core_px);
+/// split_at_necks with the model's DetectorOptions::neck_split_m on an image
+/// of `gsd_m` metres (cores of at least 3 m2); unchanged when it is 0.
+std::vector<uint8_t> split_at_necks(std::vector<uint8_t> building, int w, int h, const DetectorOptions& options, double gsd_m);
 
 /// The whole detection on one image: segmentation with the model's options,
 /// features, probabilities and building pixels. `normalised` = bands scaled

@@ -151,8 +151,11 @@ BuildingMask mask_from_probabilities(const detect::SceneSegments& segments, cons
     mo.gsd_m = gsd_m;
     mo.min_area_m2 = o.min_area_m2;
     mo.min_hole_m2 = o.min_hole_m2;
-    return label_buildings(detect::building_pixels(segments, probability, threshold, o.object_split_level, pixel_map, o.pixel_object_threshold, groups),
-                           segments.labels.width, segments.labels.height, mo);
+    const int w = segments.labels.width, h = segments.labels.height;
+    return label_buildings(detect::split_at_necks(detect::building_pixels(segments, probability, threshold, o.object_split_level, pixel_map,
+                                                                          o.pixel_object_threshold, groups),
+                                                  w, h, o, gsd_m),
+                           w, h, mo);
 }
 
 // Labelled data of one training image, in its pixel space.
@@ -313,6 +316,8 @@ void TrainOptions::validate() const {
         if (!(t > 0.0 && t < 1.0)) throw Error("--thresholds", "each threshold must be in (0, 1)");
     for (const double t : merge_thresholds)
         if (!(t > 0.0 && t < 1.0)) throw Error("--merge-thresholds", "each merge threshold must be in (0, 1)");
+    for (const double m : neck_split_candidates_m)
+        if (!(m > 0.0 && m <= 20.0)) throw Error("--neck-splits-m", "each neck split must be in (0, 20] metres");
 }
 
 void DetectionScores::add(const DetectionScores& o) { tp += o.tp, predicted += o.predicted, reference += o.reference; }
@@ -553,6 +558,20 @@ TrainReport run_train(const std::string& out_path, const TrainOptions& o, bool o
                     if (s.f1 > best_f1 + 1e-12) best_f1 = s.f1, chosen.threshold = t;
                 }
         }
+        // Then touching buildings cut apart at narrow necks (0 = off), and the threshold again.
+        for (const double nm : o.neck_split_candidates_m) {
+            detect::DetectorOptions cand = chosen;
+            cand.neck_split_m = nm;
+            const DetectionScores s = evaluate(cand, nullptr, nullptr);
+            if (s.f1 > best_f1 + 1e-12) best_f1 = s.f1, chosen.neck_split_m = nm;
+        }
+        if (chosen.neck_split_m > 0.0)
+            for (const double t : o.thresholds) {
+                detect::DetectorOptions cand = chosen;
+                cand.threshold = t;
+                const DetectionScores s = evaluate(cand, nullptr, nullptr);
+                if (s.f1 > best_f1 + 1e-12) best_f1 = s.f1, chosen.threshold = t;
+            }
         std::vector<DetectionScores> per_image;
         rep.pooled_objects = evaluate(chosen, &rep.folds, &per_image);
         for (FoldReport& f : rep.folds) {

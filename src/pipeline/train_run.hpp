@@ -79,6 +79,9 @@ struct TrainOptions {
     /// by the pair classifier, segment_merge.hpp), tried with every threshold
     /// against the split levels; empty = no pair classifier is trained.
     std::vector<double> merge_thresholds{0.5, 0.6, 0.7, 0.8, 0.9};
+    /// Candidate neck splits (DetectorOptions::neck_split_m, metres), tried
+    /// by the cross-validation after the grouping (empty = never split).
+    std::vector<double> neck_split_candidates_m{};
     void validate() const;
 };
 

@@ -236,6 +236,67 @@ TEST_CASE("Linear counts are brought to a display tone - the UInt16 Atlanta pan 
     CHECK(median < 100.0f);
 }
 
+TEST_CASE("Touching buildings joined by a narrow neck are cut apart, a wide join and a lone roof are kept", "[detect]") {
+    // Two 10 x 10 roofs (columns 2-11 and 15-24) joined by a neck 3 rows high
+    // and 3 columns long, rows 2-11; a third roof joined to the second along
+    // its full height (rows 14-23, no neck).
+    const int w = 30, h = 26;
+    std::vector<uint8_t> m(std::size_t(w) * h, 0);
+    auto fill = [&](int x0, int y0, int x1, int y1) {
+        for (int y = y0; y <= y1; ++y)
+            for (int x = x0; x <= x1; ++x) m[std::size_t(y) * w + x] = 1;
+    };
+    fill(2, 2, 11, 11), fill(15, 2, 24, 11), fill(12, 6, 14, 8), fill(15, 14, 24, 23), fill(15, 12, 24, 13);
+    auto components = [&](const std::vector<uint8_t>& b) {
+        std::vector<int> lab(b.size(), 0);
+        int n = 0;
+        for (std::size_t s = 0; s < b.size(); ++s) {
+            if (!b[s] || lab[s]) continue;
+            std::vector<std::size_t> q{s};
+            lab[s] = ++n;
+            for (std::size_t k = 0; k < q.size(); ++k) {
+                const std::size_t i = q[k];
+                const int x = int(i % w), y = int(i / w);
+                for (const auto& [dx, dy] : {std::pair{1, 0}, {-1, 0}, {0, 1}, {0, -1}}) {
+                    const int xx = x + dx, yy = y + dy;
+                    if (xx < 0 || yy < 0 || xx >= w || yy >= h) continue;
+                    const std::size_t j = std::size_t(yy) * w + xx;
+                    if (b[j] && !lab[j]) lab[j] = n, q.push_back(j);
+                }
+            }
+        }
+        return n;
+    };
+    REQUIRE(components(m) == 1);
+    CHECK(detect::split_at_necks(m, w, h, 0, 1) == m);
+    // Radius 2: the 3-pixel neck erodes away, the two upper roofs become two
+    // buildings; the lower roof, joined along 10 columns, stays with its neighbour.
+    const std::vector<uint8_t> cut = detect::split_at_necks(m, w, h, 2, 4);
+    CHECK(components(cut) == 2);
+    std::size_t lost = 0;
+    for (std::size_t i = 0; i < m.size(); ++i) {
+        CHECK(cut[i] <= m[i]);
+        lost += m[i] - cut[i];
+    }
+    CHECK(lost == 3);  // a one-pixel cut across the neck
+    // Radius 1 leaves the neck's middle row: one building.
+    CHECK(components(detect::split_at_necks(m, w, h, 1, 4)) == 1);
+    // A lone rectangle is never cut.
+    std::vector<uint8_t> one(std::size_t(w) * h, 0);
+    for (int y = 3; y < 20; ++y)
+        for (int x = 4; x < 25; ++x) one[std::size_t(y) * w + x] = 1;
+    CHECK(detect::split_at_necks(one, w, h, 3, 4) == one);
+    // Metres on the model's options: off by default, the header records it only when on.
+    detect::DetectorOptions o;
+    CHECK(detect::split_at_necks(m, w, h, o, 0.5) == m);
+    CHECK_FALSE(detect::to_json(o).contains("neck_split_m"));
+    o.neck_split_m = 1.0;
+    CHECK(detect::split_at_necks(m, w, h, o, 0.5) == cut);
+    CHECK(detect::detector_options_from_json(detect::to_json(o)).neck_split_m == 1.0);
+    o.neck_split_m = -1.0;
+    CHECK_THROWS_AS(o.validate(3), Error);
+}
+
 TEST_CASE("Cross-validated detection on the real UInt16 pan tile (SpaceNet 4 Atlanta west dev) holds its measured F1 (regression floor)", "[detect][real]") {
     // The shipped pan model's options, Atlanta alone (25 labels, houses under
     // leaf-off canopy with dark roofs among tree shadows; never the hold-out).
