@@ -32,6 +32,18 @@ constexpr double kLevelShare = 0.25;
 // Steepest roof facet, as its rise per unit run (tan 65 deg): steeper slopes
 // between slices are walls.
 constexpr double kSteepestRoof = 2.14;
+// A colour step where one side is the other times one factor below this in
+// every band (within kShadowRatioSpread) is a cast shadow's edge (in the
+// shade, direct sun is lost and every band dims alike; synthetic towns: 0.42).
+constexpr double kShadowRatio = 0.7;
+constexpr double kShadowRatioSpread = 0.1;
+// Where the roof also steps in height (see height_step), a colour step of
+// this share of min_colour_contrast is a seam.
+constexpr double kSteppedContrastShare = 0.5;
+// Colours are read this many cells inside a building's outline.
+constexpr int kInnerCells = 2;
+// and this many cells from the extremes of its width across a seam's axis.
+constexpr double kSideCells = 4.0;
 
 struct Slice {
     double count = 0;               // cells
@@ -57,8 +69,8 @@ struct CellOrigin {
 // Cells of one building (linear indices) split into pieces by seams across
 // `axis`; returns a piece index per cell (0 = no split).
 std::vector<int> seams_along(const std::vector<std::size_t>& cells, int w, CellOrigin origin, Axis axis, const Image<float>& colours,
-                             const std::vector<uint8_t>& valid, const Image<float>& ndsm, const std::vector<double>& pixel_sd, const RoofSeamOptions& o,
-                             int& cuts) {
+                             const std::vector<uint8_t>& valid, const std::vector<uint8_t>& inner, const Image<float>& ndsm,
+                             const std::vector<double>& pixel_sd, const RoofSeamOptions& o, int& cuts) {
     const int bands = colours.bands;
     std::vector<double> u(cells.size()), vv(cells.size());
     double umin = INFINITY, umax = -INFINITY, vmin = INFINITY, vmax = -INFINITY;
@@ -86,7 +98,11 @@ std::vector<int> seams_along(const std::vector<std::size_t>& cells, int w, CellO
         Slice& sl = s[static_cast<std::size_t>(b)];
         sl.count += 1;
         const std::size_t k = cells[i];
-        if (valid.empty() || valid[k]) {
+        // Colours from the same band across the width in every slice (a
+        // ragged outline would make slices sample a gable's two facets in
+        // changing proportions): cells inside the outline and this far from
+        // the building's sides.
+        if ((valid.empty() || valid[k]) && inner[k] && vv[i] >= vmin + kSideCells && vv[i] <= vmax - kSideCells) {
             sl.colour_count += 1;
             const int strip = std::clamp(static_cast<int>(3.0 * (vv[i] - vmin) / std::max(vmax - vmin, 1e-9)), 0, 2);
             sl.strip_count[strip] += 1;
@@ -301,6 +317,56 @@ std::vector<int> seams_along(const std::vector<std::size_t>& cells, int w, CellO
             return 0.0;
         return ridge.rise - std::abs(level.rise);
     };
+    // A cast shadow's edge: one side is the other darkened by one factor in
+    // every band, well below 1 (a neighbour's shadow across a low sun). Two
+    // houses' roofs differ by their own colours, not by one dimming.
+    auto cast_shadow = [&](const Win& L, const Win& R) {
+        double lo = INFINITY, hi = -INFINITY;
+        for (int c = 0; c < bands; ++c) {
+            const double a = L.mean[static_cast<std::size_t>(c)], b = R.mean[static_cast<std::size_t>(c)];
+            if (!(a > 0 && b > 0)) return false;
+            const double ratio = a / b;  // left over right, the same way in every band
+            lo = std::min(lo, ratio), hi = std::max(hi, ratio);
+        }
+        const bool dimmed = hi <= kShadowRatio || lo >= 1.0 / kShadowRatio;
+        return dimmed && (hi <= 1.0 ? hi - lo : 1.0 / lo - 1.0 / hi) <= kShadowRatioSpread;
+    };
+    // The roof steps in height at m between two level sides: windows a guard
+    // of two slices away (the cloud blurs the step), both level along the
+    // row and barely scattered, their lines apart by at least valley_depth_m
+    // (and kValleyToScatter times their scatter) at the seam, every third of
+    // the width stepping the same way by at least half of it.
+    auto height_step = [&](int m) {
+        const int a = m - W - 2, b = m + 3 + W;
+        const Win Lg = window(a, m - 2), Rg = window(m + 3, b);
+        if (!Lg.ok || !Rg.ok || std::isnan(Lg.slope) || std::isnan(Rg.slope)) return false;
+        if (std::max(std::abs(Lg.slope), std::abs(Rg.slope)) > min_slope) return false;
+        const double scatter = std::max(Lg.height_scatter, Rg.height_scatter);
+        const double dh = (Lg.intercept + Lg.slope * m) - (Rg.intercept + Rg.slope * m);
+        if (!(std::abs(dh) >= o.valley_depth_m && std::abs(dh) >= kValleyToScatter * scatter)) return false;
+        for (int t = 0; t < 3; ++t) {
+            double ls = 0, lc = 0, rs = 0, rc = 0;
+            for (int j = a; j < m - 2; ++j) ls += s[static_cast<std::size_t>(j)].strip_height[t], lc += s[static_cast<std::size_t>(j)].strip_height_count[t];
+            for (int j = m + 3; j < b; ++j) rs += s[static_cast<std::size_t>(j)].strip_height[t], rc += s[static_cast<std::size_t>(j)].strip_height_count[t];
+            if (lc < 1 || rc < 1 || !((ls / lc - rs / rc) * (dh > 0 ? 1 : -1) >= 0.5 * std::abs(dh))) return false;
+        }
+        return true;
+    };
+    // The slices' colour noise over the whole building (median of every
+    // window pair's): four slices a side estimate it poorly, and a window that
+    // happens to be quiet would make noise look like a step.
+    double typical_noise = 0.0;
+    {
+        std::vector<double> nz;
+        for (int m = min_len; m + min_len < nbins; ++m) {
+            const Win L = window(m - W, m), R = window(m + 1, m + 1 + W);
+            if (L.ok && R.ok) nz.push_back(std::sqrt(0.5 * (L.noise2 + R.noise2)));
+        }
+        if (!nz.empty()) {
+            std::nth_element(nz.begin(), nz.begin() + static_cast<std::ptrdiff_t>(nz.size() / 2), nz.end());
+            typical_noise = nz[nz.size() / 2];
+        }
+    }
     std::vector<Candidate> cand;
     for (int m = min_len; m + min_len < nbins; ++m) {
         // Seam slice m (mixed pixels) left out; windows on both sides.
@@ -326,7 +392,13 @@ std::vector<int> seams_along(const std::vector<std::size_t>& cells, int w, CellO
         } else if (turn > 0) {
             seam = true;  // a ridge along the row meets a roof with its ridge across
             strength = 1e6 + turn;
-        } else if (same_surface(L, R, m) && level_along_row(L, R, m)) {
+        } else if ((same_surface(L, R, m) && level_along_row(L, R, m)) || [&] {
+                       // The cloud's heights blur a step between two houses over a
+                       // slice or two, not always the one the colours step at: the
+                       // surface read off windows a guard of two slices away.
+                       const Win Lg = window(m - W - 2, m - 2), Rg = window(m + 3, m + 3 + W);
+                       return Lg.ok && Rg.ok && same_surface(Lg, Rg, m) && level_along_row(Lg, Rg, m);
+                   }()) {
             double d2 = 0;
             std::vector<double> step_vec(static_cast<std::size_t>(bands));
             for (int c = 0; c < bands; ++c) {
@@ -335,9 +407,14 @@ std::vector<int> seams_along(const std::vector<std::size_t>& cells, int w, CellO
                 d2 += d * d;
             }
             const double step = std::sqrt(d2 / double(std::max(1, bands)));
-            const double noise = std::sqrt(0.5 * (L.noise2 + R.noise2));
+            const double noise = std::max(std::sqrt(0.5 * (L.noise2 + R.noise2)), typical_noise);
             const double contrast = step / std::max(noise, 1e-6 * std::max(scale, 1e-6));
-            if (contrast >= o.min_colour_contrast && step >= o.min_colour_step_share * scale && straight(m, step_vec, step)) seam = true, strength = contrast;
+            // (d) a weaker colour step where the roof also steps in height
+            // between two level sides (houses of one eave on sloping ground).
+            const bool stepped = contrast >= kSteppedContrastShare * o.min_colour_contrast && contrast < o.min_colour_contrast && height_step(m);
+            if ((contrast >= o.min_colour_contrast || stepped) && step >= o.min_colour_step_share * scale && straight(m, step_vec, step) &&
+                !cast_shadow(L, R))
+                seam = true, strength = contrast;
         }
         if (seam) cand.push_back({m, strength});
     }
@@ -400,6 +477,21 @@ int split_at_roof_seams(BuildingMask& mask, const Image<float>& colours, const s
     std::vector<std::vector<std::size_t>> cells(mask.count + 1);
     for (std::size_t k = 0; k < n; ++k)
         if (mask.labels.data[k]) cells[mask.labels.data[k]].push_back(k);
+    // Colours are read inside each building, two cells from its outline: the
+    // outline's cells mix roof with wall, shadow and ground, and a slice
+    // holding one or two of them more than its neighbours would shift its
+    // mean by more than a step between two houses' roofs.
+    std::vector<uint8_t> inner(n, 0);
+    for (std::size_t k = 0; k < n; ++k) {
+        const uint32_t l = mask.labels.data[k];
+        if (!l) continue;
+        const int x = static_cast<int>(k % std::size_t(w)), y = static_cast<int>(k / std::size_t(w));
+        bool in = x >= kInnerCells && y >= kInnerCells && x + kInnerCells < w && y + kInnerCells < h;
+        for (int d = 1; d <= kInnerCells && in; ++d)
+            in = mask.labels.data[k - std::size_t(d)] == l && mask.labels.data[k + std::size_t(d)] == l &&
+                 mask.labels.data[k - std::size_t(d) * std::size_t(w)] == l && mask.labels.data[k + std::size_t(d) * std::size_t(w)] == l;
+        inner[k] = in;
+    }
     // part id per cell: (building, piece) numbered across the whole grid.
     std::vector<uint32_t> part(n, 0);
     uint32_t next_part = 0;
@@ -440,7 +532,7 @@ int split_at_roof_seams(BuildingMask& mask, const Image<float>& colours, const s
             sd[static_cast<std::size_t>(c)] = cnt > 1 ? std::sqrt(std::max(0.0, sum2 / cnt - (sum / cnt) * (sum / cnt))) : 0.0;
         }
         const Axis along{std::cos(a0), std::sin(a0)}, across{-std::sin(a0), std::cos(a0)};
-        const std::vector<int> p1 = seams_along(cl, w, origin, along, colours, valid, ndsm, sd, o, cuts);
+        const std::vector<int> p1 = seams_along(cl, w, origin, along, colours, valid, inner, ndsm, sd, o, cuts);
         const int n1 = p1.empty() ? 1 : *std::max_element(p1.begin(), p1.end()) + 1;
         uint32_t used = 0;
         for (int a = 0; a < n1; ++a) {
@@ -448,7 +540,7 @@ int split_at_roof_seams(BuildingMask& mask, const Image<float>& colours, const s
             for (std::size_t i = 0; i < cl.size(); ++i)
                 if (p1[i] == a) sub.push_back(cl[i]);
             if (sub.empty()) continue;
-            const std::vector<int> p2 = seams_along(sub, w, origin, across, colours, valid, ndsm, sd, o, cuts);
+            const std::vector<int> p2 = seams_along(sub, w, origin, across, colours, valid, inner, ndsm, sd, o, cuts);
             const int n2 = p2.empty() ? 1 : *std::max_element(p2.begin(), p2.end()) + 1;
             for (std::size_t i = 0; i < sub.size(); ++i) part[sub[i]] = base + used + static_cast<uint32_t>(p2[i]);
             used += static_cast<uint32_t>(n2);

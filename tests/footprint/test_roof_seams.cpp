@@ -172,3 +172,62 @@ TEST_CASE("No split of a hip roof's end, nor of a sparse, noisy roof at a dip of
         CHECK(m.count == 1);
     }
 }
+
+TEST_CASE("Terraces stepping down a slope split at a faint colour seam where the roof steps, blurred by the cloud", "[footprint][seams]") {
+    RoofSeamOptions o;
+    o.enabled = true;
+    // Two flat houses whose roofs differ by 3.5 grey levels (pixel noise +-6):
+    // too faint a colour step alone (below 5x the slices' noise) ...
+    const Image<float> c = colours({50}, {0.0f, 3.5f}, 6.0f);
+    SECTION("one level: no split") {
+        BuildingMask m = row_mask();
+        CHECK(split_at_roof_seams(m, c, {}, flat_heights(8.0f), o) == 0);
+        CHECK(m.count == 1);
+    }
+    SECTION("... but the roof steps 0.4 m there (houses of one eave on sloping ground), the step spread over two cells") {
+        BuildingMask m = row_mask();
+        Image<float> h = flat_heights(8.0f);
+        for (int y = kY0; y <= kY1; ++y)
+            for (int x = 49; x <= kX1; ++x) h.at(0, x, y) = x == 49 ? 8.13f : x == 50 ? 8.27f : 8.4f;
+        CHECK(split_at_roof_seams(m, c, {}, h, o) == 1);
+        REQUIRE(m.count == 2);
+        CHECK(m.labels.at(0, 20, 20) != m.labels.at(0, 70, 20));
+        CHECK(labels_in(m, kX0, kY0, 47, kY1).size() == 1);
+        CHECK(labels_in(m, 52, kY0, kX1, kY1).size() == 1);
+    }
+    SECTION("a step in height with no colour step is not a seam") {
+        BuildingMask m = row_mask();
+        Image<float> h = flat_heights(8.0f);
+        for (int y = kY0; y <= kY1; ++y)
+            for (int x = 50; x <= kX1; ++x) h.at(0, x, y) = 8.4f;
+        CHECK(split_at_roof_seams(m, colours({}, {0.0f}, 6.0f), {}, h, o) == 0);
+        CHECK(m.count == 1);
+    }
+}
+
+TEST_CASE("Roof colours read inside a ragged outline, and a cast shadow across the whole width is not a seam", "[footprint][seams]") {
+    RoofSeamOptions o;
+    o.enabled = true;
+    SECTION("every other column one cell wider, its extra cell dark (wall, shadow): the seam 6 grey levels deep still splits") {
+        BuildingMask m = row_mask();
+        Image<float> c = colours({50}, {0.0f, 6.0f}, 6.0f);
+        Image<float> h = flat_heights(8.0f);
+        for (int x = kX0; x <= kX1; x += 2) {
+            m.labels.at(0, x, kY1 + 1) = 1;
+            h.at(0, x, kY1 + 1) = 8.0f;
+            for (int b = 0; b < 3; ++b) c.at(b, x, kY1 + 1) = 60.0f;
+        }
+        CHECK(split_at_roof_seams(m, c, {}, h, o) == 1);
+        REQUIRE(m.count == 2);
+        CHECK(m.labels.at(0, 20, 20) != m.labels.at(0, 70, 20));
+    }
+    SECTION("a neighbour's shadow over the whole width: every band dimmed by one factor") {
+        BuildingMask m = row_mask();
+        Image<float> c = colours({}, {0.0f}, 5.0f);
+        for (int y = 0; y < kH; ++y)
+            for (int x = 50; x < kW; ++x)
+                for (int b = 0; b < 3; ++b) c.at(b, x, y) *= 0.45f;
+        CHECK(split_at_roof_seams(m, c, {}, flat_heights(8.0f), o) == 0);
+        CHECK(m.count == 1);
+    }
+}
