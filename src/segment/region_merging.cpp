@@ -556,17 +556,27 @@ public:
         return wc_ * hc + (1.0 - wc_) * (wcmp_ * h_cmpct + (1.0 - wcmp_) * h_smooth);
     }
 
-    // Nearest neighbour of r: lowest (cost, key).
-    // Also caches the cost on r's side of each edge.
-    void update_nn(uint32_t r) {
-        uint32_t best = 0, best_key = UINT32_MAX;
-        double best_cost = INFINITY;
-        NodeHead& R = head(r);
-        for (Neighbour* k = R.list; k != R.list + R.degree; ++k) {
-            const double c = k->cost = cost(r, k->id, k->shared);
-            if (c < best_cost || (c == best_cost && key_of(k->id) < best_key)) best = k->id, best_cost = c, best_key = key_of(k->id);
-        }
-        set_nn(r, best, best_cost);
+    // The cost of every edge, cached on both sides, and every region's
+    // nearest neighbour (lowest (cost, key)), in parallel. Each edge is
+    // scored once, by its lower node, which also writes the cost into the
+    // higher node's entry (every entry has one writer; cost() is symmetric
+    // bit for bit); then each nearest neighbour is found from the cached
+    // costs. The same result as scoring every edge from both sides, with
+    // half the cost evaluations (13 MP Autzen seeds: 0.19-0.21 -> 0.12-0.13 s CPU).
+    void initial_nearest_neighbours() {
+        tbb::parallel_for(tbb::blocked_range<uint32_t>(1, n_, 4096), [&](const tbb::blocked_range<uint32_t>& rr) {
+            for (uint32_t r = rr.begin(); r != rr.end(); ++r) {
+                NodeHead& R = head(r);
+                for (Neighbour* k = find(R, r); k != R.list + R.degree; ++k) {
+                    const double c = k->cost = cost(r, k->id, k->shared);
+                    find(head(k->id), r)->cost = c;
+                }
+            }
+        });
+        tbb::parallel_for(tbb::blocked_range<uint32_t>(1, n_, 4096), [&](const tbb::blocked_range<uint32_t>& rr) {
+            for (uint32_t r = rr.begin(); r != rr.end(); ++r)
+                if (alive(r)) rescan_nn(r);
+        });
     }
     // Nearest neighbour of r from the cached edge costs (exact: an edge's
     // cost changes only when one of its regions merges, and score_merged
@@ -873,12 +883,8 @@ RegionMergingResult merge_regions(const Image<float>& image, const Image<uint32_
         while (uf[x] != x) x = uf[x] = uf[uf[x]];
         return x;
     };
-    // Every strategy caches the edge costs (rag checks its entries against
-    // them); independent per region: in parallel, same result.
-    tbb::parallel_for(tbb::blocked_range<uint32_t>(1, n, 4096), [&](const tbb::blocked_range<uint32_t>& rr) {
-        for (uint32_t r = rr.begin(); r != rr.end(); ++r)
-            if (g.alive(r)) g.update_nn(r);
-    });
+    // Every strategy caches the edge costs (rag checks its entries against them).
+    g.initial_nearest_neighbours();
 
     result.graph_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t_graph).count();
     const std::vector<double> initial_totals = o.verify_invariants ? g.totals() : std::vector<double>{};
