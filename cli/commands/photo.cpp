@@ -50,7 +50,7 @@ void add_orient_options(CLI::App* cmd, OrientRunOptions& o) {
     cmd->add_option("--gps", o.gps, "GPS positions: 'exif' or a file of lines 'image lat lon height'")->capture_default_str();
     cmd->add_option("--crs", o.crs, "Output CRS (projected, metres); default: the UTM zone of the site");
     cmd->add_option("--max-image-px", o.max_image_px, "Downscale photos to this longest side")->capture_default_str();
-    cmd->add_option("--threads", o.threads, "COLMAP threads")->capture_default_str();
+    cmd->add_option("--threads", o.threads, "Threads of feature extraction and matching (results do not depend on it)")->capture_default_str();
     cmd->add_option("--colmap", o.colmap, "COLMAP executable")->capture_default_str();
     cmd->add_option("--max-features", o.max_features, "SIFT features per image")->capture_default_str();
     cmd->add_option("--matcher", o.matcher, "exhaustive (every pair) or sequential (file-name = flight order)")->capture_default_str();

@@ -19,6 +19,7 @@
 
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
+#include <tbb/task_arena.h>
 
 #include "cloud/las.hpp"
 #include "core/atomic_file.hpp"
@@ -26,6 +27,7 @@
 #include "crs/crs.hpp"
 #include "photo/camera.hpp"
 #include "photo/colmap_model.hpp"
+#include "photo/feature_matching.hpp"
 #include "raster/raster.hpp"
 
 namespace cityforge {
@@ -359,17 +361,37 @@ OrientRunResult run_orient(const OrientRunOptions& o, const Progress& progress) 
     }
     run_tool(fe, log, "feature extraction", progress.sub(0.1, 0.3));
     progress(0.3, "features");
-    std::vector<std::string> match{o.colmap, o.matcher + "_matcher", "--database_path", db.string(), "--SiftMatching.use_gpu", "0",
-                                   "--SiftMatching.num_threads", th};
-    if (o.matcher == "sequential")
-        match.insert(match.end(), {"--SequentialMatching.overlap", std::to_string(o.sequential_overlap),
-                                   "--SequentialMatching.quadratic_overlap", "0"});
-    run_tool(match, log, "matching", progress.sub(0.3, 0.5));
+    // Matching is ours (photo/feature_matching): COLMAP's CPU matcher builds
+    // FLANN's randomised kd-trees from the unseeded rand() and its matches
+    // differ by 1-2 per pair from run to run. Brute force on COLMAP's
+    // descriptors with its rules, pairs in file order, the same bytes for any
+    // thread count (keypoints at the image edge are left out: COLMAP leaves
+    // their descriptors uninitialised); COLMAP then verifies them
+    // geometrically in one thread (matches_importer: its RANSAC draws from a
+    // PRNG seeded with 0).
+    std::size_t match_count = 0, pair_count = 0;
+    {
+        photo::renumber_colmap_images(db.string());  // ids in name order, not in the order threads finished
+        const std::vector<photo::ImageFeatures> features = photo::read_colmap_features(db.string());
+        const int n = static_cast<int>(features.size());
+        const auto pairs = o.matcher == "sequential" ? photo::sequential_pairs(n, o.sequential_overlap) : photo::exhaustive_pairs(n);
+        std::vector<photo::PairMatches> matches;
+        tbb::task_arena arena(o.threads);
+        arena.execute([&] { matches = photo::match_image_pairs(features, pairs, {}, progress.sub(0.3, 0.45)); });
+        for (const auto& p : matches) match_count += p.matches.size(), pair_count += p.matches.empty() ? 0 : 1;
+        photo::write_colmap_match_list((colmap_dir / "matches.txt").string(), features, matches);
+    }
+    run_tool({o.colmap, "matches_importer", "--database_path", db.string(), "--match_list_path", (colmap_dir / "matches.txt").string(),
+              "--match_type", "raw", "--SiftMatching.use_gpu", "0", "--SiftMatching.num_threads", "1"},
+             log, "match verification", progress.sub(0.45, 0.5));
     progress(0.5, "matching");
     const fs::path sparse = colmap_dir / "sparse";
     ensure_directory(sparse);
+    // One mapper thread: with two, COLMAP's bundle adjustment and
+    // triangulation give a different model from run to run (measured); with
+    // one and the fixed seed the model is the same bytes.
     std::vector<std::string> mapper{o.colmap, "mapper", "--database_path", db.string(), "--image_path", img_dir.string(),
-                                    "--output_path", sparse.string(), "--Mapper.num_threads", th};
+                                    "--output_path", sparse.string(), "--Mapper.num_threads", "1", "--random_seed", "0"};
     // A calibrated camera stays fixed: nadir blocks over flat ground make the
     // focal length nearly unobservable in self-calibration.
     if (k) mapper.insert(mapper.end(), {"--Mapper.ba_refine_focal_length", "0", "--Mapper.ba_refine_extra_params", "0"});
@@ -492,8 +514,11 @@ OrientRunResult run_orient(const OrientRunOptions& o, const Progress& progress) 
     write_cloud_las((work / "sparse.las").string(), sparse_cloud, out_crs.wkt, "cityforge orient (COLMAP sparse)");
     nlohmann::json j;
     j["crs"] = r.crs;
-    j["engine"] = "COLMAP (feature_extractor, " + o.matcher + "_matcher, mapper, image_undistorter; CPU)";
+    j["engine"] = "COLMAP feature_extractor; cityforge brute-force SIFT matching (" + o.matcher +
+                  " pairs), COLMAP matches_importer (geometric verification), mapper (1 thread, seed 0), image_undistorter; CPU";
     j["max_features"] = o.max_features;
+    j["matched_pairs"] = pair_count;
+    j["matches"] = match_count;
     j["images"] = r.images;
     j["oriented"] = r.oriented;
     j["sparse_points"] = r.sparse_points;

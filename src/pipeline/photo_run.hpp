@@ -48,7 +48,7 @@ struct OrientRunOptions {
     std::string gps = "exif";        ///< "exif" or a file of lines "image lat_deg lon_deg height_m"
     std::string crs;                 ///< output CRS (projected, metres); empty = UTM zone of the site
     int max_image_px = 2000;         ///< photos are downscaled to this longest side before matching
-    int threads = 2;                 ///< COLMAP threads
+    int threads = 2;                 ///< threads of feature extraction and matching (the output does not depend on it)
     int max_features = 4096;         ///< SIFT features per image (COLMAP's SiftExtraction.max_num_features)
     /// "exhaustive" (every pair; best for small blocks) or "sequential" (each
     /// photo with the next `sequential_overlap` in file-name order = flight order).
@@ -76,9 +76,11 @@ struct OrientRunResult {
     std::string cameras_path, sparse_path, report_path, images_dir;
 };
 
-/// Orients the photos with COLMAP (SIFT on the CPU, exhaustive matching,
-/// incremental mapping with bundle adjustment, undistortion) and georeferences
-/// the model by a similarity to the GPS positions in the output CRS. Writes
+/// Orients the photos with COLMAP (SIFT on the CPU; our deterministic
+/// brute-force matching of its features, which COLMAP verifies; incremental
+/// mapping with bundle adjustment in one thread; undistortion) and
+/// georeferences the model by a similarity to the GPS positions in the output
+/// CRS. The same photos and options give the same bytes whatever `threads`. Writes
 /// OUT/images/ (undistorted, possibly downscaled), OUT/cameras.json,
 /// OUT/sparse.las, OUT/orient_report.json, OUT/colmap/ (work files and log).
 /// All or nothing: the folder appears only when every step succeeded.
