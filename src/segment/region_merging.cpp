@@ -336,23 +336,41 @@ public:
             };
             std::vector<int64_t> sum(bands_);
             std::vector<int128> sumsq(bands_);
-            for (int y = band_row(j); y < band_row(j + 1); ++y) {
+            // By blocks of kStripe x kStripe pixels, as the nodes are
+            // numbered (number_nodes): a block's nodes are reached in nearly
+            // ascending order, so their accumulators (cold: first read here)
+            // are loaded kAhead nodes ahead of use, and the few hundred
+            // records a block adds to stay in cache while its rows are read.
+            // 13 MP Autzen seeds, one core: 0.45-0.49 -> 0.37-0.38 s CPU.
+            constexpr uint32_t kAhead = 48;
+            const uint32_t owned_end = j + 1 < n_bands ? band_data[j + 1].owned_from : n_;
+            uint32_t prefetched = B.owned_from;
+            for (int ys = band_row(j); ys < band_row(j + 1); ys += kStripe)
+            for (int xs = 0; xs < w; xs += kStripe)
+            for (int y = ys; y < std::min(band_row(j + 1), ys + kStripe); ++y) {
                 const uint32_t* row = lab + std::size_t(y) * w;
                 const uint32_t* above = y > 0 ? row - w : nullptr;
                 const uint32_t* below = y < h - 1 ? row + w : nullptr;
                 uint64_t last_down = 0;  // runs of the same vertical neighbour pair collapse into one entry
-                int x = 0;
-                while (x < w) {
+                const int x_end = std::min(w, xs + kStripe);
+                int x = xs;
+                while (x < x_end) {
                     const uint32_t la = row[x];  // label; a = its node
                     if (!la) {
                         ++x;
                         continue;
                     }
                     const uint32_t a = node[la];
-                    // A run of pixels of region a: x .. end - 1.
+                    if (a >= prefetched && a < owned_end) {
+                        for (const uint32_t until = std::min(owned_end, a + kAhead); prefetched < until; ++prefetched) {
+                            __builtin_prefetch(acc(prefetched), 1);
+                            __builtin_prefetch(acc(prefetched) + 8, 1);
+                        }
+                    }
+                    // A run of pixels of region a within the block: x .. end - 1.
                     int end = x + 1;
-                    while (end < w && row[end] == la) ++end;
-                    int64_t perimeter = 2;  // its left and right ends
+                    while (end < x_end && row[end] == la) ++end;
+                    int64_t perimeter = (x == 0 || row[x - 1] != la) + (end == w || row[end] != la);  // the run's ends on the region's border
                     std::fill(sum.begin(), sum.end(), 0);
                     std::fill(sumsq.begin(), sumsq.end(), 0);
                     for (int px = x; px < end; ++px) {
@@ -374,7 +392,7 @@ public:
                             last_down = 0;
                         }
                     }
-                    if (end < w && row[end]) B.pairs.push_back({key(a, node[row[end]]), 1});
+                    if (end < w && row[end] && row[end] != la) B.pairs.push_back({key(a, node[row[end]]), 1});
                     int64_t* A = a >= B.owned_from ? acc(a) : foreign_acc(a);
                     A[0] += end - x, A[1] += perimeter;
                     A[2] = std::min<int64_t>(A[2], x), A[3] = std::min<int64_t>(A[3], y);
