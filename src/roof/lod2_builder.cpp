@@ -28,6 +28,14 @@ void Lod2Options::validate() const {
 
 namespace {
 
+constexpr double kPiLod2 = 3.14159265358979323846;
+// gable_ends_dip: a footprint at least this share of its box along the ridge is a rectangle ...
+constexpr double kRectangularShare = 0.9;
+// ... and the points at both ridge ends lie below the gable's planes by this share of its rise, on average.
+constexpr double kHipDipShare = 0.25;
+// Partition lines reach at least this many adjacency cells beyond their samples.
+constexpr double kLineExtensionCells = 3.0;
+
 using K = CGAL::Exact_predicates_exact_constructions_kernel;
 using Traits = CGAL::Arr_segment_traits_2<K>;
 using Dcel = CGAL::Arr_face_extended_dcel<Traits, int>;
@@ -134,6 +142,57 @@ std::string classify_roof(const std::vector<RoofPlane>& used, double eave_spread
     return "gable";
 }
 
+// A roof read as a gable whose ridge ends dip: on a hip roof with sparse
+// points (dark roofs, low densities) the small end facets often find no
+// plane of their own, and the two long facets cover the roof as a gable
+// would. Near each end of the ridge line (within half the half-width of the
+// footprint's end, and of the ridge across), a hip's points lie about half
+// the rise below the gable's two planes; a gable's lie on them. Only for one
+// near-rectangular footprint part (an L's ridge line runs on into the other
+// wing, whose facets dip the same way). `part` and `pts` in the local frame.
+bool gable_ends_dip(const std::vector<RoofPlane>& used, const Polygon& part, const std::vector<std::array<double, 3>>& pts, double flat_slope_deg) {
+    // The opposite pair with the most points.
+    const RoofPlane *p1 = nullptr, *p2 = nullptr;
+    std::size_t best = 0;
+    for (std::size_t i = 0; i < used.size(); ++i)
+        for (std::size_t j = i + 1; j < used.size(); ++j) {
+            const RoofPlane &a = used[i], &b = used[j];
+            if (a.slope_deg < flat_slope_deg || b.slope_deg < flat_slope_deg) continue;
+            double d = std::abs(a.azimuth_deg - b.azimuth_deg);
+            d = std::min(d, 360.0 - d);
+            if (std::abs(d - 180.0) >= 25.0 || std::abs(a.slope_deg - b.slope_deg) >= 12.0) continue;
+            if (a.points.size() + b.points.size() > best) best = a.points.size() + b.points.size(), p1 = &a, p2 = &b;
+        }
+    if (!p1 || !part.holes.empty() || part.outer.size() < 3) return false;
+    // Ridge line in plan: (a1 - a2) x + (b1 - b2) y + (c1 - c2) = 0.
+    const double gx = p1->a - p2->a, gy = p1->b - p2->b, gn = std::hypot(gx, gy);
+    if (!(gn > 1e-9)) return false;
+    const double nx = gx / gn, ny = gy / gn, dx = -ny, dy = nx;  // across, along
+    const double x0 = -(p1->c - p2->c) * gx / (gn * gn), y0 = -(p1->c - p2->c) * gy / (gn * gn);
+    double t0 = INFINITY, t1 = -INFINITY, s0 = INFINITY, s1 = -INFINITY;
+    for (const MapPoint& q : part.outer) {
+        const double t = (q.x - x0) * dx + (q.y - y0) * dy, sv = (q.x - x0) * nx + (q.y - y0) * ny;
+        t0 = std::min(t0, t), t1 = std::max(t1, t), s0 = std::min(s0, sv), s1 = std::max(s1, sv);
+    }
+    const double box = (t1 - t0) * (s1 - s0);
+    if (!(box > 0) || std::abs(signed_area(part.outer)) < kRectangularShare * box) return false;
+    // The ridge runs along the longer side, about midway across.
+    const double h = 0.5 * (s1 - s0);
+    if (t1 - t0 < 2 * h || std::abs(0.5 * (s0 + s1)) > 0.25 * h) return false;
+    const double rise = h * 0.5 * (std::tan(p1->slope_deg * kPiLod2 / 180.0) + std::tan(p2->slope_deg * kPiLod2 / 180.0));
+    double sum[2] = {0, 0}, n[2] = {0, 0};
+    for (const auto& q : pts) {
+        const double t = (q[0] - x0) * dx + (q[1] - y0) * dy, sv = (q[0] - x0) * nx + (q[1] - y0) * ny;
+        if (std::abs(sv) > 0.5 * h) continue;
+        const int end = t - t0 < 0.5 * h ? 0 : t1 - t < 0.5 * h ? 1 : -1;
+        if (end < 0) continue;
+        sum[end] += q[2] - std::min(p1->z(q[0], q[1]), p2->z(q[0], q[1])), n[end] += 1;
+    }
+    for (int e = 0; e < 2; ++e)
+        if (n[e] < 3 || sum[e] / n[e] > -kHipDipShare * rise) return false;
+    return true;
+}
+
 struct PartResult {
     Solid solid;
     std::vector<int> used_planes;
@@ -224,7 +283,10 @@ PartResult build_part(const Polygon& part, const std::vector<std::array<double, 
             const double t = (s.x - px) * dx + (s.y - py) * dy;
             t0 = std::min(t0, t), t1 = std::max(t1, t);
         }
-        t0 -= o.line_extension_m, t1 += o.line_extension_m;
+        // On a sparse roof the samples stop short of a line's ends by about
+        // a cell or two: the lines reach at least three cells further.
+        const double extension = std::max(o.line_extension_m, kLineExtensionCells * cell);
+        t0 -= extension, t1 += extension;
         // Round to a micrometre grid: keeps the exact arithmetic cheap.
         auto q = [](double v) { return std::round(v * 1e6) / 1e6; };
         const double ax = q(px + t0 * dx), ay = q(py + t0 * dy), bx = q(px + t1 * dx), by = q(py + t1 * dy);
@@ -692,6 +754,13 @@ Lod2Result reconstruct_once(const std::vector<Polygon>& footprint, const std::ve
     for (int k : used) used_planes.push_back(planes[k]);
     r.roof_planes = static_cast<int>(used_planes.size());
     r.roof_type = classify_roof(used_planes, eave_max - eave_min, sloped_outline_m > 0 ? rake_m / sloped_outline_m : 1.0, o.flat_slope_deg);
+    if (r.roof_type == "gable" && footprint.size() == 1) {
+        Polygon part = footprint[0];
+        for (MapPoint& q : part.outer) q = {(q.x - ox) * o.unit_m, (q.y - oy) * o.unit_m};
+        for (Ring& hr : part.holes)
+            for (MapPoint& q : hr) q = {(q.x - ox) * o.unit_m, (q.y - oy) * o.unit_m};
+        if (gable_ends_dip(used_planes, part, local, o.flat_slope_deg)) r.roof_type = "hip";
+    }
     const RoofPlane& main = planes[*used.begin()];  // planes are ordered by support: the lowest used index is the largest
     r.roof_slope_deg = main.slope_deg, r.roof_azimuth_deg = main.azimuth_deg;
     // Median residual: each point against the roof surface above it (the first roof face containing it in plan).
