@@ -2,7 +2,8 @@
 // the shipped RGB model) to a 4000 x 4000 px RGB tile (a synthetic town at
 // 0.5 m, 2000 m a side) and prints the time of each step: reading and
 // normalising, the pixel stage (models that have one), segmentation (watershed + merging at the model's scales),
-// features, classification and outlines (components).
+// features, classification and outlines (components, necks split when the
+// model has a neck split).
 //
 //   build/bin/bench_detect [model.cfdet] [size_px]
 #include <chrono>
@@ -75,7 +76,9 @@ int main(int argc, char** argv) try {
     std::printf(")\n  features              %7.2f s  (%zu per segment)\n", t_feat, f.cols);
     std::printf("  classification        %7.2f s\n", t_pred);
     if (model.options.merge_threshold > 0.0) std::printf("  pair classifier       %7.2f s  (%zu adjacent segment pairs)\n", t_pairs, n_pairs);
-    std::printf("  detect_building_mask  %7.2f s  (segmentation .. components; %u buildings)\n", t_all, mask.count);
+    std::printf("  detect_building_mask  %7.2f s  (segmentation .. components; %u buildings", t_all, mask.count);
+    if (model.options.neck_split_m > 0.0) std::printf("; necks split at %g m", model.options.neck_split_m);
+    std::printf(")\n");
     std::printf("  total incl. reading   %7.2f s   (target < 30 s on 2 cores)\n", t_read + t_all);
     (void)p;
     return 0;
