@@ -288,6 +288,11 @@ std::vector<PairMatches> match_image_pairs(const std::vector<ImageFeatures>& fea
 }
 
 void write_colmap_match_list(const std::string& path, const std::vector<ImageFeatures>& features, const std::vector<PairMatches>& matches) {
+    // The importer reads "name1 name2" with >>: a name with white space would
+    // be cut (and the pair skipped in silence).
+    for (const ImageFeatures& f : features)
+        if (f.name.find_first_of(" \t\r\n") != std::string::npos)
+            throw Error(f.name, "image name with white space: COLMAP's matches_importer cannot read it (rename the photo)");
     std::ofstream out(path, std::ios::binary);
     if (!out) throw Error(path, "cannot write the match list");
     for (const PairMatches& p : matches) {

@@ -86,7 +86,8 @@ std::vector<PairMatches> match_image_pairs(const std::vector<ImageFeatures>& fea
 
 /// Writes the matches in the match-list format of `colmap matches_importer`
 /// ("name1 name2" then one "idx1 idx2" line per match, a blank line between
-/// pairs). Pairs without matches are left out. Throws Error on a write error.
+/// pairs). Pairs without matches are left out. Throws Error on a write error
+/// or an image name with white space (the importer cannot read it).
 void write_colmap_match_list(const std::string& path, const std::vector<ImageFeatures>& features,
                              const std::vector<PairMatches>& matches);
 

@@ -12,6 +12,7 @@
 
 #include "audit/cloud_compare.hpp"
 #include "cloud/las.hpp"
+#include "core/error.hpp"
 #include "photo/camera.hpp"
 #include "photo/densify.hpp"
 #include "photo/feature_matching.hpp"
@@ -285,6 +286,18 @@ TEST_CASE("match_descriptors follows COLMAP's ratio, distance and cross-check ru
     const auto e = rows({{80, 81, 82, 83, 90, 91, 92, 93}});
     const auto f = rows({{80, 81, 82, 83, 84, 85, 86, 87}});
     CHECK(photo::match_descriptors(e.data(), 1, f.data(), 1, {}).empty());
+    // The match list of `colmap matches_importer`: pairs with matches only;
+    // a name with a space (the importer would cut it) is refused.
+    {
+        ScratchDir dir("photo_match_list");
+        std::vector<photo::ImageFeatures> images(3);
+        images[0].name = "a.png", images[1].name = "b.png", images[2].name = "c.png";
+        const std::vector<photo::PairMatches> pm{{0, 1, {{0, 1}, {2, 3}}}, {0, 2, {}}, {1, 2, {{4, 5}}}};
+        photo::write_colmap_match_list(dir / "m.txt", images, pm);
+        CHECK(test::slurp(dir / "m.txt") == "a.png b.png\n0 1\n2 3\n\nb.png c.png\n4 5\n\n");
+        images[1].name = "b 1.png";
+        CHECK_THROWS_AS(photo::write_colmap_match_list(dir / "m2.txt", images, pm), Error);
+    }
     // Pair lists.
     CHECK(photo::exhaustive_pairs(4).size() == 6);
     CHECK(photo::sequential_pairs(5, 2) == std::vector<std::pair<int, int>>{{0, 1}, {0, 2}, {1, 2}, {1, 3}, {2, 3}, {2, 4}, {3, 4}});
