@@ -4,11 +4,10 @@
 #include <cmath>
 #include <fstream>
 #include <memory>
+#if defined(__SSE2__)
+#include <emmintrin.h>
+#endif
 
-// GCC 12 warns about Eigen's matrix-vector fallback of the product (a loop it
-// believes may run 2^62 times: a false positive in Eigen 3.4's GEMV).
-#pragma GCC diagnostic ignored "-Waggressive-loop-optimizations"
-#include <Eigen/Core>
 #include <sqlite3.h>
 #include <tbb/parallel_for.h>
 
@@ -39,12 +38,72 @@ void prepare(const Database& d, const std::string& path, const char* sql, Statem
         throw Error(path, std::string("not a COLMAP database: ") + sqlite3_errmsg(d.db));
 }
 
-using FloatRows = Eigen::Matrix<float, Eigen::Dynamic, kDescriptorBytes, Eigen::RowMajor>;
+// Descriptors as int16 rows (count x 128) for the dot-product kernel.
+struct Rows {
+    std::size_t count = 0;
+    std::vector<int16_t> v;
+};
 
-FloatRows to_float(const uint8_t* d, std::size_t n) {
-    FloatRows m(static_cast<Eigen::Index>(n), kDescriptorBytes);
-    for (std::size_t i = 0; i < n * kDescriptorBytes; ++i) m.data()[i] = static_cast<float>(d[i]);
+Rows to_rows(const uint8_t* d, std::size_t n) {
+    Rows m;
+    m.count = n;
+    m.v.assign(d, d + n * kDescriptorBytes);
     return m;
+}
+
+#if defined(__SSE2__)
+inline int32_t horizontal_sum(__m128i v) {
+    v = _mm_add_epi32(v, _mm_shuffle_epi32(v, 0x4E));
+    v = _mm_add_epi32(v, _mm_shuffle_epi32(v, 0xB1));
+    return _mm_cvtsi128_si32(v);
+}
+#endif
+
+inline int32_t dot_scalar(const int16_t* a, const int16_t* b) {
+    int32_t s = 0;
+    for (int k = 0; k < kDescriptorBytes; ++k) s += int32_t(a[k]) * int32_t(b[k]);
+    return s;
+}
+
+// out[r * n2 + c] = a_r . b_c for rows [0, nr) of `a` and every row of `b`:
+// exact integer dot products (pmaddwd: int16 products summed in int32, far
+// from overflow at 128 * 255^2), so any order of summation gives the same
+// numbers. 4 x 2 blocks of descriptors share their loads.
+void dot_block(const int16_t* a, std::size_t nr, const int16_t* b, std::size_t n2, int32_t* out) {
+    std::size_t r = 0;
+#if defined(__SSE2__)
+    for (; r + 4 <= nr; r += 4) {
+        const int16_t* a0 = a + r * kDescriptorBytes;
+        const int16_t *a1 = a0 + kDescriptorBytes, *a2 = a1 + kDescriptorBytes, *a3 = a2 + kDescriptorBytes;
+        std::size_t c = 0;
+        for (; c + 2 <= n2; c += 2) {
+            const int16_t* b0 = b + c * kDescriptorBytes;
+            const int16_t* b1 = b0 + kDescriptorBytes;
+            __m128i s00 = _mm_setzero_si128(), s01 = s00, s10 = s00, s11 = s00, s20 = s00, s21 = s00, s30 = s00, s31 = s00;
+            for (int k = 0; k < kDescriptorBytes; k += 8) {
+                const __m128i v0 = _mm_loadu_si128(reinterpret_cast<const __m128i*>(b0 + k));
+                const __m128i v1 = _mm_loadu_si128(reinterpret_cast<const __m128i*>(b1 + k));
+                __m128i u = _mm_loadu_si128(reinterpret_cast<const __m128i*>(a0 + k));
+                s00 = _mm_add_epi32(s00, _mm_madd_epi16(u, v0)), s01 = _mm_add_epi32(s01, _mm_madd_epi16(u, v1));
+                u = _mm_loadu_si128(reinterpret_cast<const __m128i*>(a1 + k));
+                s10 = _mm_add_epi32(s10, _mm_madd_epi16(u, v0)), s11 = _mm_add_epi32(s11, _mm_madd_epi16(u, v1));
+                u = _mm_loadu_si128(reinterpret_cast<const __m128i*>(a2 + k));
+                s20 = _mm_add_epi32(s20, _mm_madd_epi16(u, v0)), s21 = _mm_add_epi32(s21, _mm_madd_epi16(u, v1));
+                u = _mm_loadu_si128(reinterpret_cast<const __m128i*>(a3 + k));
+                s30 = _mm_add_epi32(s30, _mm_madd_epi16(u, v0)), s31 = _mm_add_epi32(s31, _mm_madd_epi16(u, v1));
+            }
+            int32_t* o = out + r * n2 + c;
+            o[0] = horizontal_sum(s00), o[1] = horizontal_sum(s01);
+            o[n2] = horizontal_sum(s10), o[n2 + 1] = horizontal_sum(s11);
+            o[2 * n2] = horizontal_sum(s20), o[2 * n2 + 1] = horizontal_sum(s21);
+            o[3 * n2] = horizontal_sum(s30), o[3 * n2 + 1] = horizontal_sum(s31);
+        }
+        for (; c < n2; ++c)
+            for (std::size_t i = 0; i < 4; ++i) out[(r + i) * n2 + c] = dot_scalar(a + (r + i) * kDescriptorBytes, b + c * kDescriptorBytes);
+    }
+#endif
+    for (; r < nr; ++r)
+        for (std::size_t c = 0; c < n2; ++c) out[r * n2 + c] = dot_scalar(a + r * kDescriptorBytes, b + c * kDescriptorBytes);
 }
 
 // Best and second-best similarity (dot product) seen so far for one
@@ -73,36 +132,34 @@ struct Best {
     }
 };
 
-std::vector<std::pair<uint32_t, uint32_t>> match_float(const FloatRows& a, const FloatRows& b, const FeatureMatchOptions& o) {
-    const Eigen::Index n1 = a.rows(), n2 = b.rows();
+std::vector<std::pair<uint32_t, uint32_t>> match_rows(const Rows& a, const Rows& b, const FeatureMatchOptions& o) {
+    const std::size_t n1 = a.count, n2 = b.count;
     std::vector<std::pair<uint32_t, uint32_t>> out;
     if (n1 == 0 || n2 == 0) return out;
-    std::vector<Best> rows(static_cast<std::size_t>(n1)), cols(static_cast<std::size_t>(n2));
-    // Dot products of uint8 descriptors are integers below 128 * 255^2 < 2^24,
-    // and so is every partial sum: single precision is exact in any order of
-    // summation, so the GEMM's blocking and vector width change nothing.
-    constexpr Eigen::Index kBlock = 256;
-    Eigen::Matrix<float, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor> dots;
-    for (Eigen::Index r0 = 0; r0 < n1; r0 += kBlock) {
-        const Eigen::Index nr = std::min(kBlock, n1 - r0);
-        dots.noalias() = a.middleRows(r0, nr) * b.transpose();
-        for (Eigen::Index r = 0; r < nr; ++r) {
-            const float* row = dots.data() + r * n2;
-            Best& br = rows[static_cast<std::size_t>(r0 + r)];
-            for (Eigen::Index c = 0; c < n2; ++c) {
-                const int d = static_cast<int>(row[c]);
-                br.add(d, static_cast<int>(c));
-                cols[static_cast<std::size_t>(c)].add(d, static_cast<int>(r0 + r));
+    std::vector<Best> rows(n1), cols(n2);
+    // Blocks of rows of `a` against all of `b`, rows in ascending order: each
+    // descriptor's candidates are seen in ascending index, as COLMAP scans them.
+    constexpr std::size_t kBlock = 64;
+    std::vector<int32_t> dots(kBlock * n2);
+    for (std::size_t r0 = 0; r0 < n1; r0 += kBlock) {
+        const std::size_t nr = std::min(kBlock, n1 - r0);
+        dot_block(a.v.data() + r0 * kDescriptorBytes, nr, b.v.data(), n2, dots.data());
+        for (std::size_t r = 0; r < nr; ++r) {
+            const int32_t* row = dots.data() + r * n2;
+            Best& br = rows[r0 + r];
+            for (std::size_t c = 0; c < n2; ++c) {
+                br.add(row[c], static_cast<int>(c));
+                cols[c].add(row[c], static_cast<int>(r0 + r));
             }
         }
     }
     const float ratio = static_cast<float>(o.max_ratio), distance = static_cast<float>(o.max_distance);
-    std::vector<int> back(static_cast<std::size_t>(n2), -1);
+    std::vector<int> back(n2, -1);
     if (o.cross_check)
-        for (Eigen::Index c = 0; c < n2; ++c)
-            if (cols[static_cast<std::size_t>(c)].accepted(ratio, distance)) back[static_cast<std::size_t>(c)] = cols[static_cast<std::size_t>(c)].index;
-    for (Eigen::Index r = 0; r < n1; ++r) {
-        const Best& br = rows[static_cast<std::size_t>(r)];
+        for (std::size_t c = 0; c < n2; ++c)
+            if (cols[c].accepted(ratio, distance)) back[c] = cols[c].index;
+    for (std::size_t r = 0; r < n1; ++r) {
+        const Best& br = rows[r];
         if (!br.accepted(ratio, distance)) continue;
         if (o.cross_check && back[static_cast<std::size_t>(br.index)] != static_cast<int>(r)) continue;
         out.emplace_back(static_cast<uint32_t>(r), static_cast<uint32_t>(br.index));
@@ -247,7 +304,7 @@ std::vector<std::pair<int, int>> sequential_pairs(int n, int overlap) {
 std::vector<std::pair<uint32_t, uint32_t>> match_descriptors(const uint8_t* first, std::size_t first_count, const uint8_t* second,
                                                              std::size_t second_count, const FeatureMatchOptions& options) {
     options.validate();
-    return match_float(to_float(first, first_count), to_float(second, second_count), options);
+    return match_rows(to_rows(first, first_count), to_rows(second, second_count), options);
 }
 
 std::vector<PairMatches> match_image_pairs(const std::vector<ImageFeatures>& features, const std::vector<std::pair<int, int>>& pairs,
@@ -256,18 +313,18 @@ std::vector<PairMatches> match_image_pairs(const std::vector<ImageFeatures>& fea
     const int n = static_cast<int>(features.size());
     for (const auto& [i, j] : pairs)
         if (i < 0 || j < 0 || i >= n || j >= n || i == j) throw Error("feature matching", "pair index out of range");
-    // Matchable descriptors as floats once per image (shared read-only by
-    // the pairs), with their indices among the image's features.
-    std::vector<FloatRows> f(features.size());
+    // Matchable descriptors once per image (shared read-only by the pairs),
+    // with their indices among the image's features.
+    std::vector<Rows> f(features.size());
     std::vector<std::vector<uint32_t>> index(features.size());
     tbb::parallel_for(std::size_t(0), features.size(), [&](std::size_t i) {
         const ImageFeatures& im = features[i];
         for (std::size_t k = 0; k < im.count; ++k)
             if (matchable_feature(im, k, options)) index[i].push_back(static_cast<uint32_t>(k));
-        f[i].resize(static_cast<Eigen::Index>(index[i].size()), kDescriptorBytes);
+        f[i].count = index[i].size();
+        f[i].v.resize(f[i].count * kDescriptorBytes);
         for (std::size_t r = 0; r < index[i].size(); ++r)
-            for (int c = 0; c < kDescriptorBytes; ++c)
-                f[i](static_cast<Eigen::Index>(r), c) = static_cast<float>(im.descriptors[index[i][r] * kDescriptorBytes + static_cast<std::size_t>(c)]);
+            std::copy_n(im.descriptors.data() + index[i][r] * kDescriptorBytes, kDescriptorBytes, f[i].v.data() + r * kDescriptorBytes);
     });
     std::vector<PairMatches> out(pairs.size());
     // Chunks of pairs so that progress is reported from this thread only.
@@ -279,7 +336,7 @@ std::vector<PairMatches> match_image_pairs(const std::vector<ImageFeatures>& fea
             out[k].first = i, out[k].second = j;
             const auto& ii = index[static_cast<std::size_t>(i)];
             const auto& jj = index[static_cast<std::size_t>(j)];
-            out[k].matches = match_float(f[static_cast<std::size_t>(i)], f[static_cast<std::size_t>(j)], options);
+            out[k].matches = match_rows(f[static_cast<std::size_t>(i)], f[static_cast<std::size_t>(j)], options);
             for (auto& [a, b] : out[k].matches) a = ii[a], b = jj[b];
         });
         progress(double(k1) / double(pairs.size()), "matching " + std::to_string(k1) + "/" + std::to_string(pairs.size()) + " pairs");
