@@ -305,41 +305,49 @@ void descend_rows(const DescentInput& in, std::size_t first, std::size_t last, s
     for (int b = 0; b < std::min(bands, 4); ++b) band[b] = in.band[b];
     const float* const* bands_ptr = kBands ? band : in.band;
     auto seed_of = [parent](uint32_t q) { return std::atomic_ref<uint32_t>(parent[q]).load(std::memory_order_relaxed); };
+    const uint32_t offset[4] = {0u - w, 0u - 1u, 1u, w};  // up, left, right, down (modulo 2^32)
     std::size_t top = 0;  // stack[0, top): pixels waiting on their lower neighbours
     for (std::size_t i = first; i < last; ++i) {
         if ((kValid && !valid[i]) || seed_of(static_cast<uint32_t>(i)) != kNone) continue;
         uint32_t p = static_cast<uint32_t>(i);
         for (;;) {
             const unsigned lower = mask[p];  // lower neighbours: bit 0 up, 1 left, 2 right, 3 down
-            const uint32_t q[4] = {p - w, p - 1, p + 1, p + w};
-            uint32_t s[4] = {kNone, kNone, kNone, kNone};
+            uint32_t s[4];
             unsigned wait = 0;
             for (unsigned m = lower; m; m &= m - 1) {
                 const int j = __builtin_ctz(m);
-                s[j] = seed_of(q[j]);
+                s[j] = seed_of(p + offset[j]);
                 wait |= unsigned(s[j] == kNone) << j;
             }
             if (wait) {  // p waits under its lower neighbours; walk on to the last of them
                 if (top + 5 > stack.size()) stack.resize(2 * stack.size() + 8);
                 stack[top++] = p;
-                for (unsigned m = wait; m; m &= m - 1) stack[top++] = q[__builtin_ctz(m)];
+                for (unsigned m = wait; m; m &= m - 1) stack[top++] = p + offset[__builtin_ctz(m)];
                 p = stack[--top];
                 continue;
             }
             uint32_t seed = p;
             if (lower) {
-                // The first lower neighbour of each seed (up, left, right, down).
-                unsigned firsts = lower;
-                for (int j = 1; j < 4; ++j)
-                    for (int k = 0; k < j; ++k) firsts &= ~(unsigned((lower >> k) & (lower >> j) & 1u & (s[k] == s[j])) << j);
-                seed = s[__builtin_ctz(firsts)];
-                if (firsts & (firsts - 1)) {  // several seeds: the flooded neighbour closest in colour
+                seed = s[__builtin_ctz(lower)];
+                unsigned other = 0;  // lower neighbours of another seed than the first one's
+                for (unsigned m = lower & (lower - 1); m; m &= m - 1) {
+                    const int j = __builtin_ctz(m);
+                    other |= unsigned(s[j] != seed) << j;
+                }
+                if (other) {  // several seeds: the first neighbour of each, the closest in colour wins
+                    unsigned firsts = lower;
+                    for (unsigned m = lower & (lower - 1); m; m &= m - 1) {
+                        const int j = __builtin_ctz(m);
+                        for (unsigned e = lower & ((1u << j) - 1); e; e &= e - 1)
+                            if (s[__builtin_ctz(e)] == s[j]) firsts &= ~(1u << j);
+                    }
                     float closest = INFINITY;
                     for (unsigned m = firsts; m; m &= m - 1) {
                         const int j = __builtin_ctz(m);
+                        const uint32_t q = p + offset[j];
                         float d = 0.0f;
                         for (int b = 0; b < bands; ++b) {
-                            const float diff = bands_ptr[b][p] - bands_ptr[b][q[j]];
+                            const float diff = bands_ptr[b][p] - bands_ptr[b][q];
                             d += diff * diff;
                         }
                         if (d < closest) closest = d, seed = s[j];
@@ -380,6 +388,35 @@ void flood_descent(const DescentInput& in, const Progress& progress) {
                           });
         progress(0.5 + 0.4 * std::min(blocks, stage + per_stage) / blocks, "flooding");
     }
+}
+
+// label_basins without the seed -> label table (4 bytes a pixel, fresh
+// memory), for fewer than 2^31 - 1 pixels whose basin seeds are pixels of
+// their basins: a seed's label is kept in its own entry, tagged by the top
+// bit, from the first pixel of its basin in raster order; the tags are
+// cleared at the end. The same labels as label_basins.
+Oversegmentation label_seeds_in_place(LargeVector<uint32_t>&& parent, int w, int h, const Progress& progress) {
+    constexpr uint32_t kNone = 0xFFFFFFFFu, kTag = 0x80000000u;
+    const std::size_t n = parent.size();
+    uint32_t* label = parent.data();
+    uint32_t next = 0;
+    for (std::size_t i = 0; i < n; ++i) {
+        const uint32_t r = label[i];
+        if (r == kNone) {
+            label[i] = 0;
+        } else if (!(r & kTag)) {  // else: a seed labelled before its own turn
+            // r's entry is tagged once r is passed or labelled ahead of it.
+            if (!(label[r] & kTag)) label[r] = kTag | ++next;
+            label[i] = label[r];
+        }
+    }
+    parallel_for_each_index(n, [&](std::size_t i) { label[i] &= ~kTag; });
+    Oversegmentation out;
+    out.labels.width = w, out.labels.height = h, out.labels.bands = 1;
+    out.labels.data = std::move(parent);
+    out.region_count = next;
+    progress(1.0, "watershed");
+    return out;
 }
 
 // Labels of the basins: parent[i] (a basin's seed pixel, or kNone for
@@ -469,6 +506,7 @@ Oversegmentation watershed_oversegment(const Image<float>& image, const std::vec
         LargeVector<uint8_t> mask = lower_neighbour_masks(static_cast<uint32_t>(w), static_cast<uint32_t>(h), level.data(), valid_ptr);
         LargeVector<uint16_t>().swap(level);
         flood_descent(DescentInput{static_cast<uint32_t>(w), static_cast<uint32_t>(h), valid_ptr, mask.data(), bands, band, parent.data()}, progress);
+        if (n < 0x7FFFFFFFu) return label_seeds_in_place(std::move(parent), w, h, progress);
         LargeVector<uint32_t> root_label = small_page_vector<uint32_t>(n);
         root_label.resize(n, 0);
         return label_basins(std::move(parent), root_label, w, h, progress);
