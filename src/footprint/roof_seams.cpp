@@ -35,7 +35,7 @@ constexpr double kSteepestRoof = 2.14;
 // A colour step where one side is the other times one factor below this in
 // every band (within kShadowRatioSpread) is a cast shadow's edge (in the
 // shade, direct sun is lost and every band dims alike; synthetic towns: 0.42).
-constexpr double kShadowRatio = 0.7;
+constexpr double kShadowRatio = 0.55;
 constexpr double kShadowRatioSpread = 0.1;
 // Where the roof also steps in height (see height_step), a colour step of
 // this share of min_colour_contrast is a seam.
