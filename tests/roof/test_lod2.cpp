@@ -1,13 +1,19 @@
 #include <catch2/catch.hpp>
 #include <cmath>
+#include <algorithm>
 #include <cstdio>
 #include <map>
 #include <string>
 
+#include "io/vector.hpp"
+#include "pipeline/heights_run.hpp"
+#include "pipeline/roofs_run.hpp"
 #include "roof/lod2_builder.hpp"
 #include "roof/roof_planes.hpp"
 #include "core/random.hpp"
 #include "roof_scene.hpp"
+#include "synth/synth.hpp"
+#include "test_support.hpp"
 
 using namespace cityforge;
 
@@ -206,4 +212,39 @@ TEST_CASE("Sparse hip roofs (a dark roof at 4 pts/m2 returns about 0.8) stay hip
     CHECK(hips >= n - 2);
     CHECK(hip_models == n);
     CHECK(gables >= n - 1);
+}
+
+TEST_CASE("A town of every roof family with 40 % dark roofs at 4 pts/m2 and a 25-degree sun - roof types >= 0.95, no flat fallback", "[roof][synth]") {
+    // bench_accuracy families=1 dark=0.4 density=4 sun_el=25 size=300 seed=215:
+    // 0.926 with 2 fallbacks before the partition lines reached past their
+    // sparse samples and hips were told by their ridge ends; 0.985 after.
+    test::ScratchDir dir("sparse_dark_roof_types");
+    SynthOptions o;
+    o.size_m = 300;
+    o.seed = 215;
+    o.cloud_density_m2 = 4.0;
+    o.sun_elevation_deg = 25.0;
+    o.variation.dark_roof_share = 0.4;
+    o.variation.all_roof_families = true;
+    const SynthResult s = write_synthetic_town(dir.path.string(), o);
+    const PolygonLayer truth = read_polygon_layer(s.truth_path, "");
+    RoofsRunOptions ro;
+    ro.heights.heights.keep_roof_points = true;
+    const HeightsStage st = compute_heights_stage(s.truth_path, s.cloud_path, ro.heights);
+    RoofsRunReport rep;
+    const CityModel model = build_lod2_model(st, st.table.crs, ro, s.truth_path, rep);
+    const auto type_at = std::find(truth.field_names.begin(), truth.field_names.end(), "roof_type");
+    REQUIRE(type_at != truth.field_names.end());
+    REQUIRE(model.buildings.size() == truth.features.size());
+    int correct = 0, hips = 0, hips_right = 0;
+    for (std::size_t i = 0; i < model.buildings.size(); ++i) {
+        const std::string t = std::get<std::string>(truth.features[i].values[static_cast<std::size_t>(type_at - truth.field_names.begin())]);
+        correct += model.buildings[i].roof_type == t;
+        hips += t == "hip", hips_right += t == "hip" && model.buildings[i].roof_type == "hip";
+        CHECK(model.buildings[i].lod2_errors.empty());
+    }
+    INFO(correct << " of " << model.buildings.size() << " roof types right, hips " << hips_right << " of " << hips << ", fallbacks " << rep.fallbacks);
+    CHECK(double(correct) / double(model.buildings.size()) >= 0.95);
+    CHECK(hips_right >= hips - 2);
+    CHECK(rep.fallbacks == 0);
 }
