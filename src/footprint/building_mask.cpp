@@ -22,6 +22,7 @@ void BuildingMaskOptions::validate() const {
     if (!(min_hole_m2 >= 0.0)) throw Error("--min-hole-m2", "must be >= 0");
     if (!(split_step_m >= 0.0)) throw Error("--split-step-m", "must be >= 0");
     if (!(min_split_part_m2 >= 0.0)) throw Error("--min-split-part-m2", "must be >= 0");
+    if (!(split_gap_step_m >= 0.0)) throw Error("split_gap_step_m", "must be >= 0");
     if (fill_passes < 0 || fill_passes > 50) throw Error("fill passes", "must be between 0 and 50");
     if (!(hidden_completion_max_share >= 0.0 && hidden_completion_max_share <= 1.0)) throw Error("hidden_completion_max_share", "must be in [0, 1]");
     if (opening_radius_px < 0 || opening_radius_px > 10) throw Error("--opening-px", "must be between 0 and 10");
@@ -273,18 +274,24 @@ void split_at_height_steps(BuildingMask& mask, const Image<float>& dsm, const Bu
         }
     }
     // Cells without a height join the neighbouring part with the smallest id,
-    // one ring per pass; a building without any height keeps one part.
+    // one ring per pass, and carry that neighbour's height on (`carried`: the
+    // height each part reaches a gap with); a building without any height
+    // keeps one part.
+    std::vector<float> carried(dsm.data.begin(), dsm.data.end());
     for (bool changed = true; changed;) {
         changed = false;
         std::vector<uint32_t> next = part;
+        std::vector<float> next_carried = carried;
         for (std::size_t k = 0; k < n; ++k) {
             if (!building[k] || part[k]) continue;
             uint32_t best = 0;
+            float z = std::numeric_limits<float>::quiet_NaN();
             for (int i = 0, c = neighbours(k, nb); i < c; ++i)
-                if (building[nb[i]] == building[k] && part[nb[i]] && (!best || part[nb[i]] < best)) best = part[nb[i]];
-            if (best) next[k] = best, changed = true;
+                if (building[nb[i]] == building[k] && part[nb[i]] && (!best || part[nb[i]] < best)) best = part[nb[i]], z = carried[nb[i]];
+            if (best) next[k] = best, next_carried[k] = z, changed = true;
         }
         part.swap(next);
+        carried.swap(next_carried);
     }
     for (std::size_t k = 0; k < n; ++k)
         if (building[k] && !part[k]) {
@@ -301,16 +308,18 @@ void split_at_height_steps(BuildingMask& mask, const Image<float>& dsm, const Bu
     // 2. Sizes, contact with the outline, shared borders between parts, and
     // how much of each border is a measured step (both cells with a height;
     // such pairs differ by more than the step, or the flood had joined them).
-    std::vector<long> size(parts + 1, 0);
+    std::vector<long> size(parts + 1, 0), measured_size(parts + 1, 0);
     std::vector<uint8_t> outline(parts + 1, 0);
     struct Border {
         long length = 0;    // cell pairs across the border
         long measured = 0;  // of which both cells have a height
+        double gap_dz = 0;  // sum over the other pairs of |difference of the carried heights|
     };
     std::vector<std::map<uint32_t, Border>> border(parts + 1);
     for (std::size_t k = 0; k < n; ++k) {
         if (!part[k]) continue;
         ++size[part[k]];
+        measured_size[part[k]] += !std::isnan(dsm.data[k]);
         const int c = neighbours(k, nb);
         if (c < 4) outline[part[k]] = 1;
         for (int i = 0; i < c; ++i) {
@@ -319,20 +328,23 @@ void split_at_height_steps(BuildingMask& mask, const Image<float>& dsm, const Bu
             } else if (part[nb[i]] != part[k]) {
                 Border& b = border[part[k]][part[nb[i]]];
                 ++b.length;
-                b.measured += !std::isnan(dsm.data[k]) && !std::isnan(dsm.data[nb[i]]);
+                const bool measured = !std::isnan(dsm.data[k]) && !std::isnan(dsm.data[nb[i]]);
+                b.measured += measured;
+                if (!measured && !std::isnan(carried[k]) && !std::isnan(carried[nb[i]])) b.gap_dz += std::abs(carried[k] - carried[nb[i]]);
             }
         }
     }
     PartSets sets(parts);
     auto merge = [&](uint32_t p, uint32_t into) {
         size[into] += size[p];
+        measured_size[into] += measured_size[p];
         outline[into] |= outline[p];
         for (const auto& [q, b] : border[p]) {
             if (q == into) continue;
             Border& bi = border[into][q];
-            bi.length += b.length, bi.measured += b.measured;
+            bi.length += b.length, bi.measured += b.measured, bi.gap_dz += b.gap_dz;
             Border& bq = border[q][into];
-            bq.length += b.length, bq.measured += b.measured;
+            bq.length += b.length, bq.measured += b.measured, bq.gap_dz += b.gap_dz;
             border[q].erase(p);
         }
         border[into].erase(p);
@@ -340,15 +352,27 @@ void split_at_height_steps(BuildingMask& mask, const Image<float>& dsm, const Bu
         sets.parent[p] = into;
     };
     // 3. Parts that meet mostly across cells without heights (gaps, dark
-    // roofs) are one roof: a step must be measured along most of the border.
-    auto is_step = [](const Border& b) { return b.measured >= 4 && 2 * b.measured >= b.length; };
+    // roofs) are one roof: a step must be measured along most of the border
+    // -- unless the heights the two parts carry into the gap differ by more
+    // than split_gap_step_m on average and both parts have heights over a
+    // quarter of min_split_part_m2 at least (a roof beside a tree crown
+    // across a gap of a photogrammetric cloud; one roof's sides across a gap
+    // differ by its slope times the gap; a few stray returns in a gap are no
+    // part of their own).
+    const double gap_step = o.split_gap_step_m, cell_area_m2 = o.gsd_m * o.gsd_m;
+    auto is_step = [&](uint32_t p, uint32_t q, const Border& b) {
+        if (b.measured >= 4 && 2 * b.measured >= b.length) return true;
+        const long gap = b.length - b.measured;
+        auto measured = [&](uint32_t r) { return 4.0 * static_cast<double>(measured_size[r]) * cell_area_m2 >= o.min_split_part_m2; };
+        return gap_step > 0 && gap > 0 && b.gap_dz > gap_step * static_cast<double>(gap) && measured(p) && measured(q);
+    };
     for (bool changed = true; changed;) {
         changed = false;
         for (uint32_t p = 1; p <= parts; ++p) {
             if (sets.parent[p] != p) continue;
             for (auto it = border[p].begin(); it != border[p].end();) {
                 const uint32_t q = it->first;
-                if (is_step(it->second)) {
+                if (is_step(p, q, it->second)) {
                     ++it;
                     continue;
                 }

@@ -31,6 +31,12 @@ struct BuildingMaskOptions {
     /// Parts smaller than this, or not touching the building's outline
     /// (dormers, chimneys, roof superstructures), stay with their neighbour.
     double min_split_part_m2 = 15.0;
+    /// Parts that meet across cells without heights stay one roof unless the
+    /// heights each carries into the gap differ by more than this on average
+    /// (metres; a roof beside a tree crown across a gap of a photogrammetric
+    /// cloud) and both have heights over a quarter of min_split_part_m2;
+    /// 0 = such parts always stay one roof.
+    double split_gap_step_m = 3.0;
     /// Unmeasured cells (dark roofs, crowns over roofs) completed inside a
     /// building's rectangle when that grows it by at most this share of its
     /// area (complete_hidden_roofs); 0 = never.

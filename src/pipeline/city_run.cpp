@@ -684,7 +684,7 @@ WindowBuildings detect_on_window(const RunManifest& m, const PixelWindow& win, P
     mo.gsd_m = std::abs(gt.pixel_width) * unit;
     mo.min_height_m /= pc.crs.z_unit_m;
     WindowCloudCells wc = cloud_cells_on_window(pc, wg, win.col, win.row, std::max(1, o.extraction.cloud_cell_factor), unit, mo);
-    mo.split_step_m /= pc.crs.z_unit_m;
+    mo.split_step_m /= pc.crs.z_unit_m, mo.split_gap_step_m /= pc.crs.z_unit_m;
     // Pieces of larger buildings at the window's edges (not the grid's) stay, whatever their area.
     mo.keep_border_sides = (win.col > 0 ? 1 : 0) | (win.row > 0 ? 2 : 0) | (win.col + win.width < m.grid.width ? 4 : 0) |
                            (win.row + win.height < m.grid.height ? 8 : 0);

@@ -503,7 +503,7 @@ FootprintsReport run_footprints_unguarded(const std::string& output_path, const 
     }
     BuildingMaskOptions mo = o.mask;
     mo.gsd_m = std::abs(grid.transform.pixel_width) * unit;
-    mo.split_step_m /= z_unit;
+    mo.split_step_m /= z_unit, mo.split_gap_step_m /= z_unit;
     SegmentClassifierOptions co = o.classifier;
     if (ortho) co.gsd_m = ortho->info().gsd.x_m;
     // The NIR band's index among the colours (the nDSM band left them).

@@ -77,6 +77,38 @@ TEST_CASE("Gaps in the DSM (dark roofs) do not split a building", "[footprint][s
     CHECK(m.count == 1);
 }
 
+TEST_CASE("A roof and a lower crown that meet across a gap of the DSM are split, a pitched roof across a gap is not", "[footprint][split]") {
+    // A 20 m roof (0.5 m cells) and a 10 m crown beside it, with a 3 m band
+    // between them where a photogrammetric cloud has no height: the heights
+    // each side carries into the gap differ by 10 m.
+    Image<float> dsm = heights(80, 40, {{5, 5, 34, 34, 20.0f}, {35, 5, 74, 34, 10.0f}});
+    const BuildingMask whole = one_building(dsm);
+    BuildingMask m = whole;
+    for (int y = 5; y <= 34; ++y)
+        for (int x = 32; x <= 37; ++x) dsm.at(0, x, y) = NAN;
+    BuildingMaskOptions o;
+    split_at_height_steps(m, dsm, o);
+    CHECK(m.count == 2);
+    const auto a = labels_in(m, 5, 5, 30, 34), b = labels_in(m, 40, 5, 74, 34);
+    REQUIRE(a.size() == 1);
+    REQUIRE(b.size() == 1);
+    CHECK(*a.begin() != *b.begin());
+    o.split_gap_step_m = 0.0;  // off: parts across a gap always stay one roof
+    BuildingMask joined = whole;
+    split_at_height_steps(joined, dsm, o);
+    CHECK(joined.count == 1);
+    // A gable roof rising 0.25 m per cell (27 degrees) with the same 3 m gap
+    // across one slope: its sides carry heights 1.75 m apart into the gap.
+    Image<float> gable(60, 40, 1, 0.0f);
+    for (int y = 5; y <= 34; ++y)
+        for (int x = 5; x <= 54; ++x) gable.at(0, x, y) = 6.0f + 0.25f * static_cast<float>(std::min(x - 5, 54 - x));
+    BuildingMask g = one_building(gable);
+    for (int y = 5; y <= 34; ++y)
+        for (int x = 14; x <= 19; ++x) gable.at(0, x, y) = NAN;
+    split_at_height_steps(g, gable, BuildingMaskOptions{});
+    CHECK(g.count == 1);
+}
+
 TEST_CASE("A roof under an overhanging crown stays building", "[footprint][mask]") {
     // A 20 x 15 m roof at 9 m; a crown covers its east third. Under the crown,
     // cells hold crown points only, or crown points plus roof returns that
