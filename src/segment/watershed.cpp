@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstring>
 #include <memory>
 #include <numeric>
 #include <string>
@@ -27,6 +28,43 @@ void WatershedOptions::validate(int bands) const {
     if (!(h_minima >= 0.0 && h_minima <= 255.0)) throw Error("--h-minima", "must be between 0 and 255");
 }
 
+namespace {
+// The k-th smallest value of `values` (reordered): what std::nth_element
+// puts at k, found by a counting pass over the top 16 bits of an
+// order-preserving key and nth_element within the one bucket holding rank
+// k (~1 M samples: a few ms instead of ~10 per call). With NaN among the
+// values, plain nth_element (their order is not defined).
+float kth_smallest(std::vector<float>& values, std::size_t k) {
+    auto key = [](float f) {
+        uint32_t bits;
+        std::memcpy(&bits, &f, sizeof bits);
+        return (bits & 0x80000000u) ? ~bits : (bits | 0x80000000u);
+    };
+    std::vector<uint32_t> start(65537, 0);
+    for (float f : values) {
+        if (std::isnan(f)) {
+            std::nth_element(values.begin(), values.begin() + static_cast<std::ptrdiff_t>(k), values.end());
+            return values[k];
+        }
+        ++start[(key(f) >> 16) + 1];
+    }
+    std::size_t bucket = 0;
+    for (uint64_t below = 0; bucket < 65536; ++bucket) {
+        if (below + start[bucket + 1] > k) {
+            k -= below;
+            break;
+        }
+        below += start[bucket + 1];
+    }
+    std::vector<float> in_bucket;
+    in_bucket.reserve(start[bucket + 1]);
+    for (float f : values)
+        if ((key(f) >> 16) == bucket) in_bucket.push_back(f);
+    std::nth_element(in_bucket.begin(), in_bucket.begin() + static_cast<std::ptrdiff_t>(k), in_bucket.end());
+    return in_bucket[k];
+}
+}  // namespace
+
 void normalize_bands(Image<float>& image, const std::vector<uint8_t>& valid) {
     const std::size_t n = image.pixel_count();
     for (int b = 0; b < image.bands; ++b) {
@@ -34,15 +72,13 @@ void normalize_bands(Image<float>& image, const std::vector<uint8_t>& valid) {
         // Percentiles from a regular sample (at most ~1M values): deterministic and fast.
         const std::size_t step = std::max<std::size_t>(1, n / 1000000);
         std::vector<float> sample;
+        sample.reserve(n / step + 1);
         for (std::size_t i = 0; i < n; i += step)
             if (valid.empty() || valid[i]) sample.push_back(v[i]);
         if (sample.empty()) continue;
-        auto pct = [&](double q) {
-            const auto k = static_cast<std::size_t>(q * static_cast<double>(sample.size() - 1));
-            std::nth_element(sample.begin(), sample.begin() + static_cast<std::ptrdiff_t>(k), sample.end());
-            return sample[k];
-        };
-        const float lo = pct(0.005), hi = pct(0.995);
+        const std::size_t k_lo = static_cast<std::size_t>(0.005 * static_cast<double>(sample.size() - 1));
+        const std::size_t k_hi = static_cast<std::size_t>(0.995 * static_cast<double>(sample.size() - 1));
+        const float lo = kth_smallest(sample, k_lo), hi = kth_smallest(sample, k_hi);
         const float scale = hi > lo ? 255.0f / (hi - lo) : 0.0f;
         parallel_for_each_index(n, [&](std::size_t i) {
             v[i] = std::clamp((v[i] - lo) * scale, 0.0f, 255.0f);
