@@ -40,6 +40,9 @@ constexpr double kShadowRatioSpread = 0.1;
 // Where the roof also steps in height (see height_step), a colour step of
 // this share of min_colour_contrast is a seam.
 constexpr double kSteppedContrastShare = 0.5;
+// At a seam the slices either side of the seam slice differ by at least
+// this share of the step between the windows.
+constexpr double kAbruptShare = 0.6;
 // Colours are read this many cells inside a building's outline.
 constexpr int kInnerCells = 2;
 // and this many cells from the extremes of its width across a seam's axis.
@@ -317,6 +320,19 @@ std::vector<int> seams_along(const std::vector<std::size_t>& cells, int w, CellO
             return 0.0;
         return ridge.rise - std::abs(level.rise);
     };
+    // The colour changes at once: the slices either side of the seam slice
+    // already differ by most of the windows' step (a shadow edge crossing
+    // the roof at a slant builds its step up over many slices).
+    auto abrupt = [&](int m, const std::vector<double>& step_vec, double step) {
+        const Slice& a = s[static_cast<std::size_t>(m - 1)];
+        const Slice& b = s[static_cast<std::size_t>(m + 1)];
+        if (a.colour_count < 1 || b.colour_count < 1) return false;
+        double along = 0;
+        for (int c = 0; c < bands; ++c)
+            along += (a.colour[static_cast<std::size_t>(c)] / a.colour_count - b.colour[static_cast<std::size_t>(c)] / b.colour_count) *
+                     step_vec[static_cast<std::size_t>(c)];
+        return along / (std::max(step, 1e-9) * double(std::max(1, bands))) >= kAbruptShare * step;
+    };
     // A cast shadow's edge: one side is the other darkened by one factor in
     // every band, well below 1 (a neighbour's shadow across a low sun). Two
     // houses' roofs differ by their own colours, not by one dimming.
@@ -413,7 +429,7 @@ std::vector<int> seams_along(const std::vector<std::size_t>& cells, int w, CellO
             // between two level sides (houses of one eave on sloping ground).
             const bool stepped = contrast >= kSteppedContrastShare * o.min_colour_contrast && contrast < o.min_colour_contrast && height_step(m);
             if ((contrast >= o.min_colour_contrast || stepped) && step >= o.min_colour_step_share * scale && straight(m, step_vec, step) &&
-                !cast_shadow(L, R))
+                abrupt(m, step_vec, step) && !cast_shadow(L, R))
                 seam = true, strength = contrast;
         }
         if (seam) cand.push_back({m, strength});

@@ -225,6 +225,15 @@ TEST_CASE("Roof colours read inside a ragged outline, and a cast shadow across t
         REQUIRE(m.count == 2);
         CHECK(m.labels.at(0, 20, 20) != m.labels.at(0, 70, 20));
     }
+    SECTION("a shadow edge across the whole width at a slant, the shade 0.6 of the light (not deep enough to be told by the ratio)") {
+        BuildingMask m = row_mask();
+        Image<float> c = colours({}, {0.0f}, 5.0f);
+        for (int y = kY0; y <= kY1; ++y)
+            for (int x = 45 + (y - kY0) / 2; x < kW; ++x)
+                for (int b = 0; b < 3; ++b) c.at(b, x, y) *= 0.6f;
+        CHECK(split_at_roof_seams(m, c, {}, flat_heights(8.0f), o) == 0);
+        CHECK(m.count == 1);
+    }
     SECTION("a neighbour's shadow over the whole width: every band dimmed by one factor") {
         BuildingMask m = row_mask();
         Image<float> c = colours({}, {0.0f}, 5.0f);
