@@ -542,6 +542,15 @@ TrainReport run_train(const std::string& out_path, const TrainOptions& o, bool o
                 const DetectionScores s = evaluate(cand, nullptr, nullptr);
                 if (s.f1 > best_f1 + 1e-12) best_f1 = s.f1, chosen.threshold = t, chosen.object_split_level = 0, chosen.merge_threshold = mt;
             }
+        // The threshold chosen again after a later step changed the buildings.
+        auto retune_threshold = [&] {
+            for (const double t : o.thresholds) {
+                detect::DetectorOptions cand = chosen;
+                cand.threshold = t;
+                const DetectionScores s = evaluate(cand, nullptr, nullptr);
+                if (s.f1 > best_f1 + 1e-12) best_f1 = s.f1, chosen.threshold = t;
+            }
+        };
         // Then pixels of the pixel map joining the buildings (0 = off), and the threshold again.
         if (o.detector.pixel.enabled) {
             for (const double pt : {0.6, 0.7, 0.8, 0.9}) {
@@ -550,13 +559,7 @@ TrainReport run_train(const std::string& out_path, const TrainOptions& o, bool o
                 const DetectionScores s = evaluate(cand, nullptr, nullptr);
                 if (s.f1 > best_f1 + 1e-12) best_f1 = s.f1, chosen.pixel_object_threshold = pt;
             }
-            if (chosen.pixel_object_threshold > 0.0)
-                for (const double t : o.thresholds) {
-                    detect::DetectorOptions cand = chosen;
-                    cand.threshold = t;
-                    const DetectionScores s = evaluate(cand, nullptr, nullptr);
-                    if (s.f1 > best_f1 + 1e-12) best_f1 = s.f1, chosen.threshold = t;
-                }
+            if (chosen.pixel_object_threshold > 0.0) retune_threshold();
         }
         // Then touching buildings cut apart at narrow necks (0 = off), and the threshold again.
         for (const double nm : o.neck_split_candidates_m) {
@@ -565,13 +568,7 @@ TrainReport run_train(const std::string& out_path, const TrainOptions& o, bool o
             const DetectionScores s = evaluate(cand, nullptr, nullptr);
             if (s.f1 > best_f1 + 1e-12) best_f1 = s.f1, chosen.neck_split_m = nm;
         }
-        if (chosen.neck_split_m > 0.0)
-            for (const double t : o.thresholds) {
-                detect::DetectorOptions cand = chosen;
-                cand.threshold = t;
-                const DetectionScores s = evaluate(cand, nullptr, nullptr);
-                if (s.f1 > best_f1 + 1e-12) best_f1 = s.f1, chosen.threshold = t;
-            }
+        if (chosen.neck_split_m > 0.0) retune_threshold();
         std::vector<DetectionScores> per_image;
         rep.pooled_objects = evaluate(chosen, &rep.folds, &per_image);
         for (FoldReport& f : rep.folds) {

@@ -426,6 +426,16 @@ void flood_descent(const DescentInput& in, const Progress& progress) {
     }
 }
 
+// The labels (1..count, 0 = nodata) as an Oversegmentation; progress done.
+Oversegmentation finish_oversegmentation(LargeVector<uint32_t>&& labels, int w, int h, uint32_t count, const Progress& progress) {
+    Oversegmentation out;
+    out.labels.width = w, out.labels.height = h, out.labels.bands = 1;
+    out.labels.data = std::move(labels);
+    out.region_count = count;
+    progress(1.0, "watershed");
+    return out;
+}
+
 // label_basins without the seed -> label table (4 bytes a pixel, fresh
 // memory), for fewer than 2^31 - 1 pixels whose basin seeds are pixels of
 // their basins: a seed's label is kept in its own entry, tagged by the top
@@ -447,12 +457,7 @@ Oversegmentation label_seeds_in_place(LargeVector<uint32_t>&& parent, int w, int
         }
     }
     parallel_for_each_index(n, [&](std::size_t i) { label[i] &= ~kTag; });
-    Oversegmentation out;
-    out.labels.width = w, out.labels.height = h, out.labels.bands = 1;
-    out.labels.data = std::move(parent);
-    out.region_count = next;
-    progress(1.0, "watershed");
-    return out;
+    return finish_oversegmentation(std::move(parent), w, h, next, progress);
 }
 
 // Labels of the basins: parent[i] (a basin's seed pixel, or kNone for
@@ -471,12 +476,7 @@ Oversegmentation label_basins(LargeVector<uint32_t>&& parent, LargeVector<uint32
         if (!root_label[r]) root_label[r] = ++next;
         parent[i] = root_label[r];
     }
-    Oversegmentation out;
-    out.labels.width = w, out.labels.height = h, out.labels.bands = 1;
-    out.labels.data = std::move(parent);
-    out.region_count = next;
-    progress(1.0, "watershed");
-    return out;
+    return finish_oversegmentation(std::move(parent), w, h, next, progress);
 }
 
 }  // namespace
