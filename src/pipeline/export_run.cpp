@@ -160,6 +160,8 @@ ExportReport write_city_model(const CityModel& model, const CrsInfo& crs, const 
         rep.with_lod2 += !b.lod2.empty(), rep.valid_lod2 += !b.lod2.empty() && b.lod2_errors.empty();
         ++rep.status_counts[b.status];
     }
+    if (wants(o.lods, 2) && rep.buildings > 0 && rep.with_lod2 == 0)
+        log::warning("no building has LOD2 roofs (they are built from a cloud: `cityforge roofs`, or `run`); the LOD2 outputs hold LOD0 and LOD1 only");
     if (model.crs.gml_srs_name().empty() && (wants(o.formats, "citygml") || wants(o.formats, "cityjson") || wants(o.formats, "cityjsonseq")))
         log::warning("the buildings' CRS (" + model.crs.label +
                      ") has no EPSG code: CityGML is written without srsName (its header comment names the CRS), CityJSON without referenceSystem");
