@@ -278,20 +278,23 @@ void split_at_height_steps(BuildingMask& mask, const Image<float>& dsm, const Bu
     // height each part reaches a gap with); a building without any height
     // keeps one part.
     std::vector<float> carried(dsm.data.begin(), dsm.data.end());
-    for (bool changed = true; changed;) {
-        changed = false;
-        std::vector<uint32_t> next = part;
-        std::vector<float> next_carried = carried;
+    struct Grown {
+        std::size_t cell;
+        uint32_t part;
+        float z;
+    };
+    for (std::vector<Grown> ring;; ring.clear()) {
+        // One ring: decided from the parts before it, then applied.
         for (std::size_t k = 0; k < n; ++k) {
             if (!building[k] || part[k]) continue;
             uint32_t best = 0;
             float z = std::numeric_limits<float>::quiet_NaN();
             for (int i = 0, c = neighbours(k, nb); i < c; ++i)
                 if (building[nb[i]] == building[k] && part[nb[i]] && (!best || part[nb[i]] < best)) best = part[nb[i]], z = carried[nb[i]];
-            if (best) next[k] = best, next_carried[k] = z, changed = true;
+            if (best) ring.push_back({k, best, z});
         }
-        part.swap(next);
-        carried.swap(next_carried);
+        if (ring.empty()) break;
+        for (const Grown& g : ring) part[g.cell] = g.part, carried[g.cell] = g.z;
     }
     for (std::size_t k = 0; k < n; ++k)
         if (building[k] && !part[k]) {

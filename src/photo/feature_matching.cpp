@@ -248,38 +248,46 @@ std::vector<ImageFeatures> read_colmap_features(const std::string& database_path
     Statement kp, desc;
     prepare(d, database_path, "SELECT rows, cols, data FROM keypoints WHERE image_id = ?", kp);
     prepare(d, database_path, "SELECT rows, cols, data FROM descriptors WHERE image_id = ?", desc);
+    // One image's row of a feature table: rows x cols elements of `element`
+    // bytes, checked against the blob's size (64-bit: a corrupt header must
+    // not wrap). No row: 0 rows.
+    struct Blob {
+        std::size_t rows = 0, cols = 0;
+        const void* data = nullptr;
+    };
+    auto fetch = [&](Statement& st, int image_id, std::size_t element, bool cols_ok(std::size_t), const std::string& what) {
+        sqlite3_reset(st.stmt);
+        sqlite3_bind_int(st.stmt, 1, image_id);
+        Blob b;
+        if (sqlite3_step(st.stmt) != SQLITE_ROW) return b;
+        const long long rows = sqlite3_column_int64(st.stmt, 0), cols = sqlite3_column_int64(st.stmt, 1);
+        const long long bytes = sqlite3_column_bytes(st.stmt, 2);
+        b.data = sqlite3_column_blob(st.stmt, 2);
+        if (rows < 0 || (rows > 0 && (cols <= 0 || !cols_ok(static_cast<std::size_t>(cols)) || !b.data ||
+                                      rows > bytes || cols > bytes || bytes != rows * cols * static_cast<long long>(element))))
+            throw Error(database_path, what);
+        b.rows = static_cast<std::size_t>(rows), b.cols = static_cast<std::size_t>(cols);
+        return b;
+    };
     for (ImageFeatures& f : out) {
-        sqlite3_reset(kp.stmt);
-        sqlite3_bind_int(kp.stmt, 1, f.image_id);
-        std::size_t nk = 0;
-        if (sqlite3_step(kp.stmt) == SQLITE_ROW) {
-            const int rows = sqlite3_column_int(kp.stmt, 0), cols = sqlite3_column_int(kp.stmt, 1);
-            const auto* data = static_cast<const float*>(sqlite3_column_blob(kp.stmt, 2));
-            const int bytes = sqlite3_column_bytes(kp.stmt, 2);
-            if (rows < 0 || (rows > 0 && (cols < 2 || bytes != rows * cols * int(sizeof(float)) || !data)))
-                throw Error(database_path, "malformed keypoints of image " + f.name);
-            nk = static_cast<std::size_t>(rows);
+        // Keypoint columns: x y (2), x y scale orientation (4), x y a11 a12 a21 a22 (6).
+        const Blob k = fetch(kp, f.image_id, sizeof(float), [](std::size_t c) { return c >= 2; }, "malformed keypoints of image " + f.name);
+        const std::size_t nk = k.rows;
+        if (nk > 0) {
+            const auto* data = static_cast<const float*>(k.data);
+            const std::size_t cols = k.cols;
             f.xy.resize(2 * nk);
             for (std::size_t i = 0; i < nk; ++i) f.xy[2 * i] = data[i * cols], f.xy[2 * i + 1] = data[i * cols + 1];
-            // Columns: x y (2), x y scale orientation (4), x y a11 a12 a21 a22 (6).
             if (cols == 4 || cols == 6) {
                 f.scale.resize(nk);
                 for (std::size_t i = 0; i < nk; ++i)
                     f.scale[i] = cols == 4 ? data[i * cols + 2] : std::hypot(data[i * cols + 2], data[i * cols + 4]);
             }
         }
-        sqlite3_reset(desc.stmt);
-        sqlite3_bind_int(desc.stmt, 1, f.image_id);
-        std::size_t nd = 0;
-        if (sqlite3_step(desc.stmt) == SQLITE_ROW) {
-            const int rows = sqlite3_column_int(desc.stmt, 0), cols = sqlite3_column_int(desc.stmt, 1);
-            const auto* data = static_cast<const uint8_t*>(sqlite3_column_blob(desc.stmt, 2));
-            const int bytes = sqlite3_column_bytes(desc.stmt, 2);
-            if (rows < 0 || (rows > 0 && (cols != kDescriptorBytes || bytes != rows * cols || !data)))
-                throw Error(database_path, "descriptors of image " + f.name + " are not 128-byte SIFT");
-            nd = static_cast<std::size_t>(rows);
-            f.descriptors.assign(data, data + nd * kDescriptorBytes);
-        }
+        const Blob dsc = fetch(desc, f.image_id, 1, [](std::size_t c) { return c == kDescriptorBytes; },
+                               "descriptors of image " + f.name + " are not 128-byte SIFT");
+        const std::size_t nd = dsc.rows;
+        if (nd > 0) f.descriptors.assign(static_cast<const uint8_t*>(dsc.data), static_cast<const uint8_t*>(dsc.data) + nd * kDescriptorBytes);
         if (nk != nd)
             throw Error(database_path, "image " + f.name + " has " + std::to_string(nk) + " keypoints but " + std::to_string(nd) + " descriptors");
         f.count = nk;

@@ -209,6 +209,8 @@ TEST_CASE("heights and export run on their own output: colliding fields replaced
     INFO(e2.err);
     REQUIRE(e2.exit_code == 0);
     CHECK(e2.err.find("lod1_valid") != std::string::npos);
+    // Footprints with heights have no LOD2 roofs: said, not left to the file.
+    CHECK(e2.err.find("no building has LOD2 roofs") != std::string::npos);
     CHECK(layer_fields(dir / "e2/buildings.gpkg") == layer_fields(dir / "e1/buildings.gpkg"));
     // The compound CRS read back from our GeoPackage keeps its vertical datum.
     CHECK(e2.err.find("no vertical CRS") == std::string::npos);

@@ -361,6 +361,25 @@ TEST_CASE("orient gives the same bytes with 1 and 2 threads", "[photo][orient][r
     for (const auto& [x, y] : back[0].matches) swapped.emplace_back(y, x);
     std::sort(swapped.begin(), swapped.end());
     CHECK(swapped == one[0].matches);
+    // A corrupt database (a header claiming more keypoints than the blob
+    // holds, a huge column count, 64-byte descriptors) is refused naming it.
+    const auto corrupt = [&](const std::string& name, const std::string& sql) {
+        const std::string db = dir / (name + ".db");
+        fs::copy_file(dir / "o1/colmap/database.db", db, fs::copy_options::overwrite_existing);
+        REQUIRE(test::run_command("python3 -c \"import sqlite3; c = sqlite3.connect('" + db + "'); c.execute('" + sql + "'); c.commit()\"").exit_code == 0);
+        return db;
+    };
+    for (const std::string sql : {"UPDATE keypoints SET rows = rows + 1000000 WHERE image_id = 2", "UPDATE keypoints SET cols = 4611686018427387904 WHERE image_id = 1",
+                                  "UPDATE descriptors SET cols = 64, rows = rows * 2 WHERE image_id = 3"}) {
+        const std::string db = corrupt("bad", sql);
+        INFO(sql);
+        try {
+            photo::read_colmap_features(db);
+            FAIL("a corrupt database was read");
+        } catch (const Error& e) {
+            CHECK(std::string(e.what()).find("bad.db") != std::string::npos);
+        }
+    }
 }
 
 // It once ran past ctest's limit: a noisy photogrammetric roof gave thousands of
