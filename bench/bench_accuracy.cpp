@@ -11,6 +11,7 @@
 //         ground_like terraced oblique round families(0/1) centroid(0/1)
 //         stages=heights,roofs,outlines dir=PATH ground=plane|percentile seams(0/1) classes(0/1: an unclassified cloud) crown(sigma m, 0 = off)
 //         peel(rings) crown_fill(cells, -1 = off)
+#include "bench_main.hpp"
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
@@ -54,7 +55,7 @@ double median(std::vector<double> v) {
 
 }  // namespace
 
-int main(int argc, char** argv) try {
+static int run_bench(int argc, char** argv) {
     std::map<std::string, std::string> kv{{"size", "400"}, {"seed", "11"}, {"stages", "heights,roofs,outlines"}, {"dir", "/tmp/bench_accuracy"}};
     for (int i = 1; i < argc; ++i) {
         const std::string a = argv[i];
@@ -62,7 +63,13 @@ int main(int argc, char** argv) try {
         if (eq == std::string::npos) throw Error(a, "arguments are key=value");
         kv[a.substr(0, eq)] = a.substr(eq + 1);
     }
-    auto num = [&](const std::string& k, double def) { return kv.count(k) ? std::stod(kv.at(k)) : def; };
+    static const char* const known[] = {"centroid", "classes", "crown", "crown_fill", "dark", "density", "dir", "families", "ground",
+                                        "ground_like", "oblique", "outliers", "peel", "round", "seams", "seed", "sigma", "size",
+                                        "slope", "stages", "sun_az", "sun_el", "terraced", "trees", "undulation", "verbose", "worst"};
+    for (const auto& [k, v] : kv)
+        if (std::find_if(std::begin(known), std::end(known), [&](const char* n) { return k == n; }) == std::end(known))
+            throw Error(k, "unknown key (see --help)");
+    auto num = [&](const std::string& k, double def) { return kv.count(k) ? cityforge::bench::parse_number(kv.at(k).c_str(), k.c_str()) : def; };
     SynthOptions so;
     so.size_m = num("size", 400);
     so.seed = static_cast<uint64_t>(num("seed", 11));
@@ -183,7 +190,8 @@ int main(int argc, char** argv) try {
         std::printf("\n");
     }
     return 0;
-} catch (const std::exception& e) {
-    std::fprintf(stderr, "bench_accuracy: %s\n", e.what());
-    return 1;
+}
+
+int main(int argc, char** argv) {
+    return cityforge::bench::run_main(argc, argv, "bench_accuracy", "bench_accuracy [key=value ...]  (keys: size seed density sigma sun_az sun_el slope undulation dark trees ground_like terraced oblique families round centroid classes crown peel crown_fill outliers seams stages ground verbose worst dir)", run_bench);
 }

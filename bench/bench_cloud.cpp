@@ -6,6 +6,7 @@
 //
 //   build/bin/bench_cloud FILE.las            (any LAS/LAZ the reader takes)
 //   build/bin/bench_cloud --synth SIZE_M [DENSITY]   (default 8 pts/m²)
+#include "bench_main.hpp"
 #include <chrono>
 #include <cstdint>
 #include <cstdio>
@@ -56,7 +57,7 @@ uint64_t digest(const std::vector<uint8_t>& v) {
 }
 }  // namespace
 
-int main(int argc, char** argv) {
+static int run_bench(int argc, char** argv) {
     if (argc < 2) {
         std::fprintf(stderr, "usage: bench_cloud FILE.las | --synth SIZE_M [DENSITY]\n");
         return 2;
@@ -65,8 +66,8 @@ int main(int argc, char** argv) {
     std::filesystem::path dir;
     if (path == "--synth") {
         SynthOptions so;
-        so.size_m = argc > 2 ? std::atof(argv[2]) : 500;
-        so.cloud_density_m2 = argc > 3 ? std::atof(argv[3]) : 8;
+        so.size_m = argc > 2 ? cityforge::bench::parse_number(argv[2], "SIZE_M") : 500;
+        so.cloud_density_m2 = argc > 3 ? cityforge::bench::parse_number(argv[3], "DENSITY") : 8;
         dir = std::filesystem::temp_directory_path() / ("cityforge_bench_cloud_" + std::to_string(int(so.size_m)));
         write_synthetic_town(dir.string(), so);
         path = (dir / "cloud.las").string();
@@ -97,4 +98,8 @@ int main(int argc, char** argv) {
     std::printf("  %zu ground points, ground digest %016llx\n", g.ground_points, static_cast<unsigned long long>(digest(g.is_ground)));
     if (!dir.empty()) std::filesystem::remove_all(dir);
     return 0;
+}
+
+int main(int argc, char** argv) {
+    return cityforge::bench::run_main(argc, argv, "bench_cloud", "bench_cloud FILE.las | --synth SIZE_M [DENSITY]", run_bench);
 }

@@ -6,6 +6,7 @@
 // model has a neck split).
 //
 //   build/bin/bench_detect [model.cfdet] [size_px]
+#include "bench_main.hpp"
 #include <chrono>
 #include <cstdio>
 #include <cstdlib>
@@ -23,8 +24,8 @@ namespace {
 double now() { return std::chrono::duration<double>(std::chrono::steady_clock::now().time_since_epoch()).count(); }
 }  // namespace
 
-int main(int argc, char** argv) try {
-    const int size_px = argc > 2 ? std::atoi(argv[2]) : 4000;
+static int run_bench(int argc, char** argv) {
+    const int size_px = argc > 2 ? static_cast<int>(cityforge::bench::parse_number(argv[2], "SIZE_PX")) : 4000;
     const detect::BandLayout rgb{3, -1};
     const std::string model_path = argc > 1 ? argv[1] : default_model_path(rgb);
     const detect::DetectorModel model = detect::read_model_file(model_path);
@@ -82,7 +83,8 @@ int main(int argc, char** argv) try {
     std::printf("  total incl. reading   %7.2f s   (target < 30 s on 2 cores)\n", t_read + t_all);
     (void)p;
     return 0;
-} catch (const cityforge::Error& e) {
-    std::fprintf(stderr, "bench_detect: %s\n", e.what());
-    return 1;
+}
+
+int main(int argc, char** argv) {
+    return cityforge::bench::run_main(argc, argv, "bench_detect", "bench_detect [MODEL] [SIZE_PX]", run_bench);
 }

@@ -15,6 +15,7 @@
 // (the reconstruction takes minutes at 4 km; the timed export then does not).
 // --formats limits the formats written (default: every one). Process CPU
 // seconds (user + sys) of the writing are printed beside its wall time.
+#include "bench_main.hpp"
 #include <chrono>
 #include <cstdio>
 #include <cstdlib>
@@ -33,7 +34,7 @@
 
 using namespace cityforge;
 
-int main(int argc, char** argv) {
+static int run_bench(int argc, char** argv) {
     synth::SceneLayout layout;
     layout.size_m = 4000.0;
     bool lod2 = false;
@@ -43,7 +44,7 @@ int main(int argc, char** argv) {
         else if (!std::strcmp(argv[i], "--lod2-cache") && i + 1 < argc) cache = argv[++i], lod2 = true;
         else if (!std::strcmp(argv[i], "--formats") && i + 1 < argc) formats = argv[++i];
         else if (!std::strcmp(argv[i], "--texture-ortho") && i + 1 < argc) texture_ortho = argv[++i], lod2 = true;
-        else layout.size_m = std::atof(argv[i]);
+        else layout.size_m = cityforge::bench::parse_number(argv[i], "SIZE_M");
     }
     layout.seed = 1;
     const auto t0 = std::chrono::steady_clock::now();
@@ -146,4 +147,8 @@ int main(int argc, char** argv) {
     getrusage(RUSAGE_SELF, &ru);
     std::printf("peak memory %.0f MB\n", double(ru.ru_maxrss) / 1024.0);
     return 0;
+}
+
+int main(int argc, char** argv) {
+    return cityforge::bench::run_main(argc, argv, "bench_export", "bench_export [SIZE_M] [--lod2] [--lod2-cache FILE] [--formats LIST] [--texture-ortho]", run_bench);
 }

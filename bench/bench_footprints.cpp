@@ -5,6 +5,7 @@
 // absolute area error against the exact truth polygons.
 //
 //   build/bin/bench_footprints [size_m]
+#include "bench_main.hpp"
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -25,9 +26,9 @@ namespace {
 double now() { return std::chrono::duration<double>(std::chrono::steady_clock::now().time_since_epoch()).count(); }
 }  // namespace
 
-int main(int argc, char** argv) {
+static int run_bench(int argc, char** argv) {
     SynthOptions so;
-    so.size_m = argc > 1 ? std::atof(argv[1]) : 4000.0;
+    so.size_m = argc > 1 ? cityforge::bench::parse_number(argv[1], "SIZE_M") : 4000.0;
     so.cloud_density_m2 = 0;
     const auto dir = std::filesystem::temp_directory_path() / "cityforge_bench_footprints";
     const SynthResult s = write_synthetic_town(dir.string(), so);
@@ -96,4 +97,8 @@ int main(int argc, char** argv) {
     });
     std::filesystem::remove_all(dir);
     return 0;
+}
+
+int main(int argc, char** argv) {
+    return cityforge::bench::run_main(argc, argv, "bench_footprints", "bench_footprints [SIZE_M]", run_bench);
 }

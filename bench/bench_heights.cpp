@@ -3,6 +3,7 @@
 // heights seconds and buildings per second, flat-roof accuracy and peak RSS.
 //
 //   build/bin/bench_heights [size_m] [lidar|photo]
+#include "bench_main.hpp"
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -28,9 +29,9 @@ double peak_mb() {
 }
 }  // namespace
 
-int main(int argc, char** argv) {
+static int run_bench(int argc, char** argv) {
     SynthOptions so;
-    so.size_m = argc > 1 ? std::atof(argv[1]) : 2000.0;
+    so.size_m = argc > 1 ? cityforge::bench::parse_number(argv[1], "SIZE_M") : 2000.0;
     so.cloud_mode = argc > 2 ? cloud_mode_from_string(argv[2]) : CloudMode::lidar;
     const auto dir = std::filesystem::temp_directory_path() / "cityforge_bench_heights";
     double t = now();
@@ -75,4 +76,8 @@ int main(int argc, char** argv) {
     std::printf("peak RSS: %.0f MB\n", peak_mb());
     std::filesystem::remove_all(dir);
     return 0;
+}
+
+int main(int argc, char** argv) {
+    return cityforge::bench::run_main(argc, argv, "bench_heights", "bench_heights [SIZE_M] [lidar|photo]", run_bench);
 }

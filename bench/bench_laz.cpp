@@ -12,6 +12,7 @@
 // decodes them, layer tasks and all, in a one-thread arena; thread CPU time,
 // best of --repeat): the per-core figure, free of I/O, copies and scheduling.
 // --threads N caps TBB's worker count (default: all cores).
+#include "bench_main.hpp"
 #include <sys/resource.h>
 #include <tbb/global_control.h>
 #include <tbb/task_arena.h>
@@ -83,7 +84,7 @@ double kernel_seconds(const std::string& path, int repeat, std::string& hash) {
 }
 }  // namespace
 
-int main(int argc, char** argv) {
+static int run_bench(int argc, char** argv) {
     namespace fs = std::filesystem;
     std::string dir = CITYFORGE_SHARED_DATA "/laz_corpus";
     int repeat = 3;
@@ -93,8 +94,8 @@ int main(int argc, char** argv) {
         const std::string a = argv[i];
         if (a == "--points") points_path = true;
         else if (a == "--kernel") kernel = true;
-        else if (a == "--threads" && i + 1 < argc) threads = std::max(1, std::atoi(argv[++i]));
-        else if (a == "--repeat" && i + 1 < argc) repeat = std::max(1, std::atoi(argv[++i]));
+        else if (a == "--threads" && i + 1 < argc) threads = std::max(1, static_cast<int>(cityforge::bench::parse_number(argv[++i], "--threads")));
+        else if (a == "--repeat" && i + 1 < argc) repeat = std::max(1, static_cast<int>(cityforge::bench::parse_number(argv[++i], "--repeat")));
         else dir = a;
     }
     std::unique_ptr<tbb::global_control> cap;
@@ -215,4 +216,8 @@ int main(int argc, char** argv) {
         std::printf("TOTAL PointCloud path: %.3f s: %.2f M points/s\n", total_points_s,
                     total_points_s > 0 ? static_cast<double>(total_points) / total_points_s / 1e6 : 0.0);
     return mismatches == 0 ? 0 : 1;
+}
+
+int main(int argc, char** argv) {
+    return cityforge::bench::run_main(argc, argv, "bench_laz", "bench_laz [CORPUS_DIR] [--repeat N] [--points] [--kernel] [--threads N]", run_bench);
 }

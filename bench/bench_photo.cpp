@@ -14,6 +14,7 @@
 //
 //   build/bin/bench_photo SYNTH_DIR [views=CAMERAS.json] [cameras=EST.json] [seen=OUT.u16] NAME=CLOUD.las ...
 // (seen= writes the number of photos seeing each truth point, uint16 in surface.las order.)
+#include "bench_main.hpp"
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
@@ -94,7 +95,7 @@ PointCloud subset(const PointCloud& c, const std::vector<uint8_t>& keep) {
 
 }  // namespace
 
-int main(int argc, char** argv) try {
+static int run_bench(int argc, char** argv) {
     if (argc < 3) {
         std::fprintf(stderr, "usage: bench_photo SYNTH_DIR [views=CAMERAS.json] [cameras=EST.json] NAME=CLOUD.las ...\n");
         return 2;
@@ -182,7 +183,8 @@ int main(int argc, char** argv) try {
         std::printf("    R@0.25 by kind: %s\n", per_part.c_str());
     }
     return 0;
-} catch (const std::exception& e) {
-    std::fprintf(stderr, "bench_photo: %s\n", e.what());
-    return 1;
+}
+
+int main(int argc, char** argv) {
+    return cityforge::bench::run_main(argc, argv, "bench_photo", "bench_photo SYNTH_DIR [views=CAMERAS.json] [cameras=EST.json] NAME=CLOUD.las ...", run_bench);
 }

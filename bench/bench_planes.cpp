@@ -9,6 +9,7 @@
 // Figures are printed; nothing is asserted. Single-threaded (fair timing).
 //
 //   build/bin/bench_planes [synth_size_m=300] [retry=1]
+#include "bench_main.hpp"
 #include <algorithm>
 #include <chrono>
 #include <cstdio>
@@ -58,9 +59,9 @@ void run(const char* name, const std::vector<Case>& cases, PlaneDetector d, bool
 
 }  // namespace
 
-int main(int argc, char** argv) try {
-    const double size = argc > 1 ? std::atof(argv[1]) : 300.0;
-    const bool retry = argc > 2 ? std::atoi(argv[2]) != 0 : true;
+static int run_bench(int argc, char** argv) {
+    const double size = argc > 1 ? cityforge::bench::parse_number(argv[1], "SIZE_M") : 300.0;
+    const bool retry = argc > 2 ? cityforge::bench::parse_number(argv[2], "RETRY") != 0 : true;
     const std::vector<PlaneDetector> detectors{PlaneDetector::region_growing, PlaneDetector::cgal_region_growing, PlaneDetector::cgal_ransac};
     std::printf("plane detectors (retry of alternative settings %s)\n", retry ? "on" : "off");
     {
@@ -104,7 +105,8 @@ int main(int argc, char** argv) try {
         for (PlaneDetector d : detectors) run(label.c_str(), cases, d, retry);
     }
     return 0;
-} catch (const std::exception& e) {
-    std::fprintf(stderr, "bench_planes: %s\n", e.what());
-    return 1;
+}
+
+int main(int argc, char** argv) {
+    return cityforge::bench::run_main(argc, argv, "bench_planes", "bench_planes [SIZE_M] [RETRY 0|1]", run_bench);
 }

@@ -6,6 +6,7 @@
 // cleaning, ground) are measured by bench_heights.
 //
 //   build/bin/bench_roofs [size_m] [density_per_m2]
+#include "bench_main.hpp"
 #include <chrono>
 #include <cstdio>
 #include <cstdlib>
@@ -18,10 +19,10 @@
 
 using namespace cityforge;
 
-int main(int argc, char** argv) {
+static int run_bench(int argc, char** argv) {
     synth::SceneLayout layout;
-    layout.size_m = argc > 1 ? std::atof(argv[1]) : 4000.0;
-    const double density = argc > 2 ? std::atof(argv[2]) : 8.0;
+    layout.size_m = argc > 1 ? cityforge::bench::parse_number(argv[1], "SIZE_M") : 4000.0;
+    const double density = argc > 2 ? cityforge::bench::parse_number(argv[2], "DENSITY") : 8.0;
     layout.seed = 1;
     const synth::Scene scene = synth::generate_scene(layout);
     const std::size_t n = scene.buildings.size();
@@ -66,4 +67,8 @@ int main(int argc, char** argv) {
     for (const auto& [k, v] : per_type) std::printf(" %s %d/%d", k.c_str(), v.first, v.second);
     std::printf(" ); mean RMSE points to model %.3f m; peak memory %.0f MB\n", rmse / double(n), double(ru.ru_maxrss) / 1024.0);
     return 0;
+}
+
+int main(int argc, char** argv) {
+    return cityforge::bench::run_main(argc, argv, "bench_roofs", "bench_roofs [SIZE_M] [DENSITY]", run_bench);
 }

@@ -5,6 +5,7 @@
 //
 //   build/bin/bench_stream DIR SIZE_M NX NY [DENSITY] [SEED]
 //   -> DIR/town/ (the synth town), DIR/mosaic.las, DIR/mosaic_footprints.gpkg
+#include "bench_main.hpp"
 #include <cstdio>
 #include <cstdlib>
 #include <filesystem>
@@ -16,17 +17,17 @@
 
 using namespace cityforge;
 
-int main(int argc, char** argv) {
+static int run_bench(int argc, char** argv) {
     if (argc < 5) {
         std::fprintf(stderr, "usage: bench_stream DIR SIZE_M NX NY [DENSITY] [SEED]\n");
         return 2;
     }
     const std::filesystem::path dir = argv[1];
     SynthOptions so;
-    so.size_m = std::atof(argv[2]);
-    const int nx = std::atoi(argv[3]), ny = std::atoi(argv[4]);
-    so.cloud_density_m2 = argc > 5 ? std::atof(argv[5]) : 8.0;
-    so.seed = argc > 6 ? std::strtoull(argv[6], nullptr, 10) : 1;
+    so.size_m = cityforge::bench::parse_number(argv[2], "SIZE_M");
+    const int nx = static_cast<int>(cityforge::bench::parse_number(argv[3], "NX")), ny = static_cast<int>(cityforge::bench::parse_number(argv[4], "NY"));
+    so.cloud_density_m2 = argc > 5 ? cityforge::bench::parse_number(argv[5], "DENSITY") : 8.0;
+    so.seed = argc > 6 ? static_cast<uint64_t>(cityforge::bench::parse_number(argv[6], "SEED")) : 1;
     std::filesystem::create_directories(dir);
     const SynthResult s = write_synthetic_town((dir / "town").string(), so);
     const LasHeader header = LasReader(s.cloud_path).header();
@@ -58,4 +59,8 @@ int main(int argc, char** argv) {
     std::printf("%s: %llu points (%d x %d towns of %.0f m), %zu footprints\n", (dir / "mosaic.las").c_str(),
                 static_cast<unsigned long long>(out.points_written()), nx, ny, so.size_m, features.size());
     return 0;
+}
+
+int main(int argc, char** argv) {
+    return cityforge::bench::run_main(argc, argv, "bench_stream", "bench_stream DIR SIZE_M NX NY [DENSITY] [SEED]", run_bench);
 }

@@ -4,6 +4,7 @@
 // Input layout: byte 0 picks the item set, bytes 1-2 the point count, the rest
 // is the chunk. The decoder must return or throw cityforge::Error; anything
 // else (crash, sanitizer report, other exception, hang) is a bug.
+#include "bench_main.hpp"
 #include <cstdint>
 #include <cstdio>
 #include <cstdlib>
@@ -59,9 +60,9 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, std::size_t size) {
 
 #ifndef CITYFORGE_LIBFUZZER
 // Seeds: the first chunk of real files with a matching item set.
-int main(int argc, char** argv) {
-    const long iterations = argc > 1 ? std::atol(argv[1]) : 20000;
-    std::mt19937 rng(argc > 2 ? static_cast<unsigned>(std::atoi(argv[2])) : 18u);
+static int run_bench(int argc, char** argv) {
+    const long iterations = argc > 1 ? static_cast<long>(cityforge::bench::parse_number(argv[1], "ITERATIONS")) : 20000;
+    std::mt19937 rng(argc > 2 ? static_cast<unsigned>(cityforge::bench::parse_number(argv[2], "SEED")) : 18u);
     const std::pair<const char*, int> seeds_src[] = {{"point10.las.laz", 0}, {"point-color-time.las.laz", 1}, {"lone-star.copc.laz", 3},
                                                      {"Semis_2022_0906_6665_LA93_IGN69_ok.laz", 4}, {"crop_duplicate.laz", -1}};
     std::vector<std::vector<uint8_t>> seeds;
@@ -97,3 +98,7 @@ int main(int argc, char** argv) {
     return 0;
 }
 #endif
+
+int main(int argc, char** argv) {
+    return cityforge::bench::run_main(argc, argv, "fuzz_laz", "fuzz_laz [ITERATIONS] [SEED]", run_bench);
+}
