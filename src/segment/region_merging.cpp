@@ -5,6 +5,7 @@
 #include <cmath>
 #include <cstddef>
 #include <cstdlib>
+#include <cstring>
 #include <ctime>
 #include <atomic>
 #include <new>
@@ -98,13 +99,27 @@ struct Neighbour {
 // current cost: then it is the entry a fresh push would make, so stale
 // entries need no version stamps.
 struct QueueEntry {
-    double cost;
-    uint64_t keys;  // lower key << 32 | higher key
-    uint32_t a, b;  // nodes of the lower and the higher key when pushed
-    bool operator>(const QueueEntry& o) const {
-        if (cost != o.cost) return cost > o.cost;
-        return keys > o.keys;
+    uint64_t order;  // the cost as an unsigned integer ordered as the cost (see make)
+    uint64_t keys;   // lower key << 32 | higher key
+    uint32_t a, b;   // nodes of the lower and the higher key when pushed
+    // The entry of cost c. The cost's bits are mapped to an integer in the
+    // order of the doubles (negative: all bits flipped; otherwise the sign
+    // bit set), with -0 taken as +0 (equal costs compare equal as before),
+    // so (cost, keys) compares as one 128-bit integer, without branches.
+    static QueueEntry make(double c, uint64_t keys, uint32_t a, uint32_t b) {
+        uint64_t u;
+        c += 0.0;  // -0 -> +0
+        std::memcpy(&u, &c, sizeof u);
+        return {u >> 63 ? ~u : u | (uint64_t(1) << 63), keys, a, b};
     }
+    double cost() const {
+        const uint64_t u = order >> 63 ? order & ~(uint64_t(1) << 63) : ~order;
+        double c;
+        std::memcpy(&c, &u, sizeof c);
+        return c;
+    }
+    uint128 rank() const { return uint128(order) << 64 | keys; }
+    bool operator>(const QueueEntry& o) const { return rank() > o.rank(); }
 };
 
 // Region graph. A region lives in a node (storage slot); when two regions
@@ -862,15 +877,51 @@ public:
         }
         h[i] = e;
     }
+    // Removes the top: the hole left at the root walks down to a leaf by
+    // the lowest child (no comparison with the entry that fills it), then
+    // the heap's last entry moves into the hole and up; it belongs near the
+    // leaves, so this compares less than sifting it down from the root.
     void pop() {
         const QueueEntry last = h_.back();
         h_.pop_back();
         if (empty()) return;
-        h_[kPad] = last;
-        sift_down(0);
+        QueueEntry* h = h_.data() + kPad;
+        const std::size_t n = size();
+        std::size_t i = 0;
+        for (;;) {
+            const std::size_t first = 4 * i + 1;
+            if (first >= n) break;
+            for (std::size_t c = 4 * first + 1; c < 4 * first + 17 && c < n; c += 4)
+                __builtin_prefetch(h + c), __builtin_prefetch(h + c + 3);
+            const std::size_t best = lowest_child(h, first, n);
+            h[i] = h[best];
+            i = best;
+        }
+        const uint128 r = last.rank();
+        while (i > 0) {
+            const std::size_t parent = (i - 1) / 4;
+            if (!(h[parent].rank() > r)) break;
+            h[i] = h[parent];
+            i = parent;
+        }
+        h[i] = last;
     }
 
 private:
+    // Index of the lowest of the children first .. first + 3 (those < n),
+    // chosen by conditional moves rather than branches.
+    static std::size_t lowest_child(const QueueEntry* h, std::size_t first, std::size_t n) {
+        std::size_t best = first;
+        uint128 r = h[first].rank();
+        const std::size_t end = std::min(first + 4, n);
+        for (std::size_t c = first + 1; c < end; ++c) {
+            const uint128 rc = h[c].rank();
+            const bool lower = rc < r;
+            best = lower ? c : best;
+            r = lower ? rc : r;
+        }
+        return best;
+    }
     void sift_down(std::size_t i) {
         QueueEntry* h = h_.data() + kPad;
         const QueueEntry e = h[i];
@@ -878,13 +929,7 @@ private:
         for (;;) {
             const std::size_t first = 4 * i + 1;
             if (first >= n) break;
-            // The children lines of these four children: one of them is read next.
-            for (std::size_t c = 4 * first + 1; c < 4 * first + 17 && c < n; c += 4)
-                __builtin_prefetch(h + c), __builtin_prefetch(h + c + 3);
-            std::size_t best = first;
-            const std::size_t end = std::min(first + 4, n);
-            for (std::size_t c = first + 1; c < end; ++c)
-                if (h[best] > h[c]) best = c;
+            const std::size_t best = lowest_child(h, first, n);
             if (!(e > h[best])) break;
             h[i] = h[best];
             i = best;
@@ -938,7 +983,7 @@ RegionMergingResult merge_regions(const Image<float>& image, const Image<uint32_
         auto entry = [&](uint32_t a, uint32_t b, double c) {
             uint64_t ka = g.key_of(a), kb = g.key_of(b);
             if (ka > kb) std::swap(a, b), std::swap(ka, kb);
-            return QueueEntry{c, ka << 32 | kb, a, b};
+            return QueueEntry::make(c, ka << 32 | kb, a, b);
         };
         // r's nearest-neighbour pair if the strategy queues it.
         auto queued_nn = [&](uint32_t r) {
@@ -969,10 +1014,10 @@ RegionMergingResult merge_regions(const Image<float>& image, const Image<uint32_
         // the entry a fresh push would make (keys and cost equal).
         auto current = [&](const QueueEntry& e, uint32_t a, uint32_t b) {
             switch (o.strategy) {
-                case QueueStrategy::mutual: return g.nn(a) == b && g.nn(b) == a && g.nn_cost(a) == e.cost;
+                case QueueStrategy::mutual: return g.nn(a) == b && g.nn(b) == a && g.nn_cost(a) == e.cost();
                 case QueueStrategy::nng:
-                    return (g.nn(a) == b && g.nn_cost(a) == e.cost) || (g.nn(b) == a && g.nn_cost(b) == e.cost);
-                case QueueStrategy::rag: return g.edge_cost(a, b) == e.cost;
+                    return (g.nn(a) == b && g.nn_cost(a) == e.cost()) || (g.nn(b) == a && g.nn_cost(b) == e.cost());
+                case QueueStrategy::rag: return g.edge_cost(a, b) == e.cost();
             }
             return false;
         };
@@ -991,7 +1036,7 @@ RegionMergingResult merge_regions(const Image<float>& image, const Image<uint32_
             }
             const uint32_t a = e.a, b = e.b;
             if (!g.alive(a) || !g.alive(b) || (uint64_t(g.key_of(a)) << 32 | g.key_of(b)) != e.keys || !current(e, a, b)) continue;
-            if (!(e.cost < threshold)) break;  // rag holds every pair: the cheapest is too dear
+            if (!(e.cost() < threshold)) break;  // rag holds every pair: the cheapest is too dear
             changed.clear(), rescan.clear();
             const uint32_t m = g.merge(a, b, o.strategy != QueueStrategy::rag, changed, rescan);
             uf[m == a ? b : a] = m;
