@@ -28,6 +28,7 @@ void OrthoRefineOptions::validate() const {
     if (!(min_crown_local_roughness_m >= 0)) throw Error("crown_local_roughness_m", "must be >= 0");
     if (!(crown_local_radius_m > 0 && gsd_m > 0)) throw Error("ortho refinement", "the crown's local radius and the pixel size must be > 0");
     if (!(max_vegetation_share > 0 && max_vegetation_share <= 1)) throw Error("max_vegetation_share", "must be in (0, 1]");
+    if (!(min_crown_building_colour_share > 0)) throw Error("min_crown_building_colour_share", "must be > 0 (above 1 = off)");
 }
 
 namespace {
@@ -179,10 +180,32 @@ std::size_t refine_buildings_with_ortho(BuildingMask& mask, const BuildingCells&
                 Box& b = box[l];
                 b.x0 = std::min(b.x0, x), b.y0 = std::min(b.y0, y), b.x1 = std::max(b.x1, x), b.y1 = std::max(b.y1, y);
             }
+    // The whole-building crown test (min_crown_building_colour_share): the
+    // share of its seen cells with vegetation colours, then its heights.
+    auto crown_as_a_whole = [&](uint32_t l) {
+        if (vegetation.empty() || !(o.max_crown_plane_sigma_m > 0) || o.min_crown_building_colour_share > 1.0) return false;
+        const Box& b = box[l];
+        long seen = 0, coloured = 0;
+        std::vector<std::array<double, 3>> heights;
+        for (int y = b.y0; y <= b.y1; ++y)
+            for (int x = b.x0; x <= b.x1; ++x) {
+                const std::size_t k = static_cast<std::size_t>(y) * w + x;
+                if (old[k] != l) continue;
+                if (valid[k]) ++seen, coloured += vegetation[k] >= 1;
+                if (std::isfinite(ndsm.data[k])) heights.push_back({double(x - b.x0), double(y - b.y0), double(ndsm.data[k])});
+            }
+        if (seen == 0 || static_cast<double>(coloured) < o.min_crown_building_colour_share * static_cast<double>(seen)) return false;
+        return !heights.empty() && roof_plane_sigma(heights) > o.max_crown_plane_sigma_m &&
+               local_roughness(heights, local_radius_px) > o.min_crown_local_roughness_m;
+    };
     std::vector<uint32_t> out(n, 0);
     for (uint32_t l = 1; l <= mask.count; ++l) {
         Box b = box[l];
         if (b.x1 < b.x0) continue;
+        if (crown_as_a_whole(l)) {
+            ++crowns;
+            continue;
+        }
         b.x0 = std::max(0, b.x0 - o.margin_px), b.y0 = std::max(0, b.y0 - o.margin_px);
         b.x1 = std::min(w - 1, b.x1 + o.margin_px), b.y1 = std::min(h - 1, b.y1 + o.margin_px);
         const int cw = b.x1 - b.x0 + 1, ch = b.y1 - b.y0 + 1;

@@ -55,6 +55,13 @@ struct OrthoRefineOptions {
     /// vegetation segments is a crown and is dropped; it is not given back
     /// its heights' outline.
     double max_vegetation_share = 0.5;
+    /// A building whose cells the ortho sees are this share or more of
+    /// vegetation colours (weak ones included) and whose heights, taken over
+    /// all its cells, exceed both crown limits above (not planar, and rough
+    /// locally) is a crown and is dropped: a photo cloud's tree has a few
+    /// points in a cell and most cells empty, so its segments are too sparse
+    /// to be judged one by one. (0, 1]; above 1 = off.
+    double min_crown_building_colour_share = 0.6;
     void validate() const;
 };
 

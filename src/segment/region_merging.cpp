@@ -555,11 +555,15 @@ public:
         for (int l = 0; l < lines; ++l) prefetch_line(p + l * sizeof(Line));
     }
     int record_lines() const { return static_cast<int>(lines_); }
+    // Starts loading the records of r's first kPrefetchAhead neighbours
+    // (at most: a region of thousands of neighbours would evict its own
+    // lines before they are used, and a stale queue entry of such a region
+    // would cost thousands of loads for nothing).
+    static constexpr uint32_t kPrefetchAhead = 16;
     void prefetch_neighbours(uint32_t r, int lines) const {
-        for (const Neighbour& k : neighbours(r)) {
-            const std::byte* p = storage_[static_cast<std::size_t>(k.id) * lines_].bytes;
-            for (int l = 0; l < lines; ++l) prefetch_line(p + l * sizeof(Line));
-        }
+        const NeighbourSpan list = neighbours(r);
+        const Neighbour* end = list.first + std::min<std::size_t>(list.size(), kPrefetchAhead);
+        for (const Neighbour* k = list.first; k != end; ++k) prefetch_node(k->id, lines);
     }
     ~RegionGraph() {
         for (uint32_t r = 0; r < n_; ++r) release(r);
@@ -661,8 +665,10 @@ public:
     uint32_t merge(uint32_t a, uint32_t b, bool track_nn, std::vector<uint32_t>& changed, std::vector<uint32_t>& rescan) {
         const uint32_t s = head(a).degree >= head(b).degree ? a : b;  // survivor slot
         const uint32_t t = s == a ? b : a;                            // dies
-        prefetch_neighbours(t, static_cast<int>(lines_));  // their lists are edited below
-        prefetch_neighbours(s, static_cast<int>(lines_));  // scored, and their lists updated, after the merge
+        // The records of both lists' neighbours are read below (scored, and
+        // their lists edited): loaded kPrefetchAhead entries ahead of use.
+        prefetch_neighbours(t, static_cast<int>(lines_));
+        prefetch_neighbours(s, static_cast<int>(lines_));
         NodeHead& S = head(s);
         NodeHead& T = head(t);
         const uint32_t shared = find(S, t)->shared;
@@ -684,7 +690,11 @@ public:
         double best_cost = INFINITY;
         const Neighbour *is = S.list, *it = T.list;
         const Neighbour *es = S.list + S.degree, *et = T.list + T.degree;
+        const Neighbour *ps = is + std::min<std::size_t>(S.degree, kPrefetchAhead);
+        const Neighbour *pt = it + std::min<std::size_t>(T.degree, kPrefetchAhead);
         while (is != es || it != et) {
+            if (ps != es && ps < is + kPrefetchAhead) prefetch_node((ps++)->id, static_cast<int>(lines_));
+            if (pt != et && pt < it + kPrefetchAhead) prefetch_node((pt++)->id, static_cast<int>(lines_));
             Neighbour next;
             int from;  // 1 = s only, 2 = t only, 3 = both
             if (it == et || (is != es && is->id < it->id)) next = *is++, from = 1;

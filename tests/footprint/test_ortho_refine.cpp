@@ -286,3 +286,49 @@ TEST_CASE("With a classified cloud, pixels of a segment running on beyond the ro
     refine_buildings_with_ortho(ring, s.cells, s.colours, s.valid, s.ndsm, 20.0, {}, {}, o);
     CHECK(crown_pixels(ring) > 100);
 }
+
+TEST_CASE("A tree too sparse to be judged segment by segment is dropped as a crown as a whole", "[footprint][ortho][crown]") {
+    // A photo cloud's crown [50, 64] x [15, 44] and nothing else: weak green
+    // colours, rough heights; the ortho's segments are 2 x 2 pixels (given),
+    // too few samples each for the local roughness, so only the whole
+    // building can show that it is a crown.
+    const Scene s = crown_scene(false, false);
+    Scene t = empty_scene(80, 60);
+    Image<uint32_t> segments(80, 60, 1, 0u);
+    for (int y = 0; y < 60; ++y)
+        for (int x = 0; x < 80; ++x) {
+            const bool tree = x >= 50 && x <= 64 && y >= 15 && y <= 44;
+            for (int b = 0; b < 3; ++b) t.colours.at(b, x, y) = s.colours.at(b, x, y);
+            t.ndsm.at(0, x, y) = tree ? s.ndsm.at(0, x, y) : 0.1f;
+            t.cells.cells[static_cast<std::size_t>(y) * 80 + x] = tree;
+            if (tree) t.cells.step_dsm.at(0, x, y) = t.ndsm.at(0, x, y);
+            segments.at(0, x, y) = static_cast<uint32_t>((y / 2) * 40 + x / 2 + 1);
+        }
+    OrthoRefineOptions o;
+    BuildingMask m = mask_of(t.cells, 80, 60);
+    REQUIRE(m.count == 1);
+    // Off (above 1): the segments alone keep it.
+    OrthoRefineOptions off = o;
+    off.min_crown_building_colour_share = 1.5;
+    BuildingMask k = m;
+    CHECK(refine_buildings_with_ortho(k, t.cells, t.colours, t.valid, t.ndsm, 20.0, segments, vegetation_levels(t), off) == 0);
+    CHECK(pixels_of(k, 50, 64) >= 400);
+    CHECK(refine_buildings_with_ortho(m, t.cells, t.colours, t.valid, t.ndsm, 20.0, segments, vegetation_levels(t), o) == 1);
+    CHECK(pixels_of(m, 0, 79) == 0);
+    // A planar roof of the same weak green, cut into the same small segments, stays.
+    const Scene g = crown_scene(false, true);
+    Scene r = g;
+    for (int y = 0; y < 60; ++y)
+        for (int x = 50; x < 80; ++x) {  // the roof alone: no crown beside it
+            r.ndsm.at(0, x, y) = 0.1f;
+            r.cells.cells[static_cast<std::size_t>(y) * 80 + x] = 0;
+            r.cells.step_dsm.at(0, x, y) = NAN;
+            for (int b = 0; b < 3; ++b) r.colours.at(b, x, y) = g.colours.at(b, 10, y);
+        }
+    BuildingMask roof = mask_of(r.cells, 80, 60);
+    REQUIRE(roof.count == 1);
+    CHECK(refine_buildings_with_ortho(roof, r.cells, r.colours, r.valid, r.ndsm, 20.0, segments, vegetation_levels(r), o) == 0);
+    CHECK(pixels_of(roof, 20, 49) >= 880);
+    o.min_crown_building_colour_share = 0.0;
+    CHECK_THROWS_WITH(o.validate(), Catch::StartsWith("min_crown_building_colour_share"));
+}
