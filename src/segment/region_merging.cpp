@@ -855,19 +855,22 @@ struct LineAllocator {
     bool operator!=(const LineAllocator<U>&) const noexcept { return false; }
 };
 
-// Min-queue of candidate merges: a 4-ary heap (half the depth of a binary
+// Min-heap of candidate merges: a 4-ary heap (half the depth of a binary
 // heap), lowest entry first. A pop prefetches the children of all four
 // children while it compares them, so the walk down the heap does not wait
 // for one memory read per level. Its first entries can be looked at, to
 // prefetch what the next merges touch.
-class MergeQueue {
+class Heap4 {
     static constexpr std::size_t kPad = 0;  // slots before the root
 
 public:
-    explicit MergeQueue(const std::vector<QueueEntry>& entries) {
-        h_.reserve(entries.size() + kPad + 1);
+    Heap4() = default;
+    // Replaces the contents with `entries` (heapified in place).
+    template <typename It>
+    void assign(It first, It last) {
+        h_.clear();
         h_.resize(kPad);
-        h_.insert(h_.end(), entries.begin(), entries.end());
+        h_.insert(h_.end(), first, last);
         for (std::size_t i = size() / 4 + 1; i-- > 0;)
             if (i < size()) sift_down(i);
     }
@@ -947,6 +950,84 @@ private:
         h[i] = e;
     }
     std::vector<QueueEntry, LineAllocator<QueueEntry>> h_;
+};
+
+
+// Min-queue of candidate merges, exact: costs are bucketed by a monotone map
+// (cost -> bucket index: floor((cost - lo) / width), clamped, the last
+// bucket an overflow); only the entries of buckets up to the current one
+// are in a 4-ary heap, the later buckets are plain arrays. Every entry in
+// the heap costs less than every entry outside it, so the heap's top is the
+// queue's lowest entry, and pops come in exactly the order of one heap of
+// everything. The heap stays small (a bucket's worth), so popping walks a
+// few cache-resident levels instead of a deep heap of every entry; a push
+// above the current bucket is an append. When the overflow is reached, its
+// entries are spread over a new set of buckets between their extremes.
+class MergeQueue {
+public:
+    explicit MergeQueue(const std::vector<QueueEntry>& entries) {
+        count_ = entries.size();
+        spread(entries.begin(), entries.end());
+        refill();
+    }
+    bool empty() const { return count_ == 0; }
+    const QueueEntry& top() const { return near_.top(); }
+    // Entries of the heap part (entry(0) is the top; 1..4 its children).
+    std::size_t near_size() const { return near_.size(); }
+    const QueueEntry& entry(std::size_t i) const { return near_.entry(i); }
+    void push(const QueueEntry& e) {
+        ++count_;
+        const std::size_t b = bucket_of(e.cost());
+        if (b <= current_) near_.push(e);
+        else buckets_[b].push_back(e);
+    }
+    void pop() {
+        near_.pop();
+        --count_;
+        if (near_.empty()) refill();
+    }
+
+private:
+    static constexpr std::size_t kBuckets = 4096;  // + 1 overflow
+    std::size_t bucket_of(double c) const {
+        if (!(c >= lo_)) return 0;  // below the range (and NaN): the first bucket
+        const double x = (c - lo_) * inv_width_;
+        return x >= double(kBuckets) ? kBuckets : static_cast<std::size_t>(x);
+    }
+    // New buckets over [min, max] of the given entries, which all cost more
+    // than anything popped so far; current_ = 0.
+    template <typename It>
+    void spread(It first, It last) {
+        double lo = INFINITY, hi = -INFINITY;
+        for (It i = first; i != last; ++i) lo = std::min(lo, i->cost()), hi = std::max(hi, i->cost());
+        lo_ = lo;
+        inv_width_ = hi > lo && std::isfinite(hi - lo) ? double(kBuckets) / (hi - lo) : 0.0;
+        std::vector<std::vector<QueueEntry>> fresh(kBuckets + 1);
+        for (It i = first; i != last; ++i) fresh[bucket_of(i->cost())].push_back(*i);
+        buckets_.swap(fresh);
+        current_ = 0;
+        near_.assign(buckets_[0].begin(), buckets_[0].end());
+        std::vector<QueueEntry>().swap(buckets_[0]);
+    }
+    // The heap is empty: move on to the next bucket holding entries.
+    void refill() {
+        while (near_.empty() && count_ > 0) {
+            if (current_ + 1 < kBuckets) {
+                ++current_;
+                std::vector<QueueEntry>& b = buckets_[current_];
+                near_.assign(b.begin(), b.end());
+                std::vector<QueueEntry>().swap(b);
+            } else {  // the overflow: spread it over new buckets
+                std::vector<QueueEntry> rest;
+                rest.swap(buckets_[kBuckets]);
+                spread(rest.begin(), rest.end());
+            }
+        }
+    }
+    Heap4 near_;
+    std::vector<std::vector<QueueEntry>> buckets_;
+    std::size_t current_ = 0, count_ = 0;
+    double lo_ = 0.0, inv_width_ = 0.0;
 };
 
 }  // namespace
@@ -1040,7 +1121,7 @@ RegionMergingResult merge_regions(const Image<float>& image, const Image<uint32_
                 g.prefetch_neighbours(heap.entry(0).a, g.record_lines());
                 g.prefetch_neighbours(heap.entry(0).b, g.record_lines());
             }
-            for (std::size_t i = 1; i < 5 && i < heap.size(); ++i) {  // the next top is one of these
+            for (std::size_t i = 1; i < 5 && i < heap.near_size(); ++i) {  // the next top is one of these
                 g.prefetch_node(heap.entry(i).a, 4);
                 g.prefetch_node(heap.entry(i).b, 4);
             }

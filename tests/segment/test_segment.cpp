@@ -106,6 +106,49 @@ TEST_CASE("Merging preserves totals and adjacency symmetry - hierarchy consisten
     CHECK(tables[0].back().size() == over.region_count + 1);
 }
 
+TEST_CASE("Merging down to a region count through one huge scale: every strategy the same labels, and fewer regions coarsen more", "[segment][merging]") {
+    // One scale of 1e9 lets every pair merge, so costs grow far past the
+    // initial ones: the merge queue's buckets overflow and are spread again
+    // many times. rag queues every pair and mutual only mutual nearest
+    // pairs, so equal labels need the exact same pop order from both.
+    ScratchDir dir("seg_min_regions");
+    make_town(dir, 150, 3, 0);
+    Image<float> img = RasterReader(dir / "ortho.tif").read_all<float>();
+    normalize_bands(img, {});
+    WatershedOptions wo;
+    wo.h_minima = 0;
+    wo.smoothing_sigma_px = 0;
+    const Oversegmentation over = watershed_oversegment(img, {}, wo);
+    REQUIRE(over.region_count > 2000);
+    RegionMergingOptions mo;
+    mo.scales = {1e9};
+    std::map<uint32_t, std::vector<uint32_t>> by_count;
+    for (uint32_t target : {1000u, 100u, 10u}) {
+        mo.min_regions = target;
+        std::vector<uint32_t> first;
+        for (auto s : {QueueStrategy::rag, QueueStrategy::nng, QueueStrategy::mutual}) {
+            mo.strategy = s;
+            const auto res = merge_regions(img, over.labels, over.region_count, mo);
+            CHECK(res.levels[0].regions_after == target);
+            if (first.empty()) first = res.levels[0].label_of_input;
+            else CHECK(res.levels[0].label_of_input == first);
+        }
+        by_count[target] = first;
+    }
+    // Stopping later is the same merge sequence cut later: every region of
+    // 1000 lies within one region of 100, and every region of 100 within one of 10.
+    for (auto [fine, coarse] : {std::pair{1000u, 100u}, std::pair{100u, 10u}}) {
+        std::map<uint32_t, uint32_t> parent;
+        bool nested = true;
+        for (uint32_t l = 1; l <= over.region_count; ++l) {
+            const auto [it, fresh] = parent.emplace(by_count[fine][l], by_count[coarse][l]);
+            nested = nested && it->second == by_count[coarse][l];
+        }
+        CHECK(nested);
+        CHECK(parent.size() == fine);
+    }
+}
+
 TEST_CASE("Real panchromatic UInt16 tile segments - region count falls with scale", "[segment][real]") {
     ScratchDir dir("seg_atl");
     SegmentOptions o;
