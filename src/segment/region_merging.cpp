@@ -339,6 +339,10 @@ public:
         for (int j = 1; j < n_bands; ++j) band_data[j].owned_from = std::max(band_data[j - 1].owned_from, band_max[j - 1] + 1);
         tbb::parallel_for(0, n_bands, [&](int j) {
             Band& B = band_data[j];
+            // Room for the band's boundary pairs up front (about half a pair
+            // per pixel with the finest seeds): pages never written are never
+            // backed, and the array is not copied as it grows.
+            B.pairs.reserve(std::size_t(band_row(j + 1) - band_row(j)) * std::size_t(w) * 3 / 4 + 64);
             auto foreign_acc = [&](uint32_t a) {
                 if (B.slot.empty()) B.slot.assign(1024, 0);
                 std::size_t mask = B.slot.size() - 1, i = (a * 2654435761u) & mask;
