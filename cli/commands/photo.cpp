@@ -124,8 +124,11 @@ void add_photo(CLI::App& parent, const GlobalFlags& g, CommandList& out) {
     add_densify_options(cmd, o->densify);
     cmd->add_option("--out", o->out_dir, "Output folder (cloud.las, sparse.las, cameras.json, photo_report.json)")->required();
     cmd->add_flag("--overwrite", o->overwrite, "Replace an existing output folder");
-    cmd->add_flag("--run", o->run, "Then the building chain on the dense cloud: OUT/ortho.tif (true ortho) and OUT/run/ (as `run`)");
-    cmd->add_option("--ortho-gsd", o->ortho_gsd_m, "True ortho cell (the run's grid), metres")->capture_default_str();
+    cmd->add_flag("--run", o->run,
+                  "Then the building chain on the dense cloud: OUT/ortho.tif (the cloud's colours), OUT/orthophoto.tif (the photos' "
+                  "colours on the cloud's surface) and OUT/run/ (as `run`)");
+    cmd->add_option("--ortho-gsd", o->ortho_gsd_m, "Cell of both orthos (the run's grid), metres")->capture_default_str();
+    cmd->add_option("--run-ortho", o->run_ortho, "The run's ortho: photos (orthophoto.tif) or cloud (ortho.tif)")->capture_default_str();
     auto run_config = std::make_shared<std::string>();
     cmd->add_option("--run-config", *run_config, "JSON config of the run (schemas/run_config.schema.json; ortho and cloud are set)");
     out.push_back({cmd, [o, run_config, &g]() {

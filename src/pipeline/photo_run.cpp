@@ -598,6 +598,8 @@ void PhotoRunOptions::validate() const {
     if (run) {
         if (!(ortho_gsd_m >= 0.02 && ortho_gsd_m <= 5.0)) throw Error("--ortho-gsd", "must be 0.02..5 m");
         ortho.validate();
+        orthophoto.validate();
+        if (run_ortho != "photos" && run_ortho != "cloud") throw Error("--run-ortho", "must be photos or cloud, not \"" + run_ortho + "\"");
     }
 }
 
@@ -677,9 +679,18 @@ PhotoRunResult run_photo(const PhotoRunOptions& o, const Progress& progress) {
             const photo::CameraSet cams = photo::read_cameras_json(r.cameras_path);
             write_geotiff(r.ortho_path, ortho, grid.transform, cams.crs_wkt, wo);
             r.ortho_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t1).count();
-            progress.sub(dense_end, 0.8)(1.0, "true ortho");
+            // The orthophoto: the oriented photos' colours on the cloud's surface.
+            const auto t2 = std::chrono::steady_clock::now();
+            std::vector<cv::Mat> images;
+            for (const photo::PhotoCamera& c : cams.cameras) images.push_back(read_colour_image((fs::path(oo.out_dir) / "images" / c.image).string()));
+            const Image<uint8_t> photo_ortho = photo::orthophoto_from_photos(dense, grid, images, cams, o.orthophoto, r.cloud_path, &r.orthophoto);
+            images.clear();
+            r.orthophoto_path = (out / "orthophoto.tif").string();
+            write_geotiff(r.orthophoto_path, photo_ortho, grid.transform, cams.crs_wkt, wo);
+            r.orthophoto_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t2).count();
+            progress.sub(dense_end, 0.8)(1.0, "orthos");
             RunOptions ro = o.city;
-            ro.ortho = r.ortho_path;
+            ro.ortho = o.run_ortho == "photos" ? r.orthophoto_path : r.ortho_path;
             ro.cloud = r.cloud_path;
             ro.keep_rasters = true;  // the DSM (and DTM, nDSM) of the run
             r.run_dir = (out / "run").string();
@@ -707,10 +718,15 @@ PhotoRunResult run_photo(const PhotoRunOptions& o, const Progress& progress) {
     if (!o.oriented_dir.empty()) j["steps"][0]["reused_from"] = fs::absolute(o.oriented_dir).string();
     if (o.run) {
         j["steps"].push_back({{"step", "true_ortho"}, {"seconds", r.ortho_seconds}, {"gsd_m", o.ortho_gsd_m}});
+        j["steps"].push_back({{"step", "orthophoto"}, {"seconds", r.orthophoto_seconds}, {"gsd_m", o.ortho_gsd_m},
+                              {"cells_measured", r.orthophoto.cells_measured}, {"cells_filled", r.orthophoto.cells_filled},
+                              {"cells_coloured", r.orthophoto.cells_coloured}, {"cells_occluded", r.orthophoto.cells_occluded},
+                              {"run_ortho", o.run_ortho}});
         j["steps"].push_back({{"step", "run"}, {"seconds", r.city.seconds}, {"buildings", r.city.buildings},
                               {"valid_lod1", r.city.valid_lod1}, {"valid_lod2", r.city.valid_lod2}, {"tiles", r.city.tiles.size()},
                               {"warnings", r.city.warnings.size()}});
         j["files"]["ortho"] = "ortho.tif";
+        j["files"]["orthophoto"] = "orthophoto.tif";
         j["files"]["run"] = "run/";
         j["files"]["run_report"] = "run/run_report.json";
     }

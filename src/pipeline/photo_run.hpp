@@ -8,6 +8,7 @@
 #include "core/progress.hpp"
 #include "photo/densify.hpp"
 #include "photo/stereo.hpp"
+#include "photo/orthophoto.hpp"
 #include "photo/true_ortho.hpp"
 #include "pipeline/city_run.hpp"
 
@@ -126,6 +127,9 @@ struct PhotoRunOptions {
     bool run = false;
     double ortho_gsd_m = 0.25;     ///< cell of OUT/ortho.tif, metres (the run's grid)
     photo::TrueOrthoOptions ortho;
+    photo::OrthophotoOptions orthophoto;  ///< OUT/orthophoto.tif: colours from the photos on the cloud's surface
+    /// The run's ortho: "photos" (OUT/orthophoto.tif) or "cloud" (OUT/ortho.tif, the cloud's own colours).
+    std::string run_ortho = "cloud";
     RunOptions city;               ///< the run's options; ortho and cloud are set by the chain
     void validate() const;
 };
@@ -134,9 +138,10 @@ struct PhotoRunResult {
     OrientRunResult orient;
     DensifyRunResult densify;
     std::string cloud_path, sparse_path, cameras_path, report_path;
-    std::string ortho_path, run_dir;  ///< empty without `run`
+    std::string ortho_path, orthophoto_path, run_dir;  ///< empty without `run`
+    photo::OrthophotoStats orthophoto;                 ///< cells measured, filled, coloured, occluded
     RunReport city;                   ///< the run's report (with `run`)
-    double ortho_seconds = 0;
+    double ortho_seconds = 0, orthophoto_seconds = 0;
     double seconds = 0;
 };
 
@@ -146,7 +151,8 @@ OrientRunResult read_orient_folder(const std::string& dir);
 
 /// The chain: orient -> densify [-> true ortho -> run]. Writes OUT/orient/
 /// (oriented folder), OUT/cameras.json, OUT/sparse.las, OUT/cloud.las,
-/// OUT/photo_report.json, and with `run` OUT/ortho.tif and OUT/run/.
+/// OUT/photo_report.json, and with `run` OUT/ortho.tif (the cloud's colours),
+/// OUT/orthophoto.tif (the photos' colours) and OUT/run/.
 /// All or nothing: on an error OUT is removed.
 PhotoRunResult run_photo(const PhotoRunOptions& options, const Progress& progress = {});
 

@@ -424,14 +424,18 @@ TEST_CASE("photo --run: orient, densify, true ortho and the building run on synt
     CHECK(cd.scores[0].precision > 0.7);
     // The report names every step with its time and counts.
     const nlohmann::json rep = nlohmann::json::parse(test::slurp(out + "/photo_report.json"));
-    REQUIRE(rep["steps"].size() == 4);
+    REQUIRE(rep["steps"].size() == 5);
     CHECK(rep["steps"][0]["step"] == "orient");
     CHECK(rep["steps"][0]["oriented"] == 6);
     CHECK(rep["steps"][1]["points"] == dense.size());
-    CHECK(rep["steps"][3]["step"] == "run");
+    CHECK(rep["steps"][3]["step"] == "orthophoto");
+    CHECK(rep["steps"][3]["cells_coloured"].get<long>() > rep["steps"][3]["cells_measured"].get<long>() / 2);
+    CHECK(rep["steps"][3]["run_ortho"] == "cloud");
+    CHECK(rep["steps"][4]["step"] == "run");
     CHECK(rep["crs"] == "EPSG:32650");
     // The true ortho and the run: DSM mosaic and buildings at the truth's places and heights.
     CHECK(fs::exists(out + "/ortho.tif"));
+    CHECK(fs::exists(out + "/orthophoto.tif"));
     CHECK(fs::exists(out + "/run/dsm.vrt"));
     const nlohmann::json found = nlohmann::json::parse(test::slurp(out + "/run/buildings.geojson"));
     const nlohmann::json truth_fp = nlohmann::json::parse(test::slurp(dir / "truth.geojson"));
