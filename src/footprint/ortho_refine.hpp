@@ -61,7 +61,7 @@ struct OrthoRefineOptions {
     /// locally) is a crown and is dropped: a photo cloud's tree has a few
     /// points in a cell and most cells empty, so its segments are too sparse
     /// to be judged one by one. (0, 1]; above 1 = off.
-    double min_crown_building_colour_share = 0.6;
+    double min_crown_building_colour_share = 0.5;
     void validate() const;
 };
 

@@ -129,7 +129,7 @@ struct PhotoRunOptions {
     photo::TrueOrthoOptions ortho;
     photo::OrthophotoOptions orthophoto;  ///< OUT/orthophoto.tif: colours from the photos on the cloud's surface
     /// The run's ortho: "photos" (OUT/orthophoto.tif) or "cloud" (OUT/ortho.tif, the cloud's own colours).
-    std::string run_ortho = "cloud";
+    std::string run_ortho = "photos";
     RunOptions city;               ///< the run's options; ortho and cloud are set by the chain
     void validate() const;
 };

@@ -430,7 +430,7 @@ TEST_CASE("photo --run: orient, densify, true ortho and the building run on synt
     CHECK(rep["steps"][1]["points"] == dense.size());
     CHECK(rep["steps"][3]["step"] == "orthophoto");
     CHECK(rep["steps"][3]["cells_coloured"].get<long>() > rep["steps"][3]["cells_measured"].get<long>() / 2);
-    CHECK(rep["steps"][3]["run_ortho"] == "cloud");
+    CHECK(rep["steps"][3]["run_ortho"] == "photos");
     CHECK(rep["steps"][4]["step"] == "run");
     CHECK(rep["crs"] == "EPSG:32650");
     // The true ortho and the run: DSM mosaic and buildings at the truth's places and heights.
