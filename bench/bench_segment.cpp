@@ -16,6 +16,7 @@
 //       [--labels-out final.tif] [--json out.json]
 // The window is clipped to the raster. --seeds-in skips the watershed and
 // merges the given label raster (1..N, 0 = nodata); --seeds-out writes ours.
+#include "bench_main.hpp"
 #include <chrono>
 #include <ctime>
 #include <cstdio>
@@ -57,7 +58,7 @@ std::vector<double> parse_list(const std::string& s) {
     std::vector<double> v;
     std::stringstream ss(s);
     std::string item;
-    while (std::getline(ss, item, ',')) v.push_back(std::atof(item.c_str()));
+    while (std::getline(ss, item, ',')) v.push_back(cityforge::bench::parse_number(item.c_str(), "list item"));
     return v;
 }
 
@@ -83,18 +84,15 @@ int raster_mode(int argc, char** argv) {
     for (int i = 1; i < argc; ++i) {
         const std::string a = argv[i];
         auto next = [&]() -> std::string {
-            if (i + 1 >= argc) {
-                std::fprintf(stderr, "bench_segment: %s needs a value\n", a.c_str());
-                std::exit(2);
-            }
+            if (i + 1 >= argc) throw Error(a, "needs a value");
             return argv[++i];
         };
         if (a == "--raster") path = next();
         else if (a == "--window") window = parse_list(next());
-        else if (a == "--h-minima") wo.h_minima = std::atof(next().c_str());
-        else if (a == "--smoothing") wo.smoothing_sigma_px = std::atof(next().c_str());
+        else if (a == "--h-minima") wo.h_minima = cityforge::bench::parse_number(next().c_str(), "--h-minima");
+        else if (a == "--smoothing") wo.smoothing_sigma_px = cityforge::bench::parse_number(next().c_str(), "--smoothing");
         else if (a == "--scales") scales = parse_list(next());
-        else if (a == "--min-regions") min_regions = static_cast<uint32_t>(std::atol(next().c_str()));
+        else if (a == "--min-regions") min_regions = static_cast<uint32_t>(cityforge::bench::parse_number(next().c_str(), "--min-regions"));
         else if (a == "--seeds-out") seeds_out = next();
         else if (a == "--seeds-in") seeds_in = next();
         else if (a == "--labels-out") labels_out = next();
@@ -105,8 +103,7 @@ int raster_mode(int argc, char** argv) {
             std::string item;
             while (std::getline(ss, item, ',')) strategies.push_back(queue_strategy_from_string(item));
         } else {
-            std::fprintf(stderr, "bench_segment: unknown argument %s\n", a.c_str());
-            return 2;
+            throw Error(a, "unknown argument (see --help)");
         }
     }
     RasterReader reader(path);
@@ -197,11 +194,11 @@ int raster_mode(int argc, char** argv) {
 }
 }  // namespace
 
-int main(int argc, char** argv) {
+static int run_bench(int argc, char** argv) {
     for (int i = 1; i < argc; ++i)
         if (std::string(argv[i]) == "--raster") return raster_mode(argc, argv);
     std::vector<double> sizes;
-    for (int i = 1; i < argc; ++i) sizes.push_back(std::atof(argv[i]));
+    for (int i = 1; i < argc; ++i) sizes.push_back(cityforge::bench::parse_number(argv[i], "size_m"));
     if (sizes.empty()) sizes = {1300, 4000};
     const std::vector<double> scales{500, 1000, 1500, 2000, 2500, 3000};
     const std::vector<double> fine_scales{10, 20, 30, 40, 50, 60};
@@ -251,4 +248,12 @@ int main(int argc, char** argv) {
         std::filesystem::remove_all(dir);
     }
     return 0;
+}
+
+int main(int argc, char** argv) {
+    return cityforge::bench::run_main(argc, argv, "bench_segment",
+                                      "bench_segment [SIZE_M ...] | --raster FILE [--window col,row,w,h] [--h-minima H] [--smoothing S] "
+                                      "[--scales a,b,...] [--strategies rag,nng,mutual] [--min-regions N] [--seeds-out F] [--seeds-in F] "
+                                      "[--labels-out F] [--json F]",
+                                      run_bench);
 }
