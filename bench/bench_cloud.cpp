@@ -25,12 +25,8 @@
 using namespace cityforge;
 
 namespace {
-double now() { return std::chrono::duration<double>(std::chrono::steady_clock::now().time_since_epoch()).count(); }
-double cpu_now() {
-    timespec ts{};
-    clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &ts);
-    return double(ts.tv_sec) + 1e-9 * double(ts.tv_nsec);
-}
+using cityforge::bench::now;
+using cityforge::bench::cpu_now;
 // System CPU seconds and minor page faults of the process so far.
 struct SysUsage {
     double sys_s = 0;

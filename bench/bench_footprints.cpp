@@ -23,7 +23,7 @@
 using namespace cityforge;
 
 namespace {
-double now() { return std::chrono::duration<double>(std::chrono::steady_clock::now().time_since_epoch()).count(); }
+using cityforge::bench::now;
 }  // namespace
 
 static int run_bench(int argc, char** argv) {

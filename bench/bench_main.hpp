@@ -4,16 +4,28 @@
 // exception is caught here, once, and printed as one line on stderr with a
 // non-zero exit (1 for Error, 3 out of memory, 70 otherwise), as the CLI does.
 // Numeric positional arguments are parsed strictly (no silent 0 from atof).
+#include <chrono>
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
 #include <exception>
 #include <new>
 #include <string>
+#include <time.h>
 
 #include "core/error.hpp"
 
 namespace cityforge::bench {
+
+/// Wall-clock seconds (steady clock; differences only).
+inline double now() { return std::chrono::duration<double>(std::chrono::steady_clock::now().time_since_epoch()).count(); }
+
+/// CPU seconds of the whole process so far (all threads).
+inline double cpu_now() {
+    timespec ts{};
+    clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &ts);
+    return double(ts.tv_sec) + 1e-9 * double(ts.tv_nsec);
+}
 
 /// `text` as a finite number, or Error naming `what` (e.g. "size_m").
 inline double parse_number(const char* text, const char* what) {

@@ -38,16 +38,8 @@
 using namespace cityforge;
 
 namespace {
-double now() {
-    return std::chrono::duration<double>(std::chrono::steady_clock::now().time_since_epoch()).count();
-}
-// CPU seconds of the whole process (all threads): less sensitive to the load
-// of a shared machine than wall time.
-double cpu_now() {
-    timespec ts{};
-    clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &ts);
-    return double(ts.tv_sec) + 1e-9 * double(ts.tv_nsec);
-}
+using cityforge::bench::now;
+using cityforge::bench::cpu_now;  // less sensitive to the load of a shared machine than wall time
 long peak_rss_kb() {
     rusage u{};
     getrusage(RUSAGE_SELF, &u);

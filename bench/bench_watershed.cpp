@@ -26,13 +26,8 @@
 using namespace cityforge;
 
 namespace {
-double now() { return std::chrono::duration<double>(std::chrono::steady_clock::now().time_since_epoch()).count(); }
-// CPU seconds of the whole process (all threads).
-double cpu_now() {
-    timespec ts{};
-    clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &ts);
-    return double(ts.tv_sec) + 1e-9 * double(ts.tv_nsec);
-}
+using cityforge::bench::now;
+using cityforge::bench::cpu_now;
 }  // namespace
 
 namespace {
