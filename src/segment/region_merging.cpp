@@ -983,7 +983,12 @@ public:
         ++count_;
         const std::size_t b = bucket_of(e.cost());
         if (b <= current_) near_.push(e);
-        else buckets_[b].push_back(e);
+        else {
+            buckets_[b].push_back(e);
+            // The queue had run empty (the last pop found nothing to refill
+            // from): the heap must hold the top again before it is read.
+            if (near_.empty()) refill();
+        }
     }
     void pop() {
         near_.pop();
@@ -1067,6 +1072,7 @@ RegionMergingResult merge_regions(const Image<float>& image, const Image<uint32_
         if (g.alive(r)) previous_compact[r] = g.key_of(r), live.push_back(r);
     uint32_t previous_count = region_count;
     std::vector<uint32_t> changed, rescan;
+    std::vector<uint32_t> offered;  // mutual: lower nodes of the pairs pushed by the current merge
     for (std::size_t s = 0; s < o.scales.size(); ++s) {
         const auto t0 = std::chrono::steady_clock::now();
         const double c0 = thread_cpu_seconds();
@@ -1102,8 +1108,19 @@ RegionMergingResult merge_regions(const Image<float>& image, const Image<uint32_
             heap.push(entry(a, b, c));
             ++level.queue_pushes;
         };
+        // With the mutual queue a pair is offered from both its regions when
+        // both are the merged region or its neighbours: the second push would
+        // be the same entry (same keys, same cost), popped right after the
+        // first and dropped as stale, so it is not made.
         auto offer_nn = [&](uint32_t r) {
-            if (queued_nn(r)) push_pair(r, g.nn(r), g.nn_cost(r));
+            if (!queued_nn(r)) return;
+            const uint32_t k = g.nn(r);
+            if (o.strategy == QueueStrategy::mutual) {
+                const uint32_t lower = std::min(r, k);
+                if (std::find(offered.begin(), offered.end(), lower) != offered.end()) return;
+                offered.push_back(lower);
+            }
+            push_pair(r, k, g.nn_cost(r));
         };
         // Is e the entry of a current pair at its current cost? Then it is
         // the entry a fresh push would make (keys and cost equal).
@@ -1132,7 +1149,7 @@ RegionMergingResult merge_regions(const Image<float>& image, const Image<uint32_
             const uint32_t a = e.a, b = e.b;
             if (!g.alive(a) || !g.alive(b) || (uint64_t(g.key_of(a)) << 32 | g.key_of(b)) != e.keys || !current(e, a, b)) continue;
             if (!(e.cost() < threshold)) break;  // rag holds every pair: the cheapest is too dear
-            changed.clear(), rescan.clear();
+            changed.clear(), rescan.clear(), offered.clear();
             const uint32_t m = g.merge(a, b, o.strategy != QueueStrategy::rag, changed, rescan);
             uf[m == a ? b : a] = m;
             ++level.merges;
