@@ -14,6 +14,7 @@
 #include <tbb/parallel_for.h>
 #include <tbb/parallel_reduce.h>
 
+#include "core/prefetch.hpp"
 #include "core/error.hpp"
 #include "core/grid_fill.hpp"
 #include "core/grid_size.hpp"
@@ -288,7 +289,7 @@ void canonical_order(PointCloud& c) {
             double* const values = v->data();
             ranges([=](std::size_t from, std::size_t to) {
                 for (std::size_t i = from; i < to; ++i) {
-                    if (i + 64 < to) __builtin_prefetch(values + order[i + 64]);
+                    if (i + 64 < to) prefetch_line(values + order[i + 64]);
                     out[i] = values[order[i]];
                 }
             });
@@ -312,7 +313,7 @@ void canonical_order(PointCloud& c) {
             uint16_t *const it = intensity, *const rd = red;
             uint8_t *const cl = cls, *const rn = ret, *const nr = nret;
             for (std::size_t i = from; i < to; ++i) {
-                if (i + 64 < to) __builtin_prefetch(pk + o[i + 64]);
+                if (i + 64 < to) prefetch_line(pk + o[i + 64]);
                 const uint64_t w = pk[o[i]];
                 it[i] = static_cast<uint16_t>(w), cl[i] = static_cast<uint8_t>(w >> 16);
                 rn[i] = static_cast<uint8_t>(w >> 24), nr[i] = static_cast<uint8_t>(w >> 32);
@@ -328,7 +329,7 @@ void canonical_order(PointCloud& c) {
             const auto* const o = order;
             uint16_t *const gr = green, *const bl = blue;
             for (std::size_t i = from; i < to; ++i) {
-                if (i + 64 < to) __builtin_prefetch(pk + o[i + 64]);
+                if (i + 64 < to) prefetch_line(pk + o[i + 64]);
                 const uint64_t w = pk[o[i]];
                 gr[i] = static_cast<uint16_t>(w), bl[i] = static_cast<uint16_t>(w >> 16);
             }

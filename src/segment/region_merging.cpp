@@ -13,6 +13,7 @@
 #include <tbb/parallel_reduce.h>
 #include <tbb/parallel_for.h>
 
+#include "core/prefetch.hpp"
 #include "core/error.hpp"
 #include "core/parallel.hpp"
 
@@ -64,17 +65,6 @@ Image<uint32_t> relabel(const Image<uint32_t>& labels, const std::vector<uint32_
 namespace {
 
 
-// Starts loading the cache line at p. An asm statement, not
-// __builtin_prefetch: GCC 12 dropped loops of __builtin_prefetch that
-// had no other effect (RegionGraph::merge's prefetch of the neighbours'
-// records was not in the binary), and an asm volatile is always emitted.
-inline void prefetch_line(const void* p) {
-#if defined(__x86_64__) || defined(__i386__)
-    asm volatile("prefetcht0 %0" : : "m"(*static_cast<const char*>(p)));
-#else
-    __builtin_prefetch(p);
-#endif
-}
 
 double thread_cpu_seconds() {
     timespec ts{};
@@ -394,8 +384,8 @@ public:
                     const uint32_t a = node[la];
                     if (a >= prefetched && a < owned_end) {
                         for (const uint32_t until = std::min(owned_end, a + kAhead); prefetched < until; ++prefetched) {
-                            __builtin_prefetch(acc(prefetched), 1);
-                            __builtin_prefetch(acc(prefetched) + 8, 1);
+                            prefetch_line(acc(prefetched));
+                            prefetch_line(acc(prefetched) + 8);
                         }
                     }
                     // A run of pixels of region a within the block: x .. end - 1.
@@ -909,7 +899,7 @@ public:
             const std::size_t first = 4 * i + 1;
             if (first >= n) break;
             for (std::size_t c = 4 * first + 1; c < 4 * first + 17 && c < n; c += 4)
-                __builtin_prefetch(h + c), __builtin_prefetch(h + c + 3);
+                prefetch_line(h + c), prefetch_line(h + c + 3);
             const std::size_t best = lowest_child(h, first, n);
             h[i] = h[best];
             i = best;

@@ -11,6 +11,7 @@
 #include <tbb/parallel_for.h>
 #include <unistd.h>
 
+#include "core/prefetch.hpp"
 #include "core/error.hpp"
 #include "core/parallel.hpp"
 
@@ -634,13 +635,13 @@ Oversegmentation watershed_oversegment(const Image<float>& image, const std::vec
     const std::size_t row = static_cast<std::size_t>(w);
     auto prefetch_pixel = [&](uint32_t q) {
         const uint32_t* pq = parent.data() + q;
-        __builtin_prefetch(pq, 1);
-        if (q >= row) __builtin_prefetch(pq - row, 1);
-        if (q + row < n) __builtin_prefetch(pq + row, 1);
+        prefetch_line(pq);
+        if (q >= row) prefetch_line(pq - row);
+        if (q + row < n) prefetch_line(pq + row);
         for (int b = 0; b < bands; ++b) {
-            __builtin_prefetch(band[b] + q);
-            if (q >= row) __builtin_prefetch(band[b] + q - row);
-            if (q + row < n) __builtin_prefetch(band[b] + q + row);
+            prefetch_line(band[b] + q);
+            if (q >= row) prefetch_line(band[b] + q - row);
+            if (q + row < n) prefetch_line(band[b] + q + row);
         }
     };
     for (uint32_t k = 0; k < n_valid; ++k) {
