@@ -1,5 +1,7 @@
 #include "core/grid_fill.hpp"
 
+#include "core/error.hpp"
+
 #include <algorithm>
 #include <array>
 #include <cmath>
@@ -107,6 +109,36 @@ void fill_gaps(std::vector<double>& g, int w, int h, int max_ray_cells) {
         for (std::size_t k = r.begin(); k != r.end(); ++k)
             if (std::isnan(g[k])) g[k] = den[k] > 0 ? num[k] / den[k] : mean;  // enclosed on all 8 rays: the mean ground
     });
+}
+
+void fill_from_neighbours(std::vector<float>& v, int w, int h, int channels, int passes) {
+    if (channels < 1 || channels > 4) throw Error("fill_from_neighbours", "internal: 1 to 4 values per cell");
+    const std::size_t c = static_cast<std::size_t>(channels);
+    for (int pass = 0; pass < passes; ++pass) {
+        std::vector<float> next = v;
+        bool changed = false;
+        for (int r = 0; r < h; ++r)
+            for (int q = 0; q < w; ++q) {
+                const std::size_t u = static_cast<std::size_t>(r) * w + q;
+                if (!std::isnan(v[c * u])) continue;
+                double s[4] = {0, 0, 0, 0};
+                int k = 0;
+                for (int dr = -1; dr <= 1; ++dr)
+                    for (int dq = -1; dq <= 1; ++dq) {
+                        const int rr = r + dr, qq = q + dq;
+                        if ((!dr && !dq) || rr < 0 || qq < 0 || rr >= h || qq >= w) continue;
+                        const std::size_t t = static_cast<std::size_t>(rr) * w + qq;
+                        if (std::isnan(v[c * t])) continue;
+                        for (std::size_t b = 0; b < c; ++b) s[b] += v[c * t + b];
+                        ++k;
+                    }
+                if (k < 3) continue;
+                for (std::size_t b = 0; b < c; ++b) next[c * u + b] = static_cast<float>(s[b] / k);
+                changed = true;
+            }
+        v.swap(next);
+        if (!changed) break;
+    }
 }
 
 }  // namespace cityforge

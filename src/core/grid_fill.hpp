@@ -22,6 +22,15 @@ inline constexpr double kGapFillReach_m = 40.0;
 /// nearest valid cells at any distance, else the mean of the grid).
 void fill_gaps(std::vector<double>& grid, int w, int h, int max_ray_cells = 0);
 
+/// Grows values into NaN cells of the row-major `w` x `h` grid of
+/// `channels` interleaved values per cell (a cell is empty when its first
+/// value is NaN): each pass, an empty cell with at least 3 filled cells among
+/// its 8 neighbours takes their mean, from the state before the pass (so the
+/// result does not depend on the order of the cells); at most `passes`
+/// passes, each growing the filled area by one cell; stops early when a pass
+/// fills nothing. Small gaps close, large empty areas stay empty.
+void fill_from_neighbours(std::vector<float>& grid, int w, int h, int channels, int passes);
+
 /// kGapFillReach_m in cells of `cell_m` metres (at least 1).
 int gap_fill_reach_cells(double cell_m);
 

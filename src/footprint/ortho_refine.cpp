@@ -180,6 +180,12 @@ std::size_t refine_buildings_with_ortho(BuildingMask& mask, const BuildingCells&
                 Box& b = box[l];
                 b.x0 = std::min(b.x0, x), b.y0 = std::min(b.y0, y), b.x1 = std::max(b.x1, x), b.y1 = std::max(b.y1, y);
             }
+    // Heights (crop pixel coordinates, nDSM) that scatter like a crown: no
+    // plane (nor two along an axis) fits them, and they are rough locally.
+    auto crown_heights = [&](const std::vector<std::array<double, 3>>& p) {
+        return !p.empty() && roof_plane_sigma(p) > o.max_crown_plane_sigma_m &&
+               local_roughness(p, local_radius_px) > o.min_crown_local_roughness_m;
+    };
     // The whole-building crown test (min_crown_building_colour_share): the
     // share of its seen cells with vegetation colours, then its heights.
     auto crown_as_a_whole = [&](uint32_t l) {
@@ -195,8 +201,7 @@ std::size_t refine_buildings_with_ortho(BuildingMask& mask, const BuildingCells&
                 if (std::isfinite(ndsm.data[k])) heights.push_back({double(x - b.x0), double(y - b.y0), double(ndsm.data[k])});
             }
         if (seen == 0 || static_cast<double>(coloured) < o.min_crown_building_colour_share * static_cast<double>(seen)) return false;
-        return !heights.empty() && roof_plane_sigma(heights) > o.max_crown_plane_sigma_m &&
-               local_roughness(heights, local_radius_px) > o.min_crown_local_roughness_m;
+        return crown_heights(heights);
     };
     std::vector<uint32_t> out(n, 0);
     for (uint32_t l = 1; l <= mask.count; ++l) {
@@ -247,8 +252,7 @@ std::size_t refine_buildings_with_ortho(BuildingMask& mask, const BuildingCells&
                     if (s && 2 * weak[s] > size[s] && std::isfinite(z)) samples[s].push_back({double(x), double(y), double(z)});
                 }
         for (uint32_t s = 1; s <= count; ++s) {
-            crown[s] = !samples.empty() && !samples[s].empty() && roof_plane_sigma(samples[s]) > o.max_crown_plane_sigma_m &&
-                       local_roughness(samples[s], local_radius_px) > o.min_crown_local_roughness_m;
+            crown[s] = !samples.empty() && crown_heights(samples[s]);
             vetoed[s] |= 2 * green[s] > size[s] || crown[s];
         }
         std::vector<uint8_t> voted(static_cast<std::size_t>(cw) * ch, 0);

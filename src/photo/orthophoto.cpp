@@ -9,6 +9,7 @@
 #include <tbb/parallel_for.h>
 
 #include "core/error.hpp"
+#include "core/grid_fill.hpp"
 
 namespace cityforge::photo {
 
@@ -21,8 +22,7 @@ void OrthophotoOptions::validate() const {
 namespace {
 
 // The cloud's top surface on the grid (NaN where no point), and whether each
-// cell was measured; gaps filled from their 8 neighbours, pass by pass (each
-// pass from the state before it, so the result is order-free).
+// cell was measured; gaps filled from their neighbours (fill_from_neighbours).
 std::vector<float> top_surface(const PointCloud& c, const GridSpec& g, int fill_passes, std::vector<uint8_t>& measured) {
     const std::size_t n = static_cast<std::size_t>(g.width) * g.height;
     std::vector<float> top(n, std::numeric_limits<float>::quiet_NaN());
@@ -36,29 +36,7 @@ std::vector<float> top_surface(const PointCloud& c, const GridSpec& g, int fill_
         if (!measured[k] || z > top[k]) top[k] = z;
         measured[k] = 1;
     }
-    for (int pass = 0; pass < fill_passes; ++pass) {
-        std::vector<float> next = top;
-        bool changed = false;
-        for (int r = 0; r < g.height; ++r)
-            for (int q = 0; q < g.width; ++q) {
-                const std::size_t u = static_cast<std::size_t>(r) * g.width + q;
-                if (!std::isnan(top[u])) continue;
-                double s = 0;
-                int k = 0;
-                for (int dr = -1; dr <= 1; ++dr)
-                    for (int dq = -1; dq <= 1; ++dq) {
-                        const int rr = r + dr, qq = q + dq;
-                        if ((!dr && !dq) || rr < 0 || qq < 0 || rr >= g.height || qq >= g.width) continue;
-                        const float v = top[static_cast<std::size_t>(rr) * g.width + qq];
-                        if (!std::isnan(v)) s += v, ++k;
-                    }
-                if (k < 3) continue;
-                next[u] = static_cast<float>(s / k);
-                changed = true;
-            }
-        top.swap(next);
-        if (!changed) break;
-    }
+    fill_from_neighbours(top, g.width, g.height, 1, fill_passes);
     return top;
 }
 
@@ -126,7 +104,13 @@ Image<uint8_t> orthophoto_from_photos(const PointCloud& cloud, const GridSpec& g
     Image<uint8_t> out(g.width, g.height, 3, 0);
     std::vector<uint8_t> coloured(n, 0), occluded(n, 0);
     tbb::parallel_for(0, g.height, [&](int r) {
-        std::vector<std::pair<double, std::size_t>> views;
+        struct View {
+            double neg_cos;  // most nadir first
+            std::size_t camera;  // ties by camera order
+            Eigen::Vector2d px;
+            bool operator<(const View& v) const { return neg_cos != v.neg_cos ? neg_cos < v.neg_cos : camera < v.camera; }
+        };
+        std::vector<View> views;
         for (int q = 0; q < g.width; ++q) {
             const std::size_t k = static_cast<std::size_t>(r) * g.width + q;
             if (std::isnan(surface[k])) continue;
@@ -139,16 +123,14 @@ Image<uint8_t> orthophoto_from_photos(const PointCloud& cloud, const GridSpec& g
                 if (d.z() < cos_limit) continue;
                 const auto px = cam.project(X);
                 if (!px || !cam.inside(*px, 1.0)) continue;
-                views.push_back({-d.z(), i});  // most nadir first; ties by camera order
+                views.push_back({-d.z(), i, *px});
             }
             std::sort(views.begin(), views.end());
             bool any = false;
-            for (const auto& [neg_cos, i] : views) {
-                const PhotoCamera& cam = cameras.cameras[i];
-                if (hidden(X, cam.centre)) continue;
-                const Eigen::Vector2d px = *cam.project(X);
+            for (const View& v : views) {
+                if (hidden(X, cameras.cameras[v.camera].centre)) continue;
                 double rgb[3];
-                sample_rgb(images[i], px.x(), px.y(), rgb);
+                sample_rgb(images[v.camera], v.px.x(), v.px.y(), rgb);
                 for (int b = 0; b < 3; ++b) out.at(b, q, r) = static_cast<uint8_t>(std::clamp(std::lround(rgb[b]), 1L, 255L));
                 any = true;
                 break;

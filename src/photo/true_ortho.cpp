@@ -6,6 +6,7 @@
 #include <vector>
 
 #include "core/error.hpp"
+#include "core/grid_fill.hpp"
 
 namespace cityforge::photo {
 
@@ -44,42 +45,17 @@ Image<uint8_t> true_ortho_from_cloud(const PointCloud& c, const GridSpec& g, con
         sum[3 * u] += c.red[i] / 257.0, sum[3 * u + 1] += c.green[i] / 257.0, sum[3 * u + 2] += c.blue[i] / 257.0;
         ++cnt[u];
     }
-    std::vector<float> rgb(3 * n, -1.0f);
+    std::vector<float> rgb(3 * n, std::numeric_limits<float>::quiet_NaN());
     for (std::size_t u = 0; u < n; ++u)
         if (cnt[u])
             for (int b = 0; b < 3; ++b) rgb[3 * u + b] = static_cast<float>(sum[3 * u + b] / cnt[u]);
-    // Gap filling: an empty cell with at least 3 filled neighbours takes their
-    // mean (from the state before the pass, so the result is order-free).
-    for (int pass = 0; pass < o.fill_passes; ++pass) {
-        std::vector<float> next = rgb;
-        bool changed = false;
-        for (int r = 0; r < g.height; ++r)
-            for (int q = 0; q < g.width; ++q) {
-                const std::size_t u = static_cast<std::size_t>(r) * g.width + q;
-                if (rgb[3 * u] >= 0) continue;
-                double s[3] = {0, 0, 0};
-                int k = 0;
-                for (int dr = -1; dr <= 1; ++dr)
-                    for (int dq = -1; dq <= 1; ++dq) {
-                        const int rr = r + dr, qq = q + dq;
-                        if ((!dr && !dq) || rr < 0 || qq < 0 || rr >= g.height || qq >= g.width) continue;
-                        const std::size_t v = static_cast<std::size_t>(rr) * g.width + qq;
-                        if (rgb[3 * v] < 0) continue;
-                        for (int b = 0; b < 3; ++b) s[b] += rgb[3 * v + b];
-                        ++k;
-                    }
-                if (k < 3) continue;
-                for (int b = 0; b < 3; ++b) next[3 * u + b] = static_cast<float>(s[b] / k);
-                changed = true;
-            }
-        rgb.swap(next);
-        if (!changed) break;
-    }
+    // Small gaps between patches filled from their neighbours.
+    fill_from_neighbours(rgb, g.width, g.height, 3, o.fill_passes);
     Image<uint8_t> out(g.width, g.height, 3, 0);
     for (int r = 0; r < g.height; ++r)
         for (int q = 0; q < g.width; ++q) {
             const std::size_t u = static_cast<std::size_t>(r) * g.width + q;
-            if (rgb[3 * u] < 0) continue;
+            if (std::isnan(rgb[3 * u])) continue;
             for (int b = 0; b < 3; ++b)
                 out.at(b, q, r) = static_cast<uint8_t>(std::clamp(std::lround(rgb[3 * u + b]), 1L, 255L));
         }
