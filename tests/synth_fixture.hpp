@@ -20,4 +20,19 @@ inline SynthResult make_town(const ScratchDir& dir, double size_m, uint64_t seed
     return write_synthetic_town(dir.path.string(), o);
 }
 
+/// A small town photographed by `views` cameras in strips (120 m, seed 3,
+/// 320 x 240 px photos at 0.15 m, exact surface every 0.15 m), no cloud.
+inline SynthResult make_views(const ScratchDir& dir, int views = 4) {
+    SynthOptions o;
+    o.size_m = 120;
+    o.seed = 3;
+    o.cloud_density_m2 = 0;
+    o.views.views = views;
+    o.views.gsd_m = 0.15;
+    o.views.width_px = 320;
+    o.views.height_px = 240;
+    o.views.surface_spacing_m = 0.15;
+    return write_synthetic_town(dir.path.string(), o);
+}
+
 }  // namespace cityforge::test

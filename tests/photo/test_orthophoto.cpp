@@ -16,6 +16,7 @@
 #include "photo/orthophoto.hpp"
 #include "raster/raster.hpp"
 #include "synth/synth.hpp"
+#include "synth_fixture.hpp"
 #include "test_support.hpp"
 
 using namespace cityforge;
@@ -57,16 +58,7 @@ Agreement agreement(const Image<uint8_t>& ortho, const Image<uint8_t>& ref, cons
 
 TEST_CASE("The orthophoto takes the photos' colours where the surface does not hide them", "[photo][orthophoto]") {
     ScratchDir dir("orthophoto");
-    SynthOptions so;
-    so.size_m = 120;
-    so.seed = 3;
-    so.cloud_density_m2 = 0;
-    so.views.views = 6;
-    so.views.gsd_m = 0.15;
-    so.views.width_px = 320;
-    so.views.height_px = 240;
-    so.views.surface_spacing_m = 0.15;
-    const SynthResult s = write_synthetic_town(dir.path.string(), so);
+    const SynthResult s = test::make_views(dir, 6);
     const photo::CameraSet set = photo::read_cameras_json((dir / "views/cameras_truth.json"));
     std::vector<cv::Mat> images;
     for (const auto& c : set.cameras) images.push_back(cv::imread(dir / ("views/" + c.image), cv::IMREAD_COLOR));

@@ -18,28 +18,16 @@
 #include "photo/feature_matching.hpp"
 #include "pipeline/photo_run.hpp"
 #include "synth/synth.hpp"
+#include "synth_fixture.hpp"
 #include "test_support.hpp"
 
 using namespace cityforge;
 using cityforge::test::run_cli;
+using cityforge::test::make_views;
 using cityforge::test::ScratchDir;
 namespace fs = std::filesystem;
 
 namespace {
-
-// A small town photographed by 4 cameras in 2 strips (320 x 240 px, 0.15 m).
-SynthResult make_views(const ScratchDir& dir, int views = 4) {
-    SynthOptions o;
-    o.size_m = 120;
-    o.seed = 3;
-    o.cloud_density_m2 = 0;
-    o.views.views = views;
-    o.views.gsd_m = 0.15;
-    o.views.width_px = 320;
-    o.views.height_px = 240;
-    o.views.surface_spacing_m = 0.15;
-    return write_synthetic_town(dir.path.string(), o);
-}
 
 // Reference points inside the xy box of `pred` (a pair sees only part of the block).
 PointCloud crop_to(const PointCloud& ref, const PointCloud& pred) {
