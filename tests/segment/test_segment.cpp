@@ -5,6 +5,7 @@
 #include <set>
 #include <tbb/global_control.h>
 
+#include "segment/watershed_reference.hpp"
 #include "core/error.hpp"
 #include "pipeline/segment_raster.hpp"
 #include "raster/raster.hpp"
@@ -363,54 +364,6 @@ TEST_CASE("Region statistics do not depend on the label order or the thread coun
     }
 }
 
-namespace {
-// The sequential flooding without dynamics, written out plainly: valid pixels
-// in (level, index) order; a pixel joins the seed of its flooded neighbour
-// (up, left, right, down; seeds without repeats, each through its first
-// neighbour) closest in colour, or starts a seed; labels in raster order of
-// first appearance. The library's parallel walk must give exactly this.
-Oversegmentation reference_flooding(const Image<float>& img, const std::vector<uint8_t>& valid, const WatershedOptions& wo) {
-    const Image<float> g = multiband_gradient(img, wo);
-    const int w = img.width, h = img.height;
-    const std::size_t n = img.pixel_count();
-    std::vector<std::pair<uint16_t, uint32_t>> order;
-    for (std::size_t i = 0; i < n; ++i)
-        if (valid.empty() || valid[i])
-            order.push_back({static_cast<uint16_t>(std::min(65535.0f, g.data[i] * 4.0f)), static_cast<uint32_t>(i)});
-    std::sort(order.begin(), order.end());
-    constexpr uint32_t none = 0xFFFFFFFFu;
-    std::vector<uint32_t> seed(n, none);
-    for (const auto& [lv, p] : order) {
-        const int x = static_cast<int>(p % w), y = static_cast<int>(p / w);
-        std::vector<uint32_t> roots, via;
-        auto visit = [&](int qx, int qy) {
-            if (qx < 0 || qy < 0 || qx >= w || qy >= h) return;
-            const uint32_t q = static_cast<uint32_t>(qy * w + qx);
-            if (seed[q] == none || std::find(roots.begin(), roots.end(), seed[q]) != roots.end()) return;
-            roots.push_back(seed[q]), via.push_back(q);
-        };
-        visit(x, y - 1), visit(x - 1, y), visit(x + 1, y), visit(x, y + 1);
-        uint32_t s = p;
-        float closest = INFINITY;
-        for (std::size_t k = 0; k < roots.size(); ++k) {
-            float d = 0.0f;
-            for (int b = 0; b < img.bands; ++b) {
-                const float diff = img.band_data(b)[p] - img.band_data(b)[via[k]];
-                d += diff * diff;
-            }
-            if (d < closest) closest = d, s = roots[k];
-        }
-        seed[p] = s;
-    }
-    Oversegmentation out;
-    out.labels = Image<uint32_t>(w, h, 1, 0u);
-    std::map<uint32_t, uint32_t> label;
-    for (std::size_t i = 0; i < n; ++i)
-        if (seed[i] != none) out.labels.data[i] = label.emplace(seed[i], static_cast<uint32_t>(label.size() + 1)).first->second;
-    out.region_count = static_cast<uint32_t>(label.size());
-    return out;
-}
-}  // namespace
 
 TEST_CASE("Watershed with h 0 (seeds found by a parallel walk, no sort) equals the sequential flooding in level order", "[segment][determinism]") {
     RasterReader reader(shared_data("autzen_oregon/autzen_ortho_1ft_epsg2994.tif"));
@@ -432,7 +385,7 @@ TEST_CASE("Watershed with h 0 (seeds found by a parallel walk, no sort) equals t
                 WatershedOptions wo;
                 wo.h_minima = 0.0;
                 wo.smoothing_sigma_px = smoothing;
-                const Oversegmentation expected = reference_flooding(*img, v, wo);
+                const Oversegmentation expected = test::reference_dynamics(*img, v, wo);  // h 0: no basin is absorbed
                 const Oversegmentation all_threads = watershed_oversegment(*img, v, wo);
                 Oversegmentation one_thread;
                 {
