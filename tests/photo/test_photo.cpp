@@ -233,6 +233,12 @@ TEST_CASE("photo commands refuse bad input in one line and write nothing", "[pho
     CHECK(r.exit_code != 0);
     CHECK(r.err.find("640") != std::string::npos);
     CHECK(!fs::exists(dir / "s.las"));
+    // An unknown ortho for the run.
+    r = run_cli("photo -q --images " + views + " --gps " + views + "/gps.txt --run --run-ortho satellite --out " + (dir / "p1"));
+    CHECK(r.exit_code != 0);
+    CHECK(r.err.find("--run-ortho") != std::string::npos);
+    CHECK(test::count_lines(r.err) == 1);
+    CHECK(!fs::exists(dir / "p1"));
     // Densify of a folder without cameras.
     r = run_cli("densify -q --model " + (dir / "one") + " --out " + (dir / "d.las"));
     CHECK(r.exit_code != 0);
