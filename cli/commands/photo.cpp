@@ -48,7 +48,10 @@ void add_orient_options(CLI::App* cmd, OrientRunOptions& o) {
     cmd->add_option("--images", o.images_dir, "Folder of overlapping photos (JPEG, PNG, TIFF)")->required();
     cmd->add_option("--camera", o.camera_path, "Camera matrix K.txt (3 x 3, pixels of the photos); default: self-calibration");
     cmd->add_option("--gps", o.gps, "GPS positions: 'exif' or a file of lines 'image lat lon height'")->capture_default_str();
-    cmd->add_option("--crs", o.crs, "Output CRS (projected, metres); default: the UTM zone of the site");
+    cmd->add_option("--crs", o.crs, "Output CRS (projected, metres; with a vertical part, heights go to it); default: the UTM zone of the site");
+    cmd->add_option("--gps-height-crs", o.gps_height_crs,
+                    "Vertical CRS of the GPS heights (EXIF's altitude is above sea level: EGM96), or 'ellipsoid' (WGS 84 ellipsoidal heights)")
+        ->capture_default_str();
     cmd->add_option("--max-image-px", o.max_image_px, "Downscale photos to this longest side")->capture_default_str();
     cmd->add_option("--threads", o.threads, "Threads of feature extraction and matching (results do not depend on it)")->capture_default_str();
     cmd->add_option("--colmap", o.colmap, "COLMAP executable")->capture_default_str();

@@ -108,6 +108,7 @@ void OrientRunOptions::validate() const {
     if (max_image_px < 200 || max_image_px > 20000) throw Error("--max-image-px", "must be 200..20000");
     if (threads < 1 || threads > 256) throw Error("--threads", "must be 1..256");
     if (gps.empty()) throw Error("--gps", "give 'exif' or a file");
+    if (gps_height_crs.empty()) throw Error("--gps-height-crs", "give a vertical CRS (e.g. EPSG:5773) or 'ellipsoid'");
     if (max_features < 256 || max_features > 65536) throw Error("--max-features", "must be 256..65536");
     if (matcher != "exhaustive" && matcher != "sequential") throw Error("--matcher", "must be 'exhaustive' or 'sequential', got '" + matcher + "'");
     if (sequential_overlap < 1 || sequential_overlap > 100) throw Error("--sequential-overlap", "must be 1..100");
@@ -294,6 +295,25 @@ std::string utm_for(double lat, double lon) {
 
 }  // namespace
 
+GpsFrames gps_frames(const OrientRunOptions& o, double lat_deg, double lon_deg) {
+    GpsFrames f;
+    CrsInfo vertical;
+    if (o.gps_height_crs == "ellipsoid") {
+        f.gps = crs_from_user_input("EPSG:4979", "--gps-height-crs");
+        vertical = crs_from_user_input("EPSG:5773", "--gps-height-crs");
+    } else {
+        vertical = crs_from_user_input(o.gps_height_crs, "--gps-height-crs");
+        if (!vertical.vertical_epsg || vertical.horizontal_epsg)
+            throw Error("--gps-height-crs", "must be a vertical CRS with an EPSG code (e.g. EPSG:5773, EGM96 height) or 'ellipsoid', not \"" +
+                                                o.gps_height_crs + "\"");
+        f.gps = crs_from_user_input("EPSG:4326+" + std::to_string(*vertical.vertical_epsg), "--gps-height-crs");
+    }
+    const CrsInfo out = crs_from_user_input(o.crs.empty() ? utm_for(lat_deg, lon_deg) : o.crs, "--crs");
+    if (out.geographic) throw Error("--crs", "must be a projected CRS in metres");
+    f.out = out.vertical_epsg ? out : combine_with_vertical(out, vertical);
+    return f;
+}
+
 OrientRunResult run_orient(const OrientRunOptions& o, const Progress& progress) {
     o.validate();
     const auto t0 = std::chrono::steady_clock::now();
@@ -307,8 +327,8 @@ OrientRunResult run_orient(const OrientRunOptions& o, const Progress& progress) 
     if (!o.camera_path.empty()) k = read_camera_matrix(o.camera_path, first.cols, first.rows);
     const std::map<std::string, GpsFix> gps = read_gps(o.gps, o.images_dir, names);
     const GpsFix& g0 = gps.begin()->second;
-    const CrsInfo out_crs = crs_from_user_input(o.crs.empty() ? utm_for(g0.lat, g0.lon) : o.crs, "--crs");
-    if (out_crs.geographic) throw Error("--crs", "must be a projected CRS in metres");
+    const GpsFrames frames = gps_frames(o, g0.lat, g0.lon);
+    const CrsInfo& out_crs = frames.out;
 
     // Work in a sibling folder; it replaces OUT only at the end.
     const fs::path out = fs::path(o.out_dir);
@@ -439,7 +459,7 @@ OrientRunResult run_orient(const OrientRunOptions& o, const Progress& progress) 
         gx.push_back(it->second.lon), gy.push_back(it->second.lat), gz.push_back(it->second.h);
     }
     if (used.size() < 3) throw Error(o.images_dir, "fewer than 3 oriented photos have GPS positions: cannot georeference (do the photos overlap?)");
-    transform_points(crs_from_user_input("EPSG:4326", "gps"), out_crs, gx, gy, gz, "GPS positions");
+    transform_points(frames.gps, out_crs, gx, gy, gz, "GPS positions");
     const Eigen::Vector3d origin(std::floor(gx[0] / 1000) * 1000, std::floor(gy[0] / 1000) * 1000, 0.0);
     std::vector<Eigen::Vector3d> from, to;
     for (std::size_t i = 0; i < used.size(); ++i) {
@@ -525,7 +545,8 @@ OrientRunResult run_orient(const OrientRunOptions& o, const Progress& progress) 
     j["mean_reprojection_error_px"] = r.mean_reprojection_error_px;
     j["image_scale"] = scale;
     j["georeferencing"] = {{"method", "similarity (Umeyama) from model camera centres to GPS positions in " + r.crs},
-                           {"gps_source", o.gps}, {"scale_m_per_model_unit", r.scale}, {"rmse_m", r.gps_rmse_m}};
+                           {"gps_source", o.gps}, {"gps_crs", frames.gps.label()}, {"scale_m_per_model_unit", r.scale}, {"rmse_m", r.gps_rmse_m}};
+    j["vertical_crs"] = z_crs_label(out_crs);
     j["residuals_m"] = nlohmann::json::array();
     for (const auto& e : r.residuals) j["residuals_m"].push_back({{"image", e.image}, {"dx", e.dx_m}, {"dy", e.dy_m}, {"dz", e.dz_m}});
     j["scene_z_range_m"] = set.scene_z_range_m;

@@ -6,6 +6,7 @@
 #include <string>
 
 #include "core/progress.hpp"
+#include "crs/crs.hpp"
 #include "photo/densify.hpp"
 #include "photo/stereo.hpp"
 #include "photo/orthophoto.hpp"
@@ -48,6 +49,13 @@ struct OrientRunOptions {
     std::string camera_path;         ///< optional K.txt (3 x 3 camera matrix, pixels of the original images)
     std::string gps = "exif";        ///< "exif" or a file of lines "image lat_deg lon_deg height_m"
     std::string crs;                 ///< output CRS (projected, metres); empty = UTM zone of the site
+    /// Vertical CRS of the GPS heights: "EPSG:5773" (EGM96 height; EXIF's
+    /// GPSAltitude is "above sea level", as drones and receivers report it),
+    /// any vertical CRS PROJ knows, or "ellipsoid" (heights above the WGS 84
+    /// ellipsoid, e.g. RTK logs). The outputs' heights are in the vertical
+    /// CRS of `crs` when it has one, else in this one ("ellipsoid": EGM96,
+    /// through PROJ's geoid grid); every output names it.
+    std::string gps_height_crs = "EPSG:5773";
     int max_image_px = 2000;         ///< photos are downscaled to this longest side before matching
     int threads = 2;                 ///< threads of feature extraction and matching (the output does not depend on it)
     int max_features = 4096;         ///< SIFT features per image (COLMAP's SiftExtraction.max_num_features)
@@ -59,6 +67,17 @@ struct OrientRunOptions {
     bool overwrite = false;
     void validate() const;
 };
+
+/// The CRS of the GPS positions (lon/lat with the vertical CRS of
+/// `gps_height_crs`; EPSG:4979 for "ellipsoid") and the output CRS (`crs`, or
+/// the UTM zone of `lat_deg`/`lon_deg`; its vertical part when it has one,
+/// else the GPS heights' vertical CRS, EGM96 for ellipsoidal heights).
+/// Throws Error naming the option when either cannot be used (a geographic
+/// output CRS, a height CRS that is not vertical).
+struct GpsFrames {
+    CrsInfo gps, out;
+};
+GpsFrames gps_frames(const OrientRunOptions& o, double lat_deg, double lon_deg);
 
 struct OrientImageResidual {
     std::string image;

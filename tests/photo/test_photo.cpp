@@ -426,7 +426,7 @@ TEST_CASE("photo --run: orient, densify, true ortho and the building run on synt
     CHECK(rep["steps"][3]["cells_coloured"].get<long>() > rep["steps"][3]["cells_measured"].get<long>() / 2);
     CHECK(rep["steps"][3]["run_ortho"] == "photos");
     CHECK(rep["steps"][4]["step"] == "run");
-    CHECK(rep["crs"] == "EPSG:32650");
+    CHECK(rep["crs"] == "EPSG:32650+5773");  // GPS heights are EGM96 by default (--gps-height-crs)
     // The true ortho and the run: DSM mosaic and buildings at the truth's places and heights.
     CHECK(fs::exists(out + "/ortho.tif"));
     CHECK(fs::exists(out + "/orthophoto.tif"));
@@ -501,4 +501,41 @@ TEST_CASE("photo: photos without overlap give a one-line error and write nothing
     CHECK(r.err.find("overlap") != std::string::npos);
     CHECK(!fs::exists(dir / "ph"));
     for (const auto& e : fs::directory_iterator(dir.path)) CHECK(e.path().filename().string().find(".part-") == std::string::npos);
+}
+
+// The heights of a georeferenced photo block are in a named vertical CRS:
+// EXIF's GPSAltitude is above sea level (EGM96 by default), ellipsoidal
+// heights go through PROJ's EGM96 grid (Seattle: N = -22.3 m), and an output
+// CRS with its own vertical part is kept.
+TEST_CASE("orient: GPS heights and the output CRS carry a vertical datum", "[photo][orient][crs]") {
+    OrientRunOptions o;
+    const double lat = 47.61, lon = -122.32;
+    const GpsFrames geoid = gps_frames(o, lat, lon);
+    CHECK(geoid.gps.label() == "EPSG:4326+5773");
+    CHECK(geoid.out.label() == "EPSG:32610+5773");
+    CHECK(z_crs_label(geoid.out) == "EPSG:5773");
+    std::vector<double> x{lon}, y{lat}, z{20.0};
+    transform_points(geoid.gps, geoid.out, x, y, z, "test");
+    CHECK(z[0] == Approx(20.0).margin(1e-6));  // same datum: heights unchanged
+
+    o.gps_height_crs = "ellipsoid";
+    const GpsFrames ell = gps_frames(o, lat, lon);
+    CHECK(ell.gps.label() == "EPSG:4979");
+    CHECK(ell.out.label() == "EPSG:32610+5773");
+    x = {lon}, y = {lat}, z = {20.0};
+    transform_points(ell.gps, ell.out, x, y, z, "test");
+    CHECK(z[0] == Approx(42.30).margin(0.05));  // h - N, N(EGM96) = -22.30 m here
+
+    o.gps_height_crs = "EPSG:5773";
+    o.crs = "EPSG:32610+5703";  // NAVD88 height asked for: kept as the output's vertical CRS
+    CHECK(gps_frames(o, lat, lon).out.label() == "EPSG:32610+5703");
+    o.crs = "EPSG:2926";  // a projected CRS in US feet without a vertical part gets the GPS heights' one
+    CHECK(gps_frames(o, lat, lon).out.vertical_epsg == 5773);
+
+    o.crs.clear();
+    o.gps_height_crs = "EPSG:32610";
+    CHECK_THROWS_WITH(gps_frames(o, lat, lon), Catch::Contains("--gps-height-crs") && Catch::Contains("vertical CRS"));
+    o.gps_height_crs = "EPSG:5773";
+    o.crs = "EPSG:4326";
+    CHECK_THROWS_WITH(gps_frames(o, lat, lon), Catch::Contains("--crs") && Catch::Contains("projected"));
 }
