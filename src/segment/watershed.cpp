@@ -1,6 +1,7 @@
 #include "segment/watershed.hpp"
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstring>
 #include <memory>
@@ -10,6 +11,9 @@
 #include <atomic>
 #include <tbb/parallel_for.h>
 #include <unistd.h>
+#if defined(__SSE2__)
+#include <emmintrin.h>
+#endif
 
 #include "core/prefetch.hpp"
 #include "core/error.hpp"
@@ -30,39 +34,50 @@ void WatershedOptions::validate(int bands) const {
 }
 
 namespace {
-// The k-th smallest value of `values` (reordered): what std::nth_element
-// puts at k, found by a counting pass over the top 16 bits of an
-// order-preserving key and nth_element within the one bucket holding rank
-// k (~1 M samples: a few ms instead of ~10 per call). With NaN among the
-// values, plain nth_element (their order is not defined).
-float kth_smallest(std::vector<float>& values, std::size_t k) {
+// The k_lo-th and k_hi-th smallest values of `values` (k_lo <= k_hi): what
+// std::nth_element would put at k_lo, then at k_hi, found by one counting
+// pass over the top 16 bits of an order-preserving key and nth_element
+// within the bucket(s) holding the two ranks (~1 M samples: a few ms instead
+// of ~10 per rank). With NaN among the values, plain nth_element at k_lo and
+// then at k_hi on the reordered values (their order is not defined).
+std::pair<float, float> two_smallest(std::vector<float>& values, std::size_t k_lo, std::size_t k_hi) {
     auto key = [](float f) {
         uint32_t bits;
         std::memcpy(&bits, &f, sizeof bits);
         return (bits & 0x80000000u) ? ~bits : (bits | 0x80000000u);
     };
-    std::vector<uint32_t> start(65537, 0);
+    std::vector<uint32_t> count(65536, 0);
     for (float f : values) {
         if (std::isnan(f)) {
-            std::nth_element(values.begin(), values.begin() + static_cast<std::ptrdiff_t>(k), values.end());
-            return values[k];
+            std::nth_element(values.begin(), values.begin() + static_cast<std::ptrdiff_t>(k_lo), values.end());
+            const float lo = values[k_lo];
+            std::nth_element(values.begin(), values.begin() + static_cast<std::ptrdiff_t>(k_hi), values.end());
+            return {lo, values[k_hi]};
         }
-        ++start[(key(f) >> 16) + 1];
+        ++count[key(f) >> 16];
     }
-    std::size_t bucket = 0;
-    for (uint64_t below = 0; bucket < 65536; ++bucket) {
-        if (below + start[bucket + 1] > k) {
-            k -= below;
-            break;
-        }
-        below += start[bucket + 1];
+    // The bucket holding rank k and k's rank within it.
+    auto locate = [&](std::size_t k) {
+        uint64_t below = 0;
+        uint32_t bucket = 0;
+        while (below + count[bucket] <= k) below += count[bucket++];
+        return std::pair<uint32_t, std::size_t>(bucket, k - below);
+    };
+    const auto [b_lo, r_lo] = locate(k_lo);
+    const auto [b_hi, r_hi] = locate(k_hi);
+    std::vector<float> in_lo, in_hi;
+    in_lo.reserve(count[b_lo]);
+    if (b_hi != b_lo) in_hi.reserve(count[b_hi]);
+    for (float f : values) {
+        const uint32_t b = key(f) >> 16;
+        if (b == b_lo) in_lo.push_back(f);
+        else if (b == b_hi) in_hi.push_back(f);
     }
-    std::vector<float> in_bucket;
-    in_bucket.reserve(start[bucket + 1]);
-    for (float f : values)
-        if ((key(f) >> 16) == bucket) in_bucket.push_back(f);
-    std::nth_element(in_bucket.begin(), in_bucket.begin() + static_cast<std::ptrdiff_t>(k), in_bucket.end());
-    return in_bucket[k];
+    std::vector<float>& hi_bucket = b_hi == b_lo ? in_lo : in_hi;
+    std::nth_element(in_lo.begin(), in_lo.begin() + static_cast<std::ptrdiff_t>(r_lo), in_lo.end());
+    const float lo = in_lo[r_lo];
+    std::nth_element(hi_bucket.begin(), hi_bucket.begin() + static_cast<std::ptrdiff_t>(r_hi), hi_bucket.end());
+    return {lo, hi_bucket[r_hi]};
 }
 }  // namespace
 
@@ -79,7 +94,7 @@ void normalize_bands(Image<float>& image, const std::vector<uint8_t>& valid) {
         if (sample.empty()) continue;
         const std::size_t k_lo = static_cast<std::size_t>(0.005 * static_cast<double>(sample.size() - 1));
         const std::size_t k_hi = static_cast<std::size_t>(0.995 * static_cast<double>(sample.size() - 1));
-        const float lo = kth_smallest(sample, k_lo), hi = kth_smallest(sample, k_hi);
+        const auto [lo, hi] = two_smallest(sample, k_lo, k_hi);
         const float scale = hi > lo ? 255.0f / (hi - lo) : 0.0f;
         parallel_for_each_index(n, [&](std::size_t i) {
             v[i] = std::clamp((v[i] - lo) * scale, 0.0f, 255.0f);
@@ -187,6 +202,41 @@ float gradient_norm(const Image<float>& image, const WatershedOptions& options) 
 constexpr float kLevelsPerUnit = 4.0f;
 inline uint16_t gradient_level(float g) { return static_cast<uint16_t>(std::min(65535.0f, g * kLevelsPerUnit)); }
 
+// One row of flooding levels from the summed squared Sobel responses `g`:
+// out[x] = gradient_level(sqrt(g[x]) * norm). Four at a time with SSE2
+// (std::sqrt stays scalar for errno; sqrtps is correctly rounded like
+// sqrtss, minps(v, 65535) is std::min(65535, v) with NaN, and the
+// truncation is the same), so the levels are the same bit for bit.
+inline void quantise_row(const float* g, float norm, uint16_t* out, int w) {
+    int x = 0;
+#if defined(__SSE2__)
+    const __m128 vn = _mm_set1_ps(norm), vl = _mm_set1_ps(kLevelsPerUnit), vmax = _mm_set1_ps(65535.0f);
+    const __m128i bias = _mm_set1_epi32(32768), flip = _mm_set1_epi16(static_cast<short>(0x8000));
+    auto four = [&](const float* q) {
+        const __m128 v = _mm_min_ps(_mm_mul_ps(_mm_mul_ps(_mm_sqrt_ps(_mm_loadu_ps(q)), vn), vl), vmax);
+        return _mm_sub_epi32(_mm_cvttps_epi32(v), bias);  // 0..65535, shifted into the signed 16-bit range
+    };
+    for (; x + 8 <= w; x += 8)
+        _mm_storeu_si128(reinterpret_cast<__m128i*>(out + x), _mm_xor_si128(_mm_packs_epi32(four(g + x), four(g + x + 4)), flip));
+#endif
+    for (; x < w; ++x) out[x] = gradient_level(std::sqrt(g[x]) * norm);
+}
+
+// Levels of row y without smoothing, all bands at once; g: w floats of scratch.
+inline void unsmoothed_level_row(const Image<float>& image, const WatershedOptions& options, float norm, int y, float* g, uint16_t* out) {
+    const int w = image.width, h = image.height;
+    std::fill(g, g + w, 0.0f);
+    const int y0 = std::max(0, y - 1), y1 = std::min(h - 1, y + 1);
+    for (int b = 0; b < image.bands; ++b) {
+        const double wb = options.band_weights.empty() ? 1.0 : options.band_weights[b];
+        if (wb == 0.0) continue;
+        const float* src = image.band_data(b);
+        add_sobel_row(src + static_cast<std::size_t>(y0) * w, src + static_cast<std::size_t>(y) * w,
+                      src + static_cast<std::size_t>(y1) * w, w, static_cast<float>(wb), g);
+    }
+    quantise_row(g, norm, out, w);
+}
+
 // The quantised gradient without the float gradient raster (no smoothing):
 // row by row, all bands at once; the same levels as quantising
 // multiband_gradient's output, bit for bit.
@@ -197,19 +247,8 @@ LargeVector<uint16_t> unsmoothed_gradient_levels(const Image<float>& image, cons
     const float norm = gradient_norm(image, options);
     tbb::parallel_for(tbb::blocked_range<int>(0, h, 16), [&](const tbb::blocked_range<int>& rows) {
         std::vector<float> g(static_cast<std::size_t>(w));
-        for (int y = rows.begin(); y != rows.end(); ++y) {
-            std::fill(g.begin(), g.end(), 0.0f);
-            const int y0 = std::max(0, y - 1), y1 = std::min(h - 1, y + 1);
-            for (int b = 0; b < image.bands; ++b) {
-                const double wb = options.band_weights.empty() ? 1.0 : options.band_weights[b];
-                if (wb == 0.0) continue;
-                const float* src = image.band_data(b);
-                add_sobel_row(src + static_cast<std::size_t>(y0) * w, src + static_cast<std::size_t>(y) * w,
-                              src + static_cast<std::size_t>(y1) * w, w, static_cast<float>(wb), g.data());
-            }
-            uint16_t* out = level.data() + static_cast<std::size_t>(y) * w;
-            for (int x = 0; x < w; ++x) out[x] = gradient_level(std::sqrt(g[x]) * norm);
-        }
+        for (int y = rows.begin(); y != rows.end(); ++y)
+            unsmoothed_level_row(image, options, norm, y, g.data(), level.data() + static_cast<std::size_t>(y) * w);
     });
     return level;
 }
@@ -255,7 +294,7 @@ LargeVector<uint16_t> smoothed_gradient_levels(const Image<float>& image, const 
             for (int y = y0; y < y1; ++y) {
                 const float* gy = g.data() + static_cast<std::size_t>(y - y0) * row;
                 uint16_t* out = level.data() + static_cast<std::size_t>(y) * row;
-                for (int x = 0; x < w; ++x) out[x] = gradient_level(std::sqrt(gy[x]) * norm);
+                quantise_row(gy, norm, out, w);
             }
         }
     });
@@ -278,149 +317,213 @@ LargeVector<uint16_t> smoothed_gradient_levels(const Image<float>& image, const 
 // same seed, so the result does not depend on the thread count or timing.
 // The walk reads the image nearly in raster order instead of in level
 // order (every pixel a cache miss), and needs no sort of the pixels.
-struct DescentInput {
-    uint32_t w, h;
-    const uint8_t* valid;  // null = all valid
-    const uint8_t* mask;   // lower neighbours of each pixel (lower_neighbour_masks)
-    int bands;
-    const float* const* band;
-    uint32_t* parent;      // kNone = no seed yet
-};
+//
+// Everything the walk needs of a pixel that is not flooded yet is packed in
+// its own parent entry (images of fewer than 2^31 - 1 pixels, so a seed, a
+// pixel index, never has the top bit): kUnflooded | colour ranks << 4 |
+// lower neighbours (bit 0 up, 1 left, 2 right, 3 down); nodata holds kNone.
+// The colour ranks (2 bits per neighbour, same order) place the four
+// neighbours by colour distance, the first on ties, so the closest of any
+// subset is one table look-up: the walk reads neither the bands nor a
+// separate mask, and no level raster is kept.
+constexpr uint32_t kUnflooded = 0x80000000u;
+constexpr uint32_t kNoData = 0xFFFFFFFFu;
 
-// Bit 0 up, 1 left, 2 right, 3 down: the valid neighbours of each pixel that
-// come before it in (level, index) order: up and left when their level is
-// not higher, right and down when it is lower.
-LargeVector<uint8_t> lower_neighbour_masks(uint32_t w, uint32_t h, const uint16_t* level, const uint8_t* valid) {
-    LargeVector<uint8_t> mask = small_page_vector<uint8_t>(std::size_t(w) * h);
-    mask.resize(std::size_t(w) * h);
-    tbb::parallel_for(tbb::blocked_range<uint32_t>(0, h, 16), [&](const tbb::blocked_range<uint32_t>& rows) {
-        for (uint32_t y = rows.begin(); y != rows.end(); ++y) {
-            const std::size_t row = std::size_t(y) * w;
-            const uint16_t* l = level + row;
-            const uint16_t* up = y > 0 ? l - w : l;        // the row itself: never lower
-            const uint16_t* down = y + 1 < h ? l + w : l;
-            const unsigned up_bit = y > 0 ? 1u : 0u, down_bit = y + 1 < h ? 8u : 0u;
-            uint8_t* m = mask.data() + row;
-            auto one = [&](uint32_t x) {
-                unsigned b = (up[x] <= l[x] ? up_bit : 0u) | (down[x] < l[x] ? down_bit : 0u);
-                if (x > 0 && l[x - 1] <= l[x]) b |= 2u;
-                if (x + 1 < w && l[x + 1] < l[x]) b |= 4u;
-                return static_cast<uint8_t>(b);
-            };
-            if (w < 3) {
-                for (uint32_t x = 0; x < w; ++x) m[x] = one(x);
-            } else {
-                m[0] = one(0);
-                for (uint32_t x = 1; x + 1 < w; ++x)
-                    m[x] = static_cast<uint8_t>((up[x] <= l[x] ? up_bit : 0u) | (l[x - 1] <= l[x] ? 2u : 0u) | (l[x + 1] < l[x] ? 4u : 0u) |
-                                                (down[x] < l[x] ? down_bit : 0u));
-                m[w - 1] = one(w - 1);
-            }
-            if (valid) {
-                const uint8_t* v = valid + row;
-                const uint8_t* vu = y > 0 ? v - w : v;
-                const uint8_t* vd = y + 1 < h ? v + w : v;
-                for (uint32_t x = 0; x < w; ++x) {
-                    unsigned keep = (vu[x] ? 1u : 0u) | (vd[x] ? 8u : 0u) | (x > 0 && v[x - 1] ? 2u : 0u) | (x + 1 < w && v[x + 1] ? 4u : 0u);
-                    m[x] = static_cast<uint8_t>(m[x] & keep);
-                }
+// kPick[subset][ranks]: the neighbour of `subset` (bit per neighbour) with the lowest rank.
+constexpr std::array<std::array<uint8_t, 256>, 16> make_pick_table() {
+    std::array<std::array<uint8_t, 256>, 16> t{};
+    for (unsigned subset = 1; subset < 16; ++subset)
+        for (unsigned ranks = 0; ranks < 256; ++ranks) {
+            unsigned best = 0, best_rank = 4;
+            for (unsigned j = 0; j < 4; ++j)
+                if (((subset >> j) & 1u) && ((ranks >> (2 * j)) & 3u) < best_rank) best = j, best_rank = (ranks >> (2 * j)) & 3u;
+            t[subset][ranks] = static_cast<uint8_t>(best);
+        }
+    return t;
+}
+constexpr std::array<std::array<uint8_t, 256>, 16> kPick = make_pick_table();
+
+// The walk's starting state of every pixel of rows [y0, y1), written to
+// parent[]. `level_row(y)` gives the levels of row y (rows y0 - 1 ... y1
+// are asked for, clamped to the image). Colour distances are those of the
+// sequential flooding: Σ over all bands of (p - q)², in band order, from
+// 0.0f; (p - q)² = (q - p)² bit for bit, so each is computed once per pair.
+// A distance that is NaN or infinite never wins there (strict <, from
+// INFINITY) and the first neighbour is kept: keys min(d, ∞) (NaN -> ∞) with
+// ties to the first neighbour give the same choice.
+template <typename LevelRow>
+void descent_states_rows(const Image<float>& image, const uint8_t* valid, int y0, int y1, const LevelRow& level_row,
+                         std::vector<float>& scratch, uint32_t* parent) {
+    const int w = image.width, h = image.height, bands = image.bands;
+    const std::size_t row = static_cast<std::size_t>(w);
+    scratch.resize(3 * row + 1);
+    float* const hk = scratch.data();             // hk[x]: key of (x - 1, x), x in 1..w-1; hk[0] = hk[w] = ∞
+    float* up = scratch.data() + row + 1;         // keys of (x, y - 1) for row y
+    float* down = scratch.data() + 2 * row + 1;   // keys of (x, y + 1)
+    auto key = [](float d) { return d < INFINITY ? d : INFINITY; };  // minps
+    auto vertical = [&](int y, float* out) {  // keys between rows y and y + 1
+        std::fill(out, out + w, 0.0f);
+        for (int b = 0; b < bands; ++b) {
+            const float* a = image.band_data(b) + static_cast<std::size_t>(y) * row;
+            const float* c = a + row;
+            for (int x = 0; x < w; ++x) {
+                const float diff = a[x] - c[x];
+                out[x] += diff * diff;
             }
         }
-    });
-    return mask;
+        for (int x = 0; x < w; ++x) out[x] = key(out[x]);
+    };
+    if (y0 > 0) vertical(y0 - 1, up);
+    else std::fill(up, up + w, INFINITY);
+    for (int y = y0; y < y1; ++y) {
+        const std::size_t at = static_cast<std::size_t>(y) * row;
+        if (y + 1 < h) vertical(y, down);
+        else std::fill(down, down + w, INFINITY);
+        std::fill(hk, hk + w + 1, 0.0f);
+        for (int b = 0; b < bands; ++b) {
+            const float* a = image.band_data(b) + at;
+            for (int x = 1; x < w; ++x) {
+                const float diff = a[x] - a[x - 1];
+                hk[x] += diff * diff;
+            }
+        }
+        for (int x = 1; x < w; ++x) hk[x] = key(hk[x]);
+        hk[0] = hk[w] = INFINITY;
+        const uint16_t* l = level_row(y);
+        const uint16_t* lu = y > 0 ? level_row(y - 1) : l;  // the row itself: never lower
+        const uint16_t* ld = y + 1 < h ? level_row(y + 1) : l;
+        const uint32_t up_bit = y > 0 ? 1u : 0u, down_bit = y + 1 < h ? 8u : 0u;
+        uint32_t* out = parent + at;
+        auto state = [&](int x, uint32_t lower) {
+            const float ku = up[x], kl = hk[x], kr = hk[x + 1], kd = down[x];
+            const uint32_t a = kl < ku, b = kr < ku, c = kd < ku, d = kr < kl, e = kd < kl, f = kd < kr;
+            const uint32_t ranks = (a + b + c) | (1 - a + d + e) << 2 | (2 - b - d + f) << 4 | (3 - c - e - f) << 6;
+            return kUnflooded | ranks << 4 | lower;
+        };
+        auto lower_of = [&](int x) {
+            uint32_t m = (lu[x] <= l[x] ? up_bit : 0u) | (ld[x] < l[x] ? down_bit : 0u);
+            if (x > 0 && l[x - 1] <= l[x]) m |= 2u;
+            if (x + 1 < w && l[x + 1] < l[x]) m |= 4u;
+            return m;
+        };
+        out[0] = state(0, lower_of(0));
+        for (int x = 1; x + 1 < w; ++x)
+            out[x] = state(x, (lu[x] <= l[x] ? up_bit : 0u) | (l[x - 1] <= l[x] ? 2u : 0u) | (l[x + 1] < l[x] ? 4u : 0u) |
+                                  (ld[x] < l[x] ? down_bit : 0u));
+        if (w > 1) out[w - 1] = state(w - 1, lower_of(w - 1));
+        if (valid) {
+            const uint8_t* v = valid + at;
+            const uint8_t* vu = y > 0 ? v - row : v;
+            const uint8_t* vd = y + 1 < h ? v + row : v;
+            for (int x = 0; x < w; ++x) {
+                const uint32_t keep = (vu[x] ? 1u : 0u) | (vd[x] ? 8u : 0u) | (x > 0 && v[x - 1] ? 2u : 0u) | (x + 1 < w && v[x + 1] ? 4u : 0u);
+                out[x] = v[x] ? out[x] & (~15u | keep) : kNoData;
+            }
+        }
+        std::swap(up, down);
+    }
 }
 
-template <int kBands, bool kValid>  // kBands 0 = in.bands
-void descend_rows(const DescentInput& in, std::size_t first, std::size_t last, std::vector<uint32_t>& stack) {
-    constexpr uint32_t kNone = 0xFFFFFFFFu;
-    const uint32_t w = in.w;
-    const uint8_t* const mask = in.mask;
-    const uint8_t* const valid = in.valid;
-    uint32_t* const parent = in.parent;
-    const int bands = kBands ? kBands : in.bands;
-    const float* band[4] = {};
-    for (int b = 0; b < std::min(bands, 4); ++b) band[b] = in.band[b];
-    const float* const* bands_ptr = kBands ? band : in.band;
-    auto seed_of = [parent](uint32_t q) { return std::atomic_ref<uint32_t>(parent[q]).load(std::memory_order_relaxed); };
+// The starting states of all pixels (parent[], n entries), by blocks of rows
+// in parallel. `level` (may be null) is the level raster; without it the
+// levels of each block and its one-row halo are quantised here from the
+// bands (no smoothing), the same as unsmoothed_gradient_levels.
+void descent_states(const Image<float>& image, const WatershedOptions& options, const uint16_t* level, const uint8_t* valid,
+                    uint32_t* parent) {
+    const int w = image.width, h = image.height;
+    const std::size_t row = static_cast<std::size_t>(w);
+    const float norm = gradient_norm(image, options);
+    constexpr int kBlockRows = 32;
+    const int blocks = (h + kBlockRows - 1) / kBlockRows;
+    tbb::parallel_for(tbb::blocked_range<int>(0, blocks), [&](const tbb::blocked_range<int>& range) {
+        std::vector<float> scratch, g(row);
+        std::vector<uint16_t> levels;  // rows ly0 .. ly1 - 1
+        for (int blk = range.begin(); blk != range.end(); ++blk) {
+            const int y0 = blk * kBlockRows, y1 = std::min(h, y0 + kBlockRows);
+            if (level) {
+                descent_states_rows(image, valid, y0, y1, [&](int y) { return level + static_cast<std::size_t>(y) * row; }, scratch, parent);
+                continue;
+            }
+            const int ly0 = std::max(0, y0 - 1), ly1 = std::min(h, y1 + 1);
+            levels.resize(static_cast<std::size_t>(ly1 - ly0) * row);
+            for (int y = ly0; y < ly1; ++y) unsmoothed_level_row(image, options, norm, y, g.data(), levels.data() + static_cast<std::size_t>(y - ly0) * row);
+            descent_states_rows(image, valid, y0, y1, [&](int y) { return levels.data() + static_cast<std::size_t>(y - ly0) * row; },
+                                scratch, parent);
+        }
+    });
+}
+
+// The walk over pixels [first, last) (see above); parent[] holds the states.
+void descend_rows(uint32_t w, uint32_t* parent, std::size_t first, std::size_t last, std::vector<uint32_t>& stack) {
+    auto state_of = [parent](uint32_t q) { return std::atomic_ref<uint32_t>(parent[q]).load(std::memory_order_relaxed); };
     const uint32_t offset[4] = {0u - w, 0u - 1u, 1u, w};  // up, left, right, down (modulo 2^32)
     std::size_t top = 0;  // stack[0, top): pixels waiting on their lower neighbours
     for (std::size_t i = first; i < last; ++i) {
-        if ((kValid && !valid[i]) || seed_of(static_cast<uint32_t>(i)) != kNone) continue;
+        uint32_t v = state_of(static_cast<uint32_t>(i));
+        if (!(v & kUnflooded) || v == kNoData) continue;
         uint32_t p = static_cast<uint32_t>(i);
-        for (;;) {
-            const unsigned lower = mask[p];  // lower neighbours: bit 0 up, 1 left, 2 right, 3 down
+        for (;;) {  // v: the state of p, not flooded yet
+            const unsigned lower = v & 15u;
             uint32_t s[4];
             unsigned wait = 0;
             for (unsigned m = lower; m; m &= m - 1) {
                 const int j = __builtin_ctz(m);
-                s[j] = seed_of(p + offset[j]);
-                wait |= unsigned(s[j] == kNone) << j;
+                s[j] = state_of(p + offset[j]);
+                wait |= (s[j] >> 31) << j;
             }
             if (wait) {  // p waits under its lower neighbours; walk on to the last of them
                 if (top + 5 > stack.size()) stack.resize(2 * stack.size() + 8);
                 stack[top++] = p;
                 for (unsigned m = wait; m; m &= m - 1) stack[top++] = p + offset[__builtin_ctz(m)];
-                p = stack[--top];
-                continue;
-            }
-            uint32_t seed = p;
-            if (lower) {
-                seed = s[__builtin_ctz(lower)];
-                unsigned other = 0;  // lower neighbours of another seed than the first one's
-                for (unsigned m = lower & (lower - 1); m; m &= m - 1) {
-                    const int j = __builtin_ctz(m);
-                    other |= unsigned(s[j] != seed) << j;
-                }
-                if (other) {  // several seeds: the first neighbour of each, the closest in colour wins
-                    unsigned firsts = lower;
+            } else {
+                uint32_t seed = p;
+                if (lower) {
+                    seed = s[__builtin_ctz(lower)];
+                    unsigned other = 0;  // lower neighbours of another seed than the first one's
                     for (unsigned m = lower & (lower - 1); m; m &= m - 1) {
                         const int j = __builtin_ctz(m);
-                        for (unsigned e = lower & ((1u << j) - 1); e; e &= e - 1)
-                            if (s[__builtin_ctz(e)] == s[j]) firsts &= ~(1u << j);
+                        other |= unsigned(s[j] != seed) << j;
                     }
-                    float closest = INFINITY;
-                    for (unsigned m = firsts; m; m &= m - 1) {
-                        const int j = __builtin_ctz(m);
-                        const uint32_t q = p + offset[j];
-                        float d = 0.0f;
-                        for (int b = 0; b < bands; ++b) {
-                            const float diff = bands_ptr[b][p] - bands_ptr[b][q];
-                            d += diff * diff;
+                    if (other) {  // several seeds: the first neighbour of each, the closest in colour wins
+                        unsigned firsts = lower;
+                        for (unsigned m = lower & (lower - 1); m; m &= m - 1) {
+                            const int j = __builtin_ctz(m);
+                            for (unsigned e = lower & ((1u << j) - 1); e; e &= e - 1)
+                                if (s[__builtin_ctz(e)] == s[j]) firsts &= ~(1u << j);
                         }
-                        if (d < closest) closest = d, seed = s[j];
+                        seed = s[kPick[firsts][(v >> 4) & 0xFFu]];
                     }
                 }
+                std::atomic_ref<uint32_t>(parent[p]).store(seed, std::memory_order_relaxed);
             }
-            std::atomic_ref<uint32_t>(parent[p]).store(seed, std::memory_order_relaxed);
-            while (top > 0 && seed_of(stack[top - 1]) != kNone) --top;  // reached twice
-            if (top == 0) break;
-            p = stack[--top];
+            bool more = false;  // on with the latest stacked pixel not flooded yet (reached twice, or by another thread)
+            while (top > 0) {
+                p = stack[--top];
+                v = state_of(p);
+                if (v & kUnflooded) {
+                    more = true;
+                    break;
+                }
+            }
+            if (!more) break;
         }
     }
 }
 
-void flood_descent(const DescentInput& in, const Progress& progress) {
+// The walk over all rows: blocks of rows in parallel, in stages so that
+// progress is reported from the calling thread.
+void flood_descent(uint32_t w, uint32_t h, uint32_t* parent, const Progress& progress) {
     constexpr uint32_t kBlockRows = 32;
-    const uint32_t blocks = (in.h + kBlockRows - 1) / kBlockRows;
-    const std::size_t n = std::size_t(in.w) * in.h;
-    auto walk = [&](std::size_t first, std::size_t last, std::vector<uint32_t>& stack) {
-        if (in.valid) {
-            if (in.bands == 3) descend_rows<3, true>(in, first, last, stack);
-            else descend_rows<0, true>(in, first, last, stack);
-        } else {
-            if (in.bands == 3) descend_rows<3, false>(in, first, last, stack);
-            else descend_rows<0, false>(in, first, last, stack);
-        }
-    };
-    // Stages of blocks, so that progress is reported from the calling thread.
+    const uint32_t blocks = (h + kBlockRows - 1) / kBlockRows;
+    const std::size_t n = std::size_t(w) * h;
     const uint32_t per_stage = std::max<uint32_t>(8, (blocks + 7) / 8);
     for (uint32_t stage = 0; stage < blocks; stage += per_stage) {
         tbb::parallel_for(tbb::blocked_range<uint32_t>(stage, std::min(blocks, stage + per_stage), 1),
                           [&](const tbb::blocked_range<uint32_t>& range) {
                               std::vector<uint32_t> stack(1024);
                               for (uint32_t blk = range.begin(); blk != range.end(); ++blk) {
-                                  const std::size_t first = std::size_t(blk) * kBlockRows * in.w;
-                                  walk(first, std::min(n, first + std::size_t(kBlockRows) * in.w), stack);
+                                  const std::size_t first = std::size_t(blk) * kBlockRows * w;
+                                  descend_rows(w, parent, first, std::min(n, first + std::size_t(kBlockRows) * w), stack);
                               }
                           });
         progress(0.5 + 0.4 * std::min(blocks, stage + per_stage) / blocks, "flooding");
@@ -439,25 +542,31 @@ Oversegmentation finish_oversegmentation(LargeVector<uint32_t>&& labels, int w, 
 
 // label_basins without the seed -> label table (4 bytes a pixel, fresh
 // memory), for fewer than 2^31 - 1 pixels whose basin seeds are pixels of
-// their basins: a seed's label is kept in its own entry, tagged by the top
-// bit, from the first pixel of its basin in raster order; the tags are
-// cleared at the end. The same labels as label_basins.
+// their basins, in one raster pass. A seed r met at pixel i: r < i has been
+// passed, so its entry holds its label; r == i gets the next label; r > i
+// gets it ahead, kept in r's entry tagged by the top bit (labels and seeds
+// have none), and the tag is cleared when the pass reaches r. The same
+// labels as label_basins.
 Oversegmentation label_seeds_in_place(LargeVector<uint32_t>&& parent, int w, int h, const Progress& progress) {
-    constexpr uint32_t kNone = 0xFFFFFFFFu, kTag = 0x80000000u;
+    constexpr uint32_t kTag = 0x80000000u;
     const std::size_t n = parent.size();
     uint32_t* label = parent.data();
     uint32_t next = 0;
     for (std::size_t i = 0; i < n; ++i) {
         const uint32_t r = label[i];
-        if (r == kNone) {
+        if (r == kNoData) {
             label[i] = 0;
-        } else if (!(r & kTag)) {  // else: a seed labelled before its own turn
-            // r's entry is tagged once r is passed or labelled ahead of it.
-            if (!(label[r] & kTag)) label[r] = kTag | ++next;
+        } else if (r & kTag) {  // a seed labelled ahead
+            label[i] = r & ~kTag;
+        } else if (r < i) {
             label[i] = label[r];
+        } else if (r == i) {
+            label[i] = ++next;
+        } else {
+            if (!(label[r] & kTag)) label[r] = kTag | ++next;
+            label[i] = label[r] & ~kTag;
         }
     }
-    parallel_for_each_index(n, [&](std::size_t i) { label[i] &= ~kTag; });
     return finish_oversegmentation(std::move(parent), w, h, next, progress);
 }
 
@@ -523,6 +632,21 @@ Oversegmentation watershed_oversegment(const Image<float>& image, const std::vec
     const std::size_t n = image.pixel_count();
     if (n == 0) throw Error("watershed", "empty image");
     if (!valid.empty() && valid.size() != n) throw Error("watershed", "valid mask size does not match the image");
+    const auto h_levels = static_cast<uint32_t>(std::lround(options.h_minima * kLevelsPerUnit));
+    if (h_levels == 0 && n < 0x7FFFFFFFu) {
+        // Without dynamics: no sort, a parallel walk (flood_descent) gives the
+        // same seeds. Without smoothing no level raster either: the states
+        // are made from the bands by blocks of rows.
+        LargeVector<uint32_t> parent = small_page_vector<uint32_t>(n);
+        parent.resize(n);
+        LargeVector<uint16_t> level;
+        if (options.smoothing_sigma_px > 0.0) level = smoothed_gradient_levels(image, options);
+        descent_states(image, options, level.empty() ? nullptr : level.data(), valid.empty() ? nullptr : valid.data(), parent.data());
+        LargeVector<uint16_t>().swap(level);
+        progress(0.3, "gradient");
+        flood_descent(static_cast<uint32_t>(w), static_cast<uint32_t>(h), parent.data(), progress);
+        return label_seeds_in_place(std::move(parent), w, h, progress);
+    }
     // Integer levels (1/4 grey level) for a bucket (hierarchical) queue.
     // Without smoothing, straight from the bands (no float gradient raster).
     LargeVector<uint16_t> level;
@@ -530,24 +654,11 @@ Oversegmentation watershed_oversegment(const Image<float>& image, const std::vec
     else level = unsmoothed_gradient_levels(image, options);
     progress(0.3, "gradient");
     constexpr uint32_t kNone = 0xFFFFFFFFu;
-    const auto h_levels = static_cast<uint32_t>(std::lround(options.h_minima * kLevelsPerUnit));
     // Band pointers in locals: stores to parent[] could otherwise alias the image's fields.
     const int bands = image.bands;
     std::vector<const float*> band_ptrs(bands);
     for (int b = 0; b < bands; ++b) band_ptrs[b] = image.band_data(b);
     const float* const* band = band_ptrs.data();
-    if (h_levels == 0) {  // without dynamics: no sort, a parallel walk (flood_descent) gives the same seeds
-        LargeVector<uint32_t> parent = small_page_vector<uint32_t>(n);
-        parent.resize(n, kNone);
-        const uint8_t* valid_ptr = valid.empty() ? nullptr : valid.data();
-        LargeVector<uint8_t> mask = lower_neighbour_masks(static_cast<uint32_t>(w), static_cast<uint32_t>(h), level.data(), valid_ptr);
-        LargeVector<uint16_t>().swap(level);
-        flood_descent(DescentInput{static_cast<uint32_t>(w), static_cast<uint32_t>(h), valid_ptr, mask.data(), bands, band, parent.data()}, progress);
-        if (n < 0x7FFFFFFFu) return label_seeds_in_place(std::move(parent), w, h, progress);
-        LargeVector<uint32_t> root_label = small_page_vector<uint32_t>(n);
-        root_label.resize(n, 0);
-        return label_basins(std::move(parent), root_label, w, h, progress);
-    }
 
     // Counting sort of valid pixels by level; ties stay in raster order
     // (deterministic). Counted and scattered in parallel by row chunks:

@@ -128,3 +128,28 @@ TEST_CASE("Watershed with dynamics: fewer regions as h grows, every valid pixel 
     }
     CHECK(previous < 2000);  // h 16 leaves few basins in a 400 x 300 window
 }
+
+TEST_CASE("Watershed without dynamics equals the sequential flooding where colour distances tie, overflow or are NaN - 1 and 2 threads", "[watershed][segment][determinism]") {
+    // h 0 picks among the seeds of a pixel's lower neighbours by colour
+    // distance, the first neighbour on ties, never a NaN or infinite one.
+    uint32_t state = 977u;
+    auto next = [&]() { return state = state * 1664525u + 1013904223u, state >> 16; };
+    Image<float> ties(203, 157, 3, 0.0f);  // four colours: equal distances everywhere
+    for (float& v : ties.data) v = static_cast<float>(next() % 4) * 40.0f;
+    Image<float> huge(131, 77, 3, 0.0f);   // squares overflow to infinity, gradients saturate
+    for (float& v : huge.data) v = (next() % 3 == 0 ? 3e38f : 1e19f) * static_cast<float>(next() % 5) * (next() % 2 ? 1.0f : -1.0f);
+    Image<float> with_nan(97, 61, 3, 0.0f);  // NaN in one band here and there
+    for (float& v : with_nan.data) v = static_cast<float>(next() % 64);
+    for (std::size_t i = 0; i < with_nan.pixel_count(); i += 13) with_nan.band_data(1)[i] = NAN;
+    Image<float> one_band(121, 43, 1, 0.0f), five_bands(66, 35, 5, 0.0f);
+    for (float& v : one_band.data) v = static_cast<float>(next() % 6);
+    for (float& v : five_bands.data) v = static_cast<float>(next() % 3) * 7.0f;
+    for (const Image<float>* img : {&ties, &huge, &with_nan, &one_band, &five_bands})
+        for (double smoothing : {0.0, 1.0}) {
+            WatershedOptions wo;
+            wo.h_minima = 0.0;
+            wo.smoothing_sigma_px = smoothing;
+            check_against_reference(*img, {}, wo);
+            check_against_reference(*img, with_holes(img->pixel_count()), wo);
+        }
+}
