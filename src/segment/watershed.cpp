@@ -542,11 +542,11 @@ Oversegmentation finish_oversegmentation(LargeVector<uint32_t>&& labels, int w, 
 
 // label_basins without the seed -> label table (4 bytes a pixel, fresh
 // memory), for fewer than 2^31 - 1 pixels whose basin seeds are pixels of
-// their basins, in one raster pass. A seed r met at pixel i: r < i has been
-// passed, so its entry holds its label; r == i gets the next label; r > i
-// gets it ahead, kept in r's entry tagged by the top bit (labels and seeds
-// have none), and the tag is cleared when the pass reaches r. The same
-// labels as label_basins.
+// their basins: a seed's label is kept in its own entry, tagged by the top
+// bit, from the first pixel of its basin in raster order; the tags are
+// cleared at the end. The same labels as label_basins. (Measured: cheaper
+// than clearing each seed's tag on its own turn in the same pass, whose
+// three-way branch on the seed's position mispredicts.)
 Oversegmentation label_seeds_in_place(LargeVector<uint32_t>&& parent, int w, int h, const Progress& progress) {
     constexpr uint32_t kTag = 0x80000000u;
     const std::size_t n = parent.size();
@@ -556,17 +556,13 @@ Oversegmentation label_seeds_in_place(LargeVector<uint32_t>&& parent, int w, int
         const uint32_t r = label[i];
         if (r == kNoData) {
             label[i] = 0;
-        } else if (r & kTag) {  // a seed labelled ahead
-            label[i] = r & ~kTag;
-        } else if (r < i) {
-            label[i] = label[r];
-        } else if (r == i) {
-            label[i] = ++next;
-        } else {
+        } else if (!(r & kTag)) {  // else: a seed labelled before its own turn
+            // r's entry is tagged once r is passed or labelled ahead of it.
             if (!(label[r] & kTag)) label[r] = kTag | ++next;
-            label[i] = label[r] & ~kTag;
+            label[i] = label[r];
         }
     }
+    parallel_for_each_index(n, [&](std::size_t i) { label[i] &= ~kTag; });
     return finish_oversegmentation(std::move(parent), w, h, next, progress);
 }
 
