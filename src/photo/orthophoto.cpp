@@ -54,18 +54,10 @@ void sample_rgb(const cv::Mat& m, double u, double v, double rgb[3]) {
 
 }  // namespace
 
-Image<uint8_t> orthophoto_from_photos(const PointCloud& cloud, const GridSpec& g, const std::vector<cv::Mat>& images,
-                                      const CameraSet& cameras, const OrthophotoOptions& o, const std::string& subject,
-                                      OrthophotoStats* stats) {
+Image<uint8_t> orthophoto_from_photos(const PointCloud& cloud, const GridSpec& g, const PhotoLoader& load, const CameraSet& cameras,
+                                      const OrthophotoOptions& o, const std::string& subject, OrthophotoStats* stats) {
     o.validate();
     if (g.width <= 0 || g.height <= 0) throw Error(subject, "the orthophoto grid has no cells");
-    if (images.size() != cameras.cameras.size()) throw Error(subject, "one image per camera is needed for the orthophoto");
-    for (std::size_t i = 0; i < images.size(); ++i) {
-        const PhotoCamera& cam = cameras.cameras[i];
-        if (images[i].type() != CV_8UC3 || images[i].cols != cam.width || images[i].rows != cam.height || cam.width < 2 || cam.height < 2)
-            throw Error(cam.image, "image size or type differs from its camera (" + std::to_string(cam.width) + " x " +
-                                       std::to_string(cam.height) + " px, 8-bit colour)");
-    }
     const double cell_m = std::abs(g.transform.pixel_width);
     const int passes = static_cast<int>(std::ceil(o.max_gap_fill_m / std::max(1e-9, cell_m)));
     std::vector<uint8_t> measured;
@@ -101,21 +93,27 @@ Image<uint8_t> orthophoto_from_photos(const PointCloud& cloud, const GridSpec& g
         }
         return false;
     };
-    Image<uint8_t> out(g.width, g.height, 3, 0);
-    std::vector<uint8_t> coloured(n, 0), occluded(n, 0);
+    auto surface_point = [&](std::size_t k) {
+        const int q = static_cast<int>(k % static_cast<std::size_t>(g.width)), r = static_cast<int>(k / static_cast<std::size_t>(g.width));
+        const MapPoint m = g.transform.pixel_centre(q, r);
+        return Eigen::Vector3d(m.x, m.y, surface[k]);
+    };
+    // 1. Each cell's view: the most nadir camera (ties by camera order) that
+    // sees the cell's surface point unhidden; -1 = none.
+    constexpr int32_t none = -1;
+    std::vector<int32_t> view(n, none);
+    std::vector<uint8_t> occluded(n, 0);
     tbb::parallel_for(0, g.height, [&](int r) {
         struct View {
-            double neg_cos;  // most nadir first
+            double neg_cos;      // most nadir first
             std::size_t camera;  // ties by camera order
-            Eigen::Vector2d px;
             bool operator<(const View& v) const { return neg_cos != v.neg_cos ? neg_cos < v.neg_cos : camera < v.camera; }
         };
         std::vector<View> views;
         for (int q = 0; q < g.width; ++q) {
             const std::size_t k = static_cast<std::size_t>(r) * g.width + q;
             if (std::isnan(surface[k])) continue;
-            const MapPoint m = g.transform.pixel_centre(q, r);
-            const Eigen::Vector3d X(m.x, m.y, surface[k]);
+            const Eigen::Vector3d X = surface_point(k);
             views.clear();
             for (std::size_t i = 0; i < cameras.cameras.size(); ++i) {
                 const PhotoCamera& cam = cameras.cameras[i];
@@ -123,29 +121,57 @@ Image<uint8_t> orthophoto_from_photos(const PointCloud& cloud, const GridSpec& g
                 if (d.z() < cos_limit) continue;
                 const auto px = cam.project(X);
                 if (!px || !cam.inside(*px, 1.0)) continue;
-                views.push_back({-d.z(), i, *px});
+                views.push_back({-d.z(), i});
             }
             std::sort(views.begin(), views.end());
-            bool any = false;
-            for (const View& v : views) {
-                if (hidden(X, cameras.cameras[v.camera].centre)) continue;
-                double rgb[3];
-                sample_rgb(images[v.camera], v.px.x(), v.px.y(), rgb);
-                for (int b = 0; b < 3; ++b) out.at(b, q, r) = static_cast<uint8_t>(std::clamp(std::lround(rgb[b]), 1L, 255L));
-                any = true;
-                break;
-            }
-            coloured[k] = any;
-            occluded[k] = !any && !views.empty();
+            for (const View& v : views)
+                if (!hidden(X, cameras.cameras[v.camera].centre)) {
+                    view[k] = static_cast<int32_t>(v.camera);
+                    break;
+                }
+            occluded[k] = view[k] == none && !views.empty();
         }
     });
+    // 2. The cells of each camera (in cell order), then one photo at a time.
+    std::vector<std::size_t> first(cameras.cameras.size() + 1, 0);
+    for (std::size_t k = 0; k < n; ++k)
+        if (view[k] != none) ++first[static_cast<std::size_t>(view[k]) + 1];
+    std::partial_sum(first.begin(), first.end(), first.begin());
+    std::vector<std::size_t> cells(first.back()), next(first.begin(), first.end() - 1);
+    for (std::size_t k = 0; k < n; ++k)
+        if (view[k] != none) cells[next[static_cast<std::size_t>(view[k])]++] = k;
+    Image<uint8_t> out(g.width, g.height, 3, 0);
+    for (std::size_t i = 0; i < cameras.cameras.size(); ++i) {
+        if (first[i] == first[i + 1]) continue;
+        const PhotoCamera& cam = cameras.cameras[i];
+        const cv::Mat image = load(i);
+        if (image.type() != CV_8UC3 || image.cols != cam.width || image.rows != cam.height || cam.width < 2 || cam.height < 2)
+            throw Error(cam.image, "image size or type differs from its camera (" + std::to_string(cam.width) + " x " +
+                                       std::to_string(cam.height) + " px, 8-bit colour)");
+        tbb::parallel_for(first[i], first[i + 1], [&](std::size_t j) {
+            const std::size_t k = cells[j];
+            const auto px = cam.project(surface_point(k));  // as in step 1: in view, inside the photo
+            double rgb[3];
+            sample_rgb(image, px->x(), px->y(), rgb);
+            const int q = static_cast<int>(k % static_cast<std::size_t>(g.width)), r = static_cast<int>(k / static_cast<std::size_t>(g.width));
+            for (int b = 0; b < 3; ++b) out.at(b, q, r) = static_cast<uint8_t>(std::clamp(std::lround(rgb[b]), 1L, 255L));
+        });
+    }
     if (stats) {
         stats->cells_measured = n_measured;
         stats->cells_filled = n_filled;
-        stats->cells_coloured = static_cast<std::size_t>(std::accumulate(coloured.begin(), coloured.end(), std::size_t(0)));
+        stats->cells_coloured = first.back();
         stats->cells_occluded = static_cast<std::size_t>(std::accumulate(occluded.begin(), occluded.end(), std::size_t(0)));
     }
     return out;
+}
+
+Image<uint8_t> orthophoto_from_photos(const PointCloud& cloud, const GridSpec& g, const std::vector<cv::Mat>& images,
+                                      const CameraSet& cameras, const OrthophotoOptions& o, const std::string& subject,
+                                      OrthophotoStats* stats) {
+    if (images.size() != cameras.cameras.size()) throw Error(subject, "one image per camera is needed for the orthophoto");
+    return orthophoto_from_photos(
+        cloud, g, [&](std::size_t i) { return images[i]; }, cameras, o, subject, stats);
 }
 
 }  // namespace cityforge::photo

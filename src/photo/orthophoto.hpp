@@ -9,6 +9,7 @@
 // cells farther than that from any point, or seen by no photo, are 0 in every
 // band (nodata; colours are at least 1). No GDAL; images as OpenCV BGR.
 #include <cstdint>
+#include <functional>
 #include <string>
 #include <vector>
 
@@ -42,11 +43,21 @@ struct OrthophotoStats {
     std::size_t cells_occluded = 0;  ///< cells with a surface that every photo in view has hidden
 };
 
+/// Reads the photo of `cameras.cameras[i]` (BGR, 8-bit, the camera's size).
+using PhotoLoader = std::function<cv::Mat(std::size_t i)>;
+
 /// RGB (3 bands, 8-bit, 0 = no data) on `grid` (the cameras' and the cloud's
-/// CRS). `images[i]` is the photo of `cameras.cameras[i]` (BGR, its size
-/// equal to the camera's). Deterministic and independent of the thread
-/// count (each cell on its own). Throws Error naming `subject` when no point
-/// of the cloud falls on the grid or an image's size differs from its camera.
+/// CRS). Each cell's view is chosen from the cameras alone; then the photos
+/// that colour at least one cell are read one at a time, in camera order, by
+/// `load` (memory: one photo, whatever the block's size). Deterministic and
+/// independent of the thread count (each cell on its own). Throws Error
+/// naming `subject` when no point of the cloud falls on the grid, or the
+/// camera's image when a loaded photo's size or type differs from its camera.
+Image<uint8_t> orthophoto_from_photos(const PointCloud& cloud, const GridSpec& grid, const PhotoLoader& load, const CameraSet& cameras,
+                                      const OrthophotoOptions& options, const std::string& subject, OrthophotoStats* stats = nullptr);
+
+/// The same with the photos in memory: `images[i]` is the photo of
+/// `cameras.cameras[i]`; one image per camera is required.
 Image<uint8_t> orthophoto_from_photos(const PointCloud& cloud, const GridSpec& grid, const std::vector<cv::Mat>& images,
                                       const CameraSet& cameras, const OrthophotoOptions& options, const std::string& subject,
                                       OrthophotoStats* stats = nullptr);

@@ -702,10 +702,10 @@ PhotoRunResult run_photo(const PhotoRunOptions& o, const Progress& progress) {
             r.ortho_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t1).count();
             // The orthophoto: the oriented photos' colours on the cloud's surface.
             const auto t2 = std::chrono::steady_clock::now();
-            std::vector<cv::Mat> images;
-            for (const photo::PhotoCamera& c : cams.cameras) images.push_back(read_colour_image((fs::path(oo.out_dir) / "images" / c.image).string()));
-            const Image<uint8_t> photo_ortho = photo::orthophoto_from_photos(dense, grid, images, cams, o.orthophoto, r.cloud_path, &r.orthophoto);
-            images.clear();
+            const photo::PhotoLoader load = [&](std::size_t i) {
+                return read_colour_image((fs::path(oo.out_dir) / "images" / cams.cameras[i].image).string());
+            };
+            const Image<uint8_t> photo_ortho = photo::orthophoto_from_photos(dense, grid, load, cams, o.orthophoto, r.cloud_path, &r.orthophoto);
             r.orthophoto_path = (out / "orthophoto.tif").string();
             write_geotiff(r.orthophoto_path, photo_ortho, grid.transform, cams.crs_wkt, wo);
             r.orthophoto_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t2).count();

@@ -2,6 +2,7 @@
 // checked against the synthetic town's exact nadir ortho (same albedo and
 // shading as its perspective views), with and without the occlusion test,
 // for 1 and 2 threads, and bad input refused.
+#include <algorithm>
 #include <catch2/catch.hpp>
 #include <cmath>
 #include <filesystem>
@@ -94,6 +95,16 @@ TEST_CASE("The orthophoto takes the photos' colours where the surface does not h
         one = photo::orthophoto_from_photos(surface, grid, images, set, o, "views");
     }
     CHECK(one.data == ortho.data);
+
+    // Photos read on demand: each at most once, in camera order, one at a
+    // time (the caller's loader), and the same bytes as with all in memory.
+    std::vector<std::size_t> loaded;
+    const Image<uint8_t> streamed = photo::orthophoto_from_photos(
+        surface, grid, [&](std::size_t i) { loaded.push_back(i); return images[i].clone(); }, set, o, "views");
+    CHECK(streamed.data == ortho.data);
+    REQUIRE(!loaded.empty());
+    CHECK(std::is_sorted(loaded.begin(), loaded.end()));
+    CHECK(std::adjacent_find(loaded.begin(), loaded.end()) == loaded.end());
 
     // An image that is not its camera's size is refused, naming it.
     std::vector<cv::Mat> bad = images;
