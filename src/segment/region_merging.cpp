@@ -9,6 +9,7 @@
 #include <ctime>
 #include <atomic>
 #include <new>
+#include <type_traits>
 #include <tbb/task_arena.h>
 #include <tbb/parallel_reduce.h>
 #include <tbb/parallel_for.h>
@@ -148,30 +149,9 @@ public:
         const std::size_t fixed_bytes = sizeof(NodeHead) + 2 * sizeof(double) * bands_;
         lines_ = (fixed_bytes + 10 * sizeof(Neighbour) + sizeof(Line) - 1) / sizeof(Line);
         inline_capacity_ = static_cast<uint32_t>((lines_ * sizeof(Line) - fixed_bytes) / sizeof(Neighbour));
-        storage_.resize(static_cast<std::size_t>(n_) * lines_);
-        tbb::parallel_for(tbb::blocked_range<uint32_t>(0, n_, 1 << 14), [&](const tbb::blocked_range<uint32_t>& rr) {
-            for (uint32_t r = rr.begin(); r != rr.end(); ++r) {
-                NodeHead* h = new (head_ptr(r)) NodeHead();
-                new (sums_ptr(r)) double[2 * static_cast<std::size_t>(bands_)]();
-                h->list = new (sums_ptr(r) + 2 * sizeof(double) * bands_) Neighbour[inline_capacity_];
-                h->capacity = inline_capacity_;
-            }
-        });
+        storage_.resize(static_cast<std::size_t>(n_) * lines_);  // records are constructed by build()
         number_nodes(labels);
         build(image, labels);
-        alive_count_ = tbb::parallel_reduce(
-            tbb::blocked_range<uint32_t>(1, std::max<uint32_t>(n_, 1), 1 << 14), uint32_t(0),
-            [&](const tbb::blocked_range<uint32_t>& rr, uint32_t alive) {
-                for (uint32_t r = rr.begin(); r != rr.end(); ++r) {
-                    NodeHead& R = head(r);
-                    R.key = label_of_node_[r];
-                    R.alive = R.n > 0;
-                    alive += R.alive;
-                    derive(r);
-                }
-                return alive;
-            },
-            [](uint32_t a, uint32_t b) { return a + b; });
     }
 
     // Node order. The merge loop reads the records of a region and of its
@@ -226,6 +206,8 @@ public:
         std::vector<uint32_t> start(cells + 1, 0);
         for (uint32_t l = 1; l < n_; ++l) ++start[cell_of(l) + 1];
         for (uint64_t c = 0; c < cells; ++c) start[c + 1] += start[c];
+        nodes_above_stripe_.resize(stripes + 1);
+        for (int s = 0; s <= stripes; ++s) nodes_above_stripe_[s] = start[uint64_t(s) * blocks * 64];
         node_of_label_.assign(n_, 0);
         label_of_node_.assign(n_, 0);
         for (uint32_t l = 1; l < n_; ++l) {
@@ -267,9 +249,14 @@ public:
             std::fill(A, A + words, 0);
             A[2] = A[3] = INT32_MAX, A[4] = A[5] = -1;
         };
+        // The records are constructed here, each written once before the
+        // scan (its head, its accumulators) and once after it.
         tbb::parallel_for(tbb::blocked_range<uint32_t>(0, n_, 1 << 14), [&](const tbb::blocked_range<uint32_t>& rr) {
-            for (uint32_t r = rr.begin(); r != rr.end(); ++r)
+            for (uint32_t r = rr.begin(); r != rr.end(); ++r) {
+                NodeHead* R = new (head_ptr(r)) NodeHead();
+                R->list = nullptr, R->capacity = 0;  // the inline list is constructed after the scan
                 init_acc(in_record ? new (inline_bytes(r)) int64_t[words] : outside.data() + std::size_t(r) * words);
+            }
         });
         // Row bands (on stripe boundaries). A band owns the nodes above every
         // node of the bands before it (with nodes numbered by the stripe of
@@ -283,14 +270,6 @@ public:
             if (j >= n_bands) return h;
             return std::min(h, static_cast<int>(static_cast<int64_t>(h) * j / n_bands + kStripe / 2) / kStripe * kStripe);
         };
-        std::vector<uint32_t> band_max(n_bands, 0);
-        tbb::parallel_for(0, n_bands, [&](int j) {
-            uint32_t m = 0;
-            for (std::size_t i = std::size_t(band_row(j)) * w; i < std::size_t(band_row(j + 1)) * w; ++i) m = std::max(m, node[lab[i]]);
-            band_max[j] = m;
-        });
-        for (int j = 0; j < n_bands; ++j)
-            if (band_max[j] >= n_) throw Error("region merging", "label " + std::to_string(band_max[j]) + " exceeds the region count");
         struct Band {
             uint32_t owned_from = 0;                           // labels >= this are owned
             std::vector<std::pair<uint32_t, std::size_t>> foreign_index;  // (label, offset in foreign), unsorted
@@ -299,7 +278,9 @@ public:
             std::vector<std::pair<uint64_t, uint32_t>> pairs;  // (pair key, shared edges)
         };
         std::vector<Band> band_data(n_bands);
-        for (int j = 1; j < n_bands; ++j) band_data[j].owned_from = std::max(band_data[j - 1].owned_from, band_max[j - 1] + 1);
+        // Band j owns the nodes whose first pixel is in its rows (numbered
+        // after all those of earlier rows: number_nodes).
+        for (int j = 1; j < n_bands; ++j) band_data[j].owned_from = nodes_above_stripe_[(band_row(j) + kStripe - 1) / kStripe] + 1;
         tbb::parallel_for(0, n_bands, [&](int j) {
             Band& B = band_data[j];
             // Room for the band's boundary pairs up front (about half a pair
@@ -328,80 +309,98 @@ public:
                 }
                 return B.foreign.data() + B.foreign_index[B.slot[i] - 1].second;
             };
-            std::vector<int64_t> sum(bands_);
-            std::vector<int128> sumsq(bands_);
             // By blocks of kStripe x kStripe pixels, as the nodes are
             // numbered (number_nodes): a block's nodes are reached in nearly
             // ascending order, so their accumulators (cold: first read here)
             // are loaded kAhead nodes ahead of use, and the few hundred
             // records a block adds to stay in cache while its rows are read.
             // 13 MP Autzen seeds, one core: 0.45-0.49 -> 0.37-0.38 s CPU.
+            // A run's sums are kept in registers for the usual band counts
+            // (Bands > 0; 0 = any count), its Σq² in 64 bits (|q| <= 2^24
+            // and a run has at most kStripe pixels: < 2^55), added to the
+            // region's 128-bit total once per run.
             constexpr uint32_t kAhead = 48;
             const uint32_t owned_end = j + 1 < n_bands ? band_data[j + 1].owned_from : n_;
-            uint32_t prefetched = B.owned_from;
-            for (int ys = band_row(j); ys < band_row(j + 1); ys += kStripe)
-            for (int xs = 0; xs < w; xs += kStripe)
-            for (int y = ys; y < std::min(band_row(j + 1), ys + kStripe); ++y) {
-                const uint32_t* row = lab + std::size_t(y) * w;
-                const uint32_t* above = y > 0 ? row - w : nullptr;
-                const uint32_t* below = y < h - 1 ? row + w : nullptr;
-                uint64_t last_down = 0;  // runs of the same vertical neighbour pair collapse into one entry
-                const int x_end = std::min(w, xs + kStripe);
-                int x = xs;
-                while (x < x_end) {
-                    const uint32_t la = row[x];  // label; a = its node
-                    if (!la) {
-                        ++x;
-                        continue;
-                    }
-                    const uint32_t a = node[la];
-                    if (a >= prefetched && a < owned_end) {
-                        for (const uint32_t until = std::min(owned_end, a + kAhead); prefetched < until; ++prefetched) {
-                            prefetch_line(acc(prefetched));
-                            prefetch_line(acc(prefetched) + 8);
+            auto scan = [&](auto bands_tag) {
+                constexpr int Bands = decltype(bands_tag)::value;
+                const int nb = Bands ? Bands : bands_;
+                std::vector<const float*> band_ptrs(nb);
+                for (int b = 0; b < nb; ++b) band_ptrs[b] = image.band_data(b);
+                const float* const* band_ptr = band_ptrs.data();
+                std::vector<int64_t> wide(Bands ? 0 : 2 * std::size_t(nb));  // a run's sums, any band count
+                uint32_t prefetched = B.owned_from;
+                for (int ys = band_row(j); ys < band_row(j + 1); ys += kStripe)
+                for (int xs = 0; xs < w; xs += kStripe)
+                for (int y = ys; y < std::min(band_row(j + 1), ys + kStripe); ++y) {
+                    const uint32_t* row = lab + std::size_t(y) * w;
+                    const uint32_t* above = y > 0 ? row - w : nullptr;
+                    const uint32_t* below = y < h - 1 ? row + w : nullptr;
+                    uint64_t last_down = 0;  // runs of the same vertical neighbour pair collapse into one entry
+                    const int x_end = std::min(w, xs + kStripe);
+                    int x = xs;
+                    while (x < x_end) {
+                        const uint32_t la = row[x];  // label; a = its node
+                        if (!la) {
+                            ++x;
+                            continue;
                         }
-                    }
-                    // A run of pixels of region a within the block: x .. end - 1.
-                    int end = x + 1;
-                    while (end < x_end && row[end] == la) ++end;
-                    int64_t perimeter = (x == 0 || row[x - 1] != la) + (end == w || row[end] != la);  // the run's ends on the region's border
-                    std::fill(sum.begin(), sum.end(), 0);
-                    std::fill(sumsq.begin(), sumsq.end(), 0);
-                    for (int px = x; px < end; ++px) {
-                        const std::size_t i = std::size_t(y) * w + px;
-                        for (int b = 0; b < bands_; ++b) {
-                            const double v = image.band_data(b)[i] * fixed;  // round half away from zero
-                            const auto q = static_cast<int64_t>(v + (v >= 0.0 ? 0.5 : -0.5));
-                            sum[b] += q;
-                            sumsq[b] += static_cast<int128>(q) * q;
+                        const uint32_t a = node[la];
+                        if (a >= prefetched && a < owned_end) {
+                            for (const uint32_t until = std::min(owned_end, a + kAhead); prefetched < until; ++prefetched) {
+                                prefetch_line(acc(prefetched));
+                                prefetch_line(acc(prefetched) + 8);
+                            }
                         }
-                        const uint32_t up = above ? above[px] : 0, down = below ? below[px] : 0;
-                        perimeter += (up != la) + (down != la);
-                        if (down && down != la) {
-                            const uint64_t k = key(a, node[down]);
-                            if (k == last_down && !B.pairs.empty() && B.pairs.back().first == k) ++B.pairs.back().second;
-                            else B.pairs.push_back({k, 1});
-                            last_down = k;
-                        } else {
-                            last_down = 0;
+                        // A run of pixels of region a within the block: x .. end - 1.
+                        int end = x + 1;
+                        while (end < x_end && row[end] == la) ++end;
+                        int64_t perimeter = (x == 0 || row[x - 1] != la) + (end == w || row[end] != la);  // the run's ends on the region's border
+                        int64_t fixed_sums[2 * (Bands ? Bands : 1)];
+                        int64_t* const sum = Bands ? fixed_sums : wide.data();
+                        int64_t* const sumsq = sum + nb;
+                        std::fill(sum, sum + 2 * nb, int64_t(0));
+                        for (int px = x; px < end; ++px) {
+                            const std::size_t i = std::size_t(y) * w + px;
+                            for (int b = 0; b < nb; ++b) {
+                                const double v = band_ptr[b][i] * fixed;  // round half away from zero
+                                const auto q = static_cast<int64_t>(v + (v >= 0.0 ? 0.5 : -0.5));
+                                sum[b] += q;
+                                sumsq[b] += q * q;
+                            }
+                            const uint32_t up = above ? above[px] : 0, down = below ? below[px] : 0;
+                            perimeter += (up != la) + (down != la);
+                            if (down && down != la) {
+                                const uint64_t k = key(a, node[down]);
+                                if (k == last_down && !B.pairs.empty() && B.pairs.back().first == k) ++B.pairs.back().second;
+                                else B.pairs.push_back({k, 1});
+                                last_down = k;
+                            } else {
+                                last_down = 0;
+                            }
                         }
+                        if (end < w && row[end] && row[end] != la) B.pairs.push_back({key(a, node[row[end]]), 1});
+                        int64_t* A = a >= B.owned_from ? acc(a) : foreign_acc(a);
+                        A[0] += end - x, A[1] += perimeter;
+                        A[2] = std::min<int64_t>(A[2], x), A[3] = std::min<int64_t>(A[3], y);
+                        A[4] = std::max<int64_t>(A[4], end - 1), A[5] = std::max<int64_t>(A[5], y);
+                        for (int b = 0; b < nb; ++b) {
+                            A[6 + b] += sum[b];
+                            int64_t* half = A + 6 + nb + 2 * b;
+                            const auto total = static_cast<uint128>(static_cast<uint64_t>(half[0])) |
+                                               static_cast<uint128>(static_cast<uint64_t>(half[1])) << 64;
+                            const auto added = total + static_cast<uint128>(static_cast<uint64_t>(sumsq[b]));
+                            half[0] = static_cast<int64_t>(static_cast<uint64_t>(added));
+                            half[1] = static_cast<int64_t>(static_cast<uint64_t>(added >> 64));
+                        }
+                        x = end;
                     }
-                    if (end < w && row[end] && row[end] != la) B.pairs.push_back({key(a, node[row[end]]), 1});
-                    int64_t* A = a >= B.owned_from ? acc(a) : foreign_acc(a);
-                    A[0] += end - x, A[1] += perimeter;
-                    A[2] = std::min<int64_t>(A[2], x), A[3] = std::min<int64_t>(A[3], y);
-                    A[4] = std::max<int64_t>(A[4], end - 1), A[5] = std::max<int64_t>(A[5], y);
-                    for (int b = 0; b < bands_; ++b) {
-                        A[6 + b] += sum[b];
-                        int64_t* half = A + 6 + bands_ + 2 * b;
-                        const auto total = static_cast<uint128>(static_cast<uint64_t>(half[0])) |
-                                           static_cast<uint128>(static_cast<uint64_t>(half[1])) << 64;
-                        const auto added = total + static_cast<uint128>(sumsq[b]);
-                        half[0] = static_cast<int64_t>(static_cast<uint64_t>(added));
-                        half[1] = static_cast<int64_t>(static_cast<uint64_t>(added >> 64));
-                    }
-                    x = end;
                 }
+            };
+            switch (bands_) {  // the band loop unrolled for the usual band counts
+                case 1: scan(std::integral_constant<int, 1>{}); break;
+                case 3: scan(std::integral_constant<int, 3>{}); break;
+                case 4: scan(std::integral_constant<int, 4>{}); break;
+                default: scan(std::integral_constant<int, 0>{});
             }
         });
         // The crossing regions' sums, band by band (integer sums: any order).
@@ -425,12 +424,15 @@ public:
             }
             std::vector<int64_t>().swap(B.foreign);
         }
-        // Totals into the node records; the inline adjacency gets its room back.
-        tbb::parallel_for(tbb::blocked_range<uint32_t>(0, n_, 1 << 14), [&](const tbb::blocked_range<uint32_t>& rr) {
+        // Totals into the node records (with the region's key, whether it
+        // has pixels, and its colour term); the inline adjacency gets its room back.
+        alive_count_ = tbb::parallel_reduce(
+            tbb::blocked_range<uint32_t>(0, n_, 1 << 14), uint32_t(0),
+            [&](const tbb::blocked_range<uint32_t>& rr, uint32_t alive) {
             for (uint32_t r = rr.begin(); r != rr.end(); ++r) {
                 const int64_t* A = acc(r);
                 NodeHead& R = head(r);
-                double* S = sums(r);
+                double* S = new (sums_ptr(r)) double[2 * static_cast<std::size_t>(bands_)];
                 R.n = static_cast<double>(A[0]), R.l = static_cast<double>(A[1]);
                 R.x0 = static_cast<int32_t>(A[2]), R.y0 = static_cast<int32_t>(A[3]);
                 R.x1 = static_cast<int32_t>(A[4]), R.y1 = static_cast<int32_t>(A[5]);
@@ -441,9 +443,16 @@ public:
                     S[2 * b] = static_cast<double>(A[6 + b]) / fixed;
                     S[2 * b + 1] = static_cast<double>(sq) / (fixed * fixed);
                 }
-                if (in_record) R.list = new (inline_bytes(r)) Neighbour[inline_capacity_];
+                R.list = new (inline_bytes(r)) Neighbour[inline_capacity_];
+                R.capacity = inline_capacity_;
+                R.key = label_of_node_[r];
+                R.alive = R.n > 0;
+                alive += R.alive;
+                derive(r);
             }
-        });
+            return alive;
+            },
+            [](uint32_t a, uint32_t b) { return a + b; });
         // Boundary pairs bucketed by their lower region (counting sort, no
         // comparison sort of all pairs), then each bucket sorted by the
         // higher region with its duplicate pairs summed: the result does not
@@ -454,21 +463,47 @@ public:
         // Scratch arrays of the build are plain vectors (small pages): the
         // first touch of pages is what they cost, and small pages are found
         // among recently freed memory more often than fresh huge pages.
+        // In parallel by bands: a band's pairs have their lower region in
+        // the band's own node range (counted and placed by that band alone)
+        // except for the few whose both regions reach in from earlier bands
+        // (placed afterwards, in band order).
         std::vector<uint64_t> start(std::size_t(n_) + 1, 0);
-        for (const Band& B : band_data)
-            for (const auto& q : B.pairs) ++start[(q.first >> 32) + 1];
+        std::vector<std::vector<std::pair<uint64_t, uint32_t>>> crossing(n_bands);
+        tbb::parallel_for(0, n_bands, [&](int j) {
+            const uint64_t own = band_data[j].owned_from;
+            for (const auto& q : band_data[j].pairs) {
+                if ((q.first >> 32) >= own) ++start[(q.first >> 32) + 1];
+                else crossing[j].push_back(q);
+            }
+        });
+        for (const auto& c : crossing)
+            for (const auto& q : c) ++start[(q.first >> 32) + 1];
         for (uint32_t r = 0; r < n_; ++r) start[r + 1] += start[r];
         std::vector<Upper> upper(start[n_]);
-        {
-            std::vector<uint64_t> fill(start.begin(), start.end() - 1);
-            for (Band& B : band_data) {
-                for (const auto& q : B.pairs) upper[fill[q.first >> 32]++] = {static_cast<uint32_t>(q.first & 0xFFFFFFFFu), q.second};
-                std::vector<std::pair<uint64_t, uint32_t>>().swap(B.pairs);
-            }
-        }
-        std::vector<uint32_t> unique(n_, 0), degree(n_, 0);
-        tbb::parallel_for(tbb::blocked_range<uint32_t>(0, n_, 1 << 12), [&](const tbb::blocked_range<uint32_t>& rr) {
-            for (uint32_t r = rr.begin(); r != rr.end(); ++r) {
+        // start[r] serves as r's fill cursor (it ends at start[r + 1]; shifted back below).
+        tbb::parallel_for(0, n_bands, [&](int j) {
+            const uint64_t own = band_data[j].owned_from;
+            for (const auto& q : band_data[j].pairs)
+                if ((q.first >> 32) >= own) upper[start[q.first >> 32]++] = {static_cast<uint32_t>(q.first & 0xFFFFFFFFu), q.second};
+            std::vector<std::pair<uint64_t, uint32_t>>().swap(band_data[j].pairs);
+        });
+        for (const auto& c : crossing)
+            for (const auto& q : c) upper[start[q.first >> 32]++] = {static_cast<uint32_t>(q.first & 0xFFFFFFFFu), q.second};
+        for (uint32_t r = n_; r > 0; --r) start[r] = start[r - 1];
+        start[0] = 0;
+        // Each bucket sorted by the higher region, duplicates summed; by
+        // chunks of lower regions, each counting how many lower neighbours
+        // it gives every region. A list is then its lower neighbours, chunk
+        // by chunk, each chunk's in ascending order (so sorted, whatever
+        // thread wrote them), then its own bucket.
+        const int chunks = std::clamp(tbb::this_task_arena::max_concurrency(), 1, 8);
+        auto chunk_begin = [&](int c) { return static_cast<uint32_t>(uint64_t(n_) * uint64_t(c) / uint64_t(chunks)); };
+        std::vector<uint32_t> unique(n_, 0);
+        std::vector<std::vector<uint32_t>> from_chunk(chunks);  // lower neighbours given per region, then slots
+        tbb::parallel_for(0, chunks, [&](int c) {
+            std::vector<uint32_t>& count = from_chunk[c];
+            count.assign(n_, 0);
+            for (uint32_t r = chunk_begin(c); r < chunk_begin(c + 1); ++r) {
                 Upper* first = upper.data() + start[r];
                 Upper* last = upper.data() + start[r + 1];
                 if (last - first > 32) std::sort(first, last, [](const Upper& p, const Upper& q) { return p.id < q.id; });
@@ -481,23 +516,32 @@ public:
                     else *out++ = *i;
                 }
                 unique[r] = static_cast<uint32_t>(out - first);
+                for (const Upper* i = first; i != out; ++i) ++count[i->id];
             }
         });
-        for (uint32_t r = 0; r < n_; ++r) {
-            degree[r] += unique[r];
-            for (const Upper* i = upper.data() + start[r]; i != upper.data() + start[r] + unique[r]; ++i) ++degree[i->id];
-        }
-        for (uint32_t r = 0; r < n_; ++r) reserve(r, degree[r]);
-        // In ascending lower region: every list comes out sorted (a node's
-        // lower neighbours first, appended in ascending order, then its higher ones).
-        for (uint32_t a = 0; a < n_; ++a) {
-            NodeHead& A = head(a);
-            for (const Upper* i = upper.data() + start[a]; i != upper.data() + start[a] + unique[a]; ++i) {
-                NodeHead& B = head(i->id);
-                A.list[A.degree++] = {i->id, i->shared};
-                B.list[B.degree++] = {a, i->shared};
+        // Per region: room for the list, its bucket copied in, and each
+        // chunk's count turned into the chunk's first slot.
+        tbb::parallel_for(tbb::blocked_range<uint32_t>(0, n_, 1 << 12), [&](const tbb::blocked_range<uint32_t>& rr) {
+            for (uint32_t r = rr.begin(); r != rr.end(); ++r) {
+                uint32_t lower = 0;
+                for (int c = 0; c < chunks; ++c) {
+                    const uint32_t k = from_chunk[c][r];
+                    from_chunk[c][r] = lower;
+                    lower += k;
+                }
+                reserve(r, lower + unique[r]);
+                NodeHead& R = head(r);
+                R.degree = lower + unique[r];
+                Neighbour* out = R.list + lower;
+                for (const Upper* i = upper.data() + start[r]; i != upper.data() + start[r] + unique[r]; ++i) *out++ = {i->id, i->shared};
             }
-        }
+        });
+        tbb::parallel_for(0, chunks, [&](int c) {
+            std::vector<uint32_t>& slot = from_chunk[c];
+            for (uint32_t a = chunk_begin(c); a < chunk_begin(c + 1); ++a)
+                for (const Upper* i = upper.data() + start[a]; i != upper.data() + start[a] + unique[a]; ++i)
+                    head(i->id).list[slot[i->id]++] = {a, i->shared};
+        });
     }
 
     static uint64_t key(uint32_t a, uint32_t b) {
@@ -804,6 +848,7 @@ private:
     uint32_t inline_capacity_ = 0;
     std::vector<Neighbour> scratch_;
     std::vector<uint32_t> node_of_label_, label_of_node_;  // see number_nodes
+    std::vector<uint32_t> nodes_above_stripe_;  // [s]: nodes whose first pixel is above stripe s (number_nodes)
     uint32_t alive_count_ = 0;
 };
 
