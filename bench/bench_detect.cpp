@@ -27,7 +27,7 @@ using cityforge::bench::now;
 static int run_bench(int argc, char** argv) {
     const int size_px = argc > 2 ? static_cast<int>(cityforge::bench::parse_number(argv[2], "SIZE_PX")) : 4000;
     const detect::BandLayout rgb{3, -1};
-    const std::string model_path = argc > 1 ? argv[1] : default_model_path(rgb);
+    const std::string model_path = argc > 1 ? argv[1] : default_model_path(rgb, 0.5);  // the tile is 0.5 m
     const detect::DetectorModel model = detect::read_model_file(model_path);
     SynthOptions so;
     so.gsd_m = 0.5;

@@ -511,7 +511,7 @@ FootprintsReport run_footprints_unguarded(const std::string& output_path, const 
     if (mode == DetectionMode::ortho_only && o.detector != OrthoDetector::rules && o.segments.empty()) {
         // Learned detection (src/detect): segments and outlines from the model's own segmentation.
         DetectionImage di = read_detection_image(o.ortho, o.nir_band);
-        const std::string path = o.model.empty() ? default_model_path(di.layout) : o.model;
+        const std::string path = o.model.empty() ? default_model_path(di.layout, di.gsd_m) : o.model;
         const detect::DetectorModel model = detect::read_model_file(path);
         if (model.layout.ndsm_band >= 0 && (!o.ndsm.empty() || !o.cloud.empty())) {
             // A model trained with heights gets them as its last band.

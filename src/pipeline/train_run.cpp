@@ -2,7 +2,9 @@
 
 #include <tbb/parallel_for.h>
 
+#include <algorithm>
 #include <chrono>
+#include <cstdio>
 #include <cmath>
 #include <filesystem>
 
@@ -287,13 +289,67 @@ BuildingMask detect_building_mask(const detect::DetectorModel& model, const Dete
                                    d.pixel_probability.empty() ? nullptr : &d.pixel_probability, d.groups.empty() ? nullptr : &d.groups);
 }
 
-std::string default_model_path(const detect::BandLayout& layout) {
+std::pair<double, double> training_gsd_range_m(const detect::DetectorModel& model) {
+    double lo = 0.0, hi = 0.0;
+    const auto it = model.training.find("sources");
+    if (it == model.training.end() || !it->is_array()) return {lo, hi};
+    for (const nlohmann::json& s : *it) {
+        if (!s.is_object() || !s.contains("gsd_m") || !s["gsd_m"].is_number()) continue;
+        const double g = s["gsd_m"].get<double>();
+        if (!(g > 0.0)) continue;
+        lo = lo > 0.0 ? std::min(lo, g) : g;
+        hi = std::max(hi, g);
+    }
+    return {lo, hi};
+}
+
+namespace {
+
+std::string fixed_text(double v, int decimals) {
+    char b[64];
+    std::snprintf(b, sizeof b, "%.*f", decimals, v);
+    return b;
+}
+
+// log of how far `gsd_m` lies outside the range (0 inside).
+double gsd_distance(std::pair<double, double> range_m, double gsd_m) {
+    if (!(range_m.first > 0.0) || !(gsd_m > 0.0)) return 0.0;  // no GSD recorded or known: fits any
+    if (gsd_m < range_m.first) return std::log(range_m.first / gsd_m);
+    if (gsd_m > range_m.second) return std::log(gsd_m / range_m.second);
+    return 0.0;
+}
+
+}  // namespace
+
+std::string default_model_path(const detect::BandLayout& layout, double gsd_m) {
     const char* env = std::getenv("CITYFORGE_MODELS_DIR");
-    const std::string dir = env && *env ? env : CITYFORGE_MODELS_DIR;
-    const std::string name = layout.bands == 1 ? "default_pan.cfdet" : layout.bands == 3 && layout.nir_band < 0 ? "default_rgb.cfdet" : "";
-    if (name.empty())
+    const fs::path dir = env && *env ? env : CITYFORGE_MODELS_DIR;
+    const std::string prefix = layout.bands == 1 ? "default_pan" : layout.bands == 3 && layout.nir_band < 0 ? "default_rgb" : "";
+    if (prefix.empty())
         throw Error("--model", "no default model for " + detect::describe_bands(layout) + " images; train one with `cityforge train` and pass --model");
-    return (fs::path(dir) / name).string();
+    std::vector<std::string> names;  // default_<bands>*.cfdet, by name
+    std::error_code ec;
+    for (fs::directory_iterator d(dir, ec), end; !ec && d != end; d.increment(ec)) {
+        const std::string n = d->path().filename().string();
+        if (n.size() >= prefix.size() + 6 && n.compare(0, prefix.size(), prefix) == 0 && n.compare(n.size() - 6, 6, ".cfdet") == 0) names.push_back(n);
+    }
+    std::sort(names.begin(), names.end());
+    if (names.empty())
+        throw Error("--model", "no default model for " + detect::describe_bands(layout) + " images in " + dir.string() + " (" + prefix +
+                                   "*.cfdet); train one with `cityforge train` and pass --model");
+    std::string best, trained;
+    double best_distance = 0.0;
+    for (const std::string& n : names) {
+        const std::string path = (dir / n).string();
+        const std::pair<double, double> r = training_gsd_range_m(detect::read_model_file(path));
+        const double d = gsd_distance(r, gsd_m);
+        if (best.empty() || d < best_distance) best = path, best_distance = d;
+        trained += (trained.empty() ? "" : ", ") + n + " " + fixed_text(r.first, 2) + "-" + fixed_text(r.second, 2) + " m";
+    }
+    if (best_distance > std::log(kDefaultModelGsdReach) + 1e-9)
+        throw Error("--model", "no default model fits a " + fixed_text(gsd_m, 3) + " m image (trained at " + trained + "; each serves up to " +
+                                   fixed_text(kDefaultModelGsdReach, 0) + "x beyond its range): resample the image or train a model for it and pass --model");
+    return best;
 }
 
 void TrainOptions::validate() const {

@@ -5,6 +5,7 @@
 // IoU 0.5 of the fitted outlines) and at segment level; and the image input
 // shared with `footprints --detector model`.
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "cloud/cloud_rasters.hpp"
@@ -50,9 +51,23 @@ void add_ndsm_band(DetectionImage& image, const Image<float>& heights_m);
 BuildingMask detect_building_mask(const detect::DetectorModel& model, const DetectionImage& image, int threads = 0,
                                   const Progress& progress = {});
 
-/// The model `footprints` uses when none is given: models/default_<bands>.cfdet
-/// beside the sources (CITYFORGE_MODELS_DIR overrides the folder).
-std::string default_model_path(const detect::BandLayout& layout);
+/// Smallest and largest GSD (metres) of the images a model was trained on
+/// (its header's training sources); {0, 0} when none is recorded.
+std::pair<double, double> training_gsd_range_m(const detect::DetectorModel& model);
+
+/// How far (as a factor) beyond its training GSD range a default model is
+/// still chosen for an image.
+constexpr double kDefaultModelGsdReach = 4.0;
+
+/// The model `footprints` uses when none is given, for an image of this band
+/// layout and ground GSD: among models/default_pan*.cfdet (1 band) or
+/// models/default_rgb*.cfdet (3 colours) beside the sources
+/// (CITYFORGE_MODELS_DIR overrides the folder), the one whose training GSD
+/// range is nearest the image's GSD on a log scale (0 inside the range; ties:
+/// the first by file name; a model without recorded GSDs fits any). Throws
+/// naming --model when there is none for the layout, or when the nearest range
+/// is more than kDefaultModelGsdReach times finer or coarser than the image.
+std::string default_model_path(const detect::BandLayout& layout, double gsd_m);
 
 struct TrainOptions {
     std::vector<std::string> orthos;  ///< training images (any CRS GDAL reads)

@@ -3,6 +3,7 @@
 
 #include <algorithm>
 #include <cstdio>
+#include <cstdlib>
 #include <filesystem>
 #include <set>
 
@@ -32,7 +33,8 @@ std::vector<uint8_t> bytes_of(const std::string& path) {
     const std::string s = test::slurp(path);
     return {s.begin(), s.end()};
 }
-std::string default_rgb_model() { return default_model_path(detect::BandLayout{3, -1}); }
+// The shipped RGB model for 0.5 m images (the synthetic towns here).
+std::string default_rgb_model() { return default_model_path(detect::BandLayout{3, -1}, 0.5); }
 // A synthetic town's ortho and its truth burnt on the image grid (1 = building).
 DetectionImage labelled(const SynthResult& s, std::vector<uint8_t>& truth) {
     DetectionImage img = read_detection_image(s.ortho_path);
@@ -193,6 +195,48 @@ TEST_CASE("The shipped RGB model refuses a one-band image, and corrupt or trunca
     fo.model = s.truth_path;
     CHECK_THROWS_WITH(run_footprints(dir / "out2.geojson", fo), Catch::Contains("not a cityforge detector model"));
     CHECK_FALSE(std::filesystem::exists(dir / "out2.geojson"));
+}
+
+TEST_CASE("The default model is the one trained nearest the image's GSD - beyond reach or without models it is refused in one line", "[detect]") {
+    ScratchDir dir("detect_default_gsd");
+    const std::string models = (dir / "models");
+    std::filesystem::create_directories(models);
+    detect::DetectorModel m = detect::parse_model(bytes_of(default_rgb_model()), "m");
+    auto write_at = [&](const std::string& name, std::vector<double> gsds) {
+        m.training["sources"] = nlohmann::json::array();
+        for (const double g : gsds) m.training["sources"].push_back({{"ortho", "x.tif"}, {"gsd_m", g}});
+        detect::write_model_file(models + "/" + name, m);
+        CHECK(training_gsd_range_m(m) == std::make_pair(*std::min_element(gsds.begin(), gsds.end()), *std::max_element(gsds.begin(), gsds.end())));
+    };
+    write_at("default_rgb_fine.cfdet", {0.30, 0.264, 0.2976});
+    write_at("default_rgb_coarse.cfdet", {0.4786, 0.5});
+    write_at("other_rgb.cfdet", {0.1});  // not a default_ name: never chosen
+    const char* before = std::getenv("CITYFORGE_MODELS_DIR");
+    const std::string saved = before ? before : "";
+    ::setenv("CITYFORGE_MODELS_DIR", models.c_str(), 1);
+    const detect::BandLayout rgb{3, -1};
+    const std::string fine = models + "/default_rgb_fine.cfdet", coarse = models + "/default_rgb_coarse.cfdet";
+    CHECK(default_model_path(rgb, 0.3) == fine);
+    CHECK(default_model_path(rgb, 0.3048) == fine);    // Autzen's 1 ft pixels
+    CHECK(default_model_path(rgb, 0.4786) == coarse);  // SpaceNet Rio
+    CHECK(default_model_path(rgb, 0.37) == fine);      // log-nearest: 0.37 / 0.30 < 0.4786 / 0.37
+    CHECK(default_model_path(rgb, 0.39) == coarse);
+    CHECK(default_model_path(rgb, 0.1) == fine);
+    CHECK(default_model_path(rgb, 2.0) == coarse);     // 4x the coarsest: still within reach
+    CHECK_THROWS_WITH(default_model_path(rgb, 2.5), Catch::StartsWith("--model") && Catch::Contains("no default model fits a 2.500 m image") &&
+                                                        Catch::Contains("default_rgb_coarse.cfdet 0.48-0.50 m"));
+    CHECK_THROWS_WITH(default_model_path(rgb, 0.05), Catch::Contains("0.050 m") && !Catch::Contains("\n"));
+    // Same GSD range: the first by name.
+    write_at("default_rgb_aaa.cfdet", {0.264, 0.30});
+    CHECK(default_model_path(rgb, 0.3) == models + "/default_rgb_aaa.cfdet");
+    // No pan model in the folder, and no default for other layouts.
+    CHECK_THROWS_WITH(default_model_path(detect::BandLayout{1, -1}, 0.5), Catch::StartsWith("--model") && Catch::Contains("default_pan*.cfdet"));
+    CHECK_THROWS_WITH(default_model_path(detect::BandLayout{4, 3}, 0.5), Catch::StartsWith("--model") && Catch::Contains("no default model"));
+    if (before)
+        ::setenv("CITYFORGE_MODELS_DIR", saved.c_str(), 1);
+    else
+        ::unsetenv("CITYFORGE_MODELS_DIR");
+    CHECK(std::filesystem::exists(default_rgb_model()));
 }
 
 TEST_CASE("Cross-validated detection on a real 0.3 m RGBA drone ortho (OAM Kampala dev) holds its measured F1 (regression floor)", "[detect][real]") {

@@ -102,7 +102,7 @@ TEST_CASE("Merge groups join building segments through confident pairs only - pa
 }
 
 TEST_CASE("A model with a pair classifier round-trips - models without one keep their bytes - a missing block is refused", "[detect]") {
-    const std::string path = default_model_path(detect::BandLayout{3, -1});
+    const std::string path = default_model_path(detect::BandLayout{3, -1}, 0.5);
     REQUIRE(std::filesystem::exists(path));
     const std::string text = test::slurp(path);
     const std::vector<uint8_t> good(text.begin(), text.end());
