@@ -287,6 +287,21 @@ public:
             // per pixel with the finest seeds): pages never written are never
             // backed, and the array is not copied as it grows.
             B.pairs.reserve(std::size_t(band_row(j + 1) - band_row(j)) * std::size_t(w) * 3 / 4 + 64);
+            // Two regions meet on many rows: a pair met recently (a small
+            // direct-mapped table of pair -> entry) adds to its entry instead
+            // of a new one (4 MP Autzen seeds: 2.22 M entries -> 0.94 M, 0.92 M distinct).
+            constexpr int kRecentBits = 12;
+            std::vector<uint64_t> recent_key(std::size_t(1) << kRecentBits, UINT64_MAX);
+            std::vector<std::size_t> recent_entry(std::size_t(1) << kRecentBits, 0);
+            auto add_pair = [&](uint64_t k) {
+                const std::size_t slot = static_cast<std::size_t>((k * 0x9E3779B97F4A7C15ull) >> (64 - kRecentBits));
+                if (recent_key[slot] == k) {
+                    ++B.pairs[recent_entry[slot]].second;
+                } else {
+                    recent_key[slot] = k, recent_entry[slot] = B.pairs.size();
+                    B.pairs.push_back({k, 1});
+                }
+            };
             auto foreign_acc = [&](uint32_t a) {
                 if (B.slot.empty()) B.slot.assign(1024, 0);
                 std::size_t mask = B.slot.size() - 1, i = (a * 2654435761u) & mask;
@@ -320,6 +335,7 @@ public:
             // and a run has at most kStripe pixels: < 2^55), added to the
             // region's 128-bit total once per run.
             constexpr uint32_t kAhead = 48;
+            constexpr int kRowsAhead = 2;
             const uint32_t owned_end = j + 1 < n_bands ? band_data[j + 1].owned_from : n_;
             auto scan = [&](auto bands_tag) {
                 constexpr int Bands = decltype(bands_tag)::value;
@@ -337,6 +353,16 @@ public:
                     const uint32_t* below = y < h - 1 ? row + w : nullptr;
                     uint64_t last_down = 0;  // runs of the same vertical neighbour pair collapse into one entry
                     const int x_end = std::min(w, xs + kStripe);
+                    // A block's rows are short (kStripe pixels, a new page
+                    // each): the hardware does not stream them, so the
+                    // bands and labels kRowsAhead rows down are loaded now.
+                    if (y + kRowsAhead < h) {
+                        const std::size_t ahead = std::size_t(y + kRowsAhead) * w;
+                        for (int px = xs; px < x_end; px += 16) {
+                            prefetch_line(lab + ahead + px);
+                            for (int b = 0; b < nb; ++b) prefetch_line(band_ptr[b] + ahead + px);
+                        }
+                    }
                     int x = xs;
                     while (x < x_end) {
                         const uint32_t la = row[x];  // label; a = its node
@@ -372,13 +398,13 @@ public:
                             if (down && down != la) {
                                 const uint64_t k = key(a, node[down]);
                                 if (k == last_down && !B.pairs.empty() && B.pairs.back().first == k) ++B.pairs.back().second;
-                                else B.pairs.push_back({k, 1});
+                                else add_pair(k);
                                 last_down = k;
                             } else {
                                 last_down = 0;
                             }
                         }
-                        if (end < w && row[end] && row[end] != la) B.pairs.push_back({key(a, node[row[end]]), 1});
+                        if (end < w && row[end] && row[end] != la) add_pair(key(a, node[row[end]]));
                         int64_t* A = a >= B.owned_from ? acc(a) : foreign_acc(a);
                         A[0] += end - x, A[1] += perimeter;
                         A[2] = std::min<int64_t>(A[2], x), A[3] = std::min<int64_t>(A[3], y);
