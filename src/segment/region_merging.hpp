@@ -78,6 +78,7 @@ struct ScaleLevel {
 
 struct RegionMergingResult {
     double graph_seconds = 0.0;   ///< building the region graph (statistics + adjacency)
+    double graph_cpu_seconds = 0.0;  ///< the same in CPU seconds of the whole process (all threads)
     uint64_t adjacent_pairs = 0;  ///< edges of the initial region adjacency graph
     std::vector<ScaleLevel> levels;
 };
