@@ -34,27 +34,44 @@ void WatershedOptions::validate(int bands) const {
 }
 
 namespace {
-// The k_lo-th and k_hi-th smallest values of `values` (k_lo <= k_hi): what
-// std::nth_element would put at k_lo, then at k_hi, found by one counting
-// pass over the top 16 bits of an order-preserving key and nth_element
-// within the bucket(s) holding the two ranks (~1 M samples: a few ms instead
-// of ~10 per rank). With NaN among the values, plain nth_element at k_lo and
-// then at k_hi on the reordered values (their order is not defined).
-std::pair<float, float> two_smallest(std::vector<float>& values, std::size_t k_lo, std::size_t k_hi) {
+// The 0.5th and 99.5th percentiles of a band from a regular sample (every
+// step-th pixel, the valid ones): the values std::nth_element would put at
+// ranks k_lo = 0.005 (m - 1) and then k_hi = 0.995 (m - 1) of the m samples,
+// found by one counting pass over the top 16 bits of an order-preserving key
+// and nth_element within the bucket(s) holding the two ranks, without
+// copying the sample (~1 M values: a few ms). With NaN among the samples,
+// the sample copied and plain nth_element at k_lo and then at k_hi (their
+// order is not defined). False when no pixel is sampled.
+bool sample_percentiles(const float* v, std::size_t n, std::size_t step, const uint8_t* valid, float& lo, float& hi) {
     auto key = [](float f) {
         uint32_t bits;
         std::memcpy(&bits, &f, sizeof bits);
         return (bits & 0x80000000u) ? ~bits : (bits | 0x80000000u);
     };
+    auto for_each_sample = [&](auto&& body) {
+        for (std::size_t i = 0; i < n; i += step)
+            if (!valid || valid[i]) body(v[i]);
+    };
     std::vector<uint32_t> count(65536, 0);
-    for (float f : values) {
-        if (std::isnan(f)) {
-            std::nth_element(values.begin(), values.begin() + static_cast<std::ptrdiff_t>(k_lo), values.end());
-            const float lo = values[k_lo];
-            std::nth_element(values.begin(), values.begin() + static_cast<std::ptrdiff_t>(k_hi), values.end());
-            return {lo, values[k_hi]};
-        }
+    std::size_t m = 0;
+    bool nan = false;
+    for_each_sample([&](float f) {
+        nan = nan || std::isnan(f);
         ++count[key(f) >> 16];
+        ++m;
+    });
+    if (m == 0) return false;
+    const std::size_t k_lo = static_cast<std::size_t>(0.005 * static_cast<double>(m - 1));
+    const std::size_t k_hi = static_cast<std::size_t>(0.995 * static_cast<double>(m - 1));
+    if (nan) {
+        std::vector<float> values;
+        values.reserve(m);
+        for_each_sample([&](float f) { values.push_back(f); });
+        std::nth_element(values.begin(), values.begin() + static_cast<std::ptrdiff_t>(k_lo), values.end());
+        lo = values[k_lo];
+        std::nth_element(values.begin(), values.begin() + static_cast<std::ptrdiff_t>(k_hi), values.end());
+        hi = values[k_hi];
+        return true;
     }
     // The bucket holding rank k and k's rank within it.
     auto locate = [&](std::size_t k) {
@@ -68,33 +85,28 @@ std::pair<float, float> two_smallest(std::vector<float>& values, std::size_t k_l
     std::vector<float> in_lo, in_hi;
     in_lo.reserve(count[b_lo]);
     if (b_hi != b_lo) in_hi.reserve(count[b_hi]);
-    for (float f : values) {
+    for_each_sample([&](float f) {
         const uint32_t b = key(f) >> 16;
         if (b == b_lo) in_lo.push_back(f);
         else if (b == b_hi) in_hi.push_back(f);
-    }
+    });
     std::vector<float>& hi_bucket = b_hi == b_lo ? in_lo : in_hi;
     std::nth_element(in_lo.begin(), in_lo.begin() + static_cast<std::ptrdiff_t>(r_lo), in_lo.end());
-    const float lo = in_lo[r_lo];
+    lo = in_lo[r_lo];
     std::nth_element(hi_bucket.begin(), hi_bucket.begin() + static_cast<std::ptrdiff_t>(r_hi), hi_bucket.end());
-    return {lo, hi_bucket[r_hi]};
+    hi = hi_bucket[r_hi];
+    return true;
 }
 }  // namespace
 
 void normalize_bands(Image<float>& image, const std::vector<uint8_t>& valid) {
     const std::size_t n = image.pixel_count();
+    // Percentiles from a regular sample (at most ~1M values): deterministic and fast.
+    const std::size_t step = std::max<std::size_t>(1, n / 1000000);
     for (int b = 0; b < image.bands; ++b) {
         float* v = image.band_data(b);
-        // Percentiles from a regular sample (at most ~1M values): deterministic and fast.
-        const std::size_t step = std::max<std::size_t>(1, n / 1000000);
-        std::vector<float> sample;
-        sample.reserve(n / step + 1);
-        for (std::size_t i = 0; i < n; i += step)
-            if (valid.empty() || valid[i]) sample.push_back(v[i]);
-        if (sample.empty()) continue;
-        const std::size_t k_lo = static_cast<std::size_t>(0.005 * static_cast<double>(sample.size() - 1));
-        const std::size_t k_hi = static_cast<std::size_t>(0.995 * static_cast<double>(sample.size() - 1));
-        const auto [lo, hi] = two_smallest(sample, k_lo, k_hi);
+        float lo = 0.0f, hi = 0.0f;
+        if (!sample_percentiles(v, n, step, valid.empty() ? nullptr : valid.data(), lo, hi)) continue;
         const float scale = hi > lo ? 255.0f / (hi - lo) : 0.0f;
         parallel_for_each_index(n, [&](std::size_t i) {
             v[i] = std::clamp((v[i] - lo) * scale, 0.0f, 255.0f);
