@@ -144,7 +144,9 @@ echo "== cityforge merging the same seeds to $grass_regions regions (mutual queu
 cf_final=$(json "$work/cf_merge.json" 'd["merging"]["mutual"]["regions"]')
 cf_merge=$(json "$work/cf_merge.json" 'd["merging"]["mutual"]["seconds"]')
 cf_merge_cpu=$(json "$work/cf_merge.json" 'd["merging"]["mutual"]["cpu_seconds"]')
-echo "merging: $cf_regions -> $cf_final regions in $cf_merge s wall, $cf_merge_cpu s CPU (region graph included)"
+cf_graph=$(json "$work/cf_merge.json" 'd["merging"]["mutual"]["graph_seconds"]')
+cf_graph_cpu=$(json "$work/cf_merge.json" 'd["merging"]["mutual"].get("graph_cpu_seconds", float("nan"))')
+echo "merging: $cf_regions -> $cf_final regions in $cf_merge s wall, $cf_merge_cpu s CPU (region graph included: $cf_graph s wall, $cf_graph_cpu s CPU)"
 # The same as a whole process, like the GRASS figure: start-up, reading the
 # image and the seeds (GDAL), normalising, merging and writing the labels.
 /usr/bin/time -f "%e %U %S" -o "$work/cf_proc.time" "$bench" --raster "$ortho" --seeds-in "$work/seeds.tif" --scales 1e9 \
