@@ -550,12 +550,18 @@ public:
                 for (const Upper* i = first; i != out; ++i) ++count[i->id];
             }
         });
+        constexpr uint32_t kScoreAhead = 4;
         // Per region: room for the list, its bucket copied in with the
         // fusion cost of each edge (scored once, by the lower region; cost()
         // is symmetric bit for bit), and each chunk's count turned into the
         // chunk's first slot.
         tbb::parallel_for(tbb::blocked_range<uint32_t>(0, n_, 1 << 12), [&](const tbb::blocked_range<uint32_t>& rr) {
             for (uint32_t r = rr.begin(); r != rr.end(); ++r) {
+                // The records scored kScoreAhead regions on (their higher
+                // neighbours' heads and sums) start loading now.
+                if (r + kScoreAhead < rr.end())
+                    for (const Upper* i = upper.data() + start[r + kScoreAhead]; i != upper.data() + start[r + kScoreAhead + 1]; ++i)
+                        prefetch_node(i->id, 2);
                 uint32_t lower = 0;
                 for (int c = 0; c < chunks; ++c) {
                     const uint32_t k = from_chunk[c][r];
