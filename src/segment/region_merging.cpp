@@ -942,9 +942,12 @@ RegionMergingResult merge_regions(const Image<float>& image, const Image<uint32_
                 initial.push_back(entry(r, g.nn(r), g.nn_cost(r)));  // mutual pairs once, from their lower node
             }
         };
+        constexpr uint32_t kEntriesAhead = 8;
         if (s == 0) {  // one pass over all records: the live regions and their entries
-            for (uint32_t r = 1; r < n; ++r)
+            for (uint32_t r = 1; r < n; ++r) {
+                if (r + kEntriesAhead < n) g.prefetch_node(g.nn(r + kEntriesAhead), 1);  // read by queued_nn
                 if (g.alive(r)) previous_compact[r] = g.key_of(r), live.push_back(r), queue_initial(r);
+            }
         } else {
             for (uint32_t r : live) queue_initial(r);
         }
@@ -1020,14 +1023,17 @@ RegionMergingResult merge_regions(const Image<float>& image, const Image<uint32_
         // Contiguous labels of this level in ascending key; hierarchy links.
         std::vector<std::pair<uint32_t, uint32_t>> by_key;  // (key, node) of the regions left
         by_key.reserve(g.alive_count());
-        for (uint32_t r : live)
-            if (g.alive(r)) by_key.push_back({g.key_of(r), r});
+        for (uint32_t r : live)  // alive = never absorbed: read in the union-find, not in the records
+            if (uf[r] == r) by_key.push_back({g.key_of(r), r});
         std::sort(by_key.begin(), by_key.end());
         std::vector<uint32_t> compact(n, 0);
         uint32_t next = 0;
         for (const auto& kr : by_key) compact[kr.second] = ++next;
         level.label_of_input.assign(n, 0);
-        for (uint32_t l = 1; l < n; ++l) level.label_of_input[l] = compact[find(g.node_of_label(l))];
+        for (uint32_t l = 1; l < n; ++l) {
+            if (l + 16 < n) prefetch_line(&uf[g.node_of_label(l + 16)]);
+            level.label_of_input[l] = compact[find(g.node_of_label(l))];
+        }
         level.parent.assign(previous_count + 1, 0);
         for (uint32_t r : live) level.parent[previous_compact[r]] = compact[find(r)];
         live.clear();
