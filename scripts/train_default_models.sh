@@ -1,14 +1,17 @@
 #!/usr/bin/env bash
 # Trains the detector models shipped in models/ (used by `cityforge footprints`
 # ortho-only when no --model is given), reproducibly, from the dev sets only:
-#   models/default_rgb.cfdet  RGB(A): the five OpenAerialMap places (0.27-0.30 m), the seven SpaceNet-1 Rio tiles
-#                             (0.5 m, EPSG:4326), two synthetic towns (0.5 m and 0.3 m)
-#   models/default_pan.cfdet  one band: SpaceNet-4 Atlanta pan west (UInt16) plus the green band of every RGB set above
+#   models/default_rgb_fine.cfdet    RGB(A) at 0.26-0.30 m: the five OpenAerialMap places and the 0.3 m synthetic town
+#                                    (CNN pixel stage, finer segments: see README "session 15")
+#   models/default_rgb_coarse.cfdet  RGB at 0.48-0.50 m: the seven SpaceNet-1 Rio tiles (EPSG:4326) and the 0.5 m synthetic town
+#   models/default_pan.cfdet         one band: SpaceNet-4 Atlanta pan west (UInt16) plus the green band of every RGB set above
+# `footprints` without --model takes, for the image's bands, the default model whose training GSDs (in its
+# header) are nearest the image's GSD (src/pipeline/train_run.hpp, default_model_path).
 # Never reads ../shared/data/holdout/. Same data, same seed -> same model bytes (whatever the thread count).
 #
 #   scripts/train_default_models.sh [BUILD_DIR]      (default build/; data from ../shared/data or $CITYFORGE_DATA)
 # Experiments: $CITYFORGE_MODELS_OUT writes the two models elsewhere (default models/),
-# $CITYFORGE_ONLY=rgb|pan trains one of them, $CITYFORGE_TRAIN_ARGS adds train options; the shipped models take none.
+# $CITYFORGE_ONLY=rgb|pan trains the RGB ones or the pan one, $CITYFORGE_TRAIN_ARGS adds train options; the shipped models take none.
 # Prints each model's cross-validation figures (5 spatial folds, 60 m blocks).
 set -euo pipefail
 here="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
@@ -32,11 +35,11 @@ rgb=(
 for i in 50 51 52 53 54 55 56; do
   rgb+=(spacenet1_rio_rgb/3band_013022223130_Public_img${i}_rgb.tif spacenet1_rio_rgb/3band_013022223130_Public_img${i}_buildings.geojson)
 done
-args=()
+fine=() coarse=()
 pan=(--ortho "$data/spacenet4_atlanta_pan_west/atlanta_pan_0p5m_west.tif" --labels "$data/spacenet4_atlanta_pan_west/buildings_west.geojson")
 for ((k = 0; k < ${#rgb[@]}; k += 2)); do
   img="$data/${rgb[k]}" lab="$data/${rgb[k+1]}"
-  args+=(--ortho "$img" --labels "$lab")
+  case "$img" in *spacenet1_rio*) coarse+=(--ortho "$img" --labels "$lab") ;; *) fine+=(--ortho "$img" --labels "$lab") ;; esac
   # The green band as a panchromatic stand-in (an alpha band stays the mask).
   g="$work/pan_$(basename "${rgb[k]}")"
   if gdalinfo "$img" | grep -q "ColorInterp=Alpha"; then
@@ -46,8 +49,9 @@ for ((k = 0; k < ${#rgb[@]}; k += 2)); do
   fi
   pan+=(--ortho "$g" --labels "$lab")
 done
+coarse+=(--ortho "$work/synth_a/ortho.tif" --labels "$work/synth_a/truth.geojson")
+fine+=(--ortho "$work/synth_b/ortho.tif" --labels "$work/synth_b/truth.geojson")
 for t in synth_a synth_b; do
-  args+=(--ortho "$work/$t/ortho.tif" --labels "$work/$t/truth.geojson")
   gdal_translate -q -b 2 "$work/$t/ortho.tif" "$work/pan_$t.tif"
   pan+=(--ortho "$work/pan_$t.tif" --labels "$work/$t/truth.geojson")
 done
@@ -61,9 +65,14 @@ common=(--seed 1 --reference-gsd-m 0.3 --pixel-cell-m 0.8)
 out="${CITYFORGE_MODELS_OUT:-$here/models}"
 only="${CITYFORGE_ONLY:-}"
 mkdir -p "$out"
+# The fine RGB model: the CNN pixel stage and finer first segments, which win
+# OAM's cross-validation (README "session 15"); the coarse one keeps the common options.
+fine_opts=(--pixel-stage cnn --scales 20,40,80,160 --merge-thresholds 0.7,0.8,0.9,0.95)
 if [ "$only" != pan ]; then
-  echo "== $out/default_rgb.cfdet" >&2
-  "$cf" train "${args[@]}" "${common[@]}" --out "$out/default_rgb.cfdet" --overwrite
+  echo "== $out/default_rgb_fine.cfdet" >&2
+  "$cf" train "${fine[@]}" "${common[@]}" "${fine_opts[@]}" --out "$out/default_rgb_fine.cfdet" --overwrite
+  echo "== $out/default_rgb_coarse.cfdet" >&2
+  "$cf" train "${coarse[@]}" "${common[@]}" --out "$out/default_rgb_coarse.cfdet" --overwrite
 fi
 # The pan model: fewer watershed basins (h-minima 6) and a segment labelled
 # building from 35 % label cover, chosen on Atlanta's CV (dark roofs among
