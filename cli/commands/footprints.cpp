@@ -34,7 +34,7 @@ void add_footprints_command(CLI::App& parent, const GlobalFlags& g, CommandList&
                     "auto = model, or rules with --segments")
         ->check(CLI::IsMember({"auto", "model", "rules"}))
         ->capture_default_str();
-    cmd->add_option("--model", o.model, "ortho_only: detector model from `cityforge train` (default: models/default_<bands>.cfdet); given, --mode auto applies it, with --ndsm/--cloud as its nDSM band when trained with one");
+    cmd->add_option("--model", o.model, "ortho_only: detector model from `cityforge train` (default: the shipped model for the image's bands trained nearest its GSD, models/default_<pan|rgb>*.cfdet); given, --mode auto applies it, with --ndsm/--cloud as its nDSM band when trained with one");
     cmd->add_option("--self-training", s->self_training,
                     "ortho_cloud: where the heights cover only part of the ortho, train an image model on the buildings under them "
                     "and detect the others with it (field source = image_model)")
