@@ -73,7 +73,9 @@ static int run_bench(int argc, char** argv) {
                                                                                 : "filter bank + boosted trees",
                     model.options.pixel.cell_m);
     std::printf("  segmentation          %7.2f s  (%u segments, scales", t_seg, seg.count);
-    for (double s : model.options.segmentation.scales) std::printf(" %g", s);
+    for (double s : model.options.segmentation.scales_at(img.gsd_m)) std::printf(" %.4g", s);
+    if (model.options.segmentation.reference_gsd_m > 0.0)
+        std::printf(" at %g m: the model's scales hold at %g m", img.gsd_m, model.options.segmentation.reference_gsd_m);
     std::printf(")\n  features              %7.2f s  (%zu per segment)\n", t_feat, f.cols);
     std::printf("  classification        %7.2f s\n", t_pred);
     if (model.options.merge_threshold > 0.0) std::printf("  pair classifier       %7.2f s  (%zu adjacent segment pairs)\n", t_pairs, n_pairs);

@@ -20,6 +20,13 @@ void DetectorSegmentationOptions::validate(int bands) const {
     if (!(reference_gsd_m >= 0.0 && reference_gsd_m <= 100.0)) throw Error("segmentation.reference_gsd_m", "must be in [0, 100] metres (0 = off)");
 }
 
+std::vector<double> DetectorSegmentationOptions::scales_at(double gsd_m) const {
+    std::vector<double> out = scales;
+    if (reference_gsd_m > 0.0)
+        for (double& v : out) v *= reference_gsd_m / gsd_m;
+    return out;
+}
+
 SceneSegments segment_scene(const Image<float>& normalised, const std::vector<uint8_t>& valid, const DetectorSegmentationOptions& o,
                             const Progress& progress, double gsd_m) {
     o.validate(normalised.bands);
@@ -36,9 +43,7 @@ SceneSegments segment_scene(const Image<float>& normalised, const std::vector<ui
         return s;
     }
     RegionMergingOptions rmo;
-    rmo.scales = o.scales;
-    if (o.reference_gsd_m > 0.0)
-        for (double& v : rmo.scales) v *= o.reference_gsd_m / gsd_m;
+    rmo.scales = o.scales_at(gsd_m);
     rmo.band_weights = o.watershed.band_weights;
     rmo.color_weight = o.color_weight;
     const RegionMergingResult m = merge_regions(normalised, over.labels, over.region_count, rmo, progress.sub(0.5, 1.0));

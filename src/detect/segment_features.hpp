@@ -32,6 +32,9 @@ struct DetectorSegmentationOptions {
     /// scales as given at any GSD.
     double reference_gsd_m = 0.0;
     void validate(int bands) const;
+    /// The merging scales applied to an image of `gsd_m` metres: `scales`
+    /// times reference_gsd_m / gsd_m when reference_gsd_m > 0, else as given.
+    std::vector<double> scales_at(double gsd_m) const;
 };
 
 /// The classified segments and the context regions that contain them.
