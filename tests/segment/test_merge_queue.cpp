@@ -76,15 +76,19 @@ TEST_CASE("merge queue pops exactly in (cost, keys) order through overflows and 
         std::vector<QueueEntry> reference = initial;  // the entries queued, as a plain list
         MergeQueue q(initial);
         std::size_t pops = 0;
+        // The queue's top is the reference's lowest entry; both drop it.
+        auto pop_lowest = [&] {
+            const auto lowest = std::min_element(reference.begin(), reference.end(),
+                                                 [](const QueueEntry& x, const QueueEntry& y) { return x.rank() < y.rank(); });
+            REQUIRE(q.top().rank() == lowest->rank());
+            reference.erase(lowest);
+            q.pop();
+            ++pops;
+        };
         for (int step = 0; step < 2500; ++step) {
             const unsigned what = unsigned(rng() % 10);
             if (what < 5 && !q.empty()) {
-                const auto lowest = std::min_element(reference.begin(), reference.end(),
-                                                     [](const QueueEntry& x, const QueueEntry& y) { return x.rank() < y.rank(); });
-                REQUIRE(q.top().rank() == lowest->rank());
-                reference.erase(lowest);
-                q.pop();
-                ++pops;
+                pop_lowest();
             } else if (what < 9) {
                 // Mostly dearer than the top (the merge loop's pushes), sometimes
                 // far above every queued cost (the overflow), sometimes below.
@@ -95,14 +99,7 @@ TEST_CASE("merge queue pops exactly in (cost, keys) order through overflows and 
                 q.push(e);
                 reference.push_back(e);
             } else {
-                while (!q.empty()) {  // run dry, then go on pushing
-                    const auto lowest = std::min_element(reference.begin(), reference.end(),
-                                                         [](const QueueEntry& x, const QueueEntry& y) { return x.rank() < y.rank(); });
-                    REQUIRE(q.top().rank() == lowest->rank());
-                    reference.erase(lowest);
-                    q.pop();
-                    ++pops;
-                }
+                while (!q.empty()) pop_lowest();  // run dry, then go on pushing
             }
             REQUIRE(q.size() == reference.size());
             REQUIRE(q.empty() == reference.empty());
