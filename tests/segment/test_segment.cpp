@@ -402,25 +402,7 @@ TEST_CASE("Watershed with h 0 (seeds found by a parallel walk, no sort) equals t
 }
 
 TEST_CASE("Band normalisation stretches between the exact 0.5 and 99.5 percentiles of its sample", "[segment]") {
-    // Expected: the percentiles by std::nth_element over the same regular sample.
-    auto expected = [](Image<float> img, const std::vector<uint8_t>& valid) {
-        const std::size_t n = img.pixel_count(), step = std::max<std::size_t>(1, n / 1000000);
-        for (int b = 0; b < img.bands; ++b) {
-            float* v = img.band_data(b);
-            std::vector<float> sample;
-            for (std::size_t i = 0; i < n; i += step)
-                if (valid.empty() || valid[i]) sample.push_back(v[i]);
-            auto pct = [&](double q) {
-                const auto k = static_cast<std::size_t>(q * static_cast<double>(sample.size() - 1));
-                std::nth_element(sample.begin(), sample.begin() + static_cast<std::ptrdiff_t>(k), sample.end());
-                return sample[k];
-            };
-            const float lo = pct(0.005), hi = pct(0.995);
-            const float scale = hi > lo ? 255.0f / (hi - lo) : 0.0f;
-            for (std::size_t i = 0; i < n; ++i) v[i] = std::clamp((v[i] - lo) * scale, 0.0f, 255.0f);
-        }
-        return img;
-    };
+    // Expected: test::reference_normalisation (nth_element over the same regular sample).
     Image<float> img(1500, 1400, 3, 0.0f);  // 2.1 M pixels: a sample of every other pixel
     uint32_t state = 12345;
     for (std::size_t i = 0; i < img.data.size(); ++i) {
@@ -436,7 +418,7 @@ TEST_CASE("Band normalisation stretches between the exact 0.5 and 99.5 percentil
     for (const auto& v : {std::vector<uint8_t>{}, valid}) {
         Image<float> got = img;
         normalize_bands(got, v);
-        const Image<float> want = expected(img, v);
+        const Image<float> want = test::reference_normalisation(img, v);
         CHECK(got.data == want.data);
     }
 }

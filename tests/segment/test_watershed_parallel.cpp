@@ -156,27 +156,9 @@ TEST_CASE("Watershed without dynamics equals the sequential flooding where colou
 }
 
 TEST_CASE("Band normalisation with NaN or infinite samples stretches as nth_element over the sample does", "[watershed][segment]") {
-    // Expected: nth_element at the 0.5th and then at the 99.5th percentile's
-    // rank over the same regular sample (with NaN their order is that of the
-    // library's nth_element, so the sample must be the same and in order).
-    auto expected = [](Image<float> img, const std::vector<uint8_t>& valid) {
-        const std::size_t n = img.pixel_count(), step = std::max<std::size_t>(1, n / 1000000);
-        for (int b = 0; b < img.bands; ++b) {
-            float* v = img.band_data(b);
-            std::vector<float> sample;
-            for (std::size_t i = 0; i < n; i += step)
-                if (valid.empty() || valid[i]) sample.push_back(v[i]);
-            const auto k_lo = static_cast<std::size_t>(0.005 * static_cast<double>(sample.size() - 1));
-            const auto k_hi = static_cast<std::size_t>(0.995 * static_cast<double>(sample.size() - 1));
-            std::nth_element(sample.begin(), sample.begin() + static_cast<std::ptrdiff_t>(k_lo), sample.end());
-            const float lo = sample[k_lo];
-            std::nth_element(sample.begin(), sample.begin() + static_cast<std::ptrdiff_t>(k_hi), sample.end());
-            const float hi = sample[k_hi];
-            const float scale = hi > lo ? 255.0f / (hi - lo) : 0.0f;
-            for (std::size_t i = 0; i < n; ++i) v[i] = std::clamp((v[i] - lo) * scale, 0.0f, 255.0f);
-        }
-        return img;
-    };
+    // Expected: test::reference_normalisation, nth_element at the 0.5th and
+    // then the 99.5th percentile's rank over the same regular sample (with
+    // NaN their order is that of the library's nth_element).
     Image<float> img(1300, 900, 3, 0.0f);  // 1.17 M pixels: a sample of every pixel
     uint32_t state = 4242u;
     for (std::size_t i = 0; i < img.data.size(); ++i) {
@@ -191,7 +173,7 @@ TEST_CASE("Band normalisation with NaN or infinite samples stretches as nth_elem
     for (const auto& v : {std::vector<uint8_t>{}, valid}) {
         Image<float> got = img;
         normalize_bands(got, v);
-        const Image<float> want = expected(img, v);
+        const Image<float> want = test::reference_normalisation(img, v);
         std::size_t differ = 0;  // bitwise: NaN stays NaN
         for (std::size_t i = 0; i < got.data.size(); ++i) differ += std::memcmp(&got.data[i], &want.data[i], sizeof(float)) != 0;
         CHECK(differ == 0);

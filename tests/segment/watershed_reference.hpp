@@ -79,4 +79,29 @@ inline Oversegmentation reference_dynamics(const Image<float>& img, const std::v
     return out;
 }
 
+// Band normalisation as specified: per band, over a regular sample (every
+// max(1, n / 1e6)-th pixel, valid ones only), the 0.5th and then the 99.5th
+// percentile by std::nth_element on that sample in order (with NaN the
+// library's nth_element order decides, so the sample is the same one), and
+// each value stretched (v - lo) * 255 / (hi - lo), clamped to 0..255.
+inline Image<float> reference_normalisation(Image<float> img, const std::vector<uint8_t>& valid) {
+    const std::size_t n = img.pixel_count(), step = std::max<std::size_t>(1, n / 1000000);
+    for (int b = 0; b < img.bands; ++b) {
+        float* v = img.band_data(b);
+        std::vector<float> sample;
+        for (std::size_t i = 0; i < n; i += step)
+            if (valid.empty() || valid[i]) sample.push_back(v[i]);
+        auto pct = [&](double q) {
+            const auto k = static_cast<std::size_t>(q * static_cast<double>(sample.size() - 1));
+            std::nth_element(sample.begin(), sample.begin() + static_cast<std::ptrdiff_t>(k), sample.end());
+            return sample[k];
+        };
+        const float lo = pct(0.005), hi = pct(0.995);
+        const float scale = hi > lo ? 255.0f / (hi - lo) : 0.0f;
+        for (std::size_t i = 0; i < n; ++i) v[i] = std::clamp((v[i] - lo) * scale, 0.0f, 255.0f);
+    }
+    return img;
+}
+
 }  // namespace cityforge::test
+
