@@ -239,6 +239,12 @@ TEST_CASE("photo commands refuse bad input in one line and write nothing", "[pho
     CHECK(r.err.find("--run-ortho") != std::string::npos);
     CHECK(test::count_lines(r.err) == 1);
     CHECK(!fs::exists(dir / "p1"));
+    // GPS heights in a CRS that is not vertical.
+    r = run_cli("orient -q --images " + views + " --gps " + views + "/gps.txt --gps-height-crs EPSG:32650 --out " + (dir / "o1"));
+    CHECK(r.exit_code != 0);
+    CHECK(r.err.find("--gps-height-crs") != std::string::npos);
+    CHECK(test::count_lines(r.err) == 1);
+    CHECK(!fs::exists(dir / "o1"));
     // Densify of a folder without cameras.
     r = run_cli("densify -q --model " + (dir / "one") + " --out " + (dir / "d.las"));
     CHECK(r.exit_code != 0);
