@@ -23,7 +23,6 @@
 #include <filesystem>
 #include <fstream>
 #include <string>
-#include <sys/resource.h>
 #include <tbb/parallel_for.h>
 
 #include "crs/crs.hpp"
@@ -112,16 +111,11 @@ static int run_bench(int argc, char** argv) {
             o.formats.push_back(formats.substr(a, b - a));
         }
     }
-    auto cpu_seconds = [] {
-        rusage u{};
-        getrusage(RUSAGE_SELF, &u);
-        return double(u.ru_utime.tv_sec + u.ru_stime.tv_sec) + 1e-6 * double(u.ru_utime.tv_usec + u.ru_stime.tv_usec);
-    };
-    const double cpu0 = cpu_seconds();
+    const double cpu0 = cityforge::process_cpu_seconds();
     const auto tw = std::chrono::steady_clock::now();
     const ExportReport r = write_city_model(model, crs, dir.string(), o);
     const double t_write = std::chrono::duration<double>(std::chrono::steady_clock::now() - tw).count();
-    const double cpu_write = cpu_seconds() - cpu0;
+    const double cpu_write = cityforge::process_cpu_seconds() - cpu0;
     const double nb = double(model.buildings.size());
     std::printf("%.0f m city: %zu buildings, model + LOD1 solids + validation %.2f s (%.0f buildings/s); %zu valid LOD1\n", layout.size_m,
                 model.buildings.size(), t_model, nb / t_model, r.valid_lod1);
@@ -143,9 +137,7 @@ static int run_bench(int argc, char** argv) {
         std::printf("  %-13s %6.2f s  %8.0f buildings/s  %7.1f MB\n", format.c_str(), seconds, nb / seconds, bytes(r.files.at(format)) / 1e6);
     if (r.files.count("textures")) std::printf("  roof atlas    %7.1f MB (textures/roofs.png)\n", bytes(r.files.at("textures")) / 1e6);
     std::printf("all formats written in %.2f s wall, %.2f CPU s (roof atlas included)\n", t_write, cpu_write);
-    rusage ru{};
-    getrusage(RUSAGE_SELF, &ru);
-    std::printf("peak memory %.0f MB\n", double(ru.ru_maxrss) / 1024.0);
+    std::printf("peak memory %.0f MB\n", cityforge::peak_memory_mb());
     return 0;
 }
 

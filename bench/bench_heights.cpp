@@ -10,7 +10,6 @@
 #include <cstdlib>
 #include <filesystem>
 #include <string>
-#include <sys/resource.h>
 
 #include "cloud/cloud_filters.hpp"
 #include "cloud/las.hpp"
@@ -22,11 +21,6 @@ using namespace cityforge;
 
 namespace {
 using cityforge::bench::now;
-double peak_mb() {
-    rusage u{};
-    getrusage(RUSAGE_SELF, &u);
-    return static_cast<double>(u.ru_maxrss) / 1024.0;
-}
 }  // namespace
 
 static int run_bench(int argc, char** argv) {
@@ -73,7 +67,7 @@ static int run_bench(int argc, char** argv) {
         ++n;
     }
     std::printf("flat roofs: MAE %.3f m over %d buildings\n", n ? err / n : 0.0, n);
-    std::printf("peak RSS: %.0f MB\n", peak_mb());
+    std::printf("peak RSS: %.0f MB\n", cityforge::peak_memory_mb());
     std::filesystem::remove_all(dir);
     return 0;
 }

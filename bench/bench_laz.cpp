@@ -13,7 +13,6 @@
 // best of --repeat): the per-core figure, free of I/O, copies and scheduling.
 // --threads N caps TBB's worker count (default: all cores).
 #include "bench_main.hpp"
-#include <sys/resource.h>
 #include <tbb/global_control.h>
 #include <tbb/task_arena.h>
 
@@ -29,22 +28,11 @@
 #include <vector>
 
 #include "cloud/las.hpp"
+#include "core/resource_usage.hpp"
 #include "core/error.hpp"
 #include "core/sha256.hpp"
 
 namespace {
-// User + system CPU seconds of this process (all threads).
-double cpu_seconds() {
-    rusage u{};
-    getrusage(RUSAGE_SELF, &u);
-    return static_cast<double>(u.ru_utime.tv_sec + u.ru_stime.tv_sec) + 1e-6 * static_cast<double>(u.ru_utime.tv_usec + u.ru_stime.tv_usec);
-}
-// CPU seconds of the calling thread.
-double thread_cpu_seconds() {
-    timespec t{};
-    clock_gettime(CLOCK_THREAD_CPUTIME_ID, &t);
-    return static_cast<double>(t.tv_sec) + 1e-9 * static_cast<double>(t.tv_nsec);
-}
 // Single-thread decode of every chunk of a LAZ file: best thread-CPU seconds
 // of `repeat` passes; `hash` gets the sha256 of the decoded records.
 double kernel_seconds(const std::string& path, int repeat, std::string& hash) {
@@ -68,13 +56,13 @@ double kernel_seconds(const std::string& path, int repeat, std::string& hash) {
     tbb::task_arena one(1);
     one.execute([&] {
         for (int r = 0; r < repeat; ++r) {
-            const double t0 = thread_cpu_seconds();
+            const double t0 = cityforge::thread_cpu_seconds();
             for (std::size_t i = 0; i < raw.size(); ++i) {
                 const auto& c = laz->chunks()[i];
                 cityforge::decode_laz_chunk(*h.laz, h.point_record_length, raw[i].data(), raw[i].size(), c.point_count,
                                             out.data() + c.first_point * rl, path, i, false, laz->split_layers(c));
             }
-            best = std::min(best, thread_cpu_seconds() - t0);
+            best = std::min(best, cityforge::thread_cpu_seconds() - t0);
         }
     });
     cityforge::Sha256 sha;
@@ -127,7 +115,7 @@ static int run_bench(int argc, char** argv) {
             for (int r = 0; r < repeat; ++r) {
                 // Decode only; hashed afterwards so that SHA-256 is not part of
                 // the decode figure.
-                const double cpu0 = cpu_seconds();
+                const double cpu0 = cityforge::process_cpu_seconds();
                 const auto t0 = std::chrono::steady_clock::now();
                 cityforge::LasReader reader(p.string());
                 const std::size_t rl = static_cast<std::size_t>(reader.header().point_record_length);
@@ -138,13 +126,13 @@ static int run_bench(int argc, char** argv) {
                 }
                 if (reader.points_remaining() != 0) throw cityforge::Error(p.string(), "more points than the header announces");
                 const double s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-                const double cpu1 = cpu_seconds();
+                const double cpu1 = cityforge::process_cpu_seconds();
                 cpu += cpu1 - cpu0;
                 best = std::min(best, s);
                 cityforge::Sha256 sha;
                 sha.update(all.data(), static_cast<std::size_t>(points) * rl);
                 hash = sha.hex();
-                sha_cpu += cpu_seconds() - cpu1;
+                sha_cpu += cityforge::process_cpu_seconds() - cpu1;
             }
             cpu /= repeat;
             sha_cpu /= repeat;

@@ -11,8 +11,8 @@
 #include <exception>
 #include <new>
 #include <string>
-#include <time.h>
 
+#include "core/resource_usage.hpp"
 #include "core/error.hpp"
 
 namespace cityforge::bench {
@@ -21,11 +21,7 @@ namespace cityforge::bench {
 inline double now() { return std::chrono::duration<double>(std::chrono::steady_clock::now().time_since_epoch()).count(); }
 
 /// CPU seconds of the whole process so far (all threads).
-inline double cpu_now() {
-    timespec ts{};
-    clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &ts);
-    return double(ts.tv_sec) + 1e-9 * double(ts.tv_nsec);
-}
+inline double cpu_now() { return cityforge::process_cpu_seconds(); }
 
 /// `text` as a finite number, or Error naming `what` (e.g. "size_m").
 inline double parse_number(const char* text, const char* what) {

@@ -11,7 +11,6 @@
 #include <cstdio>
 #include <cstdlib>
 #include <map>
-#include <sys/resource.h>
 #include <tbb/parallel_for.h>
 
 #include "roof/lod2_builder.hpp"
@@ -58,14 +57,12 @@ static int run_bench(int argc, char** argv) {
         fallback += results[i].fallback;
         rmse += results[i].rmse_m;
     }
-    rusage ru{};
-    getrusage(RUSAGE_SELF, &ru);
     std::printf("%.0f m city: %zu buildings, %zu roof points (%.1f per m2)\n", layout.size_m, n, total_points, density);
     std::printf("LOD2 reconstruction %.2f s = %.0f buildings/s; valid solids %zu / %zu; flat fallbacks %zu\n", seconds, double(n) / seconds,
                 valid, n, fallback);
     std::printf("roof type accuracy %.1f %% (", 100.0 * double(correct) / double(n));
     for (const auto& [k, v] : per_type) std::printf(" %s %d/%d", k.c_str(), v.first, v.second);
-    std::printf(" ); mean RMSE points to model %.3f m; peak memory %.0f MB\n", rmse / double(n), double(ru.ru_maxrss) / 1024.0);
+    std::printf(" ); mean RMSE points to model %.3f m; peak memory %.0f MB\n", rmse / double(n), cityforge::peak_memory_mb());
     return 0;
 }
 

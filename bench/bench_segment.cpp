@@ -23,7 +23,6 @@
 #include <cstdlib>
 #include <filesystem>
 #include <string>
-#include <sys/resource.h>
 #include <vector>
 
 #include <fstream>
@@ -40,11 +39,6 @@ using namespace cityforge;
 namespace {
 using cityforge::bench::now;
 using cityforge::bench::cpu_now;  // less sensitive to the load of a shared machine than wall time
-long peak_rss_kb() {
-    rusage u{};
-    getrusage(RUSAGE_SELF, &u);
-    return u.ru_maxrss;
-}
 
 std::vector<double> parse_list(const std::string& s) {
     std::vector<double> v;
@@ -180,7 +174,7 @@ int raster_mode(int argc, char** argv) {
             write_geotiff(labels_out, relabel(over.labels, last), info.transform.window(w.col, w.row), info.crs.wkt, wopt);
         }
     }
-    std::printf("peak RSS: %.1f MB\n", double(peak_rss_kb()) / 1024.0);
+    std::printf("peak RSS: %.1f MB\n", cityforge::peak_memory_mb());
     if (!json_out.empty()) std::ofstream(json_out) << report.dump(2) << "\n";
     return 0;
 }
@@ -235,8 +229,8 @@ static int run_bench(int argc, char** argv) {
                             to_string(s).c_str(), total, sc->size(), res.graph_seconds, merging, ras);
             }
         }
-        std::printf("peak RSS so far: %.1f MB (%.1f bytes/pixel of the largest scene)\n", double(peak_rss_kb()) / 1024.0,
-                    double(peak_rss_kb()) * 1024.0 / double(img.pixel_count()));
+        std::printf("peak RSS so far: %.1f MB (%.1f bytes/pixel of the largest scene)\n", cityforge::peak_memory_mb(),
+                    cityforge::peak_memory_mb() * 1048576.0 / double(img.pixel_count()));
         std::filesystem::remove_all(dir);
     }
     return 0;

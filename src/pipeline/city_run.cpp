@@ -9,13 +9,13 @@
 #include <fstream>
 #include <set>
 #include <sstream>
-#include <sys/resource.h>
 #include <tbb/global_control.h>
 #include <thread>
 
 #include "cloud/cloud_reader.hpp"
 #include "cloud/las.hpp"
 #include "core/atomic_file.hpp"
+#include "core/resource_usage.hpp"
 #include "core/error.hpp"
 #include "core/grid_fill.hpp"
 #include "core/log.hpp"
@@ -36,12 +36,6 @@ namespace fs = std::filesystem;
 using json = nlohmann::json;
 
 namespace {
-
-double peak_memory_mb() {
-    rusage ru{};
-    getrusage(RUSAGE_SELF, &ru);
-    return double(ru.ru_maxrss) / 1024.0;
-}
 
 double since(std::chrono::steady_clock::time_point t) {
     return std::chrono::duration<double>(std::chrono::steady_clock::now() - t).count();

@@ -14,6 +14,7 @@
 #include <tbb/parallel_reduce.h>
 #include <tbb/parallel_for.h>
 
+#include "core/resource_usage.hpp"
 #include "core/prefetch.hpp"
 #include "segment/merge_queue.hpp"
 #include "core/error.hpp"
@@ -65,18 +66,6 @@ Image<uint32_t> relabel(const Image<uint32_t>& labels, const std::vector<uint32_
 }
 
 namespace {
-
-
-double thread_cpu_seconds() {
-    timespec ts{};
-    clock_gettime(CLOCK_THREAD_CPUTIME_ID, &ts);
-    return double(ts.tv_sec) + 1e-9 * double(ts.tv_nsec);
-}
-double process_cpu_seconds() {
-    timespec ts{};
-    clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &ts);
-    return double(ts.tv_sec) + 1e-9 * double(ts.tv_nsec);
-}
 
 __extension__ typedef __int128 int128;  // exact sums of squared fixed-point values
 using merge_queue::MergeQueue;
