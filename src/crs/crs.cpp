@@ -394,6 +394,23 @@ CrsInfo combine_with_vertical(const CrsInfo& horizontal, const CrsInfo& vertical
                                "combined CRS");
 }
 
+namespace {
+// What the heights of `crs` refer to: its vertical CRS ("EPSG:5709" or its
+// name) when compound, "ellipsoidal heights (NAME)" for a geographic 3D or
+// geocentric CRS, empty for a 2-D CRS (heights of no stated reference).
+std::string height_reference(const CrsInfo& crs, const OGRSpatialReference& srs) {
+    if (srs.IsCompound()) {
+        if (crs.vertical_epsg) return "EPSG:" + std::to_string(*crs.vertical_epsg);
+        return crs.vertical_name.empty() ? std::string("a vertical CRS") : crs.vertical_name;
+    }
+    if (srs.IsGeocentric() || (srs.IsGeographic() && srs.GetAxesCount() == 3) || (srs.IsProjected() && srs.GetAxesCount() == 3)) {
+        const char* name = srs.GetName();
+        return std::string("ellipsoidal heights (") + (name ? name : "unknown datum") + ")";
+    }
+    return {};
+}
+}  // namespace
+
 void transform_points(const CrsInfo& from, const CrsInfo& to, std::vector<double>& x, std::vector<double>& y,
                       std::vector<double>& z, const std::string& subject) {
     GdalErrorCapture capture;
@@ -402,8 +419,27 @@ void transform_points(const CrsInfo& from, const CrsInfo& to, std::vector<double
     b.importFromWkt(to.wkt.c_str());
     a.SetAxisMappingStrategy(OAMS_TRADITIONAL_GIS_ORDER);
     b.SetAxisMappingStrategy(OAMS_TRADITIONAL_GIS_ORDER);
-    std::unique_ptr<OGRCoordinateTransformation> ct(OGRCreateCoordinateTransformation(&a, &b));
-    if (!ct) throw Error(subject, "no transformation from " + from.label() + " to " + to.label() + capture.suffix());
+    // First without PROJ's "ballpark" operations: a ballpark vertical
+    // transformation is a no-op (PROJ 9.1 picks it silently when the geoid
+    // grid is missing), which would label unchanged heights with the new
+    // datum. A ballpark is accepted only when the heights are not at stake.
+    OGRCoordinateTransformationOptions strict;
+    strict.SetBallparkAllowed(false);
+    std::unique_ptr<OGRCoordinateTransformation> ct;
+    {
+        GdalErrorCapture quiet;
+        ct.reset(OGRCreateCoordinateTransformation(&a, &b, strict));
+    }
+    if (!ct) {
+        CPLErrorReset();  // the strict attempt's message is not this call's error
+        ct.reset(OGRCreateCoordinateTransformation(&a, &b));
+        if (!ct) throw Error(subject, "no transformation from " + from.label() + " to " + to.label() + capture.suffix());
+        const std::string from_z = height_reference(from, a), to_z = height_reference(to, b);
+        if (!from_z.empty() && !to_z.empty() && from_z != to_z)
+            throw Error(subject, "heights cannot be transformed from " + from_z + " to " + to_z +
+                                     ": PROJ has no grid for it on this machine and would leave them unchanged (install the grid, "
+                                     "e.g. with projsync, or give both the same vertical CRS)");
+    }
     const std::size_t chunk = 1 << 16;
     std::vector<int> ok(chunk);
     for (std::size_t s0 = 0; s0 < x.size(); s0 += chunk) {

@@ -125,7 +125,11 @@ CrsInfo combine_with_vertical(const CrsInfo& horizontal, const CrsInfo& vertical
 
 /// Transforms points in place from `from` to `to` (horizontal, and vertical
 /// where PROJ knows both vertical datums). Throws Error naming `subject` when
-/// PROJ has no transformation or a point fails.
+/// PROJ has no transformation or a point fails, and when both CRSs state what
+/// their heights refer to (a vertical CRS, or ellipsoidal heights of a 3-D
+/// CRS), the two differ and PROJ could only relate them by a "ballpark"
+/// operation: without the geoid grid PROJ would leave heights unchanged and
+/// label them with the other datum. A horizontal-only ballpark is accepted.
 void transform_points(const CrsInfo& from, const CrsInfo& to, std::vector<double>& x, std::vector<double>& y,
                       std::vector<double>& z, const std::string& subject);
 

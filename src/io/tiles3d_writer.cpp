@@ -204,8 +204,9 @@ Tiles3dWriteReport write_3dtiles(const std::string& dir, const CityModel& model,
             transform_points(crs, ecef, x, y, z, dir);
         } catch (const Error& e) {
             if (!crs.vertical_epsg || !crs.horizontal_epsg) throw;
-            // PROJ could not relate the vertical datum to the ellipsoid (a geoid grid is missing).
-            log::warning(dir + ": " + e.what() + "; heights taken as ellipsoidal (install the PROJ grid of " + crs.vertical_name + ")");
+            // PROJ could not relate the vertical datum to the ellipsoid (a geoid grid is missing): the
+            // horizontal CRS alone keeps its proper datum transformation, heights count as ellipsoidal.
+            log::warning(std::string(e.what()) + "; the tiles take them as ellipsoidal heights");
             x = X, y = Y, z = Z;
             transform_points(crs_from_user_input("EPSG:" + std::to_string(*crs.horizontal_epsg), dir), ecef, x, y, z, dir);
         }

@@ -1,5 +1,7 @@
 #include <catch2/catch.hpp>
 
+#include <vector>
+
 #include "core/error.hpp"
 #include "crs/crs.hpp"
 
@@ -30,4 +32,38 @@ TEST_CASE("Bad CRS text is refused naming where it came from", "[crs][errors]") 
     CHECK_THROWS_WITH(crs_from_user_input("EPSG:999999", "--cloud-crs"), Catch::StartsWith("--cloud-crs: cannot understand CRS"));
     CHECK(same_crs(crs_from_user_input("EPSG:32650", "a"), crs_from_user_input("EPSG:32650", "b")));
     CHECK_FALSE(same_crs(crs_from_user_input("EPSG:32650", "a"), crs_from_user_input("EPSG:32651", "b")));
+}
+
+TEST_CASE("Heights are never relabelled with another datum by a no-op transformation", "[crs][errors]") {
+    // Seattle, UTM 10N. PROJ carries the EGM96 geoid grid (egm96_15.gtx, Debian's proj-data): EGM96 heights
+    // to WGS 84 ellipsoidal heights subtract about 22.3 m there (h = H + N, N = -22.3 m).
+    std::vector<double> x{550000.0}, y{5270000.0}, z{100.0};
+    transform_points(crs_from_user_input("EPSG:32610+5773", "a"), crs_from_user_input("EPSG:4979", "b"), x, y, z, "points");
+    CHECK(z[0] == Approx(77.7).margin(0.2));
+    CHECK(x[0] == Approx(-122.335).margin(0.001));
+
+    // EGM96 to NAVD88 needs NOAA's GEOID18 grid, which Debian does not ship: PROJ's only operation is a
+    // "ballpark" one that leaves heights as they are. That must be refused, naming both vertical CRSs.
+    x = {550000.0}, y = {5270000.0}, z = {100.0};
+    CHECK_THROWS_WITH(
+        transform_points(crs_from_user_input("EPSG:32610+5773", "a"), crs_from_user_input("EPSG:32610+5703", "b"), x, y, z, "cloud.las"),
+        Catch::StartsWith("cloud.las: heights cannot be transformed from EPSG:5773 to EPSG:5703: PROJ has no grid"));
+    // NAP to ellipsoidal heights without the Dutch geoid grid: refused too.
+    x = {85000.0}, y = {446000.0}, z = {10.0};
+    CHECK_THROWS_WITH(
+        transform_points(crs_from_user_input("EPSG:7415", "a"), crs_from_user_input("EPSG:4979", "b"), x, y, z, "tiles"),
+        Catch::Contains("from EPSG:5709 to ellipsoidal heights"));
+
+    // Heights of no stated reference, or to a 2-D CRS: horizontal only, z as given.
+    x = {550000.0}, y = {5270000.0}, z = {100.0};
+    transform_points(crs_from_user_input("EPSG:32610", "a"), crs_from_user_input("EPSG:32610+5703", "b"), x, y, z, "points");
+    CHECK(z[0] == 100.0);
+    x = {85000.0}, y = {446000.0}, z = {10.0};
+    transform_points(crs_from_user_input("EPSG:7415", "a"), crs_from_user_input("EPSG:4326", "b"), x, y, z, "points");
+    CHECK(z[0] == 10.0);
+    CHECK(y[0] == Approx(52.0).margin(0.05));
+    // The same vertical CRS on both sides: unchanged heights, the horizontal part transformed.
+    x = {1.0e6}, y = {1.0e6}, z = {10.0};
+    transform_points(crs_from_user_input("EPSG:2994+5703", "a"), crs_from_user_input("EPSG:26910+5703", "b"), x, y, z, "points");
+    CHECK(z[0] == Approx(10.0).margin(1e-6));
 }
