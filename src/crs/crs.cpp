@@ -389,9 +389,18 @@ bool same_horizontal_crs(const CrsInfo& a, const CrsInfo& b) {
 }
 
 CrsInfo combine_with_vertical(const CrsInfo& horizontal, const CrsInfo& vertical) {
-    if (horizontal.vertical_epsg || !horizontal.horizontal_epsg || !vertical.vertical_epsg) return horizontal;
-    return crs_from_user_input("EPSG:" + std::to_string(*horizontal.horizontal_epsg) + "+" + std::to_string(*vertical.vertical_epsg),
-                               "combined CRS");
+    if (horizontal.empty() || horizontal.vertical_epsg || !horizontal.vertical_name.empty() || !vertical.vertical_epsg) return horizontal;
+    if (horizontal.horizontal_epsg)
+        return crs_from_user_input("EPSG:" + std::to_string(*horizontal.horizontal_epsg) + "+" + std::to_string(*vertical.vertical_epsg),
+                                   "combined CRS");
+    // A horizontal CRS without an EPSG code (a custom WKT, e.g. a GeoTIFF's
+    // user-defined projection): the compound of its WKT and the vertical CRS.
+    GdalErrorCapture capture;
+    OGRSpatialReference h, v, compound;
+    if (h.importFromWkt(horizontal.wkt.c_str()) != OGRERR_NONE || v.importFromEPSG(*vertical.vertical_epsg) != OGRERR_NONE) return horizontal;
+    const std::string name = horizontal.name + " + " + (v.GetName() ? v.GetName() : "EPSG:" + std::to_string(*vertical.vertical_epsg));
+    if (compound.SetCompoundCS(name.c_str(), &h, &v) != OGRERR_NONE) return horizontal;
+    return describe(compound);
 }
 
 namespace {

@@ -119,8 +119,10 @@ CrsInfo utm_crs_for(const CrsInfo& crs, const MapPoint& lon_lat);
 bool same_horizontal_crs(const CrsInfo& a, const CrsInfo& b);
 
 /// Horizontal CRS of `horizontal` combined with the vertical CRS of
-/// `vertical` when both have EPSG codes (e.g. 28992 + 5709 -> EPSG:7415 URN);
-/// otherwise `horizontal` unchanged.
+/// `vertical` when `vertical` has a vertical EPSG code and `horizontal` has
+/// no vertical part: by codes when `horizontal` has one (28992 + 5709 ->
+/// EPSG:7415), else a compound of its WKT (a custom projection) and the
+/// vertical CRS; otherwise `horizontal` unchanged.
 CrsInfo combine_with_vertical(const CrsInfo& horizontal, const CrsInfo& vertical);
 
 /// Transforms points in place from `from` to `to` (horizontal, and vertical

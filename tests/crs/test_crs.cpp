@@ -67,3 +67,25 @@ TEST_CASE("Heights are never relabelled with another datum by a no-op transforma
     transform_points(crs_from_user_input("EPSG:2994+5703", "a"), crs_from_user_input("EPSG:26910+5703", "b"), x, y, z, "points");
     CHECK(z[0] == Approx(10.0).margin(1e-6));
 }
+
+TEST_CASE("A custom projection without an EPSG code still takes the heights' vertical CRS", "[crs]") {
+    // A user-defined Lambert conformal conic (no EPSG code matches it), as GeoTIFFs from other software carry.
+    const CrsInfo custom = crs_from_user_input(
+        "+proj=lcc +lat_1=43 +lat_2=45.5 +lat_0=41.75 +lon_0=-120.123 +x_0=400000 +y_0=0 +ellps=GRS80 +units=m +no_defs", "ortho.tif");
+    REQUIRE_FALSE(custom.horizontal_epsg);
+    REQUIRE(z_crs_label(custom) == "unknown (metre)");
+    const CrsInfo navd88 = crs_from_user_input("EPSG:5703", "cloud");
+    const CrsInfo both = combine_with_vertical(custom, navd88);
+    CHECK(both.vertical_epsg == 5703);
+    CHECK(z_crs_label(both) == "EPSG:5703");
+    CHECK(same_horizontal_crs(both, custom));
+    CHECK(both.linear_unit_m == 1.0);
+    // Points in the compound go to lon/lat as in the custom CRS alone; NAVD88 heights stay NAVD88 heights.
+    std::vector<double> x{400000.0}, y{100000.0}, z{50.0};
+    transform_points(both, crs_from_user_input("EPSG:4269+5703", "b"), x, y, z, "points");
+    CHECK(x[0] == Approx(-120.123).margin(1e-6));
+    CHECK(z[0] == Approx(50.0).margin(1e-6));
+    // Already compound, or nothing to add: unchanged.
+    CHECK(combine_with_vertical(both, crs_from_user_input("EPSG:5773", "c")).vertical_epsg == 5703);
+    CHECK(combine_with_vertical(custom, crs_from_user_input("EPSG:32610", "d")).wkt == custom.wkt);
+}
