@@ -11,6 +11,9 @@
 #include <new>
 #include <type_traits>
 #include <tbb/task_arena.h>
+#if defined(__SSE2__)
+#include <emmintrin.h>
+#endif
 #include <tbb/parallel_reduce.h>
 #include <tbb/parallel_for.h>
 
@@ -68,6 +71,16 @@ Image<uint32_t> relabel(const Image<uint32_t>& labels, const std::vector<uint32_
 namespace {
 
 __extension__ typedef __int128 int128;  // exact sums of squared fixed-point values
+
+// √x for x >= 0 or NaN: the same correctly rounded value as std::sqrt, without
+// the errno check GCC wraps around std::sqrt (a compare and a branch per root).
+inline double root(double x) {
+#if defined(__SSE2__)
+    return _mm_cvtsd_f64(_mm_sqrt_sd(_mm_setzero_pd(), _mm_set_sd(x)));
+#else
+    return std::sqrt(x);
+#endif
+}
 using merge_queue::MergeQueue;
 using merge_queue::QueueEntry;
 using merge_queue::uint128;
@@ -95,23 +108,23 @@ struct Neighbour {
 // heap block). A cost evaluation, a nearest-neighbour offer or an adjacency
 // edit touches one record per neighbour, and the records of all neighbours
 // are prefetched together before they are used: the loop is bound by these
-// memory reads, not by arithmetic. The shape terms l·√n and n·l/b are
-// recomputed from n, l and the box where needed (bit for bit the same
-// values) rather than stored, to keep the head and sums in two lines.
+// memory reads more than by arithmetic. The shape terms l·√n and n·l/b
+// are stored (set by derive() whenever n, l or the box change: a cost then
+// takes 4 square roots and 2 divisions instead of 6 and 4); to keep the
+// head and sums in two lines, area and perimeter are 32-bit integers (exact
+// counts, converted to double where the cost uses them: the same values as
+// before, bit for bit) and a dead region is one of area 0.
 struct NodeHead {
-    double n = 0, l = 0;           // area (pixels), perimeter (pixel edges)
     double colour = 0;             // Σ_b w_b n σ_b
     double nn_cost = INFINITY;     // cost to the nearest neighbour
+    double lsq = 0, smooth = 0;    // l·√n and n·l/b (b = bounding-box perimeter), set by derive()
+    uint32_t n = 0, l = 0;         // area (pixels; 0 = no region: dead or without pixels), perimeter (pixel edges)
     int32_t x0 = INT32_MAX, y0 = INT32_MAX, x1 = -1, y1 = -1;  // bounding box, pixels
     uint32_t nn = 0;               // nearest neighbour node (0 = none)
     uint32_t key = 0;              // lowest input label of the region
-    uint32_t alive = 0;
     uint32_t degree = 0;
-    Neighbour* list = nullptr;     // sorted adjacency: the record's inline slots or a heap block
     uint32_t capacity = 0;
-    // l·√n and n·l/b (b = bounding-box perimeter) of the region.
-    double lsq() const { return l * std::sqrt(n); }
-    double smooth() const { return n * l / (2.0 * ((x1 - x0 + 1) + (y1 - y0 + 1))); }
+    Neighbour* list = nullptr;     // sorted adjacency: the record's inline slots or a heap block
 };
 
 static_assert(sizeof(NodeHead) == 80, "NodeHead and 3 bands of sums fill two cache lines");
@@ -158,6 +171,7 @@ public:
     // region keeps its label as its key, and keys alone decide every tie, so
     // the numbering changes no result. Fills node_of_label_ and label_of_node_.
     static constexpr int kStripe = 64;
+    static_assert(kStripe == 64, "blocks are 64 x 64 pixels: kStripe rows of 64-pixel-wide blocks (cell_of, build's scan)");
     void number_nodes(const Image<uint32_t>& labels) {
         const int w = labels.width, h = labels.height;
         const uint32_t* lab = labels.band_data(0);
@@ -202,6 +216,9 @@ public:
         for (uint64_t c = 0; c < cells; ++c) start[c + 1] += start[c];
         nodes_above_stripe_.resize(stripes + 1);
         for (int s = 0; s <= stripes; ++s) nodes_above_stripe_[s] = start[uint64_t(s) * blocks * 64];
+        blocks_per_stripe_ = static_cast<uint32_t>(blocks);
+        block_first_node_.resize(std::size_t(stripes) * blocks + 1);
+        for (std::size_t k = 0; k < block_first_node_.size(); ++k) block_first_node_[k] = 1 + start[k * 64];
         node_of_label_.assign(n_, 0);
         label_of_node_.assign(n_, 0);
         for (uint32_t l = 1; l < n_; ++l) {
@@ -319,16 +336,18 @@ public:
                 return B.foreign.data() + B.foreign_index[B.slot[i] - 1].second;
             };
             // By blocks of kStripe x kStripe pixels, as the nodes are
-            // numbered (number_nodes): a block's nodes are reached in nearly
-            // ascending order, so their accumulators (cold: first read here)
-            // are loaded kAhead nodes ahead of use, and the few hundred
-            // records a block adds to stay in cache while its rows are read.
-            // 13 MP Autzen seeds, one core: 0.45-0.49 -> 0.37-0.38 s CPU.
+            // numbered (number_nodes): the accumulators (cold: first read
+            // here) of the next block's own nodes are loaded while this
+            // block is scanned, a slice per row (loading a few nodes ahead
+            // of the first one met did not hide the misses: nodes are in
+            // Morton order of 8 x 8 cells, a row meets them out of order,
+            // and 28 % of the scan waited on these loads; 4 MP Autzen seeds:
+            // scan 113 -> 90 ms CPU), and the few hundred records a block
+            // adds to stay in cache while its rows are read.
             // A run's sums are kept in registers for the usual band counts
             // (Bands > 0; 0 = any count), its Σq² in 64 bits (|q| <= 2^24
             // and a run has at most kStripe pixels: < 2^55), added to the
             // region's 128-bit total once per run.
-            constexpr uint32_t kAhead = 48;
             constexpr int kRowsAhead = 2;
             const uint32_t owned_end = j + 1 < n_bands ? band_data[j + 1].owned_from : n_;
             auto scan = [&](auto bands_tag) {
@@ -338,10 +357,26 @@ public:
                 for (int b = 0; b < nb; ++b) band_ptrs[b] = image.band_data(b);
                 const float* const* band_ptr = band_ptrs.data();
                 std::vector<int64_t> wide(Bands ? 0 : 2 * std::size_t(nb));  // a run's sums, any band count
-                uint32_t prefetched = B.owned_from;
+                bool first_block = true;
                 for (int ys = band_row(j); ys < band_row(j + 1); ys += kStripe)
-                for (int xs = 0; xs < w; xs += kStripe)
+                for (int xs = 0; xs < w; xs += kStripe) {
+                const std::size_t block = std::size_t(ys / kStripe) * blocks_per_stripe_ + std::size_t(xs / kStripe);
+                // The accumulators of the block's own nodes (numbered by
+                // block: number_nodes) are loaded a block ahead, a slice per
+                // row, so no row waits on a burst of them; the first block
+                // of the band loads its own at once.
+                auto prefetch_nodes = [&](uint32_t from, uint32_t to) {
+                    for (uint32_t r = std::max(from, B.owned_from); r < std::min(to, owned_end); ++r) {
+                        prefetch_line(acc(r));
+                        prefetch_line(acc(r) + 8);
+                    }
+                };
+                if (first_block) prefetch_nodes(block_first_node_[block], block_first_node_[block + 1]), first_block = false;
+                const uint32_t next_first = block + 1 < block_first_node_.size() ? block_first_node_[block + 1] : n_;
+                const uint32_t next_count = block + 2 < block_first_node_.size() ? block_first_node_[block + 2] - next_first : 0;
                 for (int y = ys; y < std::min(band_row(j + 1), ys + kStripe); ++y) {
+                    prefetch_nodes(next_first + uint32_t(uint64_t(next_count) * (y - ys) / kStripe),
+                                   next_first + uint32_t(uint64_t(next_count) * (y - ys + 1) / kStripe));
                     const uint32_t* row = lab + std::size_t(y) * w;
                     const uint32_t* above = y > 0 ? row - w : nullptr;
                     const uint32_t* below = y < h - 1 ? row + w : nullptr;
@@ -365,12 +400,6 @@ public:
                             continue;
                         }
                         const uint32_t a = node[la];
-                        if (a >= prefetched && a < owned_end) {
-                            for (const uint32_t until = std::min(owned_end, a + kAhead); prefetched < until; ++prefetched) {
-                                prefetch_line(acc(prefetched));
-                                prefetch_line(acc(prefetched) + 8);
-                            }
-                        }
                         // A run of pixels of region a within the block: x .. end - 1.
                         int end = x + 1;
                         while (end < x_end && row[end] == la) ++end;
@@ -415,6 +444,7 @@ public:
                         x = end;
                     }
                 }
+                }
             };
             switch (bands_) {  // the band loop unrolled for the usual band counts
                 case 1: scan(std::integral_constant<int, 1>{}); break;
@@ -453,7 +483,7 @@ public:
                 const int64_t* A = acc(r);
                 NodeHead& R = head(r);
                 double* S = new (sums_ptr(r)) double[2 * static_cast<std::size_t>(bands_)];
-                R.n = static_cast<double>(A[0]), R.l = static_cast<double>(A[1]);
+                R.n = static_cast<uint32_t>(A[0]), R.l = static_cast<uint32_t>(A[1]);
                 R.x0 = static_cast<int32_t>(A[2]), R.y0 = static_cast<int32_t>(A[3]);
                 R.x1 = static_cast<int32_t>(A[4]), R.y1 = static_cast<int32_t>(A[5]);
                 for (int b = 0; b < bands_; ++b) {
@@ -466,8 +496,7 @@ public:
                 R.list = new (inline_bytes(r)) Neighbour[inline_capacity_];
                 R.capacity = inline_capacity_;
                 R.key = label_of_node_[r];
-                R.alive = R.n > 0;
-                alive += R.alive;
+                alive += R.n > 0;
                 derive(r);
             }
             return alive;
@@ -579,7 +608,7 @@ public:
     }
     uint32_t size() const { return n_; }
     uint32_t alive_count() const { return alive_count_; }
-    bool alive(uint32_t r) const { return head(r).alive; }
+    bool alive(uint32_t r) const { return head(r).n > 0; }
     // Cost cached on a's side of edge (a, b); NaN if they are not adjacent.
     double edge_cost(uint32_t a, uint32_t b) {
         NodeHead& A = head(a);
@@ -595,16 +624,22 @@ public:
         const std::byte* p = storage_[static_cast<std::size_t>(r) * lines_].bytes;
         for (int l = 0; l < lines; ++l) prefetch_line(p + l * sizeof(Line));
     }
-    int record_lines() const { return static_cast<int>(lines_); }
     // Starts loading the records of r's first kPrefetchAhead neighbours
     // (at most: a region of thousands of neighbours would evict its own
     // lines before they are used, and a stale queue entry of such a region
-    // would cost thousands of loads for nothing).
+    // would cost thousands of loads for nothing) into the second-level
+    // cache: they are read one merge later, and the ~80 lines of a pair's
+    // neighbourhood requested into the first level at once would stall the
+    // loop on full miss buffers (a third of the loop's samples sat on these
+    // prefetches). 341,401 seeds: merging thread 0.33-0.35 -> 0.28-0.30 s CPU.
     static constexpr uint32_t kPrefetchAhead = 16;
-    void prefetch_neighbours(uint32_t r, int lines) const {
+    void prefetch_neighbours(uint32_t r) const {
         const NeighbourSpan list = neighbours(r);
         const Neighbour* end = list.first + std::min<std::size_t>(list.size(), kPrefetchAhead);
-        for (const Neighbour* k = list.first; k != end; ++k) prefetch_node(k->id, lines);
+        for (const Neighbour* k = list.first; k != end; ++k) {
+            const std::byte* p = storage_[static_cast<std::size_t>(k->id) * lines_].bytes;
+            for (std::size_t l = 0; l < lines_; ++l) prefetch_line_l2(p + l * sizeof(Line));
+        }
     }
     ~RegionGraph() {
         for (uint32_t r = 0; r < n_; ++r) release(r);
@@ -614,7 +649,7 @@ public:
 
     // Baatz–Schäpe fusion cost of two adjacent regions sharing `shared`
     // pixel edges. Symmetric in (a, b) bit for bit.
-    double cost(uint32_t a, uint32_t b, uint32_t shared) const {
+    [[gnu::always_inline]] double cost(uint32_t a, uint32_t b, uint32_t shared) const {
         switch (bands_) {  // the band loop unrolled for the usual band counts
             case 1: return cost_bands<1>(a, b, shared);
             case 3: return cost_bands<3>(a, b, shared);
@@ -623,26 +658,26 @@ public:
         }
     }
     template <int Bands>  // 0 = bands_
-    double cost_bands(uint32_t a, uint32_t b, uint32_t shared) const {
+    [[gnu::always_inline]] double cost_bands(uint32_t a, uint32_t b, uint32_t shared) const {
         const int bands = Bands ? Bands : bands_;
         const NodeHead& A = head(a);
         const NodeHead& B = head(b);
         const double* SA = sums(a);
         const double* SB = sums(b);
-        const double nm = A.n + B.n;
+        const double nm = double(A.n) + double(B.n);
         const double inv = 1.0 / nm;
         double hc = 0.0;
         for (int k = 0; k < bands; ++k) {
             const double m = (SA[2 * k] + SB[2 * k]) * inv;
             const double var = (SA[2 * k + 1] + SB[2 * k + 1]) * inv - m * m;
-            hc += weights_[k] * std::sqrt(std::max(0.0, var));
+            hc += weights_[k] * root(std::max(0.0, var));
         }
         hc = hc * nm - (A.colour + B.colour);
         if (wc_ >= 1.0) return hc;
-        const double lm = A.l + B.l - 2.0 * shared;
+        const double lm = double(A.l) + double(B.l) - 2.0 * shared;
         const double bbm = 2.0 * ((std::max(A.x1, B.x1) - std::min(A.x0, B.x0) + 1) + (std::max(A.y1, B.y1) - std::min(A.y0, B.y0) + 1));
-        const double h_cmpct = lm * std::sqrt(nm) - (A.lsq() + B.lsq());
-        const double h_smooth = nm * lm / bbm - (A.smooth() + B.smooth());
+        const double h_cmpct = lm * root(nm) - (A.lsq + B.lsq);
+        const double h_smooth = nm * lm / bbm - (A.smooth + B.smooth);
         return wc_ * hc + (1.0 - wc_) * (wcmp_ * h_cmpct + (1.0 - wcmp_) * h_smooth);
     }
 
@@ -693,17 +728,18 @@ public:
         const uint32_t s = head(a).degree >= head(b).degree ? a : b;  // survivor slot
         const uint32_t t = s == a ? b : a;                            // dies
         // The records of both lists' neighbours are read below (scored, and
-        // their lists edited): loaded kPrefetchAhead entries ahead of use.
-        prefetch_neighbours(t, static_cast<int>(lines_));
-        prefetch_neighbours(s, static_cast<int>(lines_));
+        // their lists edited): the first kPrefetchAhead were loaded into
+        // L2 when the pair was next in the queue (merge_regions), the rest
+        // are loaded kPrefetchAhead entries ahead of use.
+        prefetch_neighbours(t), prefetch_neighbours(s);
         NodeHead& S = head(s);
         NodeHead& T = head(t);
         const uint32_t shared = find(S, t)->shared;
         double* SS = sums(s);
         const double* ST = sums(t);
-        S.n = S.n + T.n;
+        S.n = S.n + T.n;  // < 2^32: merge_regions refuses larger images
         for (int k = 0; k < 2 * bands_; ++k) SS[k] = SS[k] + ST[k];
-        S.l = S.l + T.l - 2.0 * shared;
+        S.l = S.l + T.l - 2 * shared;  // every shared edge is on both perimeters: >= 0
         S.x0 = std::min(S.x0, T.x0), S.x1 = std::max(S.x1, T.x1);
         S.y0 = std::min(S.y0, T.y0), S.y1 = std::max(S.y1, T.y1);
         derive(s);
@@ -760,7 +796,7 @@ public:
         S.degree = static_cast<uint32_t>(scratch_.size());
         set_nn(s, best, best_cost);
         release(t);
-        T.alive = 0;
+        T.n = 0;  // dead
         --alive_count_;
         return s;
     }
@@ -837,14 +873,19 @@ private:
     void derive(uint32_t r) {
         NodeHead& R = head(r);
         const double* S = sums(r);
-        const double n = R.n;
-        if (!(n > 0)) return;
+        if (!R.n) {
+            R.lsq = R.smooth = 0.0;
+            return;
+        }
+        const double n = R.n, l = R.l;
+        R.lsq = l * root(n);
+        R.smooth = n * l / (2.0 * ((R.x1 - R.x0 + 1) + (R.y1 - R.y0 + 1)));
         const double inv = 1.0 / n;
         double t = 0.0;
         for (int b = 0; b < bands_; ++b) {
             const double m = S[2 * b] * inv;
             const double var = S[2 * b + 1] * inv - m * m;
-            t += weights_[b] * std::sqrt(std::max(0.0, var));
+            t += weights_[b] * root(std::max(0.0, var));
         }
         R.colour = t * n;
     }
@@ -865,6 +906,8 @@ private:
     std::vector<Neighbour> scratch_;
     std::vector<uint32_t> node_of_label_, label_of_node_;  // see number_nodes
     std::vector<uint32_t> nodes_above_stripe_;  // [s]: nodes whose first pixel is above stripe s (number_nodes)
+    std::vector<uint32_t> block_first_node_;  // [k]: first node of block k (stripe by stripe, left to right; number_nodes)
+    uint32_t blocks_per_stripe_ = 0;
     uint32_t alive_count_ = 0;
 };
 
@@ -875,6 +918,8 @@ RegionMergingResult merge_regions(const Image<float>& image, const Image<uint32_
     o.validate(image.bands);
     if (labels.width != image.width || labels.height != image.height)
         throw Error("region merging", "label raster and image differ in size");
+    if (labels.pixel_count() >= (std::size_t(1) << 32))  // areas and perimeters are 32-bit counts (NodeHead)
+        throw Error("region merging", "images of 2^32 pixels or more are not supported; merge tiles of it");
     RegionMergingResult result;
     const auto t_graph = std::chrono::steady_clock::now();
     const double c_graph = process_cpu_seconds();
@@ -979,8 +1024,8 @@ RegionMergingResult merge_regions(const Image<float>& image, const Image<uint32_
             // The next pops are most likely the next merges: start loading
             // their records (and their neighbours') while this one is done.
             if (!heap.empty()) {
-                g.prefetch_neighbours(heap.entry(0).a, g.record_lines());
-                g.prefetch_neighbours(heap.entry(0).b, g.record_lines());
+                g.prefetch_neighbours(heap.entry(0).a);
+                g.prefetch_neighbours(heap.entry(0).b);
             }
             for (std::size_t i = 1; i < 5 && i < heap.near_size(); ++i) {  // the next top is one of these
                 g.prefetch_node(heap.entry(i).a, 4);
