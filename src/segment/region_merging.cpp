@@ -13,6 +13,7 @@
 #include <tbb/task_arena.h>
 #if defined(__SSE2__)
 #include <emmintrin.h>
+#include <xmmintrin.h>
 #endif
 #include <tbb/parallel_reduce.h>
 #include <tbb/parallel_for.h>
@@ -90,7 +91,8 @@ using merge_queue::uint128;
 struct Neighbour {
     uint32_t id;      // node
     uint32_t shared;  // boundary length in pixel edges
-    double cost = 0;  // fusion cost of the edge, cached by the nearest-neighbour strategies
+    double cost;      // fusion cost of the edge, cached by the nearest-neighbour strategies
+                      // (no initialiser: the inline room is not written before the lists are filled)
 };
 
 // Region graph. A region lives in a node (storage slot); when two regions
@@ -238,7 +240,17 @@ public:
         const float max_abs = tbb::parallel_reduce(
             tbb::blocked_range<std::size_t>(0, image.data.size(), 1 << 16), 0.0f,
             [&](const tbb::blocked_range<std::size_t>& r, float m) {
-                for (std::size_t i = r.begin(); i != r.end(); ++i) m = std::max(m, std::abs(image.data[i]));
+                std::size_t i = r.begin();
+#if defined(__SSE2__)
+                // Four lanes at a time: max(|v|, m) takes m when v is NaN, as std::max(m, |v|) does.
+                const __m128 sign = _mm_set1_ps(-0.0f);
+                __m128 m4 = _mm_set1_ps(m);
+                for (; i + 4 <= r.end(); i += 4) m4 = _mm_max_ps(_mm_andnot_ps(sign, _mm_loadu_ps(image.data.data() + i)), m4);
+                alignas(16) float lanes[4];
+                _mm_store_ps(lanes, m4);
+                for (float v : lanes) m = std::max(m, v);
+#endif
+                for (; i != r.end(); ++i) m = std::max(m, std::abs(image.data[i]));
                 return m;
             },
             [](float a, float b) { return std::max(a, b); });
@@ -762,7 +774,7 @@ public:
             int from;  // 1 = s only, 2 = t only, 3 = both
             if (it == et || (is != es && is->id < it->id)) next = *is++, from = 1;
             else if (is == es || it->id < is->id) next = *it++, from = 2;
-            else next = {is->id, is->shared + it->shared}, ++is, ++it, from = 3;
+            else next = {is->id, is->shared + it->shared, 0.0}, ++is, ++it, from = 3;
             if (next.id == s || next.id == t) continue;
             const double c = next.cost = cost(s, next.id, next.shared);
             NodeHead& K = head(next.id);
