@@ -52,6 +52,9 @@ void add_train_command(CLI::App& parent, const GlobalFlags& g, CommandList& out)
                     "Candidate neck splits, metres: touching buildings joined by a neck narrower than about twice this are cut apart "
                     "(tried after the grouping; the best pooled CV F1 is kept; none = never)")
         ->delimiter(',');
+    cmd->add_option("--cv-out", o.cv_out_dir,
+                    "Directory for the cross-validation's out-of-fold footprints (pixel space, JSON), pixel map and folds per image "
+                    "(error analysis)");
     cmd->add_option("--neck-split-m", d.neck_split_m, "Neck split, metres, when there is no cross-validation (0 = off)")->capture_default_str();
     cmd->add_flag("--no-pair-classifier", s->no_pairs, "Buildings from the split levels only (no pair classifier is trained)");
     cmd->add_option("--split-level", d.object_split_level, "Object split level when there is no cross-validation")->capture_default_str();
@@ -85,6 +88,16 @@ void add_train_command(CLI::App& parent, const GlobalFlags& g, CommandList& out)
     cmd->add_option("--pixel-cnn-steps", d.pixel.cnn.steps, "Pixel CNN: training steps (Adam)")->capture_default_str();
     cmd->add_option("--pixel-cnn-channels", d.pixel.cnn.base_channels, "Pixel CNN: channels at full resolution")->capture_default_str();
     cmd->add_option("--pixel-cnn-crop", d.pixel.cnn.crop_cells, "Pixel CNN: training crop side, cells")->capture_default_str();
+    cmd->add_option("--core-thresholds", o.core_threshold_candidates,
+                    "Instance separation: candidate thresholds of the core CNN's map (building cores grown back over the building mask, "
+                    "buildings cut where two cores meet; tried after the neck split, the best pooled CV F1 is kept; none = no core CNN)")
+        ->delimiter(',');
+    cmd->add_option("--core-depth-m", d.instance.core_depth_m, "Core CNN target: labelled pixels at least this far (m) from an unlabelled one")
+        ->capture_default_str();
+    cmd->add_option("--core-cell-m", d.instance.cell_m, "Core CNN: working cell, metres")->capture_default_str();
+    cmd->add_option("--core-cnn-steps", d.instance.cnn.steps, "Core CNN: training steps (Adam)")->capture_default_str();
+    cmd->add_option("--core-cnn-channels", d.instance.cnn.base_channels, "Core CNN: channels at full resolution")->capture_default_str();
+    cmd->add_option("--min-core-m2", d.instance.min_core_m2, "Smallest core that makes a building of its own, square metres")->capture_default_str();
     out.push_back({cmd, [s, &g]() {
                        remove_stale_temporaries_beside(s->out);
                        if (s->no_pairs) s->options.merge_thresholds.clear();

@@ -4,8 +4,10 @@
 #include <cmath>
 #include <cstring>
 #include <filesystem>
+#include <functional>
 #include <fstream>
 #include <iterator>
+#include <queue>
 
 #include "core/atomic_file.hpp"
 #include "core/error.hpp"
@@ -39,8 +41,24 @@ std::string hex64(uint64_t v) {
     return buf;
 }
 
+void InstanceOptions::validate() const {
+    if (!(core_threshold >= 0.0 && core_threshold < 1.0)) throw Error("instance.core_threshold", "must be in [0, 1) (0 = off)");
+    if (!(core_depth_m > 0.0 && core_depth_m <= 10.0)) throw Error("instance.core_depth_m", "must be in (0, 10] metres");
+    if (!(min_core_m2 >= 0.0)) throw Error("instance.min_core_m2", "must be >= 0");
+    pixel_options().validate();
+}
+
+PixelClassifierOptions InstanceOptions::pixel_options() const {
+    PixelClassifierOptions p;
+    p.kind = PixelStageKind::cnn;
+    p.cell_m = cell_m;
+    p.cnn = cnn;
+    return p;
+}
+
 void DetectorOptions::validate(int bands) const {
     segmentation.validate(bands);
+    instance.validate();
     booster.validate();
     if (pixel.enabled) pixel.validate();
     if (!(min_label_share > 0.0 && min_label_share < 1.0)) throw Error("min_label_share", "must be in (0, 1)");
@@ -93,6 +111,21 @@ BoosterOptions booster_from_json(const nlohmann::json& b) {
     o.seed = b.at("seed").get<uint64_t>();
     return o;
 }
+nlohmann::json cnn_json(const CnnOptions& c) {
+    return {{"base_channels", c.base_channels}, {"levels", c.levels}, {"crop_cells", c.crop_cells},
+            {"batch", c.batch}, {"steps", c.steps}, {"learning_rate", c.learning_rate}, {"seed", c.seed}};
+}
+CnnOptions cnn_from_json(const nlohmann::json& c) {
+    CnnOptions o;
+    o.base_channels = c.at("base_channels").get<int>();
+    o.levels = c.at("levels").get<int>();
+    o.crop_cells = c.at("crop_cells").get<int>();
+    o.batch = c.at("batch").get<int>();
+    o.steps = c.at("steps").get<int>();
+    o.learning_rate = c.at("learning_rate").get<double>();
+    o.seed = c.at("seed").get<uint64_t>();
+    return o;
+}
 }  // namespace
 
 nlohmann::json to_json(const DetectorOptions& o) {
@@ -104,9 +137,7 @@ nlohmann::json to_json(const DetectorOptions& o) {
             {"pixel",
              {{"enabled", o.pixel.enabled},
               {"kind", to_string(o.pixel.kind)},
-              {"cnn",
-               {{"base_channels", o.pixel.cnn.base_channels}, {"levels", o.pixel.cnn.levels}, {"crop_cells", o.pixel.cnn.crop_cells},
-                {"batch", o.pixel.cnn.batch}, {"steps", o.pixel.cnn.steps}, {"learning_rate", o.pixel.cnn.learning_rate}, {"seed", o.pixel.cnn.seed}}},
+              {"cnn", cnn_json(o.pixel.cnn)},
               {"cell_m", o.pixel.cell_m},
               {"sigmas_m", o.pixel.sigmas_m},
               {"samples_per_image", o.pixel.samples_per_image},
@@ -120,6 +151,10 @@ nlohmann::json to_json(const DetectorOptions& o) {
     // Written only when on: models without the pair classifier keep their header bytes.
     if (o.merge_threshold > 0.0) j["merge_threshold"] = o.merge_threshold;
     if (o.neck_split_m > 0.0) j["neck_split_m"] = o.neck_split_m;  // likewise
+    if (o.instance.enabled())  // likewise
+        j["instance"] = {{"core_threshold", o.instance.core_threshold}, {"core_depth_m", o.instance.core_depth_m},
+                         {"min_core_m2", o.instance.min_core_m2}, {"cell_m", o.instance.cell_m}, {"cnn", cnn_json(o.instance.cnn)}};
+    if (o.instance.enabled() && o.instance.by_segments) j["instance"]["by_segments"] = true;
     return j;
 }
 
@@ -141,16 +176,7 @@ DetectorOptions detector_options_from_json(const nlohmann::json& j) {
         o.pixel.samples_per_image = p.at("samples_per_image").get<std::size_t>();
         o.pixel.booster = booster_from_json(p.at("booster"));
         o.pixel.kind = parse_pixel_stage_kind(p.value("kind", std::string("boosted")));  // absent before the CNN kind
-        if (p.contains("cnn")) {
-            const auto& c = p.at("cnn");
-            o.pixel.cnn.base_channels = c.at("base_channels").get<int>();
-            o.pixel.cnn.levels = c.at("levels").get<int>();
-            o.pixel.cnn.crop_cells = c.at("crop_cells").get<int>();
-            o.pixel.cnn.batch = c.at("batch").get<int>();
-            o.pixel.cnn.steps = c.at("steps").get<int>();
-            o.pixel.cnn.learning_rate = c.at("learning_rate").get<double>();
-            o.pixel.cnn.seed = c.at("seed").get<uint64_t>();
-        }
+        if (p.contains("cnn")) o.pixel.cnn = cnn_from_json(p.at("cnn"));
     } else {
         o.pixel.enabled = false;  // models from before the pixel stage
     }
@@ -159,6 +185,15 @@ DetectorOptions detector_options_from_json(const nlohmann::json& j) {
     o.pixel_object_threshold = j.value("pixel_object_threshold", 0.0);
     o.merge_threshold = j.value("merge_threshold", 0.0);
     o.neck_split_m = j.value("neck_split_m", 0.0);
+    if (j.contains("instance")) {  // absent before the instance stage, or off
+        const auto& in = j.at("instance");
+        o.instance.core_threshold = in.at("core_threshold").get<double>();
+        o.instance.core_depth_m = in.at("core_depth_m").get<double>();
+        o.instance.min_core_m2 = in.at("min_core_m2").get<double>();
+        o.instance.cell_m = in.at("cell_m").get<double>();
+        o.instance.cnn = cnn_from_json(in.at("cnn"));
+        o.instance.by_segments = in.value("by_segments", false);
+    }
     o.threshold = j.at("threshold").get<double>();
     o.min_area_m2 = j.at("min_area_m2").get<double>();
     o.min_hole_m2 = j.at("min_hole_m2").get<double>();
@@ -171,6 +206,8 @@ std::vector<uint8_t> serialize_model(const DetectorModel& m) {
     if (pixel && m.pixel_model.empty()) throw Error("detector model", "internal: pixel stage without its model");
     const bool merge = m.options.merge_threshold > 0.0;
     if (merge && m.merge_model.empty()) throw Error("detector model", "internal: merge threshold without the pair classifier");
+    const bool instance = m.options.instance.enabled();
+    if (instance && m.core_model.empty()) throw Error("detector model", "internal: instance stage without its core CNN");
     nlohmann::json header = {{"format", "cityforge-detector"},
                                    {"format_version", cnn ? 3 : pixel ? 2 : 1},
                                    {"classifier", "xgboost gbtree (binary:logistic, hist)"},
@@ -197,6 +234,10 @@ std::vector<uint8_t> serialize_model(const DetectorModel& m) {
         put_u64(out, m.merge_model.size());
         out.insert(out.end(), m.merge_model.begin(), m.merge_model.end());
     }
+    if (instance) {
+        put_u64(out, m.core_model.size());
+        out.insert(out.end(), m.core_model.begin(), m.core_model.end());
+    }
     put_u64(out, fnv1a64(out.data(), out.size()));
     return out;
 }
@@ -216,7 +257,7 @@ DetectorModel parse_model(const std::vector<uint8_t>& in, const std::string& sub
         if (len > n - 8 - (at + 8)) throw Error(subject, "truncated or padded detector model (a block runs past the end: " + std::to_string(n) + " bytes)");
         blobs.emplace_back(at + 8, std::size_t(len));
         at += 8 + len;
-        if (blobs.size() > 3) throw Error(subject, "corrupt detector model (too many blocks)");
+        if (blobs.size() > 4) throw Error(subject, "corrupt detector model (too many blocks)");
     }
     if (blobs.empty()) throw Error(subject, "truncated detector model (no booster)");
     if (get_u64(in, n - 8) != fnv1a64(in.data(), n - 8)) throw Error(subject, "corrupt detector model (checksum mismatch)");
@@ -242,7 +283,8 @@ DetectorModel parse_model(const std::vector<uint8_t>& in, const std::string& sub
     m.options.validate(m.layout.bands);
     const bool cnn = m.options.pixel.enabled && m.options.pixel.kind != PixelStageKind::boosted;
     const bool merge = m.options.merge_threshold > 0.0;
-    if (blobs.size() != 1u + (m.options.pixel.enabled ? 1u : 0u) + (merge ? 1u : 0u) || (version >= 2) != m.options.pixel.enabled || (version == 3) != cnn)
+    const bool instance = m.options.instance.enabled();
+    if (blobs.size() != 1u + (m.options.pixel.enabled ? 1u : 0u) + (merge ? 1u : 0u) + (instance ? 1u : 0u) || (version >= 2) != m.options.pixel.enabled || (version == 3) != cnn)
         throw Error(subject, "corrupt detector model (block count does not match the header)");
     if (merge && merge_features != pair_feature_names(int(m.options.segmentation.scales.size()) - 1, m.options.pixel.enabled))
         throw Error(subject, "the model's pair feature list is not the one this version of cityforge computes");
@@ -254,6 +296,10 @@ DetectorModel parse_model(const std::vector<uint8_t>& in, const std::string& sub
     m.booster = blob(0);
     if (m.options.pixel.enabled) m.pixel_model = blob(1);
     if (merge) m.merge_model = blob(m.options.pixel.enabled ? 2 : 1);
+    if (instance) {
+        m.core_model = blob(blobs.size() - 1);
+        check_cnn_weights(m.core_model, m.layout.bands, m.options.instance.cnn, subject);
+    }
     if (m.options.pixel.enabled && m.options.pixel.kind == PixelStageKind::cnn) check_cnn_weights(m.pixel_model, m.layout.bands, m.options.pixel.cnn, subject);
     if (m.options.pixel.enabled && m.options.pixel.kind == PixelStageKind::both)
         check_cnn_weights(unpack_pixel_models(m.pixel_model, subject).second, m.layout.bands, m.options.pixel.cnn, subject);
@@ -317,6 +363,23 @@ std::vector<uint8_t> building_pixels(const SceneSegments& s, const std::vector<f
         }
     return out;
 }
+
+namespace {
+// A building pixel whose right or lower neighbour is a building pixel of
+// another instance (both non-zero) leaves the mask: a one-pixel cut.
+std::vector<uint8_t> cut_between_instances(const std::vector<uint8_t>& building, const std::vector<uint32_t>& inst, int w, int h) {
+    std::vector<uint8_t> out = building;
+    for (int y = 0; y < h; ++y)
+        for (int x = 0; x < w; ++x) {
+            const std::size_t i = std::size_t(y) * w + x;
+            const uint32_t a = inst[i];
+            if (!building[i] || !a) continue;
+            if ((x + 1 < w && building[i + 1] && inst[i + 1] && inst[i + 1] != a) || (y + 1 < h && building[i + w] && inst[i + w] && inst[i + w] != a))
+                out[i] = 0;
+        }
+    return out;
+}
+}  // namespace
 
 std::vector<uint8_t> split_at_necks(const std::vector<uint8_t>& building, int w, int h, int radius_px, int min_core_px) {
     const std::size_t n = std::size_t(w) * std::size_t(h);
@@ -389,16 +452,7 @@ std::vector<uint8_t> split_at_necks(const std::vector<uint8_t>& building, int w,
             if (building[j] && !inst[j]) inst[j] = inst[i], front.push_back(j);
         });
     }
-    std::vector<uint8_t> out = building;
-    for (int y = 0; y < h; ++y)
-        for (int x = 0; x < w; ++x) {
-            const std::size_t i = std::size_t(y) * w + x;
-            const uint32_t a = inst[i];
-            if (!building[i] || !a) continue;
-            if ((x + 1 < w && building[i + 1] && inst[i + 1] && inst[i + 1] != a) || (y + 1 < h && building[i + w] && inst[i + w] && inst[i + w] != a))
-                out[i] = 0;
-        }
-    return out;
+    return cut_between_instances(building, inst, w, h);
 }
 
 std::vector<uint8_t> split_at_necks(std::vector<uint8_t> building, int w, int h, const DetectorOptions& options, double gsd_m) {
@@ -406,6 +460,113 @@ std::vector<uint8_t> split_at_necks(std::vector<uint8_t> building, int w, int h,
     const int radius = std::max(1, static_cast<int>(std::lround(options.neck_split_m / gsd_m)));
     const int min_core = std::max(1, static_cast<int>(std::lround(3.0 / (gsd_m * gsd_m))));
     return split_at_necks(building, w, h, radius, min_core);
+}
+
+std::vector<uint32_t> core_instances(const std::vector<uint8_t>& building, int w, int h, const std::vector<float>& core, double threshold,
+                                     int min_core_px) {
+    const std::size_t n = std::size_t(w) * std::size_t(h);
+    if (building.size() != n || core.size() != n) throw Error("split_at_cores", "internal: mask size");
+    if (!(threshold > 0.0) || n == 0) return std::vector<uint32_t>(n, 0);
+    auto neighbours = [&](std::size_t i, auto&& visit) {
+        const int x = int(i % std::size_t(w)), y = int(i / std::size_t(w));
+        if (x > 0) visit(i - 1);
+        if (x + 1 < w) visit(i + 1);
+        if (y > 0) visit(i - w);
+        if (y + 1 < h) visit(i + w);
+    };
+    // Markers: 4-connected building pixels at or above the threshold.
+    std::vector<uint32_t> inst(n, 0);
+    std::vector<std::size_t> queue;
+    std::vector<uint32_t> size{0};
+    uint32_t next = 0;
+    auto is_core = [&](std::size_t i) { return building[i] && core[i] >= threshold; };
+    for (std::size_t s = 0; s < n; ++s) {
+        if (!is_core(s) || inst[s]) continue;
+        ++next;
+        const std::size_t first = queue.size();
+        inst[s] = next, queue.push_back(s);
+        for (std::size_t q = first; q < queue.size(); ++q)
+            neighbours(queue[q], [&](std::size_t j) {
+                if (is_core(j) && !inst[j]) inst[j] = next, queue.push_back(j);
+            });
+        size.push_back(uint32_t(queue.size() - first));
+    }
+    // Grown over the building pixels, the most core-like first (a priority
+    // flood: the cut falls on the valleys of the core map between markers).
+    using Entry = std::pair<float, uint64_t>;  // (core probability, arrival order)
+    std::priority_queue<std::pair<Entry, std::size_t>, std::vector<std::pair<Entry, std::size_t>>,
+                        std::function<bool(const std::pair<Entry, std::size_t>&, const std::pair<Entry, std::size_t>&)>>
+        heap([](const auto& a, const auto& b) {
+            return a.first.first != b.first.first ? a.first.first < b.first.first : a.first.second > b.first.second;
+        });
+    uint64_t order = 0;
+    for (const std::size_t i : queue) {
+        if (size[inst[i]] < uint32_t(std::max(1, min_core_px))) inst[i] = 0;
+    }
+    for (const std::size_t i : queue)
+        if (inst[i]) heap.push({{core[i], order++}, i});
+    while (!heap.empty()) {
+        const std::size_t i = heap.top().second;
+        heap.pop();
+        neighbours(i, [&](std::size_t j) {
+            if (building[j] && !inst[j]) inst[j] = inst[i], heap.push({{core[j], order++}, j});
+        });
+    }
+    return inst;
+}
+
+std::vector<uint8_t> split_at_cores(const std::vector<uint8_t>& building, int w, int h, const std::vector<float>& core, double threshold,
+                                    int min_core_px) {
+    if (!(threshold > 0.0)) return building;
+    const std::vector<uint32_t> inst = core_instances(building, w, h, core, threshold, min_core_px);
+    return cut_between_instances(building, inst, w, h);
+}
+
+std::vector<uint8_t> split_at_cores(std::vector<uint8_t> building, int w, int h, const std::vector<float>* core, const DetectorOptions& options,
+                                    double gsd_m) {
+    if (!options.instance.enabled() || options.instance.by_segments || !core || !(gsd_m > 0.0)) return building;
+    const int min_core = std::max(1, static_cast<int>(std::lround(options.instance.min_core_m2 / (gsd_m * gsd_m))));
+    return split_at_cores(building, w, h, *core, options.instance.core_threshold, min_core);
+}
+
+std::vector<uint8_t> object_pixels(const SceneSegments& s, const std::vector<float>& probability, const DetectorOptions& o,
+                                   const std::vector<float>* pixel_map, const std::vector<uint32_t>* groups, const std::vector<float>* core_map,
+                                   double gsd_m) {
+    const int w = s.labels.width, h = s.labels.height;
+    std::vector<uint8_t> b = building_pixels(s, probability, o.threshold, o.object_split_level, pixel_map, o.pixel_object_threshold, groups);
+    if (o.instance.enabled() && o.instance.by_segments && core_map && gsd_m > 0.0) {
+        // Each building segment votes for the core holding most of its
+        // pixels; segments of different (group, core) are cut apart.
+        const int min_core = std::max(1, static_cast<int>(std::lround(o.instance.min_core_m2 / (gsd_m * gsd_m))));
+        const std::vector<uint32_t> inst = core_instances(b, w, h, *core_map, o.instance.core_threshold, min_core);
+        std::vector<std::vector<std::pair<uint32_t, uint32_t>>> votes(std::size_t(s.count) + 1);  // (core, pixels) per segment
+        for (std::size_t i = 0; i < b.size(); ++i) {
+            if (!inst[i]) continue;
+            auto& v = votes[s.labels.data[i]];
+            auto it = std::find_if(v.begin(), v.end(), [&](const auto& e) { return e.first == inst[i]; });
+            if (it == v.end()) v.push_back({inst[i], 1});
+            else ++it->second;
+        }
+        std::vector<std::pair<uint64_t, uint32_t>> keys(std::size_t(s.count) + 1);  // ((group, core), segment)
+        for (uint32_t k = 0; k <= s.count; ++k) {
+            uint32_t best = 0, most = 0;
+            for (const auto& [c, n] : votes[k])
+                if (n > most || (n == most && c < best)) best = c, most = n;
+            const uint64_t g = groups ? (*groups)[k] : (o.object_split_level > 0 ? s.context[std::size_t(o.object_split_level - 1)][k] : 0u);
+            keys[k] = {(g << 32) | best, k};
+        }
+        std::vector<std::pair<uint64_t, uint32_t>> sorted = keys;
+        std::sort(sorted.begin(), sorted.end());
+        std::vector<uint32_t> regroup(std::size_t(s.count) + 1, 0);
+        uint32_t id = 0;
+        for (std::size_t i = 0; i < sorted.size(); ++i) {
+            if (i == 0 || sorted[i].first != sorted[i - 1].first) ++id;
+            regroup[sorted[i].second] = id;
+        }
+        b = building_pixels(s, probability, o.threshold, 0, pixel_map, o.pixel_object_threshold, &regroup);
+    }
+    b = split_at_necks(std::move(b), w, h, o, gsd_m);
+    return split_at_cores(std::move(b), w, h, core_map, o, gsd_m);
 }
 
 Detection detect_buildings(const DetectorModel& model, const Image<float>& normalised, const std::vector<uint8_t>& valid, double gsd_m,
@@ -427,9 +588,10 @@ Detection detect_buildings(const DetectorModel& model, const Image<float>& norma
         for (uint32_t k = 1; k <= d.segments.count; ++k) building[k] = d.probability[k] >= model.options.threshold;
         d.groups = merge_groups(pairs, pp, building, model.options.merge_threshold);
     }
-    d.building = building_pixels(d.segments, d.probability, model.options.threshold, model.options.object_split_level,
-                                 pixel ? &d.pixel_probability : nullptr, model.options.pixel_object_threshold, d.groups.empty() ? nullptr : &d.groups);
-    d.building = split_at_necks(std::move(d.building), d.segments.labels.width, d.segments.labels.height, model.options, gsd_m);
+    if (model.options.instance.enabled())
+        d.core_probability = pixel_probability(model.core_model, normalised, valid, model.layout, gsd_m, model.options.instance.pixel_options(), threads);
+    d.building = object_pixels(d.segments, d.probability, model.options, pixel ? &d.pixel_probability : nullptr, d.groups.empty() ? nullptr : &d.groups,
+                               d.core_probability.empty() ? nullptr : &d.core_probability, gsd_m);
     progress(1.0, "classified");
     return d;
 }

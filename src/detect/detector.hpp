@@ -17,6 +17,31 @@
 
 namespace cityforge::detect {
 
+/// Instance separation from building cores (off unless core_threshold > 0):
+/// a second pixel-stage CNN, on cells of `cell_m`, maps the probability
+/// that a pixel is a building *core* (labelled and at least `core_depth_m`
+/// from every unlabelled pixel, so touching labels' cores are apart); the
+/// cores (4-connected pixels of the building mask whose core probability
+/// reaches core_threshold, at least min_core_m2) are grown back over the
+/// building mask, most core-like pixels first, and buildings are cut
+/// where two cores' growths meet (split_at_cores).
+struct InstanceOptions {
+    double core_threshold = 0.0;  ///< 0 = off; else in (0, 1) (the training command picks it by cross-validation)
+    double core_depth_m = 1.0;    ///< core target: labelled pixels at least this far (metres) from an unlabelled one
+    double min_core_m2 = 2.0;     ///< smaller cores are no building of their own
+    double cell_m = 0.5;          ///< the core CNN's working cell, metres (1 pixel at 0.5 m)
+    /// false: buildings are cut where two cores' growths meet (pixels);
+    /// true: each building segment joins the core holding most of its
+    /// pixels and buildings are cut between segments of different cores
+    /// (outlines stay on segment boundaries). Header key only when true.
+    bool by_segments = false;
+    CnnOptions cnn;               ///< the core CNN
+    bool enabled() const { return core_threshold > 0.0; }
+    void validate() const;
+    /// The pixel-stage options the core CNN trains and predicts with.
+    PixelClassifierOptions pixel_options() const;
+};
+
 /// Everything that decides what a model learns and how it is applied.
 struct DetectorOptions {
     DetectorSegmentationOptions segmentation;
@@ -52,6 +77,9 @@ struct DetectorOptions {
     /// of this radius, grown back over the building pixels); 0 = off (the
     /// training command picks it by cross-validation).
     double neck_split_m = 0.0;
+    /// Instance separation from the core CNN (off by default; header key
+    /// "instance" only when on, so older models keep their bytes).
+    InstanceOptions instance;
     double min_area_m2 = 8.0;  ///< building components smaller than this are dropped
     double min_hole_m2 = 6.0;  ///< holes smaller than this are filled
     void validate(int bands) const;
@@ -79,6 +107,8 @@ struct DetectorModel {
     /// Pair ("same building") classifier, XGBoost UBJSON on pair_feature_names
     /// (options.merge_threshold > 0; else empty).
     std::vector<uint8_t> merge_model;
+    /// Core CNN weights (CFCNN1, options.instance.enabled(); else empty).
+    std::vector<uint8_t> core_model;
 };
 
 /// The model's bytes: "CFDET1\n", then header JSON, booster, the pixel
@@ -128,12 +158,41 @@ std::vector<uint8_t> split_at_necks(const std::vector<uint8_t>& building, int w,
 /// of `gsd_m` metres (cores of at least 3 m2); unchanged when it is 0.
 std::vector<uint8_t> split_at_necks(std::vector<uint8_t> building, int w, int h, const DetectorOptions& options, double gsd_m);
 
+/// Instance separation of a building mask (w x h, 1 = building) by a core
+/// probability map (w x h, 0..1): markers are the 4-connected building
+/// pixels with core probability >= `threshold` (components of at least
+/// `min_core_px`), grown over the building pixels in order of decreasing
+/// core probability (4-neighbours; ties in raster order of arrival), and a
+/// building pixel whose right or lower neighbour belongs to another marker
+/// leaves the mask (a one-pixel cut). Pixels no marker reaches stay.
+std::vector<uint8_t> split_at_cores(const std::vector<uint8_t>& building, int w, int h, const std::vector<float>& core, double threshold,
+                                    int min_core_px);
+/// The core instance (1-based; 0 = none) of every pixel: the markers and
+/// growth of split_at_cores, before any cut.
+std::vector<uint32_t> core_instances(const std::vector<uint8_t>& building, int w, int h, const std::vector<float>& core, double threshold,
+                                     int min_core_px);
+
+/// The building pixels of a detection with every object rule of the model's
+/// options: building_pixels (threshold, split level or pair groups, pixel
+/// map), the core instances when InstanceOptions::by_segments, the neck
+/// split, then split_at_cores (pixel cuts). `pixel_map`, `groups`, `core_map`
+/// may be null (not computed).
+std::vector<uint8_t> object_pixels(const SceneSegments& segments, const std::vector<float>& probability, const DetectorOptions& options,
+                                   const std::vector<float>* pixel_map, const std::vector<uint32_t>* groups, const std::vector<float>* core_map,
+                                   double gsd_m);
+
+/// split_at_cores with the model's InstanceOptions on an image of `gsd_m`
+/// metres; unchanged when the instance stage is off or `core` is null.
+std::vector<uint8_t> split_at_cores(std::vector<uint8_t> building, int w, int h, const std::vector<float>* core, const DetectorOptions& options,
+                                    double gsd_m);
+
 /// The whole detection on one image: segmentation with the model's options,
 /// features, probabilities and building pixels. `normalised` = bands scaled
 /// 0..255 (normalize_bands) in the model's band order.
 struct Detection {
     SceneSegments segments;
     std::vector<float> pixel_probability;  ///< per pixel, 0..1 (models with a pixel stage; else empty)
+    std::vector<float> core_probability;   ///< per pixel, 0..1 (models with the instance stage; else empty)
     std::vector<float> probability;  ///< per segment (index = label)
     std::vector<uint32_t> groups;    ///< building object per segment (merge_groups; empty without the pair classifier)
     std::vector<uint8_t> building;   ///< per pixel

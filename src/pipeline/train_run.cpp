@@ -148,16 +148,15 @@ namespace {
 
 BuildingMask mask_from_probabilities(const detect::SceneSegments& segments, const std::vector<float>& probability, double threshold,
                                      double gsd_m, const detect::DetectorOptions& o, const std::vector<float>* pixel_map,
-                                     const std::vector<uint32_t>* groups = nullptr) {
+                                     const std::vector<uint32_t>* groups = nullptr, const std::vector<float>* core_map = nullptr) {
     BuildingMaskOptions mo;
     mo.gsd_m = gsd_m;
     mo.min_area_m2 = o.min_area_m2;
     mo.min_hole_m2 = o.min_hole_m2;
     const int w = segments.labels.width, h = segments.labels.height;
-    return label_buildings(detect::split_at_necks(detect::building_pixels(segments, probability, threshold, o.object_split_level, pixel_map,
-                                                                          o.pixel_object_threshold, groups),
-                                                  w, h, o, gsd_m),
-                           w, h, mo);
+    detect::DetectorOptions t = o;
+    t.threshold = threshold;
+    return label_buildings(detect::object_pixels(segments, probability, t, pixel_map, groups, core_map, gsd_m), w, h, mo);
 }
 
 // Labelled data of one training image, in its pixel space.
@@ -275,9 +274,104 @@ detect::PixelStage train_pixel_map_stage(const std::vector<LabelledImage>& data,
     return s;
 }
 
+// The core CNN's target (InstanceOptions): labelled pixels whose every
+// pixel within `core_depth_m` (a square) is labelled by the same label feature.
+std::vector<uint8_t> core_truth(const LabelledImage& li, double core_depth_m) {
+    const int w = li.image.grid.width, h = li.image.grid.height;
+    const int r = std::max(1, static_cast<int>(std::lround(core_depth_m / li.image.gsd_m)));
+    std::vector<uint8_t> core(li.truth.size(), 0);
+    const bool ids = li.reference_ids.size() == li.truth.size();
+    for (int y = 0; y < h; ++y)
+        for (int x = 0; x < w; ++x) {
+            const std::size_t i = std::size_t(y) * w + x;
+            if (!li.truth[i]) continue;
+            bool ok = x >= r && y >= r && x + r < w && y + r < h;
+            for (int dy = -r; ok && dy <= r; ++dy)
+                for (int dx = -r; ok && dx <= r; ++dx) {
+                    const std::size_t j = std::size_t(y + dy) * w + (x + dx);
+                    ok = li.truth[j] && (!ids || li.reference_ids[j] == li.reference_ids[i]);
+                }
+            core[i] = ok;
+        }
+    return core;
+}
+
+// The core CNN (InstanceOptions) on every training image: its model and
+// out-of-fold core maps (with folds). Nothing unless `wanted`.
+detect::PixelStage train_core_stage(const std::vector<LabelledImage>& data, const std::vector<std::vector<uint8_t>>& cores, const detect::BandLayout& layout,
+                                    const TrainOptions& o, const detect::FoldBlocks* folds) {
+    std::vector<detect::PixelTrainingImage> px;
+    for (std::size_t i = 0; i < data.size(); ++i) px.push_back({&data[i].image.normalised, &data[i].image.valid, &cores[i], data[i].image.gsd_m});
+    return detect::train_pixel_stage(px, layout, o.detector.instance.pixel_options(), folds, o.folds);
+}
+
 int fold_of(const detect::FoldBlocks& folds, std::size_t image, const std::vector<Polygon>& parts) {
     const Extent e = parts_extent(parts);
     return folds.fold_at(image, 0.5 * (e.min_x + e.max_x), -0.5 * (e.min_y + e.max_y));
+}
+
+nlohmann::json polygons_json(const std::vector<std::vector<Polygon>>& objects) {
+    nlohmann::json a = nlohmann::json::array();
+    for (const auto& parts : objects) {
+        nlohmann::json obj = nlohmann::json::array();
+        for (const Polygon& p : parts) {
+            nlohmann::json rings = nlohmann::json::array();
+            std::vector<const Ring*> rs{&p.outer};
+            for (const Ring& r : p.holes) rs.push_back(&r);
+            for (const Ring* r : rs) {
+                nlohmann::json ring = nlohmann::json::array();
+                for (const MapPoint& q : *r) ring.push_back({q.x, q.y});
+                rings.push_back(std::move(ring));
+            }
+            obj.push_back(std::move(rings));
+        }
+        a.push_back(std::move(obj));
+    }
+    return a;
+}
+
+template <class T>
+void write_raw(const fs::path& path, const std::vector<T>& v) {
+    std::FILE* f = std::fopen(path.string().c_str(), "wb");
+    if (!f) throw Error(path.string(), "cannot write");
+    const std::size_t n = std::fwrite(v.data(), sizeof(T), v.size(), f);
+    if (std::fclose(f) != 0 || n != v.size()) throw Error(path.string(), "cannot write");
+}
+
+// TrainOptions::cv_out_dir: the chosen options' out-of-fold result per image.
+void write_cv_out(const std::string& dir, const std::vector<std::string>& orthos, const std::vector<LabelledImage>& data,
+                  const detect::FoldBlocks& folds, const std::vector<std::vector<float>>& cv, const std::vector<std::vector<float>>& cv_pairs,
+                  const detect::PixelStage& pixel, const detect::PixelStage& core, const detect::DetectorOptions& opts) {
+    fs::create_directories(dir);
+    for (std::size_t i = 0; i < data.size(); ++i) {
+        const LabelledImage& li = data[i];
+        const int w = li.segments.labels.width, h = li.segments.labels.height;
+        std::vector<uint32_t> groups;
+        if (opts.merge_threshold > 0.0) {
+            std::vector<uint8_t> building(li.segments.count + 1, 0);
+            for (uint32_t k = 1; k <= li.segments.count; ++k) building[k] = cv[i][k] >= opts.threshold;
+            groups = detect::merge_groups(li.pairs, cv_pairs[i], building, opts.merge_threshold);
+        }
+        const bool has_map = opts.pixel.enabled && i < pixel.out_of_fold.size();
+        const bool has_core = i < core.out_of_fold.size();
+        const BuildingMask mask = mask_from_probabilities(li.segments, cv[i], opts.threshold, li.image.gsd_m, opts, has_map ? &pixel.out_of_fold[i] : nullptr,
+                                                          groups.empty() ? nullptr : &groups, has_core ? &core.out_of_fold[i] : nullptr);
+        const std::string stem = fs::path(orthos[i]).stem().string();
+        const nlohmann::json j{{"ortho", orthos[i]}, {"width", w}, {"height", h}, {"gsd_m", li.image.gsd_m},
+                               {"predicted", polygons_json(predicted_footprints(mask, li.image.gsd_m))}, {"reference", polygons_json(li.reference)}};
+        std::FILE* f = std::fopen((fs::path(dir) / (stem + "_cv.json")).string().c_str(), "wb");
+        if (!f) throw Error(dir, "cannot write " + stem + "_cv.json");
+        const std::string text = j.dump();
+        std::fwrite(text.data(), 1, text.size(), f);
+        std::fclose(f);
+        if (has_map) write_raw(fs::path(dir) / (stem + "_cv_map.f32"), pixel.out_of_fold[i]);
+        if (has_core) write_raw(fs::path(dir) / (stem + "_cv_core.f32"), core.out_of_fold[i]);
+        std::vector<uint8_t> fold(std::size_t(w) * h);
+        for (int r = 0; r < h; ++r)
+            for (int c = 0; c < w; ++c) fold[std::size_t(r) * w + c] = uint8_t(folds.fold_at(i, c + 0.5, r + 0.5));
+        write_raw(fs::path(dir) / (stem + "_cv_fold.u8"), fold);
+        write_raw(fs::path(dir) / (stem + "_cv_truth.u8"), li.truth);
+    }
 }
 
 }  // namespace
@@ -286,7 +380,8 @@ BuildingMask detect_building_mask(const detect::DetectorModel& model, const Dete
     detect::check_bands(model, image.layout, image.path);
     const detect::Detection d = detect::detect_buildings(model, image.normalised, image.valid, image.gsd_m, threads, progress);
     return mask_from_probabilities(d.segments, d.probability, model.options.threshold, image.gsd_m, model.options,
-                                   d.pixel_probability.empty() ? nullptr : &d.pixel_probability, d.groups.empty() ? nullptr : &d.groups);
+                                   d.pixel_probability.empty() ? nullptr : &d.pixel_probability, d.groups.empty() ? nullptr : &d.groups,
+                                   d.core_probability.empty() ? nullptr : &d.core_probability);
 }
 
 std::pair<double, double> training_gsd_range_m(const detect::DetectorModel& model) {
@@ -374,6 +469,8 @@ void TrainOptions::validate() const {
         if (!(t > 0.0 && t < 1.0)) throw Error("--merge-thresholds", "each merge threshold must be in (0, 1)");
     for (const double m : neck_split_candidates_m)
         if (!(m > 0.0 && m <= 20.0)) throw Error("--neck-splits-m", "each neck split must be in (0, 20] metres");
+    for (const double t : core_threshold_candidates)
+        if (!(t > 0.0 && t < 1.0)) throw Error("--core-thresholds", "each core threshold must be in (0, 1)");
 }
 
 void DetectionScores::add(const DetectionScores& o) { tp += o.tp, predicted += o.predicted, reference += o.reference; }
@@ -422,6 +519,17 @@ TrainReport run_train(const std::string& out_path, const TrainOptions& o, bool o
     const detect::FoldBlocks folds = o.folds >= 2 ? detect::make_folds(ws, hs, bs, o.folds, o.detector.booster.seed) : detect::FoldBlocks{};
     // The pixel stage (src/detect/pixel_classifier): its out-of-fold maps give the segment features.
     const detect::PixelStage pixel = train_pixel_map_stage(data, layout, o, o.folds >= 2 ? &folds : nullptr);
+    // The core CNN (instance separation): trained when the CV has candidates, or when fixed on without CV.
+    const bool want_core = o.folds >= 2 ? !o.core_threshold_candidates.empty() : o.detector.instance.enabled();
+    detect::PixelStage core;
+    if (want_core) {
+        std::vector<std::vector<uint8_t>> cores;
+        for (const LabelledImage& li : data) {
+            cores.push_back(core_truth(li, o.detector.instance.core_depth_m));
+            fp = detect::fnv1a64(cores.back().data(), cores.back().size(), fp);
+        }
+        core = train_core_stage(data, cores, layout, o, o.folds >= 2 ? &folds : nullptr);
+    }
     for (std::size_t i = 0; i < data.size(); ++i)
         data[i].features = detect::segment_features(data[i].image.normalised, data[i].image.valid, data[i].segments, layout, data[i].image.gsd_m,
                                                     o.detector.pixel.enabled ? &pixel.out_of_fold[i] : nullptr);
@@ -542,7 +650,8 @@ TrainReport run_train(const std::string& out_path, const TrainOptions& o, bool o
                     groups = detect::merge_groups(li.pairs, cv_pairs[i], building, opts.merge_threshold);
                 }
                 const BuildingMask mask = mask_from_probabilities(li.segments, cv[i], threshold, li.image.gsd_m, opts,
-                                                                  opts.pixel.enabled ? &pixel.out_of_fold[i] : nullptr, groups.empty() ? nullptr : &groups);
+                                                                  opts.pixel.enabled ? &pixel.out_of_fold[i] : nullptr, groups.empty() ? nullptr : &groups,
+                                                                  opts.instance.enabled() ? &core.out_of_fold[i] : nullptr);
                 const auto pred = predicted_footprints(mask, li.image.gsd_m);
                 DetectionScores img;
                 for (int f = 0; f < o.folds; ++f) {
@@ -625,8 +734,20 @@ TrainReport run_train(const std::string& out_path, const TrainOptions& o, bool o
             if (s.f1 > best_f1 + 1e-12) best_f1 = s.f1, chosen.neck_split_m = nm;
         }
         if (chosen.neck_split_m > 0.0) retune_threshold();
+        // Then buildings cut between the core CNN's cores (0 = off; pixel cuts, then
+        // segments voting into cores), and the threshold again.
+        for (const bool by_segments : {false, true})
+            for (const double ct : o.core_threshold_candidates) {
+                detect::DetectorOptions cand = chosen;
+                cand.instance.core_threshold = ct;
+                cand.instance.by_segments = by_segments;
+                const DetectionScores s = evaluate(cand, nullptr, nullptr);
+                if (s.f1 > best_f1 + 1e-12) best_f1 = s.f1, chosen.instance.core_threshold = ct, chosen.instance.by_segments = by_segments;
+            }
+        if (chosen.instance.enabled()) retune_threshold();
         std::vector<DetectionScores> per_image;
         rep.pooled_objects = evaluate(chosen, &rep.folds, &per_image);
+        if (!o.cv_out_dir.empty()) write_cv_out(o.cv_out_dir, o.orthos, data, folds, cv, cv_pairs, pixel, core, chosen);
         for (FoldReport& f : rep.folds) {
             f.objects.finish();
             f.segments.finish();
@@ -648,6 +769,7 @@ TrainReport run_train(const std::string& out_path, const TrainOptions& o, bool o
     model.options = chosen;
     model.booster = detect::train_booster(X, y.size(), names.size(), y, wt, o.detector.booster);
     model.pixel_model = pixel.model;
+    if (chosen.instance.enabled()) model.core_model = core.model;
     if (chosen.merge_threshold > 0.0) {
         std::vector<float> Xp, yp, wp;
         pair_rows_where([](std::size_t, std::size_t) { return true; }, Xp, yp, wp);

@@ -97,6 +97,17 @@ struct TrainOptions {
     /// Candidate neck splits (DetectorOptions::neck_split_m, metres), tried
     /// by the cross-validation after the grouping (empty = never split).
     std::vector<double> neck_split_candidates_m{};
+    /// Non-empty: the cross-validation's out-of-fold result of the chosen
+    /// options is written there per training image (<ortho stem>_cv.json:
+    /// predicted and reference footprints in pixel space, x = column,
+    /// y = -row; <stem>_cv_map.f32: the out-of-fold pixel-stage map, w x h
+    /// row-major float32; <stem>_cv_fold.u8: the fold of each pixel), for
+    /// error analysis. Nothing without folds.
+    std::string cv_out_dir;
+    /// Candidate InstanceOptions::core_threshold values (instance separation
+    /// from the core CNN, detector.instance), tried by the cross-validation
+    /// after the neck split; empty = no core CNN is trained.
+    std::vector<double> core_threshold_candidates{};
     void validate() const;
 };
 

@@ -341,6 +341,135 @@ TEST_CASE("Touching buildings joined by a narrow neck are cut apart, a wide join
     CHECK_THROWS_AS(o.validate(3), Error);
 }
 
+TEST_CASE("Touching roofs with no neck are cut apart between their cores, exactly at the seam; small or absent cores cut nothing", "[detect]") {
+    // Roof A (columns 2-11) and roof B (columns 12-21), rows 2-11: one
+    // 20 x 10 rectangle in the mask. The core map peaks (0.8) in each roof's
+    // interior (2 pixels in from its own edges) and falls 0.1 per pixel of
+    // chessboard distance from it, so the seam is a valley.
+    const int w = 24, h = 14;
+    std::vector<uint8_t> m(std::size_t(w) * h, 0);
+    std::vector<float> core(m.size(), 0.0f);
+    std::vector<int> truth(m.size(), 0);  // 1 = roof A, 2 = roof B
+    for (int y = 2; y <= 11; ++y)
+        for (int x = 2; x <= 21; ++x) {
+            const std::size_t i = std::size_t(y) * w + x;
+            m[i] = 1;
+            const int x0 = x <= 11 ? 4 : 14, x1 = x <= 11 ? 9 : 19;
+            const int d = std::max({x0 - x, x - x1, 4 - y, y - 9, 0});
+            core[i] = 0.8f - 0.1f * float(d);
+            truth[i] = x <= 11 ? 1 : 2;
+        }
+    const std::vector<uint8_t> cut = detect::split_at_cores(m, w, h, core, 0.75, 4);
+    // Exactly roof A without its seam column (11), and roof B whole.
+    for (std::size_t i = 0; i < m.size(); ++i) {
+        const int x = int(i % w);
+        CHECK(cut[i] == ((truth[i] == 1 && x != 11) || truth[i] == 2 ? 1 : 0));
+    }
+    // No marker, or cores under the minimum size (36 pixels each), or the threshold 0: nothing is cut.
+    CHECK(detect::split_at_cores(m, w, h, core, 0.85, 4) == m);
+    CHECK(detect::split_at_cores(m, w, h, core, 0.75, 37) == m);
+    CHECK(detect::split_at_cores(m, w, h, core, 0.0, 4) == m);
+    // One core only (B's interior below the threshold): the roofs stay one building.
+    std::vector<float> one = core;
+    for (std::size_t i = 0; i < m.size(); ++i)
+        if (truth[i] == 2) one[i] = std::min(one[i], 0.5f);
+    CHECK(detect::split_at_cores(m, w, h, one, 0.75, 4) == m);
+    // Metres on the model's options: off by default (no header key), round-trips when on.
+    detect::DetectorOptions o;
+    CHECK(detect::split_at_cores(m, w, h, &core, o, 0.5) == m);
+    CHECK_FALSE(detect::to_json(o).contains("instance"));
+    o.instance.core_threshold = 0.75, o.instance.min_core_m2 = 1.0;  // 4 pixels at 0.5 m
+    CHECK(detect::split_at_cores(m, w, h, &core, o, 0.5) == cut);
+    CHECK(detect::split_at_cores(m, w, h, nullptr, o, 0.5) == m);
+    const detect::DetectorOptions back = detect::detector_options_from_json(detect::to_json(o));
+    CHECK(back.instance.core_threshold == 0.75);
+    CHECK(back.instance.min_core_m2 == 1.0);
+    CHECK(back.instance.cell_m == o.instance.cell_m);
+    // By segments: four segments (columns 2-7, 8-12, 13-16, 17-21), all
+    // building; the one across the seam (8-12: three columns of A, two of B)
+    // joins A's core, so the cut falls on its boundary with B's segment.
+    detect::SceneSegments seg;
+    seg.labels = Image<uint32_t>(w, h, 1, 0u);
+    seg.count = 4;
+    for (int y = 0; y < h; ++y)
+        for (int x = 0; x < w; ++x)
+            if (m[std::size_t(y) * w + x]) seg.labels.at(0, x, y) = x <= 7 ? 1u : x <= 12 ? 2u : x <= 16 ? 3u : 4u;
+    const std::vector<float> p{0.0f, 0.9f, 0.9f, 0.9f, 0.9f};
+    o.instance.core_threshold = 0.75, o.instance.by_segments = true;
+    const std::vector<uint8_t> by_seg = detect::object_pixels(seg, p, o, nullptr, nullptr, &core, 0.5);
+    for (std::size_t i = 0; i < m.size(); ++i) CHECK(by_seg[i] == (m[i] && i % w != 12 ? 1 : 0));
+    CHECK(detect::detector_options_from_json(detect::to_json(o)).instance.by_segments);
+    o.instance.by_segments = false;
+    CHECK(detect::object_pixels(seg, p, o, nullptr, nullptr, &core, 0.5) == cut);
+    CHECK_FALSE(detect::to_json(o).at("instance").contains("by_segments"));
+    o.instance.core_threshold = 1.5;
+    CHECK_THROWS_AS(o.validate(3), Error);
+}
+
+TEST_CASE("The core CNN (instance separation): same model bytes and footprints for 1 and 2 threads, stored only when on, a cut block refused",
+          "[detect][synth][cnn][determinism]") {
+    ScratchDir dir("detect_core");
+    ScratchDir a_dir("detect_core_a"), b_dir("detect_core_b");
+    const SynthResult a = make_town(a_dir, 150, 41, 0);
+    const SynthResult b = make_town(b_dir, 150, 42, 0);
+    TrainOptions o;
+    o.orthos = {a.ortho_path};
+    o.labels = {a.truth_path};
+    o.detector.booster.rounds = 40;
+    o.detector.instance.cnn.steps = 40;
+    o.detector.instance.cnn.crop_cells = 32;
+    o.detector.instance.cnn.levels = 2;
+    // Cross-validated candidates (out-of-fold core maps), then fixed on without folds.
+    o.folds = 2;
+    o.fold_block_m = 40.0;
+    o.core_threshold_candidates = {0.5};
+    auto train_both = [&](const std::string& n) {
+        {
+            tbb::global_control one(tbb::global_control::max_allowed_parallelism, 1);
+            run_train(dir / (n + "1.cfdet"), o);
+        }
+        {
+            tbb::global_control two(tbb::global_control::max_allowed_parallelism, 2);
+            run_train(dir / (n + "2.cfdet"), o);
+        }
+        CHECK(bytes_of(dir / (n + "1.cfdet")) == bytes_of(dir / (n + "2.cfdet")));
+    };
+    train_both("cv");
+    o.folds = 0;
+    o.core_threshold_candidates.clear();
+    o.detector.instance.core_threshold = 0.5;
+    train_both("on");
+    const detect::DetectorModel m = detect::read_model_file(dir / "on1.cfdet");
+    CHECK(m.options.instance.enabled());
+    CHECK_FALSE(m.core_model.empty());
+    CHECK(test::slurp(dir / "on1.cfdet").find("\"instance\"") != std::string::npos);
+    // Applied with 1 and 2 threads: the same footprints.
+    FootprintsRunOptions fo;
+    fo.ortho = b.ortho_path;
+    fo.model = dir / "on1.cfdet";
+    {
+        tbb::global_control one(tbb::global_control::max_allowed_parallelism, 1);
+        run_footprints(dir / "b1.geojson", fo);
+    }
+    {
+        tbb::global_control two(tbb::global_control::max_allowed_parallelism, 2);
+        run_footprints(dir / "b2.geojson", fo);
+    }
+    CHECK(test::slurp(dir / "b1.geojson") == test::slurp(dir / "b2.geojson"));
+    // Without the instance stage nothing of it is written; a corrupt core block (checksum intact) is refused.
+    detect::DetectorModel cut = m;
+    cut.options.instance.core_threshold = 0.0;
+    std::vector<uint8_t> bytes = detect::serialize_model(cut);
+    const std::string text(bytes.begin(), bytes.end());
+    CHECK(text.find("\"instance\"") == std::string::npos);
+    cut.options.instance.core_threshold = 0.5;
+    cut.core_model.clear();
+    CHECK_THROWS_WITH(detect::serialize_model(cut), Catch::Contains("core CNN"));
+    cut.core_model = {'X', 'Y'};
+    CHECK_THROWS_WITH(detect::parse_model(detect::serialize_model(cut), "core.cfdet"), Catch::Contains("core.cfdet: corrupt CNN weights"));
+    CHECK(detect::parse_model(detect::serialize_model(m), "core.cfdet").core_model == m.core_model);
+}
+
 TEST_CASE("Cross-validated detection on the real UInt16 pan tile (SpaceNet 4 Atlanta west dev) holds its measured F1 (regression floor)", "[detect][real]") {
     // The shipped pan model's options, Atlanta alone (25 labels, houses under
     // leaf-off canopy with dark roofs among tree shadows; never the hold-out).
