@@ -15,6 +15,7 @@
 #include "pipeline/footprints_run.hpp"
 #include "pipeline/train_run.hpp"
 #include "raster/raster.hpp"
+#include "footprints_threads.hpp"
 #include "synth_fixture.hpp"
 #include "test_support.hpp"
 
@@ -99,18 +100,9 @@ TEST_CASE("A detector trained on one synthetic town finds the buildings of anoth
     FootprintsRunOptions fo;
     fo.ortho = b.ortho_path;
     fo.model = dir / "a1.cfdet";
-    FootprintsReport fr;
-    {
-        tbb::global_control one(tbb::global_control::max_allowed_parallelism, 1);
-        fr = run_footprints(dir / "b1.geojson", fo);
-    }
-    {
-        tbb::global_control two(tbb::global_control::max_allowed_parallelism, 2);
-        run_footprints(dir / "b2.geojson", fo);
-    }
+    const FootprintsReport fr = test::run_footprints_1_and_2_threads(dir / "b1.geojson", dir / "b2.geojson", fo);
     CHECK(fr.mode == "ortho_only");
     CHECK(fr.detector.rfind("model ", 0) == 0);
-    CHECK(test::slurp(dir / "b1.geojson") == test::slurp(dir / "b2.geojson"));
     const FootprintScores s = score_files(dir / "b1.geojson", b.truth_path);
     std::printf("detect synth: trained on town A, applied to town B: %zu predicted, %zu reference; P %.3f R %.3f F1 %.3f mean IoU %.3f\n", s.predicted,
                 s.reference, s.precision, s.recall, s.f1, s.mean_iou);
@@ -447,15 +439,7 @@ TEST_CASE("The core CNN (instance separation): same model bytes and footprints f
     FootprintsRunOptions fo;
     fo.ortho = b.ortho_path;
     fo.model = dir / "on1.cfdet";
-    {
-        tbb::global_control one(tbb::global_control::max_allowed_parallelism, 1);
-        run_footprints(dir / "b1.geojson", fo);
-    }
-    {
-        tbb::global_control two(tbb::global_control::max_allowed_parallelism, 2);
-        run_footprints(dir / "b2.geojson", fo);
-    }
-    CHECK(test::slurp(dir / "b1.geojson") == test::slurp(dir / "b2.geojson"));
+    test::run_footprints_1_and_2_threads(dir / "b1.geojson", dir / "b2.geojson", fo);
     // Without the instance stage nothing of it is written; a corrupt core block (checksum intact) is refused.
     detect::DetectorModel cut = m;
     cut.options.instance.core_threshold = 0.0;

@@ -12,6 +12,7 @@
 #include "io/vector.hpp"
 #include "pipeline/footprints_run.hpp"
 #include "pipeline/train_run.hpp"
+#include "footprints_threads.hpp"
 #include "synth_fixture.hpp"
 #include "test_support.hpp"
 
@@ -153,15 +154,7 @@ TEST_CASE("A model with the pair classifier: same bytes for 1 and 2 threads, sam
     FootprintsRunOptions fo;
     fo.ortho = b.ortho_path;
     fo.model = dir / "p1.cfdet";
-    {
-        tbb::global_control one(tbb::global_control::max_allowed_parallelism, 1);
-        run_footprints(dir / "b1.geojson", fo);
-    }
-    {
-        tbb::global_control two(tbb::global_control::max_allowed_parallelism, 2);
-        run_footprints(dir / "b2.geojson", fo);
-    }
-    CHECK(test::slurp(dir / "b1.geojson") == test::slurp(dir / "b2.geojson"));
+    test::run_footprints_1_and_2_threads(dir / "b1.geojson", dir / "b2.geojson", fo);
     std::vector<std::vector<Polygon>> p, t;
     for (const auto& f : read_polygon_layer(dir / "b1.geojson").features) p.push_back(f.geometry);
     for (const auto& f : read_polygon_layer(b.truth_path).features) t.push_back(f.geometry);

@@ -14,6 +14,7 @@
 #include "detect/self_training.hpp"
 #include "io/vector.hpp"
 #include "pipeline/footprints_run.hpp"
+#include "footprints_threads.hpp"
 #include "synth_fixture.hpp"
 #include "test_support.hpp"
 
@@ -93,15 +94,7 @@ TEST_CASE("ortho_cloud with a cloud over part of the ortho: an image model self-
     {
         FootprintsRunOptions o;
         o.ortho = t.ortho_path, o.cloud = west;
-        {
-            tbb::global_control one(tbb::global_control::max_allowed_parallelism, 1);
-            run_footprints(dir / "t1.geojson", o);
-        }
-        {
-            tbb::global_control two(tbb::global_control::max_allowed_parallelism, 2);
-            run_footprints(dir / "t2.geojson", o);
-        }
-        CHECK(test::slurp(dir / "t1.geojson") == test::slurp(dir / "t2.geojson"));
+        test::run_footprints_1_and_2_threads(dir / "t1.geojson", dir / "t2.geojson", o);
         CHECK(test::slurp(dir / "t1.geojson") == test::slurp(out));
     }
 
