@@ -333,7 +333,7 @@ TEST_CASE("Touching buildings joined by a narrow neck are cut apart, a wide join
     CHECK_THROWS_AS(o.validate(3), Error);
 }
 
-TEST_CASE("Touching roofs with no neck are cut apart between their cores, exactly at the seam; small or absent cores cut nothing", "[detect]") {
+TEST_CASE("Touching roofs with no neck are cut apart between their cores, exactly at the seam - small or absent cores cut nothing", "[detect]") {
     // Roof A (columns 2-11) and roof B (columns 12-21), rows 2-11: one
     // 20 x 10 rectangle in the mask. The core map peaks (0.8) in each roof's
     // interior (2 pixels in from its own edges) and falls 0.1 per pixel of
