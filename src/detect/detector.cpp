@@ -4,7 +4,6 @@
 #include <cmath>
 #include <cstring>
 #include <filesystem>
-#include <functional>
 #include <fstream>
 #include <iterator>
 #include <queue>
@@ -367,6 +366,51 @@ std::vector<uint8_t> building_pixels(const SceneSegments& s, const std::vector<f
 namespace {
 // A building pixel whose right or lower neighbour is a building pixel of
 // another instance (both non-zero) leaves the mask: a one-pixel cut.
+// Calls visit(j) for each 4-neighbour j of pixel i of a w x h grid.
+template <class Visit>
+void for_each_4_neighbour(std::size_t i, int w, int h, Visit&& visit) {
+    const int x = int(i % std::size_t(w)), y = int(i / std::size_t(w));
+    if (x > 0) visit(i - 1);
+    if (x + 1 < w) visit(i + 1);
+    if (y > 0) visit(i - w);
+    if (y + 1 < h) visit(i + w);
+}
+
+// Markers of the instance splits: the 4-connected components of the pixels
+// where is_core(i), numbered 1.. in raster order of their first pixel.
+// Components of fewer than min_core_px pixels are left out (0; their numbers
+// are not reused). `kept` gets the kept markers' pixels in labelling order.
+template <class IsCore>
+std::vector<uint32_t> label_cores(int w, int h, IsCore&& is_core, int min_core_px, std::vector<std::size_t>& kept) {
+    const std::size_t n = std::size_t(w) * std::size_t(h);
+    std::vector<uint32_t> inst(n, 0);
+    std::vector<std::size_t> queue;
+    std::vector<uint32_t> size{0};
+    uint32_t next = 0;
+    for (std::size_t s = 0; s < n; ++s) {
+        if (!is_core(s) || inst[s]) continue;
+        ++next;
+        const std::size_t first = queue.size();
+        inst[s] = next, queue.push_back(s);
+        for (std::size_t q = first; q < queue.size(); ++q)
+            for_each_4_neighbour(queue[q], w, h, [&](std::size_t j) {
+                if (is_core(j) && !inst[j]) inst[j] = next, queue.push_back(j);
+            });
+        size.push_back(uint32_t(queue.size() - first));
+    }
+    kept.clear();
+    for (const std::size_t i : queue) {
+        if (size[inst[i]] < uint32_t(std::max(1, min_core_px))) inst[i] = 0;
+        else kept.push_back(i);
+    }
+    return inst;
+}
+
+// The smallest core, pixels, of InstanceOptions::min_core_m2 at `gsd_m`.
+int min_core_pixels(const InstanceOptions& o, double gsd_m) {
+    return std::max(1, static_cast<int>(std::lround(o.min_core_m2 / (gsd_m * gsd_m))));
+}
+
 std::vector<uint8_t> cut_between_instances(const std::vector<uint8_t>& building, const std::vector<uint32_t>& inst, int w, int h) {
     std::vector<uint8_t> out = building;
     for (int y = 0; y < h; ++y)
@@ -416,39 +460,14 @@ std::vector<uint8_t> split_at_necks(const std::vector<uint8_t>& building, int w,
             }
             d[i] = v;
         }
-    // Cores: 4-connected components of the pixels deeper than the radius.
-    std::vector<uint32_t> inst(n, 0);
-    std::vector<std::size_t> queue;
-    std::vector<uint32_t> core_size{0};
-    uint32_t next = 0;
-    auto neighbours = [&](std::size_t i, auto&& visit) {
-        const int x = int(i % std::size_t(w)), y = int(i / std::size_t(w));
-        if (x > 0) visit(i - 1);
-        if (x + 1 < w) visit(i + 1);
-        if (y > 0) visit(i - w);
-        if (y + 1 < h) visit(i + w);
-    };
-    for (std::size_t s = 0; s < n; ++s) {
-        if (d[s] <= radius_px || inst[s]) continue;
-        ++next;
-        const std::size_t first = queue.size();
-        inst[s] = next, queue.push_back(s);
-        for (std::size_t q = first; q < queue.size(); ++q)
-            neighbours(queue[q], [&](std::size_t j) {
-                if (d[j] > radius_px && !inst[j]) inst[j] = next, queue.push_back(j);
-            });
-        core_size.push_back(uint32_t(queue.size() - first));
-    }
-    // Small cores are no building of their own.
+    // Cores: 4-connected components of the pixels deeper than the radius;
+    // small cores are no building of their own.
     std::vector<std::size_t> front;
-    for (const std::size_t i : queue) {
-        if (core_size[inst[i]] < uint32_t(std::max(1, min_core_px))) inst[i] = 0;
-        else front.push_back(i);
-    }
+    std::vector<uint32_t> inst = label_cores(w, h, [&](std::size_t i) { return d[i] > radius_px; }, min_core_px, front);
     // Grow the cores back over the building pixels, breadth first.
     for (std::size_t q = 0; q < front.size(); ++q) {
         const std::size_t i = front[q];
-        neighbours(i, [&](std::size_t j) {
+        for_each_4_neighbour(i, w, h, [&](std::size_t j) {
             if (building[j] && !inst[j]) inst[j] = inst[i], front.push_back(j);
         });
     }
@@ -467,49 +486,28 @@ std::vector<uint32_t> core_instances(const std::vector<uint8_t>& building, int w
     const std::size_t n = std::size_t(w) * std::size_t(h);
     if (building.size() != n || core.size() != n) throw Error("split_at_cores", "internal: mask size");
     if (!(threshold > 0.0) || n == 0) return std::vector<uint32_t>(n, 0);
-    auto neighbours = [&](std::size_t i, auto&& visit) {
-        const int x = int(i % std::size_t(w)), y = int(i / std::size_t(w));
-        if (x > 0) visit(i - 1);
-        if (x + 1 < w) visit(i + 1);
-        if (y > 0) visit(i - w);
-        if (y + 1 < h) visit(i + w);
-    };
     // Markers: 4-connected building pixels at or above the threshold.
-    std::vector<uint32_t> inst(n, 0);
-    std::vector<std::size_t> queue;
-    std::vector<uint32_t> size{0};
-    uint32_t next = 0;
-    auto is_core = [&](std::size_t i) { return building[i] && core[i] >= threshold; };
-    for (std::size_t s = 0; s < n; ++s) {
-        if (!is_core(s) || inst[s]) continue;
-        ++next;
-        const std::size_t first = queue.size();
-        inst[s] = next, queue.push_back(s);
-        for (std::size_t q = first; q < queue.size(); ++q)
-            neighbours(queue[q], [&](std::size_t j) {
-                if (is_core(j) && !inst[j]) inst[j] = next, queue.push_back(j);
-            });
-        size.push_back(uint32_t(queue.size() - first));
-    }
+    std::vector<std::size_t> markers;
+    std::vector<uint32_t> inst = label_cores(w, h, [&](std::size_t i) { return building[i] && core[i] >= threshold; }, min_core_px, markers);
     // Grown over the building pixels, the most core-like first (a priority
-    // flood: the cut falls on the valleys of the core map between markers).
-    using Entry = std::pair<float, uint64_t>;  // (core probability, arrival order)
-    std::priority_queue<std::pair<Entry, std::size_t>, std::vector<std::pair<Entry, std::size_t>>,
-                        std::function<bool(const std::pair<Entry, std::size_t>&, const std::pair<Entry, std::size_t>&)>>
-        heap([](const auto& a, const auto& b) {
-            return a.first.first != b.first.first ? a.first.first < b.first.first : a.first.second > b.first.second;
-        });
+    // flood: the cut falls on the valleys of the core map between markers);
+    // ties go to the earlier arrival.
+    struct Entry {
+        float core;
+        uint64_t order;
+        std::size_t pixel;
+    };
+    struct Lower {
+        bool operator()(const Entry& a, const Entry& b) const { return a.core != b.core ? a.core < b.core : a.order > b.order; }
+    };
+    std::priority_queue<Entry, std::vector<Entry>, Lower> heap;
     uint64_t order = 0;
-    for (const std::size_t i : queue) {
-        if (size[inst[i]] < uint32_t(std::max(1, min_core_px))) inst[i] = 0;
-    }
-    for (const std::size_t i : queue)
-        if (inst[i]) heap.push({{core[i], order++}, i});
+    for (const std::size_t i : markers) heap.push({core[i], order++, i});
     while (!heap.empty()) {
-        const std::size_t i = heap.top().second;
+        const std::size_t i = heap.top().pixel;
         heap.pop();
-        neighbours(i, [&](std::size_t j) {
-            if (building[j] && !inst[j]) inst[j] = inst[i], heap.push({{core[j], order++}, j});
+        for_each_4_neighbour(i, w, h, [&](std::size_t j) {
+            if (building[j] && !inst[j]) inst[j] = inst[i], heap.push({core[j], order++, j});
         });
     }
     return inst;
@@ -525,8 +523,7 @@ std::vector<uint8_t> split_at_cores(const std::vector<uint8_t>& building, int w,
 std::vector<uint8_t> split_at_cores(std::vector<uint8_t> building, int w, int h, const std::vector<float>* core, const DetectorOptions& options,
                                     double gsd_m) {
     if (!options.instance.enabled() || options.instance.by_segments || !core || !(gsd_m > 0.0)) return building;
-    const int min_core = std::max(1, static_cast<int>(std::lround(options.instance.min_core_m2 / (gsd_m * gsd_m))));
-    return split_at_cores(building, w, h, *core, options.instance.core_threshold, min_core);
+    return split_at_cores(building, w, h, *core, options.instance.core_threshold, min_core_pixels(options.instance, gsd_m));
 }
 
 std::vector<uint8_t> object_pixels(const SceneSegments& s, const std::vector<float>& probability, const DetectorOptions& o,
@@ -537,8 +534,7 @@ std::vector<uint8_t> object_pixels(const SceneSegments& s, const std::vector<flo
     if (o.instance.enabled() && o.instance.by_segments && core_map && gsd_m > 0.0) {
         // Each building segment votes for the core holding most of its
         // pixels; segments of different (group, core) are cut apart.
-        const int min_core = std::max(1, static_cast<int>(std::lround(o.instance.min_core_m2 / (gsd_m * gsd_m))));
-        const std::vector<uint32_t> inst = core_instances(b, w, h, *core_map, o.instance.core_threshold, min_core);
+        const std::vector<uint32_t> inst = core_instances(b, w, h, *core_map, o.instance.core_threshold, min_core_pixels(o.instance, gsd_m));
         std::vector<std::vector<std::pair<uint32_t, uint32_t>>> votes(std::size_t(s.count) + 1);  // (core, pixels) per segment
         for (std::size_t i = 0; i < b.size(); ++i) {
             if (!inst[i]) continue;

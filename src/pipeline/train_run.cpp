@@ -9,6 +9,7 @@
 #include <filesystem>
 
 #include "audit/footprint_match.hpp"
+#include "core/atomic_file.hpp"
 #include "core/error.hpp"
 #include "detect/label_raster.hpp"
 #include "detect/segment_merge.hpp"
@@ -310,6 +311,21 @@ int fold_of(const detect::FoldBlocks& folds, std::size_t image, const std::vecto
     return folds.fold_at(image, 0.5 * (e.min_x + e.max_x), -0.5 * (e.min_y + e.max_y));
 }
 
+// The out-of-fold building mask of one training image under `opts`: its
+// cross-validation probabilities (`cv` per segment, `cv_pairs` per pair),
+// grouped by the pair classifier when the options have it, then every object
+// rule (mask_from_probabilities). `pixel_map`, `core_map` may be null.
+BuildingMask out_of_fold_mask(const LabelledImage& li, const std::vector<float>& cv, const std::vector<float>& cv_pairs,
+                              const detect::DetectorOptions& opts, const std::vector<float>* pixel_map, const std::vector<float>* core_map) {
+    std::vector<uint32_t> groups;
+    if (opts.merge_threshold > 0.0) {
+        std::vector<uint8_t> building(li.segments.count + 1, 0);
+        for (uint32_t k = 1; k <= li.segments.count; ++k) building[k] = cv[k] >= opts.threshold;
+        groups = detect::merge_groups(li.pairs, cv_pairs, building, opts.merge_threshold);
+    }
+    return mask_from_probabilities(li.segments, cv, opts.threshold, li.image.gsd_m, opts, pixel_map, groups.empty() ? nullptr : &groups, core_map);
+}
+
 nlohmann::json polygons_json(const std::vector<std::vector<Polygon>>& objects) {
     nlohmann::json a = nlohmann::json::array();
     for (const auto& parts : objects) {
@@ -330,40 +346,28 @@ nlohmann::json polygons_json(const std::vector<std::vector<Polygon>>& objects) {
     return a;
 }
 
+// Raw little-endian values, written atomically (never half-written).
 template <class T>
 void write_raw(const fs::path& path, const std::vector<T>& v) {
-    std::FILE* f = std::fopen(path.string().c_str(), "wb");
-    if (!f) throw Error(path.string(), "cannot write");
-    const std::size_t n = std::fwrite(v.data(), sizeof(T), v.size(), f);
-    if (std::fclose(f) != 0 || n != v.size()) throw Error(path.string(), "cannot write");
+    write_text_file(path, std::string(reinterpret_cast<const char*>(v.data()), v.size() * sizeof(T)));
 }
 
 // TrainOptions::cv_out_dir: the chosen options' out-of-fold result per image.
 void write_cv_out(const std::string& dir, const std::vector<std::string>& orthos, const std::vector<LabelledImage>& data,
                   const detect::FoldBlocks& folds, const std::vector<std::vector<float>>& cv, const std::vector<std::vector<float>>& cv_pairs,
                   const detect::PixelStage& pixel, const detect::PixelStage& core, const detect::DetectorOptions& opts) {
-    fs::create_directories(dir);
+    ensure_directory(dir);
     for (std::size_t i = 0; i < data.size(); ++i) {
         const LabelledImage& li = data[i];
         const int w = li.segments.labels.width, h = li.segments.labels.height;
-        std::vector<uint32_t> groups;
-        if (opts.merge_threshold > 0.0) {
-            std::vector<uint8_t> building(li.segments.count + 1, 0);
-            for (uint32_t k = 1; k <= li.segments.count; ++k) building[k] = cv[i][k] >= opts.threshold;
-            groups = detect::merge_groups(li.pairs, cv_pairs[i], building, opts.merge_threshold);
-        }
         const bool has_map = opts.pixel.enabled && i < pixel.out_of_fold.size();
         const bool has_core = i < core.out_of_fold.size();
-        const BuildingMask mask = mask_from_probabilities(li.segments, cv[i], opts.threshold, li.image.gsd_m, opts, has_map ? &pixel.out_of_fold[i] : nullptr,
-                                                          groups.empty() ? nullptr : &groups, has_core ? &core.out_of_fold[i] : nullptr);
+        const BuildingMask mask = out_of_fold_mask(li, cv[i], cv_pairs[i], opts, has_map ? &pixel.out_of_fold[i] : nullptr,
+                                                   has_core ? &core.out_of_fold[i] : nullptr);
         const std::string stem = fs::path(orthos[i]).stem().string();
         const nlohmann::json j{{"ortho", orthos[i]}, {"width", w}, {"height", h}, {"gsd_m", li.image.gsd_m},
                                {"predicted", polygons_json(predicted_footprints(mask, li.image.gsd_m))}, {"reference", polygons_json(li.reference)}};
-        std::FILE* f = std::fopen((fs::path(dir) / (stem + "_cv.json")).string().c_str(), "wb");
-        if (!f) throw Error(dir, "cannot write " + stem + "_cv.json");
-        const std::string text = j.dump();
-        std::fwrite(text.data(), 1, text.size(), f);
-        std::fclose(f);
+        write_text_file(fs::path(dir) / (stem + "_cv.json"), j.dump());
         if (has_map) write_raw(fs::path(dir) / (stem + "_cv_map.f32"), pixel.out_of_fold[i]);
         if (has_core) write_raw(fs::path(dir) / (stem + "_cv_core.f32"), core.out_of_fold[i]);
         std::vector<uint8_t> fold(std::size_t(w) * h);
@@ -471,6 +475,7 @@ void TrainOptions::validate() const {
         if (!(m > 0.0 && m <= 20.0)) throw Error("--neck-splits-m", "each neck split must be in (0, 20] metres");
     for (const double t : core_threshold_candidates)
         if (!(t > 0.0 && t < 1.0)) throw Error("--core-thresholds", "each core threshold must be in (0, 1)");
+    if (!cv_out_dir.empty() && folds < 2) throw Error("--cv-out", "writes the cross-validation's result: give --folds 2 or more");
 }
 
 void DetectionScores::add(const DetectionScores& o) { tp += o.tp, predicted += o.predicted, reference += o.reference; }
@@ -485,6 +490,8 @@ TrainReport run_train(const std::string& out_path, const TrainOptions& o, bool o
     o.validate();
     if (out_path.empty()) throw Error("--out", "give the model file to write");
     if (fs::exists(out_path) && !overwrite) throw Error(out_path, "exists; pass --overwrite to replace it");
+    if (!o.cv_out_dir.empty() && fs::exists(o.cv_out_dir) && !(fs::is_directory(o.cv_out_dir) && fs::is_empty(o.cv_out_dir)) && !overwrite)
+        throw Error(o.cv_out_dir, "exists and is not an empty folder; pass --overwrite to write the cross-validation's result into it");
     TrainReport rep;
     std::vector<LabelledImage> data(o.orthos.size());
     uint64_t fp = detect::fnv1a64("cityforge-train", 15);
@@ -643,15 +650,8 @@ TrainReport run_train(const std::string& out_path, const TrainOptions& o, bool o
             DetectionScores pooled;
             for (std::size_t i = 0; i < data.size(); ++i) {
                 const LabelledImage& li = data[i];
-                std::vector<uint32_t> groups;
-                if (opts.merge_threshold > 0.0) {
-                    std::vector<uint8_t> building(li.segments.count + 1, 0);
-                    for (uint32_t k = 1; k <= li.segments.count; ++k) building[k] = cv[i][k] >= threshold;
-                    groups = detect::merge_groups(li.pairs, cv_pairs[i], building, opts.merge_threshold);
-                }
-                const BuildingMask mask = mask_from_probabilities(li.segments, cv[i], threshold, li.image.gsd_m, opts,
-                                                                  opts.pixel.enabled ? &pixel.out_of_fold[i] : nullptr, groups.empty() ? nullptr : &groups,
-                                                                  opts.instance.enabled() ? &core.out_of_fold[i] : nullptr);
+                const BuildingMask mask = out_of_fold_mask(li, cv[i], cv_pairs[i], opts, opts.pixel.enabled ? &pixel.out_of_fold[i] : nullptr,
+                                                           opts.instance.enabled() ? &core.out_of_fold[i] : nullptr);
                 const auto pred = predicted_footprints(mask, li.image.gsd_m);
                 DetectionScores img;
                 for (int f = 0; f < o.folds; ++f) {

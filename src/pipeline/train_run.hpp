@@ -101,8 +101,10 @@ struct TrainOptions {
     /// options is written there per training image (<ortho stem>_cv.json:
     /// predicted and reference footprints in pixel space, x = column,
     /// y = -row; <stem>_cv_map.f32: the out-of-fold pixel-stage map, w x h
-    /// row-major float32; <stem>_cv_fold.u8: the fold of each pixel), for
-    /// error analysis. Nothing without folds.
+    /// row-major float32; <stem>_cv_core.f32: the core CNN's, when trained;
+    /// <stem>_cv_truth.u8: the label mask; <stem>_cv_fold.u8: the fold of
+    /// each pixel), for error analysis. Needs folds >= 2; a folder that is
+    /// not empty is refused unless the command may overwrite.
     std::string cv_out_dir;
     /// Candidate InstanceOptions::core_threshold values (instance separation
     /// from the core CNN, detector.instance), tried by the cross-validation

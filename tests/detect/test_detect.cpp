@@ -660,3 +660,45 @@ TEST_CASE("The CNN pixel stage: same weight bytes and out-of-fold maps for 1 and
     m.pixel_model = cut;
     CHECK_THROWS_WITH(detect::parse_model(detect::serialize_model(m), "cnn.cfdet"), Catch::Contains("cnn.cfdet: truncated CNN weights"));
 }
+
+TEST_CASE("train --cv-out writes each image's out-of-fold footprints (the ones scored), maps, labels and folds - needs folds - an occupied folder is refused",
+          "[detect][synth][errors]") {
+    ScratchDir dir("detect_cv_out"), a_dir("detect_cv_out_town");
+    const SynthResult a = make_town(a_dir, 150, 31, 0);
+    TrainOptions o;
+    o.orthos = {a.ortho_path};
+    o.labels = {a.truth_path};
+    o.folds = 2;
+    o.fold_block_m = 50.0;
+    o.detector.booster.rounds = 40;
+    o.cv_out_dir = dir / "cv";
+    const TrainReport rep = run_train(dir / "m.cfdet", o);
+    const std::string stem = std::filesystem::path(a.ortho_path).stem().string();
+    const auto j = nlohmann::json::parse(test::slurp(dir / ("cv/" + stem + "_cv.json")));
+    const RasterReader ortho(a.ortho_path);
+    const std::size_t w = j.at("width").get<std::size_t>(), h = j.at("height").get<std::size_t>();
+    CHECK(w == std::size_t(ortho.info().width));
+    CHECK(h == std::size_t(ortho.info().height));
+    // The footprints written are the ones the cross-validation scored (every object falls in one fold).
+    CHECK(j.at("predicted").size() == rep.pooled_objects.predicted);
+    CHECK(j.at("reference").size() == rep.pooled_objects.reference);
+    CHECK(rep.pooled_objects.reference > 10);
+    const std::string map = test::slurp(dir / ("cv/" + stem + "_cv_map.f32"));
+    const std::string fold = test::slurp(dir / ("cv/" + stem + "_cv_fold.u8"));
+    const std::string truth = test::slurp(dir / ("cv/" + stem + "_cv_truth.u8"));
+    CHECK(map.size() == w * h * sizeof(float));
+    REQUIRE(fold.size() == w * h);
+    REQUIRE(truth.size() == w * h);
+    CHECK(std::count(fold.begin(), fold.end(), char(0)) > 0);
+    CHECK(std::count(fold.begin(), fold.end(), char(1)) > 0);
+    CHECK(std::count(fold.begin(), fold.end(), char(0)) + std::count(fold.begin(), fold.end(), char(1)) == std::ptrdiff_t(w * h));
+    CHECK(std::count(truth.begin(), truth.end(), char(0)) < std::ptrdiff_t(w * h));
+    CHECK_FALSE(std::filesystem::exists(dir / ("cv/" + stem + "_cv_core.f32")));  // no core CNN was asked for
+
+    // The folder now holds files: refused without overwrite, before any work; written again with it.
+    CHECK_THROWS_WITH(run_train(dir / "m2.cfdet", o), Catch::StartsWith(dir / "cv") && Catch::Contains("not an empty folder"));
+    CHECK_FALSE(std::filesystem::exists(dir / "m2.cfdet"));
+    // Without folds there is nothing to write: refused.
+    o.folds = 0;
+    CHECK_THROWS_WITH(run_train(dir / "m3.cfdet", o), Catch::StartsWith("--cv-out"));
+}
