@@ -427,6 +427,68 @@ private:
     V b_[K > 0 ? kPairs : 1];
 };
 
+// The cells of a grid of nx x ny cells over a cloud's extent, stored column
+// by column and each column only over its band: the rows from the lowest to
+// the highest that hold a point of that column. A cloud along a diagonal
+// corridor, or two towns far apart, then costs cells for the ground it covers,
+// not for its bounding box. Cell (cx, cy) is cell `base[cx] + cy - lo[cx]`
+// when lo[cx] <= cy <= hi[cx], else empty (an empty column has lo > hi).
+struct BandedGrid {
+    double minx = 0, miny = 0, cx_size = 1, cy_size = 1;
+    int nx = 1, ny = 1;
+    std::vector<int> lo, hi;          // per column, its band of rows
+    std::vector<std::size_t> base;    // per column, its first cell; base[nx] = cells
+    int col(double x) const { return std::min(nx - 1, static_cast<int>((x - minx) / cx_size)); }
+    int row(double y) const { return std::min(ny - 1, static_cast<int>((y - miny) / cy_size)); }
+    bool holds(int cx, int cy) const { return cy >= lo[static_cast<std::size_t>(cx)] && cy <= hi[static_cast<std::size_t>(cx)]; }
+    std::size_t index(int cx, int cy) const { return base[static_cast<std::size_t>(cx)] + static_cast<std::size_t>(cy - lo[static_cast<std::size_t>(cx)]); }
+    std::size_t cells() const { return base.back(); }
+};
+
+// Cells of `cell` metres (capped at 65535 a side) over the box.
+BandedGrid grid_over(double minx, double miny, double maxx, double maxy, double cell) {
+    BandedGrid g;
+    g.minx = minx, g.miny = miny;
+    g.nx = static_cast<int>(std::min(65535.0, std::floor((maxx - minx) / cell) + 1));
+    g.ny = static_cast<int>(std::min(65535.0, std::floor((maxy - miny) / cell) + 1));
+    g.cx_size = (maxx - minx) / g.nx > cell ? (maxx - minx) / g.nx : cell;
+    g.cy_size = (maxy - miny) / g.ny > cell ? (maxy - miny) / g.ny : cell;
+    return g;
+}
+
+// The rows each column's points occupy (every `stride`-th point), and the
+// columns each row's: the cells of both banded layouts, columns first.
+std::pair<std::size_t, std::size_t> band_cells(const BandedGrid& g, const double* px, const double* py, std::size_t n, std::size_t stride) {
+    struct Bands {
+        std::vector<int> col_lo, col_hi, row_lo, row_hi;
+    };
+    const auto fresh = [&] {
+        return Bands{std::vector<int>(static_cast<std::size_t>(g.nx), g.ny), std::vector<int>(static_cast<std::size_t>(g.nx), -1),
+                     std::vector<int>(static_cast<std::size_t>(g.ny), g.nx), std::vector<int>(static_cast<std::size_t>(g.ny), -1)};
+    };
+    const std::size_t samples = (n + stride - 1) / stride;
+    const Bands b = tbb::parallel_reduce(
+        tbb::blocked_range<std::size_t>(0, samples, 1u << 16), fresh(),
+        [&](const tbb::blocked_range<std::size_t>& r, Bands acc) {
+            for (std::size_t s = r.begin(); s != r.end(); ++s) {
+                const std::size_t i = s * stride;
+                const auto cx = static_cast<std::size_t>(g.col(px[i])), cy = static_cast<std::size_t>(g.row(py[i]));
+                acc.col_lo[cx] = std::min(acc.col_lo[cx], int(cy)), acc.col_hi[cx] = std::max(acc.col_hi[cx], int(cy));
+                acc.row_lo[cy] = std::min(acc.row_lo[cy], int(cx)), acc.row_hi[cy] = std::max(acc.row_hi[cy], int(cx));
+            }
+            return acc;
+        },
+        [](Bands a, const Bands& o) {
+            for (std::size_t q = 0; q < a.col_lo.size(); ++q) a.col_lo[q] = std::min(a.col_lo[q], o.col_lo[q]), a.col_hi[q] = std::max(a.col_hi[q], o.col_hi[q]);
+            for (std::size_t q = 0; q < a.row_lo.size(); ++q) a.row_lo[q] = std::min(a.row_lo[q], o.row_lo[q]), a.row_hi[q] = std::max(a.row_hi[q], o.row_hi[q]);
+            return a;
+        });
+    std::size_t by_col = 0, by_row = 0;
+    for (std::size_t q = 0; q < b.col_lo.size(); ++q) by_col += b.col_hi[q] >= b.col_lo[q] ? std::size_t(b.col_hi[q] - b.col_lo[q] + 1) : 0;
+    for (std::size_t q = 0; q < b.row_lo.size(); ++q) by_row += b.row_hi[q] >= b.row_lo[q] ? std::size_t(b.row_hi[q] - b.row_lo[q] + 1) : 0;
+    return {by_col, by_row};
+}
+
 // The k smallest squared distances (3-D, Euclidean) from every point to the
 // points of the cloud, itself included, from a 2-D grid of columns: the points
 // of each cell and of its 8 neighbours are gathered once into a contiguous
@@ -436,56 +498,102 @@ private:
 // closer point (cells are pruned by their z range, so isolated points far above
 // or below the surface stay cheap). Distances are computed in double from the
 // source coordinates, so they do not depend on a local origin, on the thread
-// count or on the order candidates are offered; which of several equidistant
-// points is counted does not change the k smallest distances. `visit(i, d2,
-// count)` gets point i's `count` (<= k) smallest squared distances in
-// ascending order. Cells are numbered column by column: for points in
-// canonical order (sorted by x) building the grid and gathering blocks then
-// walk memory almost in order. K: k when known at compile time, else 0.
+// count, on the grid or on the order candidates are offered; which of several
+// equidistant points is counted does not change the k smallest distances.
+// `visit(i, d2, count)` gets point i's `count` (<= k) smallest squared
+// distances in ascending order. Cells are numbered column by column: for
+// points in canonical order (sorted by x) building the grid and gathering
+// blocks then walk memory almost in order. The cell size follows the density
+// over the ground the points cover (a banded grid, BandedGrid), so a corridor
+// or a few stray points far away do not make the cells of the whole cloud
+// coarse. K: k when known at compile time, else 0.
 template <std::size_t K, class Visit>
 void grid_knn(const PointCloud& c, std::size_t k, Visit&& visit) {
     const std::size_t n = c.size();
     if (n == 0 || k == 0) return;
     const XYBounds bb = kept_bounds(c, [](std::size_t) { return true; });
-    const double minx = bb.minx, miny = bb.miny, maxx = bb.maxx, maxy = bb.maxy;
+    require_finite_extent(bb.minx, bb.miny, bb.maxx, bb.maxy, "outlier filter");  // the grid itself is capped below
     // About 0.4 k points per cell on average (the 3 x 3 block holds ~3.6 k;
     // instructions in the search on a 400 m town at 8 pts/m²: 0.3 k +4 %,
     // 0.5 k +7 %, 0.25 k +20 %, 0.2 k +46 %).
-    require_finite_extent(minx, miny, maxx, maxy, "outlier filter");  // the grid itself is capped below
-    const double area = std::max((maxx - minx) * (maxy - miny), 1e-12);
     const double per_point = std::max(1.0, 0.4 * double(k)) / double(n);
-    double cell = std::isfinite(area) ? std::sqrt(area * per_point) : std::sqrt(maxx - minx) * std::sqrt(maxy - miny) * std::sqrt(per_point);
     // A cloud (nearly) without extent along one axis (every point on one row
     // or column) has a 1-D density: cells of the 2-D rule would be far smaller
     // than the point spacing (1e-7 for one exact row), and the ring search ran
     // for ever. Such a grid is one cell thick. On any other cloud the 2-D cell
     // is the larger one (the short side spans more than one 1-D cell).
-    const double long_side = std::max(maxx - minx, maxy - miny);
-    if (std::isfinite(long_side)) cell = std::max({cell, long_side * per_point, long_side / 65535.0});
-    if (!(cell > 0.0) || !std::isfinite(cell)) cell = 1.0;
-    const auto nx = static_cast<int>(std::min(65535.0, std::floor((maxx - minx) / cell) + 1));
-    const auto ny = static_cast<int>(std::min(65535.0, std::floor((maxy - miny) / cell) + 1));
-    const double cx_size = (maxx - minx) / nx > cell ? (maxx - minx) / nx : cell;  // grid capped at 65535 cells a side
-    const double cy_size = (maxy - miny) / ny > cell ? (maxy - miny) / ny : cell;
-    auto col = [&](double x) { return std::min(nx - 1, static_cast<int>((x - minx) / cx_size)); };
-    auto row = [&](double y) { return std::min(ny - 1, static_cast<int>((y - miny) / cy_size)); };
-    auto cell_index = [ny](int cx, int cy) { return static_cast<std::size_t>(cx) * ny + cy; };  // column-major
-    const std::size_t cells = static_cast<std::size_t>(nx) * ny;
+    const auto cell_for = [&](double area) {
+        area = std::max(area, 1e-12);
+        double cell = std::isfinite(area) ? std::sqrt(area * per_point)
+                                          : std::sqrt(bb.maxx - bb.minx) * std::sqrt(bb.maxy - bb.miny) * std::sqrt(per_point);
+        const double long_side = std::max(bb.maxx - bb.minx, bb.maxy - bb.miny);
+        if (std::isfinite(long_side)) cell = std::max({cell, long_side * per_point, long_side / 65535.0});
+        if (!(cell > 0.0) || !std::isfinite(cell)) cell = 1.0;
+        return cell;
+    };
+    // The density over the bounding box first; where the points' bands (from
+    // every 8th point) cover under half of it, over the bands instead, in the
+    // orientation with fewer cells (x and y swap: distances do not change).
+    bool swap = false;
+    double cell = cell_for((bb.maxx - bb.minx) * (bb.maxy - bb.miny));
+    bool banded = false;
+    {
+        const BandedGrid g0 = grid_over(bb.minx, bb.miny, bb.maxx, bb.maxy, cell);
+        const double full = double(g0.nx) * double(g0.ny);
+        if (full >= 64.0) {
+            const auto [by_col, by_row] = band_cells(g0, c.x.data(), c.y.data(), n, n >= (1u << 16) ? 8 : 1);
+            const std::size_t fewer = std::min(by_col, by_row);
+            if (double(fewer) < 0.5 * full) {
+                banded = true, swap = by_row < by_col;
+                cell = cell_for(double(fewer) * g0.cx_size * g0.cy_size);
+            }
+        }
+    }
+    const double* cxp = swap ? c.y.data() : c.x.data();
+    const double* cyp = swap ? c.x.data() : c.y.data();
+    const double* czp = c.z.data();
+    BandedGrid g = swap ? grid_over(bb.miny, bb.minx, bb.maxy, bb.maxx, cell) : grid_over(bb.minx, bb.miny, bb.maxx, bb.maxy, cell);
+    g.lo.assign(static_cast<std::size_t>(g.nx), 0), g.hi.assign(static_cast<std::size_t>(g.nx), g.ny - 1);
+    if (banded) {  // the exact band of every column, from every point
+        struct Band {
+            std::vector<int> lo, hi;
+        };
+        const auto nxs = static_cast<std::size_t>(g.nx);
+        const Band band = tbb::parallel_reduce(
+            tbb::blocked_range<std::size_t>(0, n, 1u << 16), Band{std::vector<int>(nxs, g.ny), std::vector<int>(nxs, -1)},
+            [&](const tbb::blocked_range<std::size_t>& r, Band acc) {
+                for (std::size_t i = r.begin(); i != r.end(); ++i) {
+                    const auto cx = static_cast<std::size_t>(g.col(cxp[i]));
+                    const int cy = g.row(cyp[i]);
+                    acc.lo[cx] = std::min(acc.lo[cx], cy), acc.hi[cx] = std::max(acc.hi[cx], cy);
+                }
+                return acc;
+            },
+            [](Band a, const Band& o) {
+                for (std::size_t q = 0; q < a.lo.size(); ++q) a.lo[q] = std::min(a.lo[q], o.lo[q]), a.hi[q] = std::max(a.hi[q], o.hi[q]);
+                return a;
+            });
+        g.lo = band.lo, g.hi = band.hi;
+    }
+    g.base.assign(static_cast<std::size_t>(g.nx) + 1, 0);
+    for (std::size_t q = 0; q < static_cast<std::size_t>(g.nx); ++q)
+        g.base[q + 1] = g.base[q] + (g.hi[q] >= g.lo[q] ? static_cast<std::size_t>(g.hi[q] - g.lo[q] + 1) : 0);
+    const double minx = g.minx, miny = g.miny, cx_size = g.cx_size, cy_size = g.cy_size;
+    const int nx = g.nx, ny = g.ny;
+    auto cell_index = [&g](int cx, int cy) { return g.index(cx, cy); };  // column-major, within the column's band
+    const std::size_t cells = g.cells();
     constexpr std::size_t kGrain = 1u << 16;
     std::vector<uint32_t> start(cells + 1, 0), order(n);  // order: point indices cell by cell
     {
         std::vector<uint32_t> cell_of(n);
         tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, kGrain), [&](const tbb::blocked_range<std::size_t>& r) {
-            for (std::size_t i = r.begin(); i != r.end(); ++i) cell_of[i] = static_cast<uint32_t>(cell_index(col(c.x[i]), row(c.y[i])));
+            for (std::size_t i = r.begin(); i != r.end(); ++i) cell_of[i] = static_cast<uint32_t>(cell_index(g.col(cxp[i]), g.row(cyp[i])));
         });
         for (std::size_t i = 0; i < n; ++i) ++start[cell_of[i] + 1];
         for (std::size_t q = 0; q < cells; ++q) start[q + 1] += start[q];
         std::vector<uint32_t> fill(start.begin(), start.end() - 1);
         for (std::size_t i = 0; i < n; ++i) order[fill[cell_of[i]]++] = static_cast<uint32_t>(i);  // ascending index per cell
     }
-    const double* cxp = c.x.data();
-    const double* cyp = c.y.data();
-    const double* czp = c.z.data();
     // Each cell's z range in floats that enclose its double z values (the
     // float next below / above when rounding went the other way).
     std::vector<float> zlo(cells), zhi(cells);
@@ -514,7 +622,7 @@ void grid_knn(const PointCloud& c, std::size_t k, Visit&& visit) {
         const auto column = [&](int xx) -> const Column& {
             Column& s = slots[static_cast<std::size_t>(xx) % slots.size()];
             if (s.xx != xx) {
-                const uint32_t from = start[cell_index(xx, 0)], to = start[cell_index(xx, ny - 1) + 1];
+                const uint32_t from = start[g.base[static_cast<std::size_t>(xx)]], to = start[g.base[static_cast<std::size_t>(xx) + 1]];
                 s.xx = xx, s.first = from;
                 s.x.resize(to - from), s.y.resize(to - from), s.z.resize(to - from);
                 for (uint32_t j = from; j < to; ++j) {
@@ -524,7 +632,9 @@ void grid_knn(const PointCloud& c, std::size_t k, Visit&& visit) {
             }
             return s;
         };
-        const auto run = [&](int xx, int y_lo, int y_hi) {  // cells y_lo .. y_hi of column xx
+        const auto run = [&](int xx, int y_lo, int y_hi) {  // cells y_lo .. y_hi of column xx (those in its band)
+            y_lo = std::max(y_lo, g.lo[static_cast<std::size_t>(xx)]), y_hi = std::min(y_hi, g.hi[static_cast<std::size_t>(xx)]);
+            if (y_lo > y_hi) return Run{nullptr, nullptr, nullptr, 0};
             const Column& s = column(xx);
             const std::size_t a = start[cell_index(xx, y_lo)] - s.first, b = start[cell_index(xx, y_hi) + 1] - s.first;
             return Run{s.x.data() + a, s.y.data() + a, s.z.data() + a, b - a};
@@ -554,7 +664,7 @@ void grid_knn(const PointCloud& c, std::size_t k, Visit&& visit) {
         // similar densities.
         double guess = INFINITY;
         for (int cx = columns.begin(); cx != columns.end(); ++cx)
-            for (int cy = 0; cy < ny; ++cy) {
+            for (int cy = g.lo[static_cast<std::size_t>(cx)]; cy <= g.hi[static_cast<std::size_t>(cx)]; ++cy) {
                 const std::size_t q = cell_index(cx, cy);
                 if (start[q] == start[q + 1]) continue;
                 block_size = 0;
@@ -653,7 +763,7 @@ void grid_knn(const PointCloud& c, std::size_t k, Visit&& visit) {
                             std::size_t m = 0;
                             for (const auto& [ox, oy] : kRing2) {
                                 const int xx = cx + ox, yy = cy + oy;
-                                if (xx < 0 || yy < 0 || xx >= nx || yy >= ny) continue;
+                                if (xx < 0 || yy < 0 || xx >= nx || yy >= ny || !g.holds(xx, yy)) continue;
                                 const std::size_t qq = cell_index(xx, yy);
                                 if (start[qq] == start[qq + 1]) continue;
                                 if (count >= k) {  // the cell's box, z range included, beyond the k-th so far
@@ -674,10 +784,11 @@ void grid_knn(const PointCloud& c, std::size_t k, Visit&& visit) {
                         for (int xx = std::max(0, cx - r); xx <= std::min(nx - 1, cx + r); ++xx) {
                             const bool edge_col = xx == cx - r || xx == cx + r;
                             const int step_y = edge_col ? 1 : 2 * r;
+                            const int band_lo = g.lo[static_cast<std::size_t>(xx)], band_hi = g.hi[static_cast<std::size_t>(xx)];
                             int yy = cy - r;
-                            if (edge_col && yy < 0) yy = 0;
-                            for (; yy <= std::min(ny - 1, cy + r); yy += step_y) {
-                                if (yy < 0) continue;
+                            if (edge_col && yy < band_lo) yy = band_lo;
+                            for (; yy <= std::min(band_hi, cy + r); yy += step_y) {
+                                if (yy < band_lo) continue;
                                 const std::size_t qq = cell_index(xx, yy);
                                 if (start[qq] == start[qq + 1] || !may_hold_closer(xx, yy)) continue;
                                 for (uint32_t j = start[qq]; j < start[qq + 1]; ++j, ++count) {

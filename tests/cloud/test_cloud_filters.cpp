@@ -136,6 +136,48 @@ TEST_CASE("Outlier filter on grid neighbourhoods flags exactly the points of a w
     }
 }
 
+TEST_CASE("Outlier filter on a diagonal corridor and on a cloud with a stray point kilometres away: the k-d tree's flags, cells for the ground covered", "[cloud][filters]") {
+    // A 45° strip (2 km x 30 m: its bounding box is 50 times the ground it
+    // covers), two east-west corridors 3 km apart (each column spans both:
+    // the grid is laid out by rows instead), and a square with one stray point 20 km away. The grid
+    // sizes its cells from the ground the points cover (BandedGrid); the flags
+    // must be those of the whole-cloud k-d tree, for any thread count.
+    const auto strip = [](double length, double width, double angle_deg, uint64_t seed) {
+        PointCloud c;
+        Rng rng(seed);
+        const double a = angle_deg * M_PI / 180.0;
+        const auto n = static_cast<std::size_t>(length * width * 2.0);  // 2 pts/m²
+        for (std::size_t i = 0; i < n; ++i) {
+            const double u = rng.uniform(0, length), v = rng.uniform(-width / 2, width / 2);
+            c.x.push_back(500000 + u * std::cos(a) - v * std::sin(a)), c.y.push_back(5000000 + u * std::sin(a) + v * std::cos(a));
+            c.z.push_back(40 + 0.01 * u + (std::fmod(u, 40.0) < 15 && std::abs(v) < 8 ? 7.0 : 0.0) + 0.05 * rng.normal());
+            c.classification.push_back(1), c.intensity.push_back(0), c.return_number.push_back(1), c.number_of_returns.push_back(1);
+        }
+        return c;
+    };
+    PointCloud diagonal = strip(2000, 30, 45, 11);
+    PointCloud corridors = strip(1500, 30, 0, 12);
+    corridors.append(strip(1500, 30, 0, 13), 0);
+    for (std::size_t i = corridors.size() / 2; i < corridors.size(); ++i) corridors.y[i] += 3000;
+    PointCloud stray = strip(150, 150, 0, 14);
+    stray.x[0] += 20000, stray.y[0] += 15000, stray.z[0] = 45;
+    for (PointCloud* c : {&diagonal, &corridors, &stray}) {
+        // A few points far above and below the surface (the ring search reaches out).
+        for (std::size_t i = 100; i < c->size(); i += c->size() / 4) c->z[i] += 90.0;
+        OutlierFilterOptions o;
+        const std::vector<uint8_t> oracle = kd_tree_outlier_keep(*c, o);
+        const OutlierFilterResult r = filter_outliers(*c, o);
+        std::size_t differ = 0, removed = 0;
+        for (std::size_t i = 0; i < c->size(); ++i) differ += r.keep[i] != oracle[i], removed += !r.keep[i];
+        INFO(c->size() << " points, " << removed << " removed");
+        CHECK(differ == 0);
+        CHECK(removed >= 3);
+        tbb::global_control one_thread(tbb::global_control::max_allowed_parallelism, 1);
+        CHECK(filter_outliers(*c, o).keep == r.keep);
+    }
+    CHECK_FALSE(filter_outliers(stray, OutlierFilterOptions{}).keep[0]);  // the stray point itself is an outlier
+}
+
 namespace {
 // morphology_square as it was: for every cell the (2r+1)-wide window scanned
 // cell by cell, rows then columns (the oracle for the running extrema).
