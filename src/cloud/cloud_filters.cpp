@@ -456,37 +456,33 @@ BandedGrid grid_over(double minx, double miny, double maxx, double maxy, double 
     return g;
 }
 
-// The rows each column's points occupy (every `stride`-th point), and the
-// columns each row's: the cells of both banded layouts, columns first.
-std::pair<std::size_t, std::size_t> band_cells(const BandedGrid& g, const double* px, const double* py, std::size_t n, std::size_t stride) {
-    struct Bands {
-        std::vector<int> col_lo, col_hi, row_lo, row_hi;
+// Sets g's bands (lo, hi, base) to the rows each column's points occupy,
+// from every `stride`-th point (px, py: the coordinates along g's columns and
+// rows); returns the cells of the layout.
+std::size_t set_bands(BandedGrid& g, const double* px, const double* py, std::size_t n, std::size_t stride) {
+    struct Band {
+        std::vector<int> lo, hi;
     };
-    const auto fresh = [&] {
-        return Bands{std::vector<int>(static_cast<std::size_t>(g.nx), g.ny), std::vector<int>(static_cast<std::size_t>(g.nx), -1),
-                     std::vector<int>(static_cast<std::size_t>(g.ny), g.nx), std::vector<int>(static_cast<std::size_t>(g.ny), -1)};
-    };
+    const auto nxs = static_cast<std::size_t>(g.nx);
     const std::size_t samples = (n + stride - 1) / stride;
-    const Bands b = tbb::parallel_reduce(
-        tbb::blocked_range<std::size_t>(0, samples, 1u << 16), fresh(),
-        [&](const tbb::blocked_range<std::size_t>& r, Bands acc) {
+    Band band = tbb::parallel_reduce(
+        tbb::blocked_range<std::size_t>(0, samples, 1u << 16), Band{std::vector<int>(nxs, g.ny), std::vector<int>(nxs, -1)},
+        [&](const tbb::blocked_range<std::size_t>& r, Band acc) {
             for (std::size_t s = r.begin(); s != r.end(); ++s) {
-                const std::size_t i = s * stride;
-                const auto cx = static_cast<std::size_t>(g.col(px[i])), cy = static_cast<std::size_t>(g.row(py[i]));
-                acc.col_lo[cx] = std::min(acc.col_lo[cx], int(cy)), acc.col_hi[cx] = std::max(acc.col_hi[cx], int(cy));
-                acc.row_lo[cy] = std::min(acc.row_lo[cy], int(cx)), acc.row_hi[cy] = std::max(acc.row_hi[cy], int(cx));
+                const auto cx = static_cast<std::size_t>(g.col(px[s * stride]));
+                const int cy = g.row(py[s * stride]);
+                acc.lo[cx] = std::min(acc.lo[cx], cy), acc.hi[cx] = std::max(acc.hi[cx], cy);
             }
             return acc;
         },
-        [](Bands a, const Bands& o) {
-            for (std::size_t q = 0; q < a.col_lo.size(); ++q) a.col_lo[q] = std::min(a.col_lo[q], o.col_lo[q]), a.col_hi[q] = std::max(a.col_hi[q], o.col_hi[q]);
-            for (std::size_t q = 0; q < a.row_lo.size(); ++q) a.row_lo[q] = std::min(a.row_lo[q], o.row_lo[q]), a.row_hi[q] = std::max(a.row_hi[q], o.row_hi[q]);
+        [](Band a, const Band& o) {  // minima and maxima: the same for any thread count
+            for (std::size_t q = 0; q < a.lo.size(); ++q) a.lo[q] = std::min(a.lo[q], o.lo[q]), a.hi[q] = std::max(a.hi[q], o.hi[q]);
             return a;
         });
-    std::size_t by_col = 0, by_row = 0;
-    for (std::size_t q = 0; q < b.col_lo.size(); ++q) by_col += b.col_hi[q] >= b.col_lo[q] ? std::size_t(b.col_hi[q] - b.col_lo[q] + 1) : 0;
-    for (std::size_t q = 0; q < b.row_lo.size(); ++q) by_row += b.row_hi[q] >= b.row_lo[q] ? std::size_t(b.row_hi[q] - b.row_lo[q] + 1) : 0;
-    return {by_col, by_row};
+    g.lo = std::move(band.lo), g.hi = std::move(band.hi);
+    g.base.assign(nxs + 1, 0);
+    for (std::size_t q = 0; q < nxs; ++q) g.base[q + 1] = g.base[q] + (g.hi[q] >= g.lo[q] ? static_cast<std::size_t>(g.hi[q] - g.lo[q] + 1) : 0);
+    return g.cells();
 }
 
 // The k smallest squared distances (3-D, Euclidean) from every point to the
@@ -538,14 +534,16 @@ void grid_knn(const PointCloud& c, std::size_t k, Visit&& visit) {
     double cell = cell_for((bb.maxx - bb.minx) * (bb.maxy - bb.miny));
     bool banded = false;
     {
-        const BandedGrid g0 = grid_over(bb.minx, bb.miny, bb.maxx, bb.maxy, cell);
-        const double full = double(g0.nx) * double(g0.ny);
+        BandedGrid by_col = grid_over(bb.minx, bb.miny, bb.maxx, bb.maxy, cell), by_row = grid_over(bb.miny, bb.minx, bb.maxy, bb.maxx, cell);
+        const double full = double(by_col.nx) * double(by_col.ny);
         if (full >= 64.0) {
-            const auto [by_col, by_row] = band_cells(g0, c.x.data(), c.y.data(), n, n >= (1u << 16) ? 8 : 1);
-            const std::size_t fewer = std::min(by_col, by_row);
+            const std::size_t stride = n >= (1u << 16) ? 8 : 1;
+            const std::size_t col_cells = set_bands(by_col, c.x.data(), c.y.data(), n, stride);
+            const std::size_t row_cells = set_bands(by_row, c.y.data(), c.x.data(), n, stride);
+            const std::size_t fewer = std::min(col_cells, row_cells);
             if (double(fewer) < 0.5 * full) {
-                banded = true, swap = by_row < by_col;
-                cell = cell_for(double(fewer) * g0.cx_size * g0.cy_size);
+                banded = true, swap = row_cells < col_cells;
+                cell = cell_for(double(fewer) * by_col.cx_size * by_col.cy_size);
             }
         }
     }
@@ -553,31 +551,13 @@ void grid_knn(const PointCloud& c, std::size_t k, Visit&& visit) {
     const double* cyp = swap ? c.x.data() : c.y.data();
     const double* czp = c.z.data();
     BandedGrid g = swap ? grid_over(bb.miny, bb.minx, bb.maxy, bb.maxx, cell) : grid_over(bb.minx, bb.miny, bb.maxx, bb.maxy, cell);
-    g.lo.assign(static_cast<std::size_t>(g.nx), 0), g.hi.assign(static_cast<std::size_t>(g.nx), g.ny - 1);
-    if (banded) {  // the exact band of every column, from every point
-        struct Band {
-            std::vector<int> lo, hi;
-        };
-        const auto nxs = static_cast<std::size_t>(g.nx);
-        const Band band = tbb::parallel_reduce(
-            tbb::blocked_range<std::size_t>(0, n, 1u << 16), Band{std::vector<int>(nxs, g.ny), std::vector<int>(nxs, -1)},
-            [&](const tbb::blocked_range<std::size_t>& r, Band acc) {
-                for (std::size_t i = r.begin(); i != r.end(); ++i) {
-                    const auto cx = static_cast<std::size_t>(g.col(cxp[i]));
-                    const int cy = g.row(cyp[i]);
-                    acc.lo[cx] = std::min(acc.lo[cx], cy), acc.hi[cx] = std::max(acc.hi[cx], cy);
-                }
-                return acc;
-            },
-            [](Band a, const Band& o) {
-                for (std::size_t q = 0; q < a.lo.size(); ++q) a.lo[q] = std::min(a.lo[q], o.lo[q]), a.hi[q] = std::max(a.hi[q], o.hi[q]);
-                return a;
-            });
-        g.lo = band.lo, g.hi = band.hi;
+    if (banded) {
+        set_bands(g, cxp, cyp, n, 1);  // the exact band of every column, from every point
+    } else {  // every column whole: the plain column-major grid
+        g.lo.assign(static_cast<std::size_t>(g.nx), 0), g.hi.assign(static_cast<std::size_t>(g.nx), g.ny - 1);
+        g.base.resize(static_cast<std::size_t>(g.nx) + 1);
+        for (std::size_t q = 0; q < g.base.size(); ++q) g.base[q] = q * static_cast<std::size_t>(g.ny);
     }
-    g.base.assign(static_cast<std::size_t>(g.nx) + 1, 0);
-    for (std::size_t q = 0; q < static_cast<std::size_t>(g.nx); ++q)
-        g.base[q + 1] = g.base[q] + (g.hi[q] >= g.lo[q] ? static_cast<std::size_t>(g.hi[q] - g.lo[q] + 1) : 0);
     const double minx = g.minx, miny = g.miny, cx_size = g.cx_size, cy_size = g.cy_size;
     const int nx = g.nx, ny = g.ny;
     auto cell_index = [&g](int cx, int cy) { return g.index(cx, cy); };  // column-major, within the column's band
