@@ -362,6 +362,44 @@ TEST_CASE("Region statistics do not depend on the label order or the thread coun
         REQUIRE(over.region_count > 1000);
         CHECK(all_threads.levels.back().regions_after < over.region_count / 10);
     }
+    SECTION("seeds in raster order but for the last two labels, and a label out of range") {
+        // The node numbering reads first pixels in one pass while labels come
+        // in raster order of first appearance (the watershed's); here that
+        // holds until the last two labels, and the numbering starts again
+        // with the general search: same labels with 1 and all threads.
+        ScratchDir dir("seg_nearly_ordered");
+        make_town(dir, 150, 3, 0);
+        Image<float> img = RasterReader(dir / "ortho.tif").read_all<float>();
+        normalize_bands(img, {});
+        WatershedOptions fine;
+        fine.h_minima = 0.0;
+        fine.smoothing_sigma_px = 0.0;
+        const Oversegmentation over = watershed_oversegment(img, {}, fine);
+        REQUIRE(over.region_count > 1000);
+        std::vector<uint32_t> to(over.region_count + 1);
+        for (uint32_t k = 0; k <= over.region_count; ++k) to[k] = k;
+        std::swap(to[over.region_count], to[over.region_count - 1]);
+        const Image<uint32_t> nearly = relabel(over.labels, to);
+        RegionMergingOptions mo;
+        mo.scales = {10, 30};
+        mo.verify_invariants = true;
+        const auto all_threads = merge_regions(img, nearly, over.region_count, mo);
+        const auto ordered = merge_regions(img, over.labels, over.region_count, mo);
+        {
+            tbb::global_control one(tbb::global_control::max_allowed_parallelism, 1);
+            const auto one_thread = merge_regions(img, nearly, over.region_count, mo);
+            const auto ordered_one = merge_regions(img, over.labels, over.region_count, mo);
+            for (std::size_t l = 0; l < mo.scales.size(); ++l) {
+                CHECK(all_threads.levels[l].label_of_input == one_thread.levels[l].label_of_input);
+                CHECK(ordered.levels[l].label_of_input == ordered_one.levels[l].label_of_input);
+            }
+        }
+        CHECK(all_threads.levels.back().regions_after < over.region_count / 10);
+        // The next new label beyond the region count, in raster order: refused.
+        Image<uint32_t> beyond = over.labels;
+        beyond.band_data(0)[beyond.pixel_count() - 1] = over.region_count + 1;
+        CHECK_THROWS_WITH(merge_regions(img, beyond, over.region_count, mo), Catch::Contains("exceeds the region count"));
+    }
 }
 
 
