@@ -287,26 +287,50 @@ public:
         const int w = labels.width, h = labels.height;
         const uint32_t* lab = labels.band_data(0);
         const uint32_t* node = node_of_label_.data();  // label -> node (number_nodes)
-        const float max_abs = tbb::parallel_reduce(
-            tbb::blocked_range<std::size_t>(0, image.data.size(), 1 << 16), 0.0f,
-            [&](const tbb::blocked_range<std::size_t>& r, float m) {
+        // The largest |v| (NaN values left out, as std::max(m, |v|) leaves
+        // them out) and whether any value is NaN, four lanes at a time.
+        struct Extent {
+            float max_abs = 0.0f;
+            bool nan = false;
+        };
+        const Extent extent = tbb::parallel_reduce(
+            tbb::blocked_range<std::size_t>(0, image.data.size(), 1 << 16), Extent{},
+            [&](const tbb::blocked_range<std::size_t>& r, Extent e) {
                 std::size_t i = r.begin();
+                float m = e.max_abs;
 #if defined(__SSE2__)
-                // Four lanes at a time: max(|v|, m) takes m when v is NaN, as std::max(m, |v|) does.
+                // max(|v|, m) takes m when v is NaN, as std::max(m, |v|) does.
                 const __m128 sign = _mm_set1_ps(-0.0f);
-                __m128 m4 = _mm_set1_ps(m);
-                for (; i + 4 <= r.end(); i += 4) m4 = _mm_max_ps(_mm_andnot_ps(sign, _mm_loadu_ps(image.data.data() + i)), m4);
+                __m128 m4 = _mm_set1_ps(m), nan4 = _mm_setzero_ps();
+                for (; i + 4 <= r.end(); i += 4) {
+                    const __m128 v = _mm_loadu_ps(image.data.data() + i);
+                    m4 = _mm_max_ps(_mm_andnot_ps(sign, v), m4);
+                    nan4 = _mm_or_ps(nan4, _mm_cmpunord_ps(v, v));
+                }
                 alignas(16) float lanes[4];
                 _mm_store_ps(lanes, m4);
                 for (float v : lanes) m = std::max(m, v);
+                e.nan = e.nan || _mm_movemask_ps(nan4) != 0;
 #endif
-                for (; i != r.end(); ++i) m = std::max(m, std::abs(image.data[i]));
-                return m;
+                for (; i != r.end(); ++i) m = std::max(m, std::abs(image.data[i])), e.nan = e.nan || std::isnan(image.data[i]);
+                e.max_abs = m;
+                return e;
             },
-            [](float a, float b) { return std::max(a, b); });
+            [](Extent a, Extent b) { return Extent{std::max(a.max_abs, b.max_abs), a.nan || b.nan}; });
+        const float max_abs = extent.max_abs;
         double fixed = 1.0;  // largest power of two keeping |v| * fixed <= 2^24
         while (max_abs * fixed * 2.0 <= 16777216.0 && fixed < 65536.0) fixed *= 2.0;
         while (max_abs * fixed > 16777216.0) fixed *= 0.5;
+        // Band values as fixed-point integers q = round(v * fixed), halves
+        // away from zero. With fixed >= 1 (a power of two) and no NaN, v *
+        // fixed is exact in float (|v| * fixed <= 2^24) and q is found four
+        // values at a time (truncation, then the rounding of the exact
+        // fraction): the same integers as the double formula, bit for bit.
+#if defined(__SSE2__)
+        const bool quantise_rows = fixed >= 1.0 && !extent.nan;
+#else
+        const bool quantise_rows = false;
+#endif
         // Integer accumulators of a region, in 64-bit words: area, perimeter,
         // x0, y0, x1, y1, Σq per band, then Σq² per band as (low, high)
         // halves of a 128-bit sum. They live in the room of the record's
@@ -442,7 +466,6 @@ public:
                     const uint32_t* row = lab + std::size_t(y) * w;
                     const uint32_t* above = y > 0 ? row - w : nullptr;
                     const uint32_t* below = y < h - 1 ? row + w : nullptr;
-                    uint64_t last_down = 0;  // runs of the same vertical neighbour pair collapse into one entry
                     const int x_end = std::min(w, xs + kStripe);
                     // A block's rows are short (kStripe pixels, a new page
                     // each): the hardware does not stream them, so the
@@ -454,40 +477,125 @@ public:
                             for (int b = 0; b < nb; ++b) prefetch_line(band_ptr[b] + ahead + px);
                         }
                     }
-                    int x = xs;
-                    while (x < x_end) {
-                        const uint32_t la = row[x];  // label; a = its node
-                        if (!la) {
-                            ++x;
-                            continue;
+                    // The block row (n <= 64 pixels) as bit masks: run starts,
+                    // nodata, and pixels whose label differs above or below
+                    // (and below from a region, not nodata). Runs are then
+                    // found with bit scans and their perimeter by counting
+                    // bits, instead of a branch per pixel that the boundaries
+                    // of fine seeds make unpredictable.
+                    const int n = x_end - xs;
+                    uint64_t starts = 1, nodata = 0, up_diff = 0, down_diff = 0, down_pair = 0;
+                    int i0 = 0;
+#if defined(__SSE2__)
+                    {
+                        const __m128i zero4 = _mm_setzero_si128();
+                        auto bits = [](__m128i eq) { return static_cast<uint64_t>(_mm_movemask_ps(_mm_castsi128_ps(eq))); };
+                        for (; i0 + 4 <= n; i0 += 4) {
+                            const __m128i l = _mm_loadu_si128(reinterpret_cast<const __m128i*>(row + xs + i0));
+                            // lane 0 of the first group has no left neighbour in the row: a run start anyway
+                            const __m128i left = xs + i0 > 0 ? _mm_loadu_si128(reinterpret_cast<const __m128i*>(row + xs + i0 - 1))
+                                                             : _mm_slli_si128(l, 4);
+                            const __m128i u = above ? _mm_loadu_si128(reinterpret_cast<const __m128i*>(above + xs + i0)) : zero4;
+                            const __m128i d = below ? _mm_loadu_si128(reinterpret_cast<const __m128i*>(below + xs + i0)) : zero4;
+                            const uint64_t d_differs = ~bits(_mm_cmpeq_epi32(d, l)) & 15u;
+                            starts |= (~bits(_mm_cmpeq_epi32(l, left)) & 15u) << i0;
+                            nodata |= bits(_mm_cmpeq_epi32(l, zero4)) << i0;
+                            up_diff |= (~bits(_mm_cmpeq_epi32(u, l)) & 15u) << i0;
+                            down_diff |= d_differs << i0;
+                            down_pair |= (d_differs & ~bits(_mm_cmpeq_epi32(d, zero4))) << i0;
                         }
-                        const uint32_t a = node[la];
+                    }
+#endif
+                    for (; i0 < n; ++i0) {
+                        const uint32_t l = row[xs + i0];
+                        const uint32_t u = above ? above[xs + i0] : 0, d = below ? below[xs + i0] : 0;
+                        starts |= uint64_t(i0 > 0 && l != row[xs + i0 - 1]) << i0;
+                        nodata |= uint64_t(l == 0) << i0;
+                        up_diff |= uint64_t(u != l) << i0;
+                        down_diff |= uint64_t(d != l) << i0;
+                        down_pair |= uint64_t(d != l && d != 0) << i0;
+                    }
+                    // Prefix sums of the row's fixed-point band values and
+                    // their squares (quantise_rows): a run's sums are two
+                    // differences, with no loop over its pixels.
+                    int64_t prefix[Bands ? Bands : 1][2][kStripe + 1];
+                    const bool prefixed = Bands > 0 && quantise_rows;
+                    if constexpr (Bands > 0) {
+#if defined(__SSE2__)
+                        if (prefixed) {
+                            const __m128 f4 = _mm_set1_ps(static_cast<float>(fixed));
+                            const __m128 half = _mm_set1_ps(0.5f), minus_half = _mm_set1_ps(-0.5f);
+                            const std::size_t row_start = std::size_t(y) * w;
+                            for (int b = 0; b < Bands; ++b) {
+                                alignas(16) int32_t q[kStripe];
+                                const float* src = band_ptr[b] + row_start;
+                                int t = 0;
+                                for (; t + 4 <= n; t += 4) {
+                                    const __m128 v = _mm_mul_ps(_mm_loadu_ps(src + xs + t), f4);
+                                    const __m128i whole = _mm_cvttps_epi32(v);
+                                    const __m128 frac = _mm_sub_ps(v, _mm_cvtepi32_ps(whole));
+                                    const __m128i up = _mm_castps_si128(_mm_cmpge_ps(frac, half));         // -1 where frac >= 0.5
+                                    const __m128i down = _mm_castps_si128(_mm_cmple_ps(frac, minus_half));  // -1 where frac <= -0.5
+                                    _mm_store_si128(reinterpret_cast<__m128i*>(q + t), _mm_add_epi32(_mm_sub_epi32(whole, up), down));
+                                }
+                                for (; t < n; ++t) {
+                                    const double v = src[xs + t] * fixed;
+                                    q[t] = static_cast<int32_t>(v + (v >= 0.0 ? 0.5 : -0.5));
+                                }
+                                int64_t* ps = prefix[b][0];
+                                int64_t* pq = prefix[b][1];
+                                ps[0] = pq[0] = 0;
+                                for (t = 0; t < n; ++t) {
+                                    const int64_t v = q[t];
+                                    ps[t + 1] = ps[t] + v, pq[t + 1] = pq[t] + v * v;
+                                }
+                            }
+                        }
+#endif
+                    }
+                    uint64_t rest = starts;
+                    int last_p = -2;  // a run of pixels over the same vertical neighbour pair collapses into one entry
+                    uint64_t last_k = 0;
+                    while (rest) {
+                        const int r0 = __builtin_ctzll(rest);
+                        rest &= rest - 1;
+                        const int r1 = rest ? __builtin_ctzll(rest) : n;
+                        if (nodata >> r0 & 1) continue;
                         // A run of pixels of region a within the block: x .. end - 1.
-                        int end = x + 1;
-                        while (end < x_end && row[end] == la) ++end;
-                        int64_t perimeter = (x == 0 || row[x - 1] != la) + (end == w || row[end] != la);  // the run's ends on the region's border
+                        const int x = xs + r0, end = xs + r1;
+                        const uint32_t la = row[x];  // label; a = its node
+                        const uint32_t a = node[la];
+                        const uint64_t run = (r1 == 64 ? ~uint64_t(0) : (uint64_t(1) << r1) - 1) & ~((uint64_t(1) << r0) - 1);
+                        // the run's ends on the region's border (inside the block row: always), and its
+                        // pixels whose upper or lower neighbour is another label
+                        int64_t perimeter = (r0 > 0 || x == 0 || row[x - 1] != la) + (r1 < n || end == w || row[end] != la);
+                        perimeter += __builtin_popcountll(up_diff & run) + __builtin_popcountll(down_diff & run);
                         int64_t fixed_sums[2 * (Bands ? Bands : 1)];
                         int64_t* const sum = Bands ? fixed_sums : wide.data();
                         int64_t* const sumsq = sum + nb;
-                        std::fill(sum, sum + 2 * nb, int64_t(0));
-                        for (int px = x; px < end; ++px) {
-                            const std::size_t i = std::size_t(y) * w + px;
+                        if (prefixed) {
                             for (int b = 0; b < nb; ++b) {
-                                const double v = band_ptr[b][i] * fixed;  // round half away from zero
-                                const auto q = static_cast<int64_t>(v + (v >= 0.0 ? 0.5 : -0.5));
-                                sum[b] += q;
-                                sumsq[b] += q * q;
+                                sum[b] = prefix[Bands ? b : 0][0][r1] - prefix[Bands ? b : 0][0][r0];
+                                sumsq[b] = prefix[Bands ? b : 0][1][r1] - prefix[Bands ? b : 0][1][r0];
                             }
-                            const uint32_t up = above ? above[px] : 0, down = below ? below[px] : 0;
-                            perimeter += (up != la) + (down != la);
-                            if (down && down != la) {
-                                const uint64_t k = key(a, node[down]);
-                                if (k == last_down && !B.pairs.empty() && B.pairs.back().first == k) ++B.pairs.back().second;
-                                else add_pair(k);
-                                last_down = k;
-                            } else {
-                                last_down = 0;
+                        } else {
+                            std::fill(sum, sum + 2 * nb, int64_t(0));
+                            for (int px = x; px < end; ++px) {
+                                const std::size_t at = std::size_t(y) * w + px;
+                                for (int b = 0; b < nb; ++b) {
+                                    const double v = band_ptr[b][at] * fixed;  // round half away from zero
+                                    const auto q = static_cast<int64_t>(v + (v >= 0.0 ? 0.5 : -0.5));
+                                    sum[b] += q;
+                                    sumsq[b] += q * q;
+                                }
                             }
+                        }
+                        for (uint64_t p_bits = down_pair & run; p_bits; p_bits &= p_bits - 1) {
+                            const int p = __builtin_ctzll(p_bits);
+                            const uint64_t k = key(a, node[below[xs + p]]);
+                            if (p == last_p + 1 && k == last_k && !B.pairs.empty() && B.pairs.back().first == k) ++B.pairs.back().second;
+                            else add_pair(k);
+                            last_p = p, last_k = k;
                         }
                         if (end < w && row[end] && row[end] != la) add_pair(key(a, node[row[end]]));
                         int64_t* A = a >= B.owned_from ? acc(a) : foreign_acc(a);
@@ -503,7 +611,6 @@ public:
                             half[0] = static_cast<int64_t>(static_cast<uint64_t>(added));
                             half[1] = static_cast<int64_t>(static_cast<uint64_t>(added >> 64));
                         }
-                        x = end;
                     }
                 }
                 }

@@ -43,6 +43,18 @@ bool same_partition(const Image<uint32_t>& a, const Image<uint32_t>& b) {
     }
     return true;
 }
+// The 150 m synthetic town (seed 3) with its bands normalised, and its
+// finest seeds: every regional minimum of the watershed (h 0, no smoothing),
+// thousands of regions.
+Oversegmentation fine_town_seeds(const ScratchDir& dir, Image<float>& img) {
+    make_town(dir, 150, 3, 0);
+    img = RasterReader(dir / "ortho.tif").read_all<float>();
+    normalize_bands(img, {});
+    WatershedOptions fine;
+    fine.h_minima = 0.0;
+    fine.smoothing_sigma_px = 0.0;
+    return watershed_oversegment(img, {}, fine);
+}
 }  // namespace
 
 TEST_CASE("Merging recovers flat-colour regions exactly with every strategy", "[segment]") {
@@ -113,13 +125,8 @@ TEST_CASE("Merging down to a region count through one huge scale: every strategy
     // many times. rag queues every pair and mutual only mutual nearest
     // pairs, so equal labels need the exact same pop order from both.
     ScratchDir dir("seg_min_regions");
-    make_town(dir, 150, 3, 0);
-    Image<float> img = RasterReader(dir / "ortho.tif").read_all<float>();
-    normalize_bands(img, {});
-    WatershedOptions wo;
-    wo.h_minima = 0;
-    wo.smoothing_sigma_px = 0;
-    const Oversegmentation over = watershed_oversegment(img, {}, wo);
+    Image<float> img;
+    const Oversegmentation over = fine_town_seeds(dir, img);
     REQUIRE(over.region_count > 2000);
     RegionMergingOptions mo;
     mo.scales = {1e9};
@@ -344,13 +351,8 @@ TEST_CASE("Region statistics do not depend on the label order or the thread coun
     }
     SECTION("shuffled seeds of a town: 1 thread and all threads agree") {
         ScratchDir dir("seg_shuffled");
-        make_town(dir, 150, 3, 0);
-        Image<float> img = RasterReader(dir / "ortho.tif").read_all<float>();
-        normalize_bands(img, {});
-        WatershedOptions fine;  // every regional minimum a seed: thousands of regions
-        fine.h_minima = 0.0;
-        fine.smoothing_sigma_px = 0.0;
-        const Oversegmentation over = watershed_oversegment(img, {}, fine);
+        Image<float> img;
+        const Oversegmentation over = fine_town_seeds(dir, img);
         const Image<uint32_t> shuffled = permuted(over.labels, over.region_count);
         RegionMergingOptions mo;
         mo.scales = {10, 30, 60};
@@ -368,13 +370,8 @@ TEST_CASE("Region statistics do not depend on the label order or the thread coun
         // holds until the last two labels, and the numbering starts again
         // with the general search: same labels with 1 and all threads.
         ScratchDir dir("seg_nearly_ordered");
-        make_town(dir, 150, 3, 0);
-        Image<float> img = RasterReader(dir / "ortho.tif").read_all<float>();
-        normalize_bands(img, {});
-        WatershedOptions fine;
-        fine.h_minima = 0.0;
-        fine.smoothing_sigma_px = 0.0;
-        const Oversegmentation over = watershed_oversegment(img, {}, fine);
+        Image<float> img;
+        const Oversegmentation over = fine_town_seeds(dir, img);
         REQUIRE(over.region_count > 1000);
         std::vector<uint32_t> to(over.region_count + 1);
         for (uint32_t k = 0; k <= over.region_count; ++k) to[k] = k;
@@ -402,6 +399,41 @@ TEST_CASE("Region statistics do not depend on the label order or the thread coun
     }
 }
 
+TEST_CASE("Region statistics: a block row's sums by runs equal the sums pixel by pixel (any value range, any band count)", "[segment][merging][determinism]") {
+    // The graph sums 1, 3 or 4 bands of values below 2^24 fixed-point units
+    // through prefix sums of each block row; other band counts and value
+    // ranges pixel by pixel. Both must give the same statistics, so the same
+    // merges (colour only: costs then scale exactly with the values).
+    ScratchDir dir("seg_run_sums");
+    Image<float> img;
+    const Oversegmentation over = fine_town_seeds(dir, img);
+    REQUIRE(over.region_count > 1000);
+    RegionMergingOptions mo;
+    mo.scales = {1e9};
+    mo.min_regions = 300;
+    mo.color_weight = 1.0;
+    mo.verify_invariants = true;
+    const auto reference = merge_regions(img, over.labels, over.region_count, mo);
+    REQUIRE(reference.levels[0].regions_after == 300);
+    SECTION("values scaled by 2^20: the fixed point falls below 1, the sums are taken pixel by pixel") {
+        Image<float> big = img;
+        for (float& v : big.data) v = std::ldexp(v, 20);
+        const auto scaled = merge_regions(big, over.labels, over.region_count, mo);
+        CHECK(scaled.levels[0].label_of_input == reference.levels[0].label_of_input);
+    }
+    SECTION("two bands (pixel by pixel) equal three with a zero band of weight 0 (by runs)") {
+        Image<float> two(img.width, img.height, 2);
+        std::copy(img.data.begin(), img.data.begin() + 2 * static_cast<std::ptrdiff_t>(img.pixel_count()), two.data.begin());
+        Image<float> three = img;
+        std::fill(three.data.begin() + 2 * static_cast<std::ptrdiff_t>(img.pixel_count()), three.data.end(), 0.0f);
+        RegionMergingOptions with_zero = mo;
+        with_zero.band_weights = {1, 1, 0};
+        const auto by_pixel = merge_regions(two, over.labels, over.region_count, mo);
+        const auto by_run = merge_regions(three, over.labels, over.region_count, with_zero);
+        CHECK(by_pixel.levels[0].label_of_input == by_run.levels[0].label_of_input);
+        CHECK(by_pixel.levels[0].regions_after == 300);
+    }
+}
 
 TEST_CASE("Watershed with h 0 (seeds found by a parallel walk, no sort) equals the sequential flooding in level order", "[segment][determinism]") {
     RasterReader reader(shared_data("autzen_oregon/autzen_ortho_1ft_epsg2994.tif"));
