@@ -444,7 +444,36 @@ public:
                 const float* const* band_ptr = band_ptrs.data();
                 std::vector<int64_t> wide(Bands ? 0 : 2 * std::size_t(nb));  // a run's sums, any band count
                 bool first_block = true;
-                for (int ys = band_row(j); ys < band_row(j + 1); ys += kStripe)
+                // With quantise_rows, a stripe's band values are quantised
+                // first, row by row (the hardware streams whole rows; the
+                // blocks' short rows it does not), into this buffer the
+                // blocks then read from cache.
+                std::vector<int32_t> quantised(Bands > 0 && quantise_rows ? std::size_t(nb) * kStripe * std::size_t(w) : 0);
+                for (int ys = band_row(j); ys < band_row(j + 1); ys += kStripe) {
+#if defined(__SSE2__)
+                if (!quantised.empty()) {
+                    const __m128 f4 = _mm_set1_ps(static_cast<float>(fixed));
+                    const __m128 half = _mm_set1_ps(0.5f), minus_half = _mm_set1_ps(-0.5f);
+                    for (int y = ys; y < std::min(band_row(j + 1), ys + kStripe); ++y)
+                        for (int b = 0; b < nb; ++b) {
+                            const float* src = band_ptr[b] + std::size_t(y) * w;
+                            int32_t* q = quantised.data() + (std::size_t(b) * kStripe + std::size_t(y - ys)) * w;
+                            int t = 0;
+                            for (; t + 4 <= w; t += 4) {
+                                const __m128 v = _mm_mul_ps(_mm_loadu_ps(src + t), f4);
+                                const __m128i whole = _mm_cvttps_epi32(v);
+                                const __m128 frac = _mm_sub_ps(v, _mm_cvtepi32_ps(whole));
+                                const __m128i up = _mm_castps_si128(_mm_cmpge_ps(frac, half));         // -1 where frac >= 0.5
+                                const __m128i down = _mm_castps_si128(_mm_cmple_ps(frac, minus_half));  // -1 where frac <= -0.5
+                                _mm_storeu_si128(reinterpret_cast<__m128i*>(q + t), _mm_add_epi32(_mm_sub_epi32(whole, up), down));
+                            }
+                            for (; t < w; ++t) {
+                                const double v = src[t] * fixed;
+                                q[t] = static_cast<int32_t>(v + (v >= 0.0 ? 0.5 : -0.5));
+                            }
+                        }
+                }
+#endif
                 for (int xs = 0; xs < w; xs += kStripe) {
                 const std::size_t block = std::size_t(ys / kStripe) * blocks_per_stripe_ + std::size_t(xs / kStripe);
                 // The accumulators of the block's own nodes (numbered by
@@ -474,7 +503,8 @@ public:
                         const std::size_t ahead = std::size_t(y + kRowsAhead) * w;
                         for (int px = xs; px < x_end; px += 16) {
                             prefetch_line(lab + ahead + px);
-                            for (int b = 0; b < nb; ++b) prefetch_line(band_ptr[b] + ahead + px);
+                            if (quantised.empty())
+                                for (int b = 0; b < nb; ++b) prefetch_line(band_ptr[b] + ahead + px);
                         }
                     }
                     // The block row (n <= 64 pixels) as bit masks: run starts,
@@ -523,29 +553,13 @@ public:
                     if constexpr (Bands > 0) {
 #if defined(__SSE2__)
                         if (prefixed) {
-                            const __m128 f4 = _mm_set1_ps(static_cast<float>(fixed));
-                            const __m128 half = _mm_set1_ps(0.5f), minus_half = _mm_set1_ps(-0.5f);
-                            const std::size_t row_start = std::size_t(y) * w;
                             for (int b = 0; b < Bands; ++b) {
-                                alignas(16) int32_t q[kStripe];
-                                const float* src = band_ptr[b] + row_start;
+                                const int32_t* q = quantised.data() + (std::size_t(b) * kStripe + std::size_t(y - ys)) * w + xs;
                                 int t = 0;
-                                for (; t + 4 <= n; t += 4) {
-                                    const __m128 v = _mm_mul_ps(_mm_loadu_ps(src + xs + t), f4);
-                                    const __m128i whole = _mm_cvttps_epi32(v);
-                                    const __m128 frac = _mm_sub_ps(v, _mm_cvtepi32_ps(whole));
-                                    const __m128i up = _mm_castps_si128(_mm_cmpge_ps(frac, half));         // -1 where frac >= 0.5
-                                    const __m128i down = _mm_castps_si128(_mm_cmple_ps(frac, minus_half));  // -1 where frac <= -0.5
-                                    _mm_store_si128(reinterpret_cast<__m128i*>(q + t), _mm_add_epi32(_mm_sub_epi32(whole, up), down));
-                                }
-                                for (; t < n; ++t) {
-                                    const double v = src[xs + t] * fixed;
-                                    q[t] = static_cast<int32_t>(v + (v >= 0.0 ? 0.5 : -0.5));
-                                }
                                 int64_t* ps = prefix[b][0];
                                 int64_t* pq = prefix[b][1];
                                 ps[0] = pq[0] = 0;
-                                for (t = 0; t < n; ++t) {
+                                for (; t < n; ++t) {
                                     const int64_t v = q[t];
                                     ps[t + 1] = ps[t] + v, pq[t + 1] = pq[t] + v * v;
                                 }
@@ -612,6 +626,7 @@ public:
                             half[1] = static_cast<int64_t>(static_cast<uint64_t>(added >> 64));
                         }
                     }
+                }
                 }
                 }
             };
