@@ -21,6 +21,7 @@
 #   bash bench/compare_peers.sh [--raster FILE] [--window col,row,w,h | --centre w,h]
 #                               [--synth SIZE_M] [--grass-threshold T] [--install]
 #                               [--bench PATH]   (another bench_segment build, e.g. an older one)
+#                               [--repeat N]     (runs of our merging; medians count, default 5)
 # Default: the Autzen ortho (shared data), 2000 x 2000 px around its centre,
 # native 1 ft resolution (--centre 4000,4000: the 16 MP window, clipped to the
 # raster). Any GDAL raster with 3 or more bands works (the first 3 are used).
@@ -38,6 +39,7 @@ grass_threshold="0.1"
 centre=""
 install=0
 bench="$here/build/bin/bench_segment"
+repeat=5
 while [ $# -gt 0 ]; do
   case "$1" in
     --raster) raster="$2"; shift 2 ;;
@@ -47,10 +49,12 @@ while [ $# -gt 0 ]; do
     --bench) bench="$2"; shift 2 ;;
     --synth) synth="$2"; window=""; shift 2 ;;
     --grass-threshold) grass_threshold="$2"; shift 2 ;;
+    --repeat) repeat="$2"; shift 2 ;;
     *) echo "compare_peers.sh: unknown argument $1" >&2; exit 2 ;;
   esac
 done
 py=/usr/bin/python3
+[[ "$repeat" =~ ^[1-9][0-9]*$ ]] || { echo "compare_peers.sh: --repeat needs a positive count" >&2; exit 2; }
 [ -x "$bench" ] || { echo "compare_peers.sh: build bench_segment first (cmake --build build --target bench_segment)" >&2; exit 1; }
 [ -r "$raster" ] || [ -n "$synth" ] || { echo "compare_peers.sh: cannot read $raster" >&2; exit 1; }
 have_sk() { "$py" -c 'import skimage' 2>/dev/null; }
@@ -139,14 +143,27 @@ grass_regions=$(tr -d ' ' < "$work/grass.count")
 echo "i.segment: $grass_regions regions in $(wall_of "$work/grass.time") s wall, $(cpu_of "$work/grass.time") s CPU"
 
 echo "== cityforge merging the same seeds to $grass_regions regions (mutual queue)"
-"$bench" --raster "$ortho" --seeds-in "$work/seeds.tif" --scales 1e9 --min-regions "$grass_regions" --strategies mutual \
-  --json "$work/cf_merge.json" > "$work/cf_merge.txt"
-cf_final=$(json "$work/cf_merge.json" 'd["merging"]["mutual"]["regions"]')
-cf_merge=$(json "$work/cf_merge.json" 'd["merging"]["mutual"]["seconds"]')
-cf_merge_cpu=$(json "$work/cf_merge.json" 'd["merging"]["mutual"]["cpu_seconds"]')
-cf_graph=$(json "$work/cf_merge.json" 'd["merging"]["mutual"]["graph_seconds"]')
-cf_graph_cpu=$(json "$work/cf_merge.json" 'd["merging"]["mutual"].get("graph_cpu_seconds", float("nan"))')
-echo "merging: $cf_regions -> $cf_final regions in $cf_merge s wall, $cf_merge_cpu s CPU (region graph included: $cf_graph s wall, $cf_graph_cpu s CPU)"
+# Our side takes well under a second, so one load spike swings a single run
+# by 20 %: it runs $repeat times (separate processes) and the medians count;
+# the spread is printed. GRASS's side is one run of ~45 s, which averages
+# the load over its own length.
+for ((k = 1; k <= repeat; k++)); do
+  "$bench" --raster "$ortho" --seeds-in "$work/seeds.tif" --scales 1e9 --min-regions "$grass_regions" --strategies mutual \
+    --json "$work/cf_merge_$k.json" > "$work/cf_merge.txt"
+done
+med() {  # median (and min-max) of a field over the runs
+  "$py" - "$1" "$work"/cf_merge_*.json <<'PY'
+import json, statistics, sys
+v = [eval(sys.argv[1], {}, {'d': json.load(open(f))['merging']['mutual']}) for f in sys.argv[2:]]
+print(statistics.median(v), min(v), max(v))
+PY
+}
+cf_final=$(json "$work/cf_merge_1.json" 'd["merging"]["mutual"]["regions"]')
+read -r cf_merge cf_merge_lo cf_merge_hi < <(med 'd["seconds"]')
+read -r cf_merge_cpu cf_cpu_lo cf_cpu_hi < <(med 'd["cpu_seconds"]')
+read -r cf_graph _ _ < <(med 'd["graph_seconds"]')
+read -r cf_graph_cpu _ _ < <(med 'd.get("graph_cpu_seconds", float("nan"))')
+echo "merging: $cf_regions -> $cf_final regions, median of $repeat runs: $cf_merge s wall ($cf_merge_lo-$cf_merge_hi), $cf_merge_cpu s CPU ($cf_cpu_lo-$cf_cpu_hi) (region graph included: $cf_graph s wall, $cf_graph_cpu s CPU)"
 # The same as a whole process, like the GRASS figure: start-up, reading the
 # image and the seeds (GDAL), normalising, merging and writing the labels.
 /usr/bin/time -f "%e %U %S" -o "$work/cf_proc.time" "$bench" --raster "$ortho" --seeds-in "$work/seeds.tif" --scales 1e9 \
