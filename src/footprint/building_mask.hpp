@@ -75,6 +75,15 @@ uint32_t label_components(const std::vector<uint8_t>& mask, uint8_t value, int w
 /// min_hole_m2 filled, optional opening, components under min_area_m2 dropped.
 BuildingMask label_buildings(std::vector<uint8_t> mask, int w, int h, const BuildingMaskOptions& options);
 
+/// Buildings (4-connected components, label_buildings with `options`) of
+/// the object pixels `cut` (w x h, 1 = building) that the object rules
+/// (pair groups, split level, neck and core splits) made from the building
+/// pixels `whole` by taking one-pixel cuts out of them. Holes under
+/// options.min_hole_m2 are filled in `whole`, not in `cut`: a cut along a
+/// diagonal or ragged boundary touches the background only at corners, and
+/// filled as small holes its pixels would join the buildings again.
+BuildingMask label_cut_buildings(const std::vector<uint8_t>& whole, std::vector<uint8_t> cut, int w, int h, BuildingMaskOptions options);
+
 /// Per-cell building decisions from the cloud rasters, before components are
 /// formed: `cells` 1 = building; `step_dsm` = the DSM where a cell has its own
 /// evidence (NaN where it was decided from its neighbours), for step splits.

@@ -381,17 +381,6 @@ void write_cv_out(const std::string& dir, const std::vector<std::string>& orthos
 
 }  // namespace
 
-BuildingMask label_cut_buildings(const std::vector<uint8_t>& whole, std::vector<uint8_t> cut, int w, int h, BuildingMaskOptions options) {
-    if (whole.size() != cut.size()) throw Error("building detection", "internal: cut and whole masks differ in size");
-    BuildingMaskOptions fill = options;
-    fill.min_area_m2 = 0.0, fill.opening_radius_px = 0;  // only the holes: every part stays as it is
-    const BuildingMask filled = label_buildings(whole, w, h, fill);
-    // Building where the filled mask is, except the cut pixels (building in `whole`, not in `cut`).
-    for (std::size_t i = 0; i < cut.size(); ++i) cut[i] = filled.labels.data[i] != 0 && (cut[i] || !whole[i]) ? 1 : 0;
-    options.min_hole_m2 = 0.0;  // filled above
-    return label_buildings(std::move(cut), w, h, options);
-}
-
 BuildingMask detect_building_mask(const detect::DetectorModel& model, const DetectionImage& image, int threads, const Progress& progress) {
     detect::check_bands(model, image.layout, image.path);
     const detect::Detection d = detect::detect_buildings(model, image.normalised, image.valid, image.gsd_m, threads, progress);

@@ -46,15 +46,6 @@ Image<float> heights_on_image_grid(const DetectionImage& image, const std::strin
 /// -> 0..255 (NaN = 0), and records it in the layout (ndsm_band).
 void add_ndsm_band(DetectionImage& image, const Image<float>& heights_m);
 
-/// Buildings (4-connected components, label_buildings with `options`) of
-/// the object pixels `cut` (w x h, 1 = building) that the object rules
-/// (pair groups, split level, neck and core splits) made from the building
-/// pixels `whole` by taking one-pixel cuts out of them. Holes under
-/// options.min_hole_m2 are filled in `whole`, not in `cut`: a cut along a
-/// diagonal or ragged boundary touches the background only at corners, and
-/// filled as small holes its pixels would join the buildings again.
-BuildingMask label_cut_buildings(const std::vector<uint8_t>& whole, std::vector<uint8_t> cut, int w, int h, BuildingMaskOptions options);
-
 /// Building pixels and components from a model on one image (used by
 /// `footprints --detector model` and by the cross-validation).
 BuildingMask detect_building_mask(const detect::DetectorModel& model, const DetectionImage& image, int threads = 0,
