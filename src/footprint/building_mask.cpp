@@ -552,6 +552,10 @@ std::size_t keep_largest_parts(BuildingMask& mask) {
 
 BuildingMask label_cut_buildings(const std::vector<uint8_t>& whole, std::vector<uint8_t> cut, int w, int h, BuildingMaskOptions options) {
     if (whole.size() != cut.size()) throw Error("building detection", "internal: cut and whole masks differ in size");
+    // Nothing cut (no object rule split a building; the usual case in the
+    // cross-validation's sweeps): label_buildings fills, opens and drops in
+    // that order, so one call gives the same buildings as the two below.
+    if (cut == whole) return label_buildings(std::move(cut), w, h, options);
     BuildingMaskOptions fill = options;
     fill.min_area_m2 = 0.0, fill.opening_radius_px = 0;  // only the holes: every part stays as it is
     const BuildingMask filled = label_buildings(whole, w, h, fill);
