@@ -36,11 +36,11 @@ struct RunInputs {
 };
 
 void add_run_inputs(CLI::App* cmd, RunInputs& r) {
-    cmd->add_option("--ortho", r.ortho, "Ortho: the pixel grid and CRS of the run");
+    cmd->add_option("--ortho", r.ortho, "Ortho: the pixel grid and CRS of the run (without it: a grid over the footprints, or over the cloud alone)");
     cmd->add_option("--cloud", r.cloud, "Dense point cloud (LAS, LAZ, COPC, PLY, XYZ)");
     cmd->add_option("--cloud-crs", r.cloud_crs, "CRS of the cloud, e.g. EPSG:7415");
     cmd->add_option("--footprints", r.footprints, "Existing footprints: skip extraction, compute heights, roofs and models");
-    cmd->add_option("--working-crs", r.working_crs, "Projected CRS to work in (default: the ortho's; a lon/lat ortho: the UTM zone of its centre)");
+    cmd->add_option("--working-crs", r.working_crs, "Projected CRS to work in (default: the ortho's, else the footprints' or the cloud's; a lon/lat ortho: the UTM zone of its centre)");
     cmd->add_option("--out-crs", r.out_crs, "Projected CRS of the city models (default: the input's; the working CRS for a lon/lat input)");
     cmd->add_option("--config", r.config, "JSON config (schemas/run_config.schema.json); command-line options override it");
     cmd->add_option("--tile-size", r.tile_size, "Tile core edge in pixels (default 4000)");

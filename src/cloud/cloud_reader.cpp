@@ -389,6 +389,8 @@ CloudReader::CloudReader(const std::string& path) : path_(path) {
         auto las = std::make_unique<LasFormatReader>(path);
         crs_records_ = las->reader_.header().crs;
         announced_ = las->reader_.header().point_count;
+        const LasHeader& h = las->reader_.header();
+        announced_bounds_ = std::array<double, 4>{h.min[0], h.min[1], h.max[0], h.max[1]};
         copc_ = las->copc_.has_value();
         color_ = las->reader_.header().has_color(), gps_ = las->reader_.header().has_gps_time();
         format_ = CloudFormat::las;

@@ -3,8 +3,10 @@
 // binary, x/y/z plus optional colour, classification, intensity) and XYZ/CSV
 // text. Streamed in chunks. No GDAL here: the CRS records the file carries
 // are passed on raw; resolve_cloud_crs (io/cloud_crs.hpp) interprets them.
+#include <array>
 #include <cstdint>
 #include <memory>
+#include <optional>
 #include <string>
 
 #include "cloud/las.hpp"
@@ -43,6 +45,9 @@ public:
     const LasCrsRecords& crs_records() const { return crs_records_; }
     /// Point count announced by the header (LAS, PLY); 0 when unknown (XYZ).
     uint64_t announced_points() const { return announced_; }
+    /// The header's x/y bounds {min_x, min_y, max_x, max_y} (LAS, file CRS
+    /// units; points outside them are dropped when read); empty for PLY/XYZ.
+    const std::optional<std::array<double, 4>>& announced_bounds() const { return announced_bounds_; }
     /// Appends up to `max_points` points to `out`; returns how many (0 = end).
     /// Points with a NaN or infinite x, y or z (PLY and XYZ may hold them, e.g.
     /// PCL's organized clouds) are dropped, and so are LAS points outside the
@@ -70,6 +75,7 @@ private:
     CloudFormat format_ = CloudFormat::las;
     LasCrsRecords crs_records_;
     uint64_t announced_ = 0;
+    std::optional<std::array<double, 4>> announced_bounds_;
     bool copc_ = false;
     bool color_ = false, gps_ = false;  ///< LAS: the point format holds colour / GPS time
     bool end_reported_ = false;

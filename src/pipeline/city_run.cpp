@@ -84,11 +84,13 @@ int context_px(const RunOptions& o, double gsd_m) {
 void RunOptions::validate() const {
     if (cloud.empty() && ortho.empty()) throw Error("--ortho", "give an ortho, a cloud, or both");
     if (cloud.empty() && !footprints.empty()) throw Error("--cloud", "heights for given footprints need a dense point cloud");
-    if (ortho.empty() && footprints.empty()) throw Error("--ortho", "give the ortho (its grid and CRS) or existing --footprints");
+    if (ortho.empty() && footprints.empty() && extraction.mode == DetectionMode::ortho_cloud)
+        throw Error("extraction.mode", "ortho_cloud needs an ortho: give --ortho, or choose auto or cloud_only");
     if (tile_size_px < 64) throw Error("--tile-size", "must be at least 64 pixels");
     if (!(overlap_m >= 0)) throw Error("--overlap-m", "must be >= 0");
     if (threads < 0) throw Error("--threads", "must be >= 0");
     if (!(footprint_grid_m > 0)) throw Error("footprint_grid_m", "must be > 0");
+    if (!(extraction.mask.gsd_m > 0)) throw Error("cloud_grid_m", "must be > 0");
     buildings.validate();
     if (footprints.empty()) extraction.mask.validate(), extraction.segmentation.validate();
     if (!cloud.empty() && extraction.mode == DetectionMode::ortho_only)
@@ -130,7 +132,8 @@ json to_json(const RunOptions& o) {
               {"simplify_m", o.extraction.simplify_m},
               {"detector", to_string(o.extraction.detector)},
               {"model", o.extraction.model},
-              {"footprint_grid_m", o.footprint_grid_m}}},
+              {"footprint_grid_m", o.footprint_grid_m},
+              {"cloud_grid_m", o.extraction.mask.gsd_m}}},
             {"cleaning",
              {{"outlier_filter", o.buildings.heights.outliers.enabled},
               {"recompute_ground", !o.buildings.heights.ground.trust_classification},
@@ -165,7 +168,7 @@ RunOptions run_options_from_json(const json& j, const std::string& where, RunOpt
     if (j.contains("extraction")) {
         const json& x = j["extraction"];
         const std::string w = where + ": extraction";
-        check_keys(x, {"mode", "cloud_cell_px", "use_point_classes", "min_height_m", "min_area_m2", "min_hole_m2", "opening_px", "hidden_completion_max_share", "split_step_m", "roof_seams", "crown_plane_sigma_m", "min_split_part_m2", "fit", "fit_tolerance_pct", "simplify_m", "footprint_grid_m", "detector", "model"}, w);
+        check_keys(x, {"mode", "cloud_cell_px", "use_point_classes", "min_height_m", "min_area_m2", "min_hole_m2", "opening_px", "hidden_completion_max_share", "split_step_m", "roof_seams", "crown_plane_sigma_m", "min_split_part_m2", "fit", "fit_tolerance_pct", "simplify_m", "footprint_grid_m", "cloud_grid_m", "detector", "model"}, w);
         take(x, "min_height_m", o.extraction.mask.min_height_m, w), take(x, "min_area_m2", o.extraction.mask.min_area_m2, w);
         take(x, "min_hole_m2", o.extraction.mask.min_hole_m2, w), take(x, "opening_px", o.extraction.mask.opening_radius_px, w);
         take(x, "hidden_completion_max_share", o.extraction.mask.hidden_completion_max_share, w);
@@ -174,7 +177,7 @@ RunOptions run_options_from_json(const json& j, const std::string& where, RunOpt
         take(x, "roof_seams", o.extraction.seams.enabled, w);
         take(x, "crown_plane_sigma_m", o.extraction.segmentation.max_crown_plane_sigma_m, w);
         take(x, "fit_tolerance_pct", o.extraction.recursive.tolerance_pct, w), take(x, "simplify_m", o.extraction.simplify_m, w);
-        take(x, "footprint_grid_m", o.footprint_grid_m, w);
+        take(x, "footprint_grid_m", o.footprint_grid_m, w), take(x, "cloud_grid_m", o.extraction.mask.gsd_m, w);
         take(x, "model", o.extraction.model, w);
         if (x.contains("detector")) {
             std::string d;
@@ -330,6 +333,21 @@ RunManifest plan_run(const RunOptions& in) {
         m.grid = {info.transform, info.width, info.height};
         m.crs_wkt = info.crs.wkt;
         gsd_m = std::abs(info.transform.pixel_width) * info.metres_per_unit;
+    } else if (o.footprints.empty()) {
+        // Cloud only: a grid of extraction.mask.gsd_m cells (the config's
+        // extraction.cloud_grid_m, as `footprints --gsd`) over the cloud's
+        // points (cloud_point_bounds: a few points kilometres away do not make
+        // it), in the cloud's projected CRS or --working-crs.
+        const CrsInfo cloud = o.working_crs.empty() ? require_cloud_crs(o.cloud, o.cloud_crs) : crs_from_user_input(o.working_crs, "--working-crs");
+        if (cloud.geographic) throw Error("--working-crs", "the working CRS must be projected (metres)");
+        const Extent e = cloud_bounds_in(o.cloud, o.cloud_crs, cloud);
+        const double unit = ground_metres_per_unit_at(cloud, e);
+        const double cell = o.extraction.mask.gsd_m / unit;
+        const double x0 = std::floor(e.min_x / cell) * cell, y1 = std::ceil(e.max_y / cell) * cell;
+        m.grid = {GeoTransform{x0, cell, y1, -cell}, static_cast<int>(std::ceil((e.max_x - x0) / cell)) + 1,
+                  static_cast<int>(std::ceil((y1 - e.min_y) / cell)) + 1};
+        m.crs_wkt = cloud.wkt;
+        gsd_m = o.extraction.mask.gsd_m;
     } else {
         // The footprints' own projected CRS, or --working-crs, or (lon/lat footprints) the
         // cloud's projected CRS, else their UTM zone.
@@ -424,9 +442,16 @@ RunManifest plan_run(const RunOptions& in) {
     // every building near a core's edge be done again on a grown window).
     m.overlap_px = std::max(m.overlap_px, context_px(m.options, gsd_m));
     const int ts = o.tile_size_px;
+    // Cloud only: tiles whose core holds no point of the cloud are left out
+    // (a corridor or an L-shaped survey across its bounding box); a tile
+    // finds buildings only from the points of its core.
+    std::vector<uint64_t> points_in_core;
+    if (o.ortho.empty() && extract) points_in_core = count_points_in_blocks(o.cloud, o.cloud_crs, crs_from_wkt(m.crs_wkt, "grid"), m.grid, ts);
+    const int tiles_x = (m.grid.width + ts - 1) / ts;
     int k = 0;
     for (int r = 0; r < m.grid.height; r += ts)
         for (int c = 0; c < m.grid.width; c += ts) {
+            if (!points_in_core.empty() && points_in_core[static_cast<std::size_t>(r / ts) * tiles_x + c / ts] == 0) continue;
             TileSpec t;
             t.index = k++;
             t.core = {c, r, std::min(ts, m.grid.width - c), std::min(ts, m.grid.height - r)};
@@ -684,7 +709,7 @@ WindowBuildings detect_on_window(const RunManifest& m, const PixelWindow& win, P
                            (win.row + win.height < m.grid.height ? 8 : 0);
     // With the run's ortho the buildings are redrawn along it, unless the
     // config asks for the cloud alone.
-    const DetectionMode detection = o.extraction.mode == DetectionMode::cloud_only ? DetectionMode::cloud_only : DetectionMode::ortho_cloud;
+    const DetectionMode detection = o.extraction.mode == DetectionMode::cloud_only || o.ortho.empty() ? DetectionMode::cloud_only : DetectionMode::ortho_cloud;
     d.mode = to_string(detection);
     const BuildingCells cells = std::move(wc.cells);
     d.mask = buildings_from_cells(cells, win.width, win.height, mo);

@@ -1,7 +1,7 @@
 #pragma once
 // `cityforge run`, `plan` and `merge-tiles`: the whole chain (cloud ->
 // ground -> nDSM -> buildings -> footprints and fits -> heights -> LOD2 roofs
-// -> city models) over an area of any size, cut into tiles of the ortho's
+// -> city models) over an area of any size, cut into tiles of the ortho's (or, without one, the footprints' or the cloud's)
 // pixel grid with an overlap. A building belongs to the one tile whose core
 // holds its reference pixel (its first pixel in raster order, global
 // coordinates) or, for given footprints, the centre of its bounding box; so
@@ -23,8 +23,13 @@
 namespace cityforge {
 
 struct RunOptions {
-    std::string ortho;        ///< defines the pixel grid and CRS of the run (required unless footprints are given)
-    std::string cloud;        ///< dense cloud (LAS/PLY/XYZ), required
+    /// Defines the pixel grid and CRS of the run. Without an ortho the grid
+    /// covers the given footprints (footprint_grid_m cells) or, cloud only,
+    /// the cloud's points (extraction.mask.gsd_m cells, config key
+    /// extraction.cloud_grid_m; the cloud's projected
+    /// CRS or working_crs; only tiles whose core holds points are run).
+    std::string ortho;
+    std::string cloud;        ///< dense cloud (LAS/LAZ/COPC/PLY/XYZ); required unless the run is ortho-only
     std::string cloud_crs;    ///< overrides/supplies the cloud's CRS
     std::string footprints;   ///< existing footprints: extraction is skipped
     /// Projected CRS the run works in ("EPSG:32723"): the ortho is read
@@ -61,7 +66,7 @@ struct TileSpec {
 
 struct RunManifest {
     RunOptions options;
-    GridSpec grid;          ///< the run's pixel grid (the ortho's, or one over the footprints)
+    GridSpec grid;          ///< the run's pixel grid (the ortho's, or one over the footprints or the cloud)
     std::string crs_wkt;    ///< horizontal CRS of the grid (the working CRS: projected)
     int overlap_px = 0;
     std::vector<TileSpec> tiles;

@@ -82,15 +82,25 @@ WindowedRasters rasterize_cloud_by_windows(const std::string& cloud_path, const 
     return out;
 }
 
-DensestSquare densest_square(const std::string& cloud_path, const std::string& cloud_crs_override, const CrsInfo& target,
-                             const Extent& within, double cell) {
-    DensestSquare best{{0.5 * (within.min_x + within.max_x), 0.5 * (within.min_y + within.max_y)}, 0};
-    if (!(cell > 0) || !(within.min_x <= within.max_x && within.min_y <= within.max_y)) return best;
-    // At most 4 M squares: larger areas get larger squares.
-    auto count = [&](double c) { return (std::floor(within.width() / c) + 1) * (std::floor(within.height() / c) + 1); };
-    while (count(cell) > 4e6) cell *= 2;
-    const auto nx = static_cast<std::size_t>(std::floor(within.width() / cell)) + 1, ny = static_cast<std::size_t>(std::floor(within.height() / cell)) + 1;
-    std::vector<uint64_t> counts(nx * ny, 0);
+bool read_cloud_by_windows(const CloudReader& reader, uint64_t max_points, double cell) {
+    if (max_points == 0) return false;
+    if (reader.announced_points() > max_points) return true;
+    const auto& b = reader.announced_bounds();
+    if (!b || !(cell > 0)) return false;
+    const double cells = std::floor(((*b)[2] - (*b)[0]) / cell + 1.0) * std::floor(((*b)[3] - (*b)[1]) / cell + 1.0);
+    if (!(cells > static_cast<double>(max_points))) return false;  // also NaN bounds
+    char text[200];
+    std::snprintf(text, sizeof text, "its bounding box (%.0f x %.0f CRS units) would need a grid of %.3g cells of %g: read window by window",
+                  (*b)[2] - (*b)[0], (*b)[3] - (*b)[1], cells, cell);
+    log::info(reader.path() + ": " + text);
+    return true;
+}
+
+namespace {
+// One streamed pass over the cloud's points moved to `target` (as they are
+// when `target` is empty or has the same horizontal CRS as the file).
+template <class Visit>
+void for_each_point_on(const std::string& cloud_path, const std::string& cloud_crs_override, const CrsInfo& target, Visit&& visit) {
     const CrsInfo from = resolve_cloud_crs(cloud_path, cloud_crs_override).crs;
     const bool move = !target.empty() && !from.empty() && !same_horizontal_crs(from, target);
     CloudReader reader(cloud_path);
@@ -103,14 +113,26 @@ DensestSquare densest_square(const std::string& cloud_path, const std::string& c
             z.assign(chunk.size(), 0.0);
             transform_points(from, target, chunk.x, chunk.y, z, cloud_path);
         }
-        for (std::size_t i = 0; i < chunk.size(); ++i) {
-            const double x = chunk.x[i], y = chunk.y[i];
-            if (!(x >= within.min_x && x <= within.max_x && y >= within.min_y && y <= within.max_y)) continue;
-            const auto c = std::min(nx - 1, static_cast<std::size_t>((x - within.min_x) / cell));
-            const auto r = std::min(ny - 1, static_cast<std::size_t>((y - within.min_y) / cell));
-            ++counts[r * nx + c];
-        }
+        for (std::size_t i = 0; i < chunk.size(); ++i) visit(chunk.x[i], chunk.y[i]);
     }
+}
+}  // namespace
+
+DensestSquare densest_square(const std::string& cloud_path, const std::string& cloud_crs_override, const CrsInfo& target,
+                             const Extent& within, double cell) {
+    DensestSquare best{{0.5 * (within.min_x + within.max_x), 0.5 * (within.min_y + within.max_y)}, 0};
+    if (!(cell > 0) || !(within.min_x <= within.max_x && within.min_y <= within.max_y)) return best;
+    // At most 4 M squares: larger areas get larger squares.
+    auto count = [&](double c) { return (std::floor(within.width() / c) + 1) * (std::floor(within.height() / c) + 1); };
+    while (count(cell) > 4e6) cell *= 2;
+    const auto nx = static_cast<std::size_t>(std::floor(within.width() / cell)) + 1, ny = static_cast<std::size_t>(std::floor(within.height() / cell)) + 1;
+    std::vector<uint64_t> counts(nx * ny, 0);
+    for_each_point_on(cloud_path, cloud_crs_override, target, [&](double x, double y) {
+        if (!(x >= within.min_x && x <= within.max_x && y >= within.min_y && y <= within.max_y)) return;
+        const auto c = std::min(nx - 1, static_cast<std::size_t>((x - within.min_x) / cell));
+        const auto r = std::min(ny - 1, static_cast<std::size_t>((y - within.min_y) / cell));
+        ++counts[r * nx + c];
+    });
     std::size_t at = 0;
     for (std::size_t k = 1; k < counts.size(); ++k)
         if (counts[k] > counts[at]) at = k;
@@ -120,6 +142,20 @@ DensestSquare densest_square(const std::string& cloud_path, const std::string& c
     const double x0 = within.min_x + static_cast<double>(at % nx) * cell, y0 = within.min_y + static_cast<double>(at / nx) * cell;
     best.centre = {0.5 * (x0 + std::min(within.max_x, x0 + cell)), 0.5 * (y0 + std::min(within.max_y, y0 + cell))};
     return best;
+}
+
+std::vector<uint64_t> count_points_in_blocks(const std::string& cloud_path, const std::string& cloud_crs_override, const CrsInfo& target,
+                                             const GridSpec& grid, int block_px) {
+    if (block_px < 1 || grid.width < 1 || grid.height < 1) throw Error("count_points_in_blocks", "needs a grid and blocks of at least one pixel");
+    const auto bx = static_cast<std::size_t>((grid.width + block_px - 1) / block_px), by = static_cast<std::size_t>((grid.height + block_px - 1) / block_px);
+    std::vector<uint64_t> counts(bx * by, 0);
+    for_each_point_on(cloud_path, cloud_crs_override, target, [&](double x, double y) {
+        const PixelPoint p = grid.transform.map_to_pixel({x, y});
+        const double c = std::floor(p.col), r = std::floor(p.row);
+        if (!(c >= 0 && r >= 0 && c < grid.width && r < grid.height)) return;  // also NaN
+        ++counts[static_cast<std::size_t>(r) / static_cast<std::size_t>(block_px) * bx + static_cast<std::size_t>(c) / static_cast<std::size_t>(block_px)];
+    });
+    return counts;
 }
 
 namespace {

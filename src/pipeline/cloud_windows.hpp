@@ -11,8 +11,10 @@
 //    overlap only (canonical point order, exact neighbours).
 #include <cstdint>
 #include <string>
+#include <vector>
 
 #include "cloud/cloud_rasters.hpp"
+#include "cloud/cloud_reader.hpp"
 #include "core/progress.hpp"
 #include "pipeline/prepared_cloud.hpp"
 
@@ -31,6 +33,13 @@ struct CloudPlan {
 /// whole cloud when it is smaller). One streamed pass over the file.
 CloudPlan plan_cloud(const std::string& cloud_path, const std::string& cloud_crs_override, const CrsInfo& target,
                      const OutlierFilterOptions& outliers, const MapPoint& centre);
+
+/// Whether a command reads the cloud window by window: it announces more
+/// than `max_points` points, or its header's bounding box (LAS) would need a
+/// grid of more than `max_points` cells of `cell` file-CRS units, e.g. the
+/// ground filter's grid over a corridor at 45 degrees or over points
+/// kilometres apart (said in an info line). `max_points` = 0: never.
+bool read_cloud_by_windows(const CloudReader& reader, uint64_t max_points, double cell);
 
 /// Edge (metres) of square tiles whose windows (tile + 2 x overlap_m a side)
 /// hold about `max_points` at `density_m2`: at most `tile_m`, at least 50 m.
@@ -73,6 +82,14 @@ struct DensestSquare {
 };
 DensestSquare densest_square(const std::string& cloud_path, const std::string& cloud_crs_override, const CrsInfo& target,
                              const Extent& within, double cell);
+
+/// Points of the cloud (moved to `target`) on each block of `block_px` x
+/// `block_px` pixels of `grid`, row-major from the grid's first row and
+/// column (the last blocks may be cut); points off the grid are not counted.
+/// One streamed pass. Used to leave out the tiles of a run where the cloud
+/// has no point (a corridor across its bounding box).
+std::vector<uint64_t> count_points_in_blocks(const std::string& cloud_path, const std::string& cloud_crs_override, const CrsInfo& target,
+                                             const GridSpec& grid, int block_px);
 
 /// The bounding box of the cloud's points (file CRS), one streamed pass:
 /// what the grid of a cloud held whole or read by windows covers. A box

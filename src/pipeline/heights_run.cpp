@@ -250,10 +250,12 @@ HeightsRunReport run_heights_unguarded(const std::string& footprints_path, const
     o.heights.validate();
     if (!(o.tile_m > 0) || !(o.tile_margin_m >= 4 * o.heights.ground_buffer_m))
         throw Error("--tile-m", "tiles must be > 0 m and their margin at least 4 x the ground buffer");
-    const uint64_t announced = CloudReader(cloud_path).announced_points();
     HeightsStage st;
     std::size_t tiles = 1;
-    if (o.max_points_in_memory > 0 && announced > o.max_points_in_memory) {
+    // By windows also when the ground filter's grid over the cloud's box would
+    // dwarf its points (a corridor across its box): each window's grid covers
+    // the footprints of one tile.
+    if (read_cloud_by_windows(CloudReader(cloud_path), o.max_points_in_memory, o.ground.cell)) {
         PolygonLayer footprints = read_footprints_for_heights(footprints_path, cloud_path, o);
         st = tiled_heights_stage(std::move(footprints), footprints_path, cloud_path, o, progress.sub(0.0, 0.95), tiles);
     } else {

@@ -5,6 +5,7 @@
 #include <nlohmann/json.hpp>
 #include <ogrsf_frmts.h>
 
+#include "cloud/las.hpp"
 #include "core/error.hpp"
 #include "heights/building_heights.hpp"
 #include "io/vector.hpp"
@@ -228,4 +229,35 @@ TEST_CASE("heights read window by window (cloud larger than the memory budget) w
     const bool same = a == b;
     CHECK(same);
     CHECK(read_polygon_layer(dir / "tiled.geojson").features.size() == 135);
+}
+
+TEST_CASE("heights over a cloud whose bounding box dwarfs its points (one point 30 km away) are read by windows, with the same bytes as held whole", "[heights][windows]") {
+    ScratchDir dir("heights_far_point");
+    const SynthResult s = make_town(dir, 300, 3, 6.0);
+    LasHeader h;
+    PointCloud c = read_las(s.cloud_path, &h);
+    const PointCloud first = [&] {
+        PointCloud one;
+        one.append(c, 0);
+        return one;
+    }();
+    c.append(first, 0);
+    c.x.back() += 30000.0, c.y.back() += 20000.0;  // a stray point: the box is 30 x 20 km, the ground grid 6e8 cells
+    {
+        LasWriter w(dir / "far.las", h.scale, h.offset, h.crs.wkt);
+        w.write(c);
+        w.close();
+    }
+    HeightsRunOptions o;
+    o.ground.trust_classification = false;  // SMRF, whose grid follows the box
+    o.tile_m = 150.0;
+    const HeightsRunReport windows = run_heights(s.truth_path, dir / "far.las", dir / "windows.geojson", o);
+    CHECK(windows.tiles > 1);  // below the point budget, but read by windows
+    o.max_points_in_memory = 0;  // held whole
+    const HeightsRunReport whole = run_heights(s.truth_path, dir / "far.las", dir / "whole.geojson", o);
+    CHECK(whole.tiles == 1);
+    const std::string a = test::slurp(dir / "whole.geojson"), b = test::slurp(dir / "windows.geojson");
+    CHECK(a.find("\"height_m\"") != std::string::npos);
+    const bool same = a == b;
+    CHECK(same);
 }

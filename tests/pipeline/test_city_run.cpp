@@ -3,6 +3,7 @@
 #include <fstream>
 #include <nlohmann/json.hpp>
 
+#include "cloud/las.hpp"
 #include "pipeline/city_run.hpp"
 #include "synth/synth.hpp"
 #include "synth_fixture.hpp"
@@ -139,6 +140,68 @@ TEST_CASE("run without a cloud - ortho-only footprints as one tile - no heights 
     CHECK(test::run_command("xmllint --noout --nonet --schema " + test::shared_data("citygml2_schemas/CityGML.xsd") + " " + (dir / "out/buildings_lod1.gml")).exit_code == 0);
     const auto audit = test::run_cli("audit footprints --pred " + (dir / "out/buildings.geojson") + " --ref " + s.truth_path + " --out " + (dir / "a"));
     CHECK(audit.exit_code == 0);
+}
+
+TEST_CASE("run with a cloud alone - a grid over its points, tiles without points left out - tile-invariant - matches the truth", "[run]") {
+    ScratchDir dir("run_cloud_only");
+    const SynthResult s = test::make_town(dir, 400, 6, 8.0);
+    const std::string env = "SOURCE_DATE_EPOCH=1700000000 ";
+    const std::string common = " run --cloud " + s.cloud_path + " --vertical-crs EPSG:5773 --formats geojson,gpkg,cityjson --quiet";
+    REQUIRE(test::run_command(env + test::cli() + common + " --tile-size 4000 --threads 2 --out " + (dir / "one")).exit_code == 0);
+    const auto many = test::run_command(env + test::cli() + common + " --tile-size 350 --threads 1 --out " + (dir / "many"));
+    INFO(many.err);
+    REQUIRE(many.exit_code == 0);
+    for (const char* f : {"buildings.geojson", "buildings.gpkg", "buildings.city.json"}) {
+        INFO(f);
+        CHECK(same_bytes(dir / (std::string("one/") + f), dir / (std::string("many/") + f)));
+    }
+    const auto report = nlohmann::json::parse(test::slurp(dir / "many/run_report.json"));
+    CHECK(report["tiles"].size() == 9);  // 801 x 801 cells of 0.5 m
+    CHECK_FALSE(report["inputs"].contains("ortho"));
+    CHECK(report["working_crs"] == "EPSG:32650");
+    CHECK(report["counts"]["valid_lod2"] == report["counts"]["buildings"]);
+    CHECK(test::slurp(dir / "many/buildings.geojson").find("\"mode\": \"cloud_only\"") != std::string::npos);
+    const auto audit = test::run_cli("audit footprints --pred " + (dir / "many/buildings.gpkg") + " --ref " + s.truth_path + " --out " +
+                                     (dir / "audit") + " --fail-below f1=0.95,iou=0.85");
+    CHECK(audit.exit_code == 0);
+    // An L-shaped survey: the north-east corner has no point, so the tile
+    // whose core lies there is not planned (it would only fail for want of points).
+    LasHeader h;
+    const PointCloud all = read_las(s.cloud_path, &h);
+    PointCloud kept;
+    double minx = all.x[0], maxy = all.y[0];
+    for (std::size_t i = 0; i < all.size(); ++i) minx = std::min(minx, all.x[i]), maxy = std::max(maxy, all.y[i]);
+    for (std::size_t i = 0; i < all.size(); ++i)
+        if (!(all.x[i] > minx + 300.0 && all.y[i] > maxy - 200.0)) kept.append(all, i);
+    {
+        LasWriter w(dir / "l_shape.las", h.scale, h.offset, h.crs.wkt);
+        w.write(kept);
+        w.close();
+    }
+    const auto l = test::run_command(env + test::cli() + " run --cloud " + (dir / "l_shape.las") +
+                                     " --vertical-crs EPSG:5773 --formats geojson --quiet --tile-size 350 --out " + (dir / "l"));
+    INFO(l.err);
+    REQUIRE(l.exit_code == 0);
+    const auto lr = nlohmann::json::parse(test::slurp(dir / "l/run_report.json"));
+    CHECK(lr["tiles"].size() == 8);
+    for (const auto& t : lr["tiles"]) CHECK(t["status"] == "done");
+    CHECK(lr["counts"]["buildings"].get<int>() > 0);
+    CHECK(lr["counts"]["buildings"].get<int>() < report["counts"]["buildings"].get<int>());
+    // The grid's cell from the config (extraction.cloud_grid_m): 401 x 401 cells of 1 m.
+    {
+        std::ofstream cfg(dir / "coarse.json");
+        cfg << R"({"extraction": {"cloud_grid_m": 1.0}, "export": {"formats": ["geojson"]}})";
+    }
+    REQUIRE(test::run_cli("plan --cloud " + s.cloud_path + " --config " + (dir / "coarse.json") + " --tile-size 350 --out " + (dir / "coarse_manifest.json") +
+                          " --quiet").exit_code == 0);
+    const RunManifest coarse = read_manifest(dir / "coarse_manifest.json");
+    CHECK(coarse.tiles.size() == 4);
+    CHECK(coarse.grid.transform.pixel_width == 1.0);
+    // Without an ortho, ortho_cloud detection cannot be asked for.
+    RunOptions o;
+    o.cloud = s.cloud_path;
+    o.extraction.mode = DetectionMode::ortho_cloud;
+    CHECK_THROWS_WITH(o.validate(), Catch::StartsWith("extraction.mode") && Catch::Contains("needs an ortho"));
 }
 
 TEST_CASE("run refuses detection modes its inputs cannot serve", "[run][errors]") {
