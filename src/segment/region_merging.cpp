@@ -164,7 +164,7 @@ public:
         // The records' first touch (page faults and zeroing, most of the
         // construction) needs no node numbers: it runs beside the
         // numbering, whose fast path is one thread's pass (4 MP Autzen
-        // seeds: ~11 ms of wall time off the graph on two cores).
+        // seeds with both cores free: the two 35-37 -> 30-33 ms wall).
         tbb::parallel_invoke([&] { number_nodes(labels); }, [&] { construct_records(); });
         build(image, labels);
     }
@@ -1204,43 +1204,24 @@ RegionMergingResult merge_regions(const Image<float>& image, const Image<uint32_
             if (!k || !(g.nn_cost(r) < threshold)) return false;
             return o.strategy != QueueStrategy::mutual || g.nn(k) == r;
         };
-        auto queue_initial = [&](uint32_t r, std::vector<QueueEntry>& out) {
+        auto queue_initial = [&](uint32_t r) {
             if (o.strategy == QueueStrategy::rag) {
                 for (const Neighbour& k : g.neighbours(r))
-                    if (k.id > r) out.push_back(entry(r, k.id, k.cost));
+                    if (k.id > r) initial.push_back(entry(r, k.id, k.cost));
             } else if ((o.strategy == QueueStrategy::nng || g.nn(r) > r) && queued_nn(r)) {
-                out.push_back(entry(r, g.nn(r), g.nn_cost(r)));  // mutual pairs once, from their lower node
+                initial.push_back(entry(r, g.nn(r), g.nn_cost(r)));  // mutual pairs once, from their lower node
             }
         };
         constexpr uint32_t kEntriesAhead = 8;
-        if (s == 0) {
-            // One pass over all records: the live regions and their
-            // entries, by chunks of nodes on all threads (each chunk's in
-            // ascending order, then joined in chunk order: the same lists
-            // on any number of threads; 4 MP Autzen seeds: 10 -> ~5 ms wall
-            // on two cores).
-            const int chunks = std::clamp(tbb::this_task_arena::max_concurrency(), 1, 8);
-            std::vector<std::vector<uint32_t>> chunk_live(chunks);
-            std::vector<std::vector<QueueEntry>> chunk_entries(chunks);
-            tbb::parallel_for(0, chunks, [&](int c) {
-                const uint32_t first = static_cast<uint32_t>(1 + uint64_t(n - 1) * uint64_t(c) / uint64_t(chunks));
-                const uint32_t last = static_cast<uint32_t>(1 + uint64_t(n - 1) * uint64_t(c + 1) / uint64_t(chunks));
-                std::vector<uint32_t>& own_live = chunk_live[c];
-                std::vector<QueueEntry>& own_entries = chunk_entries[c];
-                for (uint32_t r = first; r < last; ++r) {
-                    if (r + kEntriesAhead < last) g.prefetch_node(g.nn(r + kEntriesAhead), 1);  // read by queued_nn
-                    if (g.alive(r)) previous_compact[r] = g.key_of(r), own_live.push_back(r), queue_initial(r, own_entries);
-                }
-            });
-            std::size_t entries = 0;
-            for (const auto& v : chunk_entries) entries += v.size();
-            initial.reserve(entries);
-            for (int c = 0; c < chunks; ++c) {
-                live.insert(live.end(), chunk_live[c].begin(), chunk_live[c].end());
-                initial.insert(initial.end(), chunk_entries[c].begin(), chunk_entries[c].end());
+        if (s == 0) {  // one pass over all records: the live regions and their entries
+            // (on one thread: by chunks on both, 4 MP Autzen seeds took
+            // 10 -> 8 ms wall but 10 -> 15-18 ms CPU)
+            for (uint32_t r = 1; r < n; ++r) {
+                if (r + kEntriesAhead < n) g.prefetch_node(g.nn(r + kEntriesAhead), 1);  // read by queued_nn
+                if (g.alive(r)) previous_compact[r] = g.key_of(r), live.push_back(r), queue_initial(r);
             }
         } else {
-            for (uint32_t r : live) queue_initial(r, initial);
+            for (uint32_t r : live) queue_initial(r);
         }
         level.initial_queue_length = initial.size();
         level.queue_pushes = initial.size();
