@@ -1094,6 +1094,15 @@ RunReport merge_tiles(const RunManifest& m, const std::string& out_dir, const Pr
     if (!rep.tiles.empty() && std::all_of(rep.tiles.begin(), rep.tiles.end(), [](const TileReport& t) { return t.status == "failed"; }))
         throw Error(out_dir, "every tile failed (" + std::to_string(rep.tiles.size()) + " of " + std::to_string(rep.tiles.size()) +
                                  "; tile " + std::to_string(rep.tiles.front().index) + ": " + rep.tiles.front().reason + "); no city model written");
+    // Nothing found is an error too (as in `footprints`): an empty city model
+    // would read as "no buildings here" rather than "none could be found".
+    if (buildings.empty()) {
+        const RunOptions& o = m.options;
+        const std::string& input = !o.footprints.empty() ? o.footprints : !o.cloud.empty() ? o.cloud : o.ortho;
+        throw Error(input, "no building found in " + std::to_string(rep.tiles.size()) + " tile(s) (" +
+                               (o.cloud.empty() ? "ortho only" : o.ortho.empty() ? "cloud only" : "ortho and cloud") +
+                               "; the tiles' reports are in " + (dir).string() + "); no city model written");
+    }
     progress(0.3, "tiles read");
     // One order whatever the tiling: by numeric id when ids are numbers, else as text.
     auto key = [](const std::string& id) {

@@ -187,6 +187,19 @@ TEST_CASE("run with a cloud alone - a grid over its points, tiles without points
     for (const auto& t : lr["tiles"]) CHECK(t["status"] == "done");
     CHECK(lr["counts"]["buildings"].get<int>() > 0);
     CHECK(lr["counts"]["buildings"].get<int>() < report["counts"]["buildings"].get<int>());
+    // Only the ground's points: the tiles run, find nothing, and the run says so (exit 1, no city model).
+    {
+        PointCloud ground;
+        for (std::size_t i = 0; i < all.size(); ++i)
+            if (all.classification[i] == 2) ground.append(all, i);
+        LasWriter w(dir / "ground.las", h.scale, h.offset, h.crs.wkt);
+        w.write(ground);
+        w.close();
+    }
+    const auto none = test::run_cli("run --cloud " + (dir / "ground.las") + " --vertical-crs EPSG:5773 --formats geojson --quiet --out " + (dir / "none"));
+    CHECK(none.exit_code == 1);
+    CHECK(none.err.find("ground.las: no building found in 1 tile(s) (cloud only") != std::string::npos);
+    CHECK_FALSE(std::filesystem::exists(dir / "none/buildings.geojson"));
     // The grid's cell from the config (extraction.cloud_grid_m): 401 x 401 cells of 1 m.
     {
         std::ofstream cfg(dir / "coarse.json");
