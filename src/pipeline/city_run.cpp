@@ -442,24 +442,46 @@ RunManifest plan_run(const RunOptions& in) {
     // every building near a core's edge be done again on a grown window).
     m.overlap_px = std::max(m.overlap_px, context_px(m.options, gsd_m));
     const int ts = o.tile_size_px;
-    // Cloud only: tiles whose core holds no point of the cloud are left out
-    // (a corridor or an L-shaped survey across its bounding box); a tile
-    // finds buildings only from the points of its core.
-    std::vector<uint64_t> points_in_core;
-    if (o.ortho.empty() && extract) points_in_core = count_points_in_blocks(o.cloud, o.cloud_crs, crs_from_wkt(m.crs_wkt, "grid"), m.grid, ts);
-    const int tiles_x = (m.grid.width + ts - 1) / ts;
-    int k = 0;
+    // Extraction: a tile whose window holds no point of the cloud would only
+    // fail for want of points ("no points in tile K"), so it is not planned:
+    // a corridor or an L-shaped survey costs its own area, not its box's, and
+    // a cloud over part of the ortho runs where it has points. Points are
+    // counted on blocks of 64 px or more; a block the window only partly
+    // covers counts whole, so a kept tile may still find no point (then it
+    // fails as before), but no tile with points is left out.
+    std::vector<uint64_t> block_points;
+    int block = 64;
+    while ((int64_t(m.grid.width) / block + 1) * (int64_t(m.grid.height) / block + 1) > (int64_t(1) << 24)) block *= 2;
+    const int blocks_x = (m.grid.width + block - 1) / block;
+    if (extract) block_points = count_points_in_blocks(o.cloud, o.cloud_crs, crs_from_wkt(m.crs_wkt, "grid"), m.grid, block);
+    auto window_has_points = [&](const PixelWindow& w) {
+        if (block_points.empty()) return true;
+        for (int br = w.row / block; br <= (w.row + w.height - 1) / block; ++br)
+            for (int bc = w.col / block; bc <= (w.col + w.width - 1) / block; ++bc)
+                if (block_points[static_cast<std::size_t>(br) * blocks_x + bc]) return true;
+        return false;
+    };
+    int k = 0, left_out = 0;
     for (int r = 0; r < m.grid.height; r += ts)
         for (int c = 0; c < m.grid.width; c += ts) {
-            if (!points_in_core.empty() && points_in_core[static_cast<std::size_t>(r / ts) * tiles_x + c / ts] == 0) continue;
             TileSpec t;
-            t.index = k++;
             t.core = {c, r, std::min(ts, m.grid.width - c), std::min(ts, m.grid.height - r)};
             const int c0 = std::max(0, c - m.overlap_px), r0 = std::max(0, r - m.overlap_px);
             const int c1 = std::min(m.grid.width, c + t.core.width + m.overlap_px), r1 = std::min(m.grid.height, r + t.core.height + m.overlap_px);
             t.window = {c0, r0, c1 - c0, r1 - r0};
+            if (!window_has_points(t.window)) {
+                ++left_out;
+                continue;
+            }
+            t.index = k++;
             m.tiles.push_back(t);
         }
+    if (left_out > 0) {
+        const std::string text = o.cloud + ": " + std::to_string(left_out) + " of " + std::to_string(left_out + k) +
+                                 " tiles have no point of the cloud in their window and are not planned";
+        if (o.ortho.empty()) log::info(text);
+        else log::warning(text + " (no building is detected there: the cloud covers part of " + o.ortho + ")");
+    }
     return m;
 }
 

@@ -27,7 +27,8 @@ struct RunOptions {
     /// covers the given footprints (footprint_grid_m cells) or, cloud only,
     /// the cloud's points (extraction.mask.gsd_m cells, config key
     /// extraction.cloud_grid_m; the cloud's projected
-    /// CRS or working_crs; only tiles whose core holds points are run).
+    /// CRS or working_crs). Runs that extract buildings plan only the tiles
+    /// whose window holds points of the cloud.
     std::string ortho;
     std::string cloud;        ///< dense cloud (LAS/LAZ/COPC/PLY/XYZ); required unless the run is ortho-only
     std::string cloud_crs;    ///< overrides/supplies the cloud's CRS

@@ -165,14 +165,15 @@ TEST_CASE("run with a cloud alone - a grid over its points, tiles without points
                                      (dir / "audit") + " --fail-below f1=0.95,iou=0.85");
     CHECK(audit.exit_code == 0);
     // An L-shaped survey: the north-east corner has no point, so the tile
-    // whose core lies there is not planned (it would only fail for want of points).
+    // whose window (core + overlap) lies there is not planned (it would only
+    // fail for want of points).
     LasHeader h;
     const PointCloud all = read_las(s.cloud_path, &h);
     PointCloud kept;
     double minx = all.x[0], maxy = all.y[0];
     for (std::size_t i = 0; i < all.size(); ++i) minx = std::min(minx, all.x[i]), maxy = std::max(maxy, all.y[i]);
     for (std::size_t i = 0; i < all.size(); ++i)
-        if (!(all.x[i] > minx + 300.0 && all.y[i] > maxy - 200.0)) kept.append(all, i);
+        if (!(all.x[i] > minx + 150.0 && all.y[i] > maxy - 300.0)) kept.append(all, i);
     {
         LasWriter w(dir / "l_shape.las", h.scale, h.offset, h.crs.wkt);
         w.write(kept);
@@ -187,6 +188,15 @@ TEST_CASE("run with a cloud alone - a grid over its points, tiles without points
     for (const auto& t : lr["tiles"]) CHECK(t["status"] == "done");
     CHECK(lr["counts"]["buildings"].get<int>() > 0);
     CHECK(lr["counts"]["buildings"].get<int>() < report["counts"]["buildings"].get<int>());
+    // With the ortho, the same tile is left out and said in a warning (before, it failed for want of points).
+    const auto lo = test::run_cli("run --ortho " + s.ortho_path + " --cloud " + (dir / "l_shape.las") +
+                                  " --vertical-crs EPSG:5773 --formats geojson --tile-size 350 --out " + (dir / "lo"));
+    INFO(lo.err);
+    REQUIRE(lo.exit_code == 0);
+    CHECK(lo.err.find("l_shape.las: 1 of 9 tiles have no point of the cloud in their window and are not planned") != std::string::npos);
+    const auto lor = nlohmann::json::parse(test::slurp(dir / "lo/run_report.json"));
+    CHECK(lor["tiles"].size() == 8);
+    for (const auto& t : lor["tiles"]) CHECK(t["status"] == "done");
     // Only the ground's points: the tiles run, find nothing, and the run says so (exit 1, no city model).
     {
         PointCloud ground;
