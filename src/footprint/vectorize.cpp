@@ -99,6 +99,39 @@ void emit_edges(const Image<uint32_t>& labels, int x, int y, uint32_t v, std::ve
 
 }  // namespace
 
+Polygon fill_pinched_pockets(const Polygon& polygon) {
+    const Ring& ring = polygon.outer;
+    const double sign = signed_area(ring) < 0 ? -1.0 : 1.0;
+    auto same = [](const MapPoint& a, const MapPoint& b) { return a.x == b.x && a.y == b.y; };
+    // Cut at every repeated vertex (a stack of the vertices since each one's
+    // first visit): each loop closed there is a ring of its own.
+    std::vector<Ring> loops;
+    Ring stack;
+    for (const MapPoint& p : ring) {
+        std::size_t at = stack.size();
+        for (std::size_t i = 0; i < stack.size(); ++i)
+            if (same(stack[i], p)) {
+                at = i;
+                break;
+            }
+        if (at == stack.size()) {
+            stack.push_back(p);
+            continue;
+        }
+        loops.emplace_back(stack.begin() + static_cast<std::ptrdiff_t>(at), stack.end());
+        stack.resize(at + 1);
+    }
+    if (loops.empty()) return polygon;
+    loops.push_back(std::move(stack));
+    Polygon out = polygon;
+    double best = 0.0;
+    for (Ring& l : loops) {
+        const double a = signed_area(l) * sign;
+        if (l.size() >= 3 && a > best) best = a, out.outer = std::move(l);
+    }
+    return out;
+}
+
 std::vector<Polygon> vectorize_region(const Image<uint32_t>& labels, uint32_t region, const GeoTransform& t) {
     std::vector<Edge> edges;
     const uint32_t* l = labels.band_data(0);

@@ -21,6 +21,15 @@ std::vector<Polygon> vectorize_region(const Image<uint32_t>& labels, uint32_t re
 /// absent labels are empty). One pass over the raster plus the boundaries.
 std::vector<std::vector<Polygon>> vectorize_all(const Image<uint32_t>& labels, const GeoTransform& transform);
 
+/// `polygon` with its exterior ring made simple where it passes one vertex
+/// twice: a background pocket open to the outside only diagonally, which the
+/// 4-connected outline enters and leaves through that vertex (an exterior
+/// touching itself is not a valid polygon, and a hole touching the exterior
+/// would make the extruded walls share an edge). The pocket is filled: of the
+/// loops the ring splits into, the one of the exterior's orientation and
+/// largest area stays. Holes are kept. Unchanged when no vertex repeats.
+Polygon fill_pinched_pockets(const Polygon& polygon);
+
 /// Douglas–Peucker simplification of every ring with `tolerance` (CRS units).
 /// A ring that would collapse below 3 vertices is kept as it was.
 Polygon simplify_polygon(const Polygon& polygon, double tolerance);

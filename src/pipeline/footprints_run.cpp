@@ -180,7 +180,19 @@ FootprintTable footprint_table(const BuildingMask& mask, const Image<float>& nds
             status = "fit_failed", reason = e.what();
         }
         orient_polygon(out);
-        if (status == "ok" && !polygon_is_valid(out)) status = "fit_failed", reason = "the fit is not a valid polygon", out = raw, err = 0.0, iou = 1.0;
+        if (status == "ok" && !polygon_is_valid(out)) {
+            // A fit that kept an outline passing one vertex twice (a pocket
+            // open to the outside only diagonally, e.g. on sparse LiDAR): the
+            // pocket filled (fill_pinched_pockets) gives a simple ring.
+            const Polygon filled = fill_pinched_pockets(out);
+            if (polygon_is_valid(filled)) {
+                reason = "a pocket open only diagonally was filled";
+                const FitAccuracy acc = fit_accuracy(raw, filled);
+                out = filled, err = acc.area_error_pct, iou = acc.iou;
+            } else {
+                status = "fit_failed", reason = "the fit is not a valid polygon", out = raw, err = 0.0, iou = 1.0;
+            }
+        }
         std::vector<Ring> rings{out.outer};
         for (const Ring& h : out.holes) rings.push_back(h);
         std::size_t vertices = out.outer.size();

@@ -64,6 +64,26 @@ TEST_CASE("L-shapes - holes and diagonal pixels vectorise validly", "[footprint]
     const auto pp = vectorize_region(pinch, 9, kGrid);
     REQUIRE(pp.size() == 1);
     CHECK(polygon_area(pp[0]) == Approx((36 - 4) * 0.25));
+    // A pocket open to the outside only diagonally (pixel 5,5 beside the cut
+    // corner 6,6; seen on IGN Lidar HD): the exterior runs into it and back
+    // through one vertex, which is not a valid polygon. fill_pinched_pockets
+    // fills the pocket: a simple ring, the corner pixel still cut off.
+    auto pocket = paint(10, 10, {{4, 1, 1, 6, 6}});
+    pocket.at(0, 6, 6) = 0, pocket.at(0, 5, 5) = 0;
+    const auto kp = vectorize_region(pocket, 4, kGrid);
+    REQUIRE(kp.size() == 1);
+    CHECK_FALSE(polygon_is_valid(kp[0]));
+    const Polygon filled = fill_pinched_pockets(kp[0]);
+    CHECK(polygon_is_valid(filled));
+    CHECK(filled.holes.empty());
+    CHECK(polygon_area(filled) == Approx((36 - 1) * 0.25));
+    CHECK(signed_area(filled.outer) > 0);
+    for (std::size_t i = 0; i < filled.outer.size(); ++i)
+        for (std::size_t j = i + 1; j < filled.outer.size(); ++j)
+            CHECK_FALSE((filled.outer[i].x == filled.outer[j].x && filled.outer[i].y == filled.outer[j].y));
+    // A simple outline comes back unchanged.
+    CHECK(fill_pinched_pockets(lp[0]).outer.size() == lp[0].outer.size());
+    CHECK(polygon_area(fill_pinched_pockets(rp[0])) == Approx(polygon_area(rp[0])));
 }
 
 TEST_CASE("A rectangle fits itself with 0 % error - a rotated noisy rectangle's orientation comes back within 1 degree", "[footprint][fit]") {

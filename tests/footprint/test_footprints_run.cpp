@@ -297,3 +297,34 @@ TEST_CASE("Footprints from a cloud read window by window (above the memory budge
         CHECK(same);
     }
 }
+
+TEST_CASE("A building outline through one vertex twice (a pocket open only diagonally) is written as a simple ring, not a failed fit", "[footprints][vectorize]") {
+    // 6 x 6 cells with the corner cell (6,6) cut off and the cell (5,5)
+    // beside it empty: the 4-connected outline enters that pocket and leaves
+    // it through one vertex (seen on IGN Lidar HD, 1 of 625 buildings).
+    BuildingMask mask;
+    mask.labels = Image<uint32_t>(10, 10, 1, 0u);
+    for (int y = 1; y <= 6; ++y)
+        for (int x = 1; x <= 6; ++x) mask.labels.at(0, x, y) = 1;
+    mask.labels.at(0, 6, 6) = 0, mask.labels.at(0, 5, 5) = 0;
+    mask.count = 1;
+    FootprintsRunOptions o;
+    o.fit = FootprintFit::raw;
+    o.simplify_m = 0.0;  // the exact pixel outline, as the fits may keep it
+    const GeoTransform grid{500000.0, 0.5, 4400100.0, -0.5};
+    const FootprintTable t = footprint_table(mask, Image<float>(), grid, 0, 0, {}, "cloud_only", 1.0, 1.0,
+                                             crs_from_user_input("EPSG:32650", "test"), o);
+    REQUIRE(t.features.size() == 1);
+    const auto field = [&](const std::string& name) {
+        for (std::size_t i = 0; i < t.fields.size(); ++i)
+            if (t.fields[i].name == name) return t.features[0].values[i];
+        FAIL("no field " << name);
+        return AttributeValue();
+    };
+    CHECK(std::get<std::string>(field("status")) == "ok");
+    CHECK(std::get<std::string>(field("reason")) == "a pocket open only diagonally was filled");
+    REQUIRE(t.features[0].geometry.size() == 1);
+    const Polygon& p = t.features[0].geometry[0];
+    CHECK(polygon_is_valid(p));
+    CHECK(polygon_area(p) == Approx(35 * 0.25));  // the pocket filled, the corner still cut off
+}
