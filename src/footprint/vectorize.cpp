@@ -123,12 +123,21 @@ Polygon fill_pinched_pockets(const Polygon& polygon) {
     }
     if (loops.empty()) return polygon;
     loops.push_back(std::move(stack));
-    Polygon out = polygon;
-    double best = 0.0;
-    for (Ring& l : loops) {
-        const double a = signed_area(l) * sign;
-        if (l.size() >= 3 && a > best) best = a, out.outer = std::move(l);
+    // One loop of the exterior's orientation (the outline), the others
+    // pockets (the opposite one) or degenerate; anything else, e.g. two
+    // pieces touching at a corner, is left unchanged (not ours to drop).
+    std::size_t outline = loops.size();
+    for (std::size_t i = 0; i < loops.size(); ++i) {
+        if (loops[i].size() < 3) continue;
+        const double a = signed_area(loops[i]) * sign;
+        if (a > 0) {
+            if (outline != loops.size()) return polygon;
+            outline = i;
+        }
     }
+    if (outline == loops.size()) return polygon;
+    Polygon out = polygon;
+    out.outer = std::move(loops[outline]);
     return out;
 }
 

@@ -25,9 +25,11 @@ std::vector<std::vector<Polygon>> vectorize_all(const Image<uint32_t>& labels, c
 /// twice: a background pocket open to the outside only diagonally, which the
 /// 4-connected outline enters and leaves through that vertex (an exterior
 /// touching itself is not a valid polygon, and a hole touching the exterior
-/// would make the extruded walls share an edge). The pocket is filled: of the
-/// loops the ring splits into, the one of the exterior's orientation and
-/// largest area stays. Holes are kept. Unchanged when no vertex repeats.
+/// would make the extruded walls share an edge). The pocket is filled: the
+/// ring splits into loops, and when exactly one has the exterior's
+/// orientation (the others being pockets) it stays. Holes are kept.
+/// Unchanged when no vertex repeats or when two loops have the exterior's
+/// orientation (pieces touching at a corner: nothing is dropped).
 Polygon fill_pinched_pockets(const Polygon& polygon);
 
 /// Douglas–Peucker simplification of every ring with `tolerance` (CRS units).

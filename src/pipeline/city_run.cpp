@@ -343,7 +343,8 @@ RunManifest plan_run(const RunOptions& in) {
         const Extent e = cloud_bounds_in(o.cloud, o.cloud_crs, cloud);
         const double unit = ground_metres_per_unit_at(cloud, e);
         const double cell = o.extraction.mask.gsd_m / unit;
-        const double x0 = std::floor(e.min_x / cell) * cell, y1 = std::ceil(e.max_y / cell) * cell;
+        // The top edge strictly above the highest point: windows keep y < top.
+        const double x0 = std::floor(e.min_x / cell) * cell, y1 = (std::floor(e.max_y / cell) + 1) * cell;
         m.grid = {GeoTransform{x0, cell, y1, -cell}, static_cast<int>(std::ceil((e.max_x - x0) / cell)) + 1,
                   static_cast<int>(std::ceil((y1 - e.min_y) / cell)) + 1};
         m.crs_wkt = cloud.wkt;
@@ -446,20 +447,29 @@ RunManifest plan_run(const RunOptions& in) {
     // fail for want of points ("no points in tile K"), so it is not planned:
     // a corridor or an L-shaped survey costs its own area, not its box's, and
     // a cloud over part of the ortho runs where it has points. Points are
-    // counted on blocks of 64 px or more; a block the window only partly
-    // covers counts whole, so a kept tile may still find no point (then it
-    // fails as before), but no tile with points is left out.
-    std::vector<uint64_t> block_points;
-    int block = 64;
-    while ((int64_t(m.grid.width) / block + 1) * (int64_t(m.grid.height) / block + 1) > (int64_t(1) << 24)) block *= 2;
-    const int blocks_x = (m.grid.width + block - 1) / block;
-    if (extract) block_points = count_points_in_blocks(o.cloud, o.cloud_crs, crs_from_wkt(m.crs_wkt, "grid"), m.grid, block);
+    // counted on blocks of 16 px or more (summed-area table); a block the
+    // window only partly covers counts whole, so a kept tile may still find
+    // no point (then it fails as before), but no tile with points is left out.
+    std::vector<uint64_t> sums;  // (blocks_y + 1) x (blocks_x + 1), inclusive prefix sums
+    int block = 16;
+    while ((int64_t(m.grid.width) / block + 1) * (int64_t(m.grid.height) / block + 1) > (int64_t(1) << 22)) block *= 2;
+    const int blocks_x = (m.grid.width + block - 1) / block, blocks_y = (m.grid.height + block - 1) / block;
+    if (extract) {
+        const std::vector<uint64_t> counts = count_points_in_blocks(o.cloud, o.cloud_crs, crs_from_wkt(m.crs_wkt, "grid"), m.grid, block);
+        sums.assign(static_cast<std::size_t>(blocks_y + 1) * (blocks_x + 1), 0);
+        for (int by = 0; by < blocks_y; ++by)
+            for (int bx = 0; bx < blocks_x; ++bx)
+                sums[static_cast<std::size_t>(by + 1) * (blocks_x + 1) + bx + 1] = counts[static_cast<std::size_t>(by) * blocks_x + bx] +
+                                                                                   sums[static_cast<std::size_t>(by) * (blocks_x + 1) + bx + 1] +
+                                                                                   sums[static_cast<std::size_t>(by + 1) * (blocks_x + 1) + bx] -
+                                                                                   sums[static_cast<std::size_t>(by) * (blocks_x + 1) + bx];
+    }
     auto window_has_points = [&](const PixelWindow& w) {
-        if (block_points.empty()) return true;
-        for (int br = w.row / block; br <= (w.row + w.height - 1) / block; ++br)
-            for (int bc = w.col / block; bc <= (w.col + w.width - 1) / block; ++bc)
-                if (block_points[static_cast<std::size_t>(br) * blocks_x + bc]) return true;
-        return false;
+        if (sums.empty()) return true;
+        const std::size_t x0 = static_cast<std::size_t>(w.col / block), x1 = static_cast<std::size_t>((w.col + w.width - 1) / block) + 1;
+        const std::size_t y0 = static_cast<std::size_t>(w.row / block), y1 = static_cast<std::size_t>((w.row + w.height - 1) / block) + 1;
+        const std::size_t stride = static_cast<std::size_t>(blocks_x) + 1;
+        return sums[y1 * stride + x1] + sums[y0 * stride + x0] - sums[y0 * stride + x1] - sums[y1 * stride + x0] > 0;
     };
     int k = 0, left_out = 0;
     for (int r = 0; r < m.grid.height; r += ts)
@@ -476,6 +486,12 @@ RunManifest plan_run(const RunOptions& in) {
             t.index = k++;
             m.tiles.push_back(t);
         }
+    m.tiles_left_out = left_out;
+    if (k == 0) {  // the box met the grid, no point did: nothing to run
+        const CrsInfo grid_crs = crs_from_wkt(m.crs_wkt, "grid");
+        throw Error(o.cloud, "no point of the cloud lies on the grid of " + (o.ortho.empty() ? o.cloud : o.ortho) + ": cloud " +
+                                 describe_extent(bounds(), grid_crs) + ", grid " + describe_extent(grid_extent(m), grid_crs));
+    }
     if (left_out > 0) {
         const std::string text = o.cloud + ": " + std::to_string(left_out) + " of " + std::to_string(left_out + k) +
                                  " tiles have no point of the cloud in their window and are not planned";
@@ -492,6 +508,7 @@ void write_manifest(const std::string& path, const RunManifest& m) {
     j["options"] = to_json(m.options);
     j["grid"] = {{"geotransform", m.grid.transform.to_gdal()}, {"width", m.grid.width}, {"height", m.grid.height}, {"crs_wkt", m.crs_wkt}};
     j["overlap_px"] = m.overlap_px;
+    j["tiles_left_out"] = m.tiles_left_out;
     json tiles = json::array();
     for (const TileSpec& t : m.tiles)
         tiles.push_back({{"index", t.index},
@@ -520,6 +537,7 @@ RunManifest read_manifest(const std::string& path) {
         m.grid = {GeoTransform::from_gdal(gt), j["grid"].at("width").get<int>(), j["grid"].at("height").get<int>()};
         m.crs_wkt = j["grid"].at("crs_wkt").get<std::string>();
         m.overlap_px = j.at("overlap_px").get<int>();
+        m.tiles_left_out = j.value("tiles_left_out", 0);
         for (const auto& t : j.at("tiles")) {
             const auto c = t.at("core").get<std::array<int, 4>>(), w = t.at("window").get<std::array<int, 4>>();
             m.tiles.push_back({t.at("index").get<int>(), {c[0], c[1], c[2], c[3]}, {w[0], w[1], w[2], w[3]}});
@@ -1111,6 +1129,10 @@ RunReport merge_tiles(const RunManifest& m, const std::string& out_dir, const Pr
             }
         }
     }
+    if (m.tiles_left_out > 0)
+        rep.warnings.push_back(std::to_string(m.tiles_left_out) + " of " + std::to_string(m.tiles_left_out + static_cast<int>(m.tiles.size())) +
+                               " tiles have no point of " + m.options.cloud + " in their window and were not planned" +
+                               (m.options.ortho.empty() ? "" : " (no building is detected there)"));
     // Every tile failed: nothing to model, and empty city models would read as
     // "no buildings here". The tiles' reports (DIR/tiles/) keep every reason.
     if (!rep.tiles.empty() && std::all_of(rep.tiles.begin(), rep.tiles.end(), [](const TileReport& t) { return t.status == "failed"; }))

@@ -70,6 +70,9 @@ struct RunManifest {
     GridSpec grid;          ///< the run's pixel grid (the ortho's, or one over the footprints or the cloud)
     std::string crs_wkt;    ///< horizontal CRS of the grid (the working CRS: projected)
     int overlap_px = 0;
+    /// Tiles of the grid not planned: their window holds no point of the
+    /// cloud (runs that extract buildings); said in the run report's warnings.
+    int tiles_left_out = 0;
     std::vector<TileSpec> tiles;
 };
 

@@ -87,8 +87,13 @@ bool read_cloud_by_windows(const CloudReader& reader, uint64_t max_points, doubl
     if (reader.announced_points() > max_points) return true;
     const auto& b = reader.announced_bounds();
     if (!b || !(cell > 0)) return false;
+    for (double v : *b)
+        if (!std::isfinite(v)) return false;
+    if (!((*b)[0] <= (*b)[2] && (*b)[1] <= (*b)[3])) return false;  // an empty or inverted header box says nothing
     const double cells = std::floor(((*b)[2] - (*b)[0]) / cell + 1.0) * std::floor(((*b)[3] - (*b)[1]) / cell + 1.0);
-    if (!(cells > static_cast<double>(max_points))) return false;  // also NaN bounds
+    // Large and sparse: more cells than the budget and than 4 per point (a
+    // fully covered LAS of under 1 point per cell stays whole).
+    if (!(cells > static_cast<double>(max_points)) || !(cells > 4.0 * static_cast<double>(reader.announced_points()))) return false;
     char text[200];
     std::snprintf(text, sizeof text, "its bounding box (%.0f x %.0f CRS units) would need a grid of %.3g cells of %g: read window by window",
                   (*b)[2] - (*b)[0], (*b)[3] - (*b)[1], cells, cell);

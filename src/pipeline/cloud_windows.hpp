@@ -35,8 +35,9 @@ CloudPlan plan_cloud(const std::string& cloud_path, const std::string& cloud_crs
                      const OutlierFilterOptions& outliers, const MapPoint& centre);
 
 /// Whether a command reads the cloud window by window: it announces more
-/// than `max_points` points, or its header's bounding box (LAS) would need a
-/// grid of more than `max_points` cells of `cell` file-CRS units, e.g. the
+/// than `max_points` points, or its header's bounding box (LAS; finite,
+/// min <= max) would need a grid of more than `max_points` cells of `cell`
+/// file-CRS units and of more than 4 cells per announced point, e.g. the
 /// ground filter's grid over a corridor at 45 degrees or over points
 /// kilometres apart (said in an info line). `max_points` = 0: never.
 bool read_cloud_by_windows(const CloudReader& reader, uint64_t max_points, double cell);

@@ -81,6 +81,12 @@ TEST_CASE("L-shapes - holes and diagonal pixels vectorise validly", "[footprint]
     for (std::size_t i = 0; i < filled.outer.size(); ++i)
         for (std::size_t j = i + 1; j < filled.outer.size(); ++j)
             CHECK_FALSE((filled.outer[i].x == filled.outer[j].x && filled.outer[i].y == filled.outer[j].y));
+    // Two pieces touching at a corner (both of the exterior's orientation):
+    // unchanged, neither is dropped.
+    Polygon corner;
+    corner.outer = {{0, 0}, {2, 0}, {2, 2}, {3, 2}, {3, 3}, {2, 3}, {2, 2}, {0, 2}};
+    CHECK(polygon_area(fill_pinched_pockets(corner)) == Approx(polygon_area(corner)));
+    CHECK(fill_pinched_pockets(corner).outer.size() == corner.outer.size());
     // A simple outline comes back unchanged.
     CHECK(fill_pinched_pockets(lp[0]).outer.size() == lp[0].outer.size());
     CHECK(polygon_area(fill_pinched_pockets(rp[0])) == Approx(polygon_area(rp[0])));

@@ -197,6 +197,44 @@ TEST_CASE("run with a cloud alone - a grid over its points, tiles without points
     const auto lor = nlohmann::json::parse(test::slurp(dir / "lo/run_report.json"));
     CHECK(lor["tiles"].size() == 8);
     for (const auto& t : lor["tiles"]) CHECK(t["status"] == "done");
+    bool said = false;  // also in the report, for merge-tiles on another host
+    for (const auto& w : lor["warnings"]) said = said || w.get<std::string>().find("1 of 9 tiles have no point of") != std::string::npos;
+    CHECK(said);
+    {
+        std::ofstream cfg(dir / "no_outliers.json");
+        cfg << R"({"cleaning": {"outlier_filter": false}, "export": {"formats": ["geojson"]}})";
+    }
+    // A cloud whose box covers the ortho but none of whose points lie on it
+    // (two patches beyond opposite corners): refused at plan time, naming both.
+    {
+        PointCloud far;
+        for (std::size_t i = 0; i < all.size() && far.size() < 400; ++i) {
+            far.append(all, i);
+            far.x.back() += far.size() % 2 ? -600.0 : 600.0;
+            far.y.back() += far.size() % 2 ? -600.0 : 600.0;
+        }
+        LasWriter w(dir / "far.las", h.scale, h.offset, h.crs.wkt);
+        w.write(far);
+        w.close();
+    }
+    const auto off = test::run_cli("run --ortho " + s.ortho_path + " --cloud " + (dir / "far.las") + " --config " + (dir / "no_outliers.json") +
+                                   " --tile-size 350 --out " + (dir / "off"));
+    CHECK(off.exit_code == 1);
+    CHECK(off.err.find("far.las: no point of the cloud lies on the grid of " + s.ortho_path) != std::string::npos);
+    CHECK_FALSE(std::filesystem::exists(dir / "off/buildings.geojson"));
+    // One point on a whole multiple of the cell: the grid's top edge lies
+    // above it, so the tile holds it (before: "no points in tile 0").
+    {
+        PointCloud one;
+        one.append(all, 0);
+        one.x.back() = 500100.0, one.y.back() = 4400100.0;
+        LasWriter w(dir / "one.las", {0.01, 0.01, 0.01}, {500000.0, 4400000.0, 0.0}, h.crs.wkt);
+        w.write(one);
+        w.close();
+    }
+    const auto single = test::run_cli("run --cloud " + (dir / "one.las") + " --config " + (dir / "no_outliers.json") + " --out " + (dir / "single"));
+    CHECK(single.exit_code == 1);
+    CHECK(single.err.find("one.las: no building found in 1 tile(s)") != std::string::npos);
     // Only the ground's points: the tiles run, find nothing, and the run says so (exit 1, no city model).
     {
         PointCloud ground;
