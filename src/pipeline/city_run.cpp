@@ -307,6 +307,16 @@ Extent covered_part(const RunManifest& m, const Extent& cloud) {
 }
 }  // namespace
 
+namespace {
+// What plan_run says (a log line) and the run report keeps (a warning) about
+// the tiles left out for want of points.
+std::string tiles_left_out_note(const RunManifest& m) {
+    return std::to_string(m.tiles_left_out) + " of " + std::to_string(m.tiles_left_out + static_cast<int>(m.tiles.size())) + " tiles have no point of " +
+           m.options.cloud + " in their window and are not planned" +
+           (m.options.ortho.empty() ? "" : " (no building is detected there: the cloud covers part of " + m.options.ortho + ")");
+}
+}  // namespace
+
 RasterOpenOptions run_ortho_open_options(const RunOptions& o) {
     RasterOpenOptions ro;
     ro.project_geographic = true;  // metres: a lon/lat ortho is read on its UTM zone
@@ -493,10 +503,8 @@ RunManifest plan_run(const RunOptions& in) {
                                  describe_extent(bounds(), grid_crs) + ", grid " + describe_extent(grid_extent(m), grid_crs));
     }
     if (left_out > 0) {
-        const std::string text = o.cloud + ": " + std::to_string(left_out) + " of " + std::to_string(left_out + k) +
-                                 " tiles have no point of the cloud in their window and are not planned";
-        if (o.ortho.empty()) log::info(text);
-        else log::warning(text + " (no building is detected there: the cloud covers part of " + o.ortho + ")");
+        if (o.ortho.empty()) log::info(tiles_left_out_note(m));
+        else log::warning(tiles_left_out_note(m));
     }
     return m;
 }
@@ -1129,10 +1137,7 @@ RunReport merge_tiles(const RunManifest& m, const std::string& out_dir, const Pr
             }
         }
     }
-    if (m.tiles_left_out > 0)
-        rep.warnings.push_back(std::to_string(m.tiles_left_out) + " of " + std::to_string(m.tiles_left_out + static_cast<int>(m.tiles.size())) +
-                               " tiles have no point of " + m.options.cloud + " in their window and were not planned" +
-                               (m.options.ortho.empty() ? "" : " (no building is detected there)"));
+    if (m.tiles_left_out > 0) rep.warnings.push_back(tiles_left_out_note(m));
     // Every tile failed: nothing to model, and empty city models would read as
     // "no buildings here". The tiles' reports (DIR/tiles/) keep every reason.
     if (!rep.tiles.empty() && std::all_of(rep.tiles.begin(), rep.tiles.end(), [](const TileReport& t) { return t.status == "failed"; }))
@@ -1145,7 +1150,7 @@ RunReport merge_tiles(const RunManifest& m, const std::string& out_dir, const Pr
         const std::string& input = !o.footprints.empty() ? o.footprints : !o.cloud.empty() ? o.cloud : o.ortho;
         throw Error(input, "no building found in " + std::to_string(rep.tiles.size()) + " tile(s) (" +
                                (o.cloud.empty() ? "ortho only" : o.ortho.empty() ? "cloud only" : "ortho and cloud") +
-                               "; the tiles' reports are in " + (dir).string() + "); no city model written");
+                               "; the tiles' reports are in " + dir.string() + "); no city model written");
     }
     progress(0.3, "tiles read");
     // One order whatever the tiling: by numeric id when ids are numbers, else as text.

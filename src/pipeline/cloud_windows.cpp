@@ -103,10 +103,11 @@ bool read_cloud_by_windows(const CloudReader& reader, uint64_t max_points, doubl
 
 namespace {
 // One streamed pass over the cloud's points moved to `target` (as they are
-// when `target` is empty or has the same horizontal CRS as the file).
+// in the file when `target` is empty or has the file's horizontal CRS; an
+// empty `target` reads no CRS record).
 template <class Visit>
 void for_each_point_on(const std::string& cloud_path, const std::string& cloud_crs_override, const CrsInfo& target, Visit&& visit) {
-    const CrsInfo from = resolve_cloud_crs(cloud_path, cloud_crs_override).crs;
+    const CrsInfo from = target.empty() ? CrsInfo{} : resolve_cloud_crs(cloud_path, cloud_crs_override).crs;
     const bool move = !target.empty() && !from.empty() && !same_horizontal_crs(from, target);
     CloudReader reader(cloud_path);
     PointCloud chunk;
@@ -163,24 +164,11 @@ std::vector<uint64_t> count_points_in_blocks(const std::string& cloud_path, cons
     return counts;
 }
 
-namespace {
-// One streamed pass over the cloud's points.
-template <class Visit>
-void for_each_point(const std::string& cloud_path, Visit&& visit) {
-    CloudReader reader(cloud_path);
-    PointCloud chunk;
-    while (true) {
-        chunk.clear();
-        if (reader.read_chunk(chunk, 1u << 20) == 0) break;
-        for (std::size_t i = 0; i < chunk.size(); ++i) visit(chunk.x[i], chunk.y[i]);
-    }
-}
-}  // namespace
 
 Extent cloud_point_bounds(const std::string& cloud_path) {
     Extent e = empty_extent();
     uint64_t n = 0;
-    for_each_point(cloud_path, [&](double x, double y) {
+    for_each_point_on(cloud_path, {}, {}, [&](double x, double y) {
         e.min_x = std::min(e.min_x, x), e.max_x = std::max(e.max_x, x);
         e.min_y = std::min(e.min_y, y), e.max_y = std::max(e.max_y, y);
         ++n;
@@ -202,7 +190,7 @@ Extent cloud_point_bounds(const std::string& cloud_path) {
         Extent box = empty_extent();
     };
     std::vector<Square> sq(nx * ny);
-    for_each_point(cloud_path, [&](double x, double y) {
+    for_each_point_on(cloud_path, {}, {}, [&](double x, double y) {
         const auto c = std::min(nx - 1, static_cast<std::size_t>((x - e.min_x) / cell)), r = std::min(ny - 1, static_cast<std::size_t>((y - e.min_y) / cell));
         Square& s = sq[r * nx + c];
         if (s.points < UINT32_MAX) ++s.points;
@@ -230,7 +218,7 @@ Extent cloud_point_bounds(const std::string& cloud_path) {
     if (dropped == 0 || dropped * 100 > n) return e;
     // What the smaller box leaves out (isolated squares inside it stay in).
     uint64_t outside = 0;
-    for_each_point(cloud_path, [&](double x, double y) { outside += x < kept.min_x || x > kept.max_x || y < kept.min_y || y > kept.max_y; });
+    for_each_point_on(cloud_path, {}, {}, [&](double x, double y) { outside += x < kept.min_x || x > kept.max_x || y < kept.min_y || y > kept.max_y; });
     if (outside == 0) return e;  // cannot be: every point is then in `kept`, which is `e`
     char text[400];
     std::snprintf(text, sizeof text,

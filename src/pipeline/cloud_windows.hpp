@@ -39,7 +39,9 @@ CloudPlan plan_cloud(const std::string& cloud_path, const std::string& cloud_crs
 /// min <= max) would need a grid of more than `max_points` cells of `cell`
 /// file-CRS units and of more than 4 cells per announced point, e.g. the
 /// ground filter's grid over a corridor at 45 degrees or over points
-/// kilometres apart (said in an info line). `max_points` = 0: never.
+/// kilometres apart (said in an info line). `max_points` = 0: never;
+/// `cell` <= 0: by the point count only (commands whose output grid covers
+/// the whole box anyway: `cloud rasterize`, `footprints`).
 bool read_cloud_by_windows(const CloudReader& reader, uint64_t max_points, double cell);
 
 /// Edge (metres) of square tiles whose windows (tile + 2 x overlap_m a side)

@@ -456,7 +456,7 @@ FootprintsReport run_footprints_unguarded(const std::string& output_path, const 
             // Whole-cloud decisions made before the cloud is read, alike whether it
             // is held whole or read window by window (cloud_windows.hpp).
             const CrsInfo target = ortho ? ortho->info().crs : CrsInfo{};
-            const bool windows = o.max_points_in_memory > 0 && CloudReader(o.cloud).announced_points() > o.max_points_in_memory;
+            const bool windows = read_cloud_by_windows(CloudReader(o.cloud), o.max_points_in_memory, 0.0);  // the grid covers the whole box anyway
             if (!ortho) {
                 unit = require_cloud_crs(o.cloud, o.cloud_crs).linear_unit_m;
                 grid = grid_over_extent(cloud_point_bounds(o.cloud), o.mask.gsd_m / unit, 0, o.cloud);

@@ -190,6 +190,7 @@ HeightsStage tiled_heights_stage(PolygonLayer footprints, const std::string& foo
     std::vector<BuildingHeight> heights(footprints.features.size());
     std::size_t done = 0;
     bool first = true;
+    Extent kept = empty_extent();  // the windows' kept points, for the footprints' check
     for (const auto& [key, members] : groups) {
         Extent w = empty_extent();
         PolygonLayer sub;
@@ -200,6 +201,7 @@ HeightsStage tiled_heights_stage(PolygonLayer footprints, const std::string& foo
             sub.fids.push_back(footprints.fids[i]);
         }
         PreparedCloud pc = prepare_cloud(cloud_path, o.cloud_crs, footprints.crs, ho.outliers, ho.ground, &w);
+        include(kept, kept_extent(pc));
         HeightsStage st = compute_heights_stage(std::move(sub), std::move(pc), ho);
         if (first) {
             out.table.crs = st.table.crs, out.table.field_names = st.table.field_names, out.table.field_types = st.table.field_types;
@@ -218,6 +220,8 @@ HeightsStage tiled_heights_stage(PolygonLayer footprints, const std::string& foo
     tiles_used = groups.size();
     if (out.report.points_read == 0)
         throw Error(cloud_path, "no point of the cloud lies near the footprints of " + footprints_path + " (" + describe_extent(all, footprints.crs) + ")");
+    // As held whole (check_footprint_overlap): footprints beyond every kept point are counted in a warning.
+    check_footprints_within(kept, footprints.crs, cloud_path, ext, footprints_path);
     out.table.features = std::move(rows);
     out.table.fids = footprints.fids;
     out.heights = std::move(heights);

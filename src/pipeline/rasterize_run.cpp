@@ -63,8 +63,8 @@ RasterizeReport rasterize_run_unguarded(const std::string& cloud_path, const std
     }
     CloudRasters r;
     CrsInfo out_crs;
-    const uint64_t announced = CloudReader(cloud_path).announced_points();
-    const bool windows = o.max_points_in_memory > 0 && announced > o.max_points_in_memory;
+    // By the point count only: the rasters cover the whole box anyway.
+    const bool windows = read_cloud_by_windows(CloudReader(cloud_path), o.max_points_in_memory, 0.0);
     // Decisions on the whole cloud, made before it is read and alike in both
     // paths (cloud_windows.hpp): the grid over every point, the outlier limit
     // and the density measured on the central 400 m.

@@ -261,3 +261,30 @@ TEST_CASE("heights over a cloud whose bounding box dwarfs its points (one point 
     const bool same = a == b;
     CHECK(same);
 }
+
+TEST_CASE("heights by windows warn about footprints beyond the cloud, as held whole", "[heights][windows]") {
+    ScratchDir dir("heights_windows_outside");
+    const SynthResult s = make_town(dir, 300, 3, 2.0);
+    LasHeader h;
+    const PointCloud all = read_las(s.cloud_path, &h);
+    PointCloud west;
+    for (std::size_t i = 0; i < all.size(); ++i)
+        if (all.x[i] < 500120.0) west.append(all, i);
+    {
+        LasWriter w(dir / "west.las", h.scale, h.offset, h.crs.wkt);
+        w.write(west);
+        w.close();
+    }
+    const auto whole = test::run_cli("heights --footprints " + s.truth_path + " --cloud " + (dir / "west.las") + " --out " + (dir / "whole.geojson"));
+    const auto windows = test::run_cli("heights --footprints " + s.truth_path + " --cloud " + (dir / "west.las") + " --out " +
+                                       (dir / "windows.geojson") + " --max-points-in-memory 20000 --tile-m 100");
+    REQUIRE(whole.exit_code == 0);
+    REQUIRE(windows.exit_code == 0);
+    const auto said = [](const std::string& err) {
+        const auto at = err.find(" footprints lie outside the cloud ");
+        return at == std::string::npos ? std::string() : err.substr(err.rfind(": ", at) + 2, at - err.rfind(": ", at) - 2);
+    };
+    INFO(whole.err + windows.err);
+    CHECK_FALSE(said(whole.err).empty());
+    CHECK(said(windows.err) == said(whole.err));  // the same "N of M"
+}
