@@ -28,7 +28,7 @@ std::string write_cloud(const ScratchDir& dir, const std::string& name, int n, d
 }
 }  // namespace
 
-TEST_CASE("read_cloud_by_windows: more points than the budget, or a header box large and sparse; never with a budget of 0", "[cloud][windows]") {
+TEST_CASE("read_cloud_by_windows: more points than the budget, or a header box large and sparse - never with a budget of 0", "[cloud][windows]") {
     ScratchDir dir("cloud_windows_rule");
     const std::string dense = write_cloud(dir, "dense.las", 1000, 40.0, 0.0);      // 1,681 cells of 1 m
     const std::string spread = write_cloud(dir, "spread.las", 1000, 40.0, 50.0);   // 10,201 cells for 1,002 points
