@@ -56,7 +56,7 @@ void add_run_inputs(CLI::App* cmd, RunInputs& r) {
 }
 
 // The run's plan from the config file and the options given.
-RunManifest plan_from(const RunInputs& rc) {
+RunManifest plan_from(const RunInputs& rc, const Progress& progress) {
     RunOptions ro;
     if (!rc.config.empty()) ro = run_options_from_json(read_json_file(rc.config), rc.config);
     if (!rc.ortho.empty()) ro.ortho = rc.ortho;
@@ -75,7 +75,7 @@ RunManifest plan_from(const RunInputs& rc) {
     if (!rc.db.empty()) ro.buildings.model.database = rc.db;
     if (!rc.texture_ortho.empty()) ro.buildings.model.texture_ortho = rc.texture_ortho;
     if (!rc.fit.empty()) ro.extraction.fit = footprint_fit_from_string(rc.fit);
-    return plan_run(ro);
+    return plan_run(ro, progress);
 }
 
 // What --out may hold before a run: nothing, or an earlier run of the same
@@ -130,7 +130,7 @@ void add_run_commands(CLI::App& parent, const GlobalFlags& g, CommandList& out) 
                     "\nDIR may hold an earlier run of the same command: its finished tiles are kept and skipped (a folder made "
                     "with other options is refused).");
     out.push_back({run_cmd, [rs, &g]() {
-                       const RunManifest manifest = rs->manifest.empty() ? plan_from(rs->inputs) : read_manifest(rs->manifest);
+                       const RunManifest manifest = rs->manifest.empty() ? plan_from(rs->inputs, make_progress(g)) : read_manifest(rs->manifest);
                        if (rs->tile >= 0) {
                            const TileReport r = run_tile(manifest, rs->tile, rs->out, make_progress(g));
                            if (r.status == "failed") {  // an error: printed whatever --quiet says
@@ -175,7 +175,7 @@ void add_run_commands(CLI::App& parent, const GlobalFlags& g, CommandList& out) 
     add_run_inputs(plan_cmd, ps->inputs);
     plan_cmd->add_option("--out", ps->out, "Manifest file (.json)")->required();
     out.push_back({plan_cmd, [ps, &g]() {
-                       const RunManifest manifest = plan_from(ps->inputs);
+                       const RunManifest manifest = plan_from(ps->inputs, make_progress(g));
                        refuse_existing_output(g, ps->out);
                        write_manifest(ps->out, manifest);
                        if (!g.quiet)

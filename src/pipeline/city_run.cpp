@@ -287,8 +287,8 @@ Extent grid_extent(const RunManifest& m) {
 }
 
 // The bounding box of the cloud's points on the grid's CRS (one streamed pass).
-Extent cloud_bounds_on_grid(const RunManifest& m) {
-    return cloud_bounds_in(m.options.cloud, m.options.cloud_crs, crs_from_wkt(m.crs_wkt, "grid"));
+Extent cloud_bounds_on_grid(const RunManifest& m, const Progress& progress) {
+    return cloud_bounds_in(m.options.cloud, m.options.cloud_crs, crs_from_wkt(m.crs_wkt, "grid"), progress);
 }
 
 // The square of half-side `half` centred on `c`.
@@ -328,12 +328,16 @@ double grid_metres_per_unit(const RunManifest& m) {
     return ground_metres_per_unit(crs_from_wkt(m.crs_wkt, "manifest"), m.grid.transform, m.grid.width, m.grid.height);
 }
 
-RunManifest plan_run(const RunOptions& in) {
+RunManifest plan_run(const RunOptions& in, const Progress& progress) {
     RunOptions o = run_options_from_json(to_json(in), "options", in);  // normalised: shared cleaning options
     o.validate();
     RunManifest m;
     m.options = o;
     double gsd_m = 0.0;
+    // The cloud's points' box on the grid's CRS, read once when needed.
+    Extent cloud_bounds = empty_extent();
+    // The plan's passes over the cloud: its box, the sample, points per tile.
+    const Progress bounds_progress = progress.sub(0.0, 0.4), tiles_progress = progress.sub(0.5, 1.0);
     std::vector<Extent> footprint_extents;  // given footprints, on the grid's CRS
     if (!o.ortho.empty()) {
         // The working grid: the ortho's, or a lon/lat ortho warped onto its UTM zone (as `footprints` reads it).
@@ -350,7 +354,8 @@ RunManifest plan_run(const RunOptions& in) {
         // it), in the cloud's projected CRS or --working-crs.
         const CrsInfo cloud = o.working_crs.empty() ? require_cloud_crs(o.cloud, o.cloud_crs) : crs_from_user_input(o.working_crs, "--working-crs");
         if (cloud.geographic) throw Error("--working-crs", "the working CRS must be projected (metres)");
-        const Extent e = cloud_bounds_in(o.cloud, o.cloud_crs, cloud);
+        const Extent e = cloud_bounds_in(o.cloud, o.cloud_crs, cloud, bounds_progress);
+        cloud_bounds = e;  // the grid's CRS is `cloud`: no second pass for it
         const double unit = ground_metres_per_unit_at(cloud, e);
         const double cell = o.extraction.mask.gsd_m / unit;
         // The top edge strictly above the highest point: windows keep y < top.
@@ -393,9 +398,8 @@ RunManifest plan_run(const RunOptions& in) {
     }
     // An input that cannot produce a result is an error naming both files and their
     // extents; given footprints outside the cloud are counted in a warning.
-    Extent cloud_bounds = empty_extent();
     auto bounds = [&]() -> const Extent& {
-        if (!(cloud_bounds.min_x <= cloud_bounds.max_x)) cloud_bounds = cloud_bounds_on_grid(m);
+        if (!(cloud_bounds.min_x <= cloud_bounds.max_x)) cloud_bounds = cloud_bounds_on_grid(m, bounds_progress);
         return cloud_bounds;
     };
     if (!footprint_extents.empty()) {
@@ -422,7 +426,7 @@ RunManifest plan_run(const RunOptions& in) {
         // populated 400 m square.
         constexpr std::size_t kMinSample = 100;
         if (points.cloud.size() < kMinSample) {
-            const DensestSquare d = densest_square(o.cloud, o.cloud_crs, grid_crs, grid_extent(m), 400.0 / grid_metres_per_unit(m));
+            const DensestSquare d = densest_square(o.cloud, o.cloud_crs, grid_crs, grid_extent(m), 400.0 / grid_metres_per_unit(m), progress.sub(0.4, 0.5));
             if (d.points > points.cloud.size()) {
                 PreparedCloud p;
                 CloudSample s = sample_cloud(o.cloud, o.cloud_crs, grid_crs, outliers, d.centre, &p);
@@ -465,7 +469,7 @@ RunManifest plan_run(const RunOptions& in) {
     while ((int64_t(m.grid.width) / block + 1) * (int64_t(m.grid.height) / block + 1) > (int64_t(1) << 22)) block *= 2;
     const int blocks_x = (m.grid.width + block - 1) / block, blocks_y = (m.grid.height + block - 1) / block;
     if (extract) {
-        const std::vector<uint64_t> counts = count_points_in_blocks(o.cloud, o.cloud_crs, crs_from_wkt(m.crs_wkt, "grid"), m.grid, block);
+        const std::vector<uint64_t> counts = count_points_in_blocks(o.cloud, o.cloud_crs, crs_from_wkt(m.crs_wkt, "grid"), m.grid, block, tiles_progress);
         sums.assign(static_cast<std::size_t>(blocks_y + 1) * (blocks_x + 1), 0);
         for (int by = 0; by < blocks_y; ++by)
             for (int bx = 0; bx < blocks_x; ++bx)

@@ -86,7 +86,10 @@ RasterOpenOptions run_ortho_open_options(const RunOptions& options);
 double grid_metres_per_unit(const RunManifest& manifest);
 
 /// Reads the inputs' headers and cuts the grid into tiles. Throws Error naming the file.
-RunManifest plan_run(const RunOptions& options);
+/// With a cloud it streams the cloud's points (its box, a 400 m sample, the
+/// points per tile) and reports each pass to `progress` ("cloud bounds: N of
+/// M points", ...).
+RunManifest plan_run(const RunOptions& options, const Progress& progress = {});
 void write_manifest(const std::string& path, const RunManifest& manifest);
 RunManifest read_manifest(const std::string& path);
 

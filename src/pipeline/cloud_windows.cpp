@@ -104,12 +104,17 @@ bool read_cloud_by_windows(const CloudReader& reader, uint64_t max_points, doubl
 namespace {
 // One streamed pass over the cloud's points moved to `target` (as they are
 // in the file when `target` is empty or has the file's horizontal CRS; an
-// empty `target` reads no CRS record).
+// empty `target` reads no CRS record). Reports the share of the header's
+// point count read (nothing when the file announces none, e.g. XYZ) with
+// "<what>: N of M points".
 template <class Visit>
-void for_each_point_on(const std::string& cloud_path, const std::string& cloud_crs_override, const CrsInfo& target, Visit&& visit) {
+void for_each_point_on(const std::string& cloud_path, const std::string& cloud_crs_override, const CrsInfo& target, Visit&& visit,
+                       const Progress& progress, const char* what) {
     const CrsInfo from = target.empty() ? CrsInfo{} : resolve_cloud_crs(cloud_path, cloud_crs_override).crs;
     const bool move = !target.empty() && !from.empty() && !same_horizontal_crs(from, target);
     CloudReader reader(cloud_path);
+    const uint64_t announced = reader.announced_points();
+    uint64_t read = 0;
     PointCloud chunk;
     std::vector<double> z;
     while (true) {
@@ -120,12 +125,16 @@ void for_each_point_on(const std::string& cloud_path, const std::string& cloud_c
             transform_points(from, target, chunk.x, chunk.y, z, cloud_path);
         }
         for (std::size_t i = 0; i < chunk.size(); ++i) visit(chunk.x[i], chunk.y[i]);
+        read += chunk.size();
+        if (progress.active() && announced > 0)
+            progress(std::min(1.0, static_cast<double>(read) / static_cast<double>(announced)),
+                     std::string(what) + ": " + std::to_string(read) + " of " + std::to_string(announced) + " points");
     }
 }
 }  // namespace
 
 DensestSquare densest_square(const std::string& cloud_path, const std::string& cloud_crs_override, const CrsInfo& target,
-                             const Extent& within, double cell) {
+                             const Extent& within, double cell, const Progress& progress) {
     DensestSquare best{{0.5 * (within.min_x + within.max_x), 0.5 * (within.min_y + within.max_y)}, 0};
     if (!(cell > 0) || !(within.min_x <= within.max_x && within.min_y <= within.max_y)) return best;
     // At most 4 M squares: larger areas get larger squares.
@@ -138,7 +147,7 @@ DensestSquare densest_square(const std::string& cloud_path, const std::string& c
         const auto c = std::min(nx - 1, static_cast<std::size_t>((x - within.min_x) / cell));
         const auto r = std::min(ny - 1, static_cast<std::size_t>((y - within.min_y) / cell));
         ++counts[r * nx + c];
-    });
+    }, progress, "densest 400 m square");
     std::size_t at = 0;
     for (std::size_t k = 1; k < counts.size(); ++k)
         if (counts[k] > counts[at]) at = k;
@@ -151,7 +160,7 @@ DensestSquare densest_square(const std::string& cloud_path, const std::string& c
 }
 
 std::vector<uint64_t> count_points_in_blocks(const std::string& cloud_path, const std::string& cloud_crs_override, const CrsInfo& target,
-                                             const GridSpec& grid, int block_px) {
+                                             const GridSpec& grid, int block_px, const Progress& progress) {
     if (block_px < 1 || grid.width < 1 || grid.height < 1) throw Error("count_points_in_blocks", "needs a grid and blocks of at least one pixel");
     const auto bx = static_cast<std::size_t>((grid.width + block_px - 1) / block_px), by = static_cast<std::size_t>((grid.height + block_px - 1) / block_px);
     std::vector<uint64_t> counts(bx * by, 0);
@@ -160,19 +169,19 @@ std::vector<uint64_t> count_points_in_blocks(const std::string& cloud_path, cons
         const double c = std::floor(p.col), r = std::floor(p.row);
         if (!(c >= 0 && r >= 0 && c < grid.width && r < grid.height)) return;  // also NaN
         ++counts[static_cast<std::size_t>(r) / static_cast<std::size_t>(block_px) * bx + static_cast<std::size_t>(c) / static_cast<std::size_t>(block_px)];
-    });
+    }, progress, "points per tile");
     return counts;
 }
 
 
-Extent cloud_point_bounds(const std::string& cloud_path) {
+Extent cloud_point_bounds(const std::string& cloud_path, const Progress& progress) {
     Extent e = empty_extent();
     uint64_t n = 0;
     for_each_point_on(cloud_path, {}, {}, [&](double x, double y) {
         e.min_x = std::min(e.min_x, x), e.max_x = std::max(e.max_x, x);
         e.min_y = std::min(e.min_y, y), e.max_y = std::max(e.max_y, y);
         ++n;
-    });
+    }, progress.sub(0.0, 0.6), "cloud bounds");
     if (!(e.min_x <= e.max_x)) throw Error(cloud_path, "point cloud is empty");
     // A box this empty (over 100 square units a point: 0.01 points per m2)
     // may be stretched by a few far points (a z of -1700 m is harmless here, a
@@ -195,7 +204,7 @@ Extent cloud_point_bounds(const std::string& cloud_path) {
         Square& s = sq[r * nx + c];
         if (s.points < UINT32_MAX) ++s.points;
         include(s.box, Extent{x, y, x, y});
-    });
+    }, progress.sub(0.6, 0.8), "cloud bounds, far points");
     std::vector<uint32_t> counts;
     for (const Square& s : sq)
         if (s.points) counts.push_back(s.points);
@@ -218,7 +227,9 @@ Extent cloud_point_bounds(const std::string& cloud_path) {
     if (dropped == 0 || dropped * 100 > n) return e;
     // What the smaller box leaves out (isolated squares inside it stay in).
     uint64_t outside = 0;
-    for_each_point_on(cloud_path, {}, {}, [&](double x, double y) { outside += x < kept.min_x || x > kept.max_x || y < kept.min_y || y > kept.max_y; });
+    for_each_point_on(
+        cloud_path, {}, {}, [&](double x, double y) { outside += x < kept.min_x || x > kept.max_x || y < kept.min_y || y > kept.max_y; }, progress.sub(0.8, 1.0),
+        "cloud bounds, points left out");
     if (outside == 0) return e;  // cannot be: every point is then in `kept`, which is `e`
     char text[400];
     std::snprintf(text, sizeof text,
@@ -230,8 +241,8 @@ Extent cloud_point_bounds(const std::string& cloud_path) {
     return kept;
 }
 
-Extent cloud_bounds_in(const std::string& cloud_path, const std::string& cloud_crs_override, const CrsInfo& target) {
-    const Extent e = cloud_point_bounds(cloud_path);
+Extent cloud_bounds_in(const std::string& cloud_path, const std::string& cloud_crs_override, const CrsInfo& target, const Progress& progress) {
+    const Extent e = cloud_point_bounds(cloud_path, progress);
     const CrsInfo from = resolve_cloud_crs(cloud_path, cloud_crs_override).crs;
     if (target.empty() || from.empty() || same_horizontal_crs(from, target)) return e;
     std::vector<double> x, y;

@@ -84,7 +84,7 @@ struct DensestSquare {
     uint64_t points = 0;
 };
 DensestSquare densest_square(const std::string& cloud_path, const std::string& cloud_crs_override, const CrsInfo& target,
-                             const Extent& within, double cell);
+                             const Extent& within, double cell, const Progress& progress = {});
 
 /// Points of the cloud (moved to `target`) on each block of `block_px` x
 /// `block_px` pixels of `grid`, row-major from the grid's first row and
@@ -92,7 +92,7 @@ DensestSquare densest_square(const std::string& cloud_path, const std::string& c
 /// One streamed pass. Used to leave out the tiles of a run where the cloud
 /// has no point (a corridor across its bounding box).
 std::vector<uint64_t> count_points_in_blocks(const std::string& cloud_path, const std::string& cloud_crs_override, const CrsInfo& target,
-                                             const GridSpec& grid, int block_px);
+                                             const GridSpec& grid, int block_px, const Progress& progress = {});
 
 /// The bounding box of the cloud's points (file CRS), one streamed pass:
 /// what the grid of a cloud held whole or read by windows covers. A box
@@ -100,11 +100,12 @@ std::vector<uint64_t> count_points_in_blocks(const std::string& cloud_path, cons
 /// out (with a warning naming the file) up to 1 % of the points when they lie
 /// in squares of 1/512 of the box's longer side that are nearly empty, as are
 /// their 8 neighbours: a few points kilometres away do not make the grid.
-Extent cloud_point_bounds(const std::string& cloud_path);
+/// Each pass reports its share of the header's point count to `progress`.
+Extent cloud_point_bounds(const std::string& cloud_path, const Progress& progress = {});
 
 /// cloud_point_bounds moved to `target` (its outline, 9 points a side,
 /// transformed; the file's box when `target` is empty or the same CRS).
 /// `cloud_crs_override` as for prepare_cloud.
-Extent cloud_bounds_in(const std::string& cloud_path, const std::string& cloud_crs_override, const CrsInfo& target);
+Extent cloud_bounds_in(const std::string& cloud_path, const std::string& cloud_crs_override, const CrsInfo& target, const Progress& progress = {});
 
 }  // namespace cityforge

@@ -259,6 +259,34 @@ TEST_CASE("run with a cloud alone - a grid over its points, tiles without points
     const RunManifest coarse = read_manifest(dir / "coarse_manifest.json");
     CHECK(coarse.tiles.size() == 4);
     CHECK(coarse.grid.transform.pixel_width == 1.0);
+    // The plan's passes over the cloud say how far they are (a large cloud
+    // takes them tens of seconds): its box, then the points per tile, each
+    // up to every point the header announces, the overall share never falling.
+    {
+        RunOptions po;
+        po.cloud = s.cloud_path;
+        std::vector<std::pair<double, std::string>> said_progress;
+        const RunManifest pm = plan_run(po, Progress([&](double f, std::string_view msg) {
+            said_progress.emplace_back(f, std::string(msg));
+            return true;
+        }));
+        CHECK(pm.tiles.size() == 1);
+        const std::string all_points = " of " + std::to_string(all.size()) + " points";
+        bool bounds_done = false, tiles_done = false, rising = true;
+        for (std::size_t k = 0; k < said_progress.size(); ++k) {
+            bounds_done = bounds_done || said_progress[k].second == "cloud bounds: " + std::to_string(all.size()) + all_points;
+            tiles_done = tiles_done || said_progress[k].second == "points per tile: " + std::to_string(all.size()) + all_points;
+            rising = rising && (k == 0 || said_progress[k].first >= said_progress[k - 1].first) && said_progress[k].first <= 1.0;
+        }
+        CHECK(bounds_done);
+        CHECK(tiles_done);
+        CHECK(rising);
+        CHECK(said_progress.back().first == Approx(1.0));
+        // --quiet: nothing on stderr.
+        const auto quiet = test::run_cli("plan --cloud " + s.cloud_path + " --progress --quiet --out " + (dir / "quiet_manifest.json"));
+        CHECK(quiet.exit_code == 0);
+        CHECK(quiet.err.empty());
+    }
     // Without an ortho, ortho_cloud detection cannot be asked for.
     RunOptions o;
     o.cloud = s.cloud_path;
