@@ -21,7 +21,7 @@ struct GridSpec {
 /// Float rasters, NaN = no data. z in the cloud's vertical units.
 struct CloudRasters {
     Image<float> dsm;      ///< highest kept point per cell (NaN where empty)
-    Image<float> dtm;      ///< mean ground z per cell, gaps filled (no holes)
+    Image<float> dtm;      ///< mean ground z per cell, gaps filled within kGapFillReach_m of any kept point (NaN beyond: outside the survey)
     Image<float> ndsm;     ///< dsm - dtm where the dsm has data
     Image<float> density;  ///< kept points per square metre
     /// Share of building (6) among the cell's points that are not vegetation

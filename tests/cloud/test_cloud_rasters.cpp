@@ -1,6 +1,8 @@
 #include <catch2/catch.hpp>
 #include <cmath>
 
+#include "cloud/las.hpp"
+#include "core/grid_fill.hpp"
 #include "pipeline/rasterize_run.hpp"
 #include "raster/raster.hpp"
 #include "synth/synth.hpp"
@@ -74,4 +76,52 @@ TEST_CASE("cloud rasterize window by window (cloud above the memory budget) writ
                 CHECK(same);
             }
         }
+}
+
+TEST_CASE("cloud rasterize - the DTM stays empty beyond the fill's reach of every point (an L-shaped survey's empty corner) - same bytes by windows", "[cloud][rasterize][windows]") {
+    ScratchDir dir("rasterize_l_shape");
+    const SynthResult s = make_town(dir, 300, 9, 8);
+    LasHeader h;
+    const PointCloud all = read_las(s.cloud_path, &h);
+    double minx = all.x[0], miny = all.y[0];
+    for (std::size_t i = 0; i < all.size(); ++i) minx = std::min(minx, all.x[i]), miny = std::min(miny, all.y[i]);
+    // An L: the strips x < minx + 60 and y < miny + 60 (the box stays the town's).
+    PointCloud l;
+    for (std::size_t i = 0; i < all.size(); ++i)
+        if (all.x[i] < minx + 60.0 || all.y[i] < miny + 60.0) l.append(all, i);
+    {
+        LasWriter w(dir / "l.las", h.scale, h.offset, h.crs.wkt);
+        w.write(l);
+        w.close();
+    }
+    RasterizeOptions o;
+    o.gsd_m = 1.0;
+    const RasterizeReport whole = rasterize_run(dir / "l.las", dir / "whole", o);
+    const auto dtm = RasterReader(whole.dtm_path).read_all<float>();
+    const RasterInfo info = read_raster_info(whole.dtm_path);
+    std::size_t near_valid = 0, near = 0, far_empty = 0, far = 0, between_valid = 0, between = 0;
+    for (int r = 0; r < dtm.height; ++r)
+        for (int c = 0; c < dtm.width; ++c) {
+            const double x = info.transform.origin_x + (c + 0.5) * info.transform.pixel_width;
+            const double y = info.transform.origin_y + (r + 0.5) * info.transform.pixel_height;
+            const float v = dtm.data[static_cast<std::size_t>(r) * dtm.width + c];
+            const double d = std::min(x - (minx + 60.0), y - (miny + 60.0));  // distance past the L, along the nearer axis
+            if (d < 0) ++near, near_valid += v != -9999.0f;                     // on the survey
+            else if (d > kGapFillReach_m + 2.0) ++far, far_empty += v == -9999.0f;  // beyond the reach of any point
+            else if (d < kGapFillReach_m - 2.0) ++between, between_valid += v != -9999.0f;  // filled from the survey's edge
+        }
+    REQUIRE(far > 10000);
+    CHECK(far_empty == far);
+    CHECK(near_valid == near);
+    CHECK(between_valid == between);
+    // Read by windows (a budget under the point count), the same bytes.
+    o.max_points_in_memory = l.size() / 3;
+    o.tile_m = 100.0;
+    o.overlap_m = 100.0;
+    const RasterizeReport tiled = rasterize_run(dir / "l.las", dir / "tiled", o);
+    CHECK(tiled.tiles > 1);
+    for (const std::string name : {"dsm.tif", "dtm.tif", "ndsm.tif", "density.tif"}) {
+        INFO(name);
+        CHECK(test::slurp(dir / ("whole/" + name)) == test::slurp(dir / ("tiled/" + name)));
+    }
 }
