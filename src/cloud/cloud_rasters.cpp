@@ -113,19 +113,18 @@ CloudRasters rasterize_cloud(const PointCloud& c, const std::vector<uint8_t>& ke
     std::vector<double> dtm(n);
     for (std::size_t k = 0; k < n; ++k) dtm[k] = ground_n[k] ? ground_sum[k] / ground_n[k] : NAN;
     // Filled from ground within kGapFillReach_m (a cell depends on nearby ground only: tiles agree).
-    const int reach = gap_fill_reach_cells(std::abs(g.transform.pixel_width) * unit_m);
-    fill_gaps(dtm, g.width, g.height, reach);
     // Terrain only where the cloud saw something: a cell with no kept point
     // within the fill's reach (a square of kGapFillReach_m a side around it)
     // lies beyond the survey (the box of a corridor, a wide lake) and stays
     // empty, as PDAL's and LAStools' rasters leave it, instead of an
     // extrapolation from ground kilometres away. Under a roof the cell holds
     // the roof's points, so buildings of any size keep their filled ground.
+    const int reach = gap_fill_reach_cells(std::abs(g.transform.pixel_width) * unit_m);
     const std::vector<uint8_t> seen = cells_near_points(above_n, g.width, g.height, reach);
+    fill_gaps(dtm, g.width, g.height, reach, &seen);
     r.dtm = Image<float>(g.width, g.height, 1, NAN);
     r.ndsm = Image<float>(g.width, g.height, 1, NAN);
     for (std::size_t k = 0; k < n; ++k) {
-        if (!seen[k]) dtm[k] = NAN;
         r.dtm.data[k] = static_cast<float>(dtm[k]);
         if (!std::isnan(r.dsm.data[k]) && !std::isnan(dtm[k])) r.ndsm.data[k] = static_cast<float>(r.dsm.data[k] - dtm[k]);
     }

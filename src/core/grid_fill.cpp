@@ -81,7 +81,7 @@ void sweep(const std::vector<double>& g, int w, int h, int limit, std::vector<do
 
 int gap_fill_reach_cells(double cell_m) { return std::max(1, static_cast<int>(std::ceil(kGapFillReach_m / cell_m))); }
 
-void fill_gaps(std::vector<double>& g, int w, int h, int max_ray_cells) {
+void fill_gaps(std::vector<double>& g, int w, int h, int max_ray_cells, const std::vector<uint8_t>* fill_only) {
     bool any_gap = false, any_valid = false;
     double sum = 0.0;
     std::size_t n_valid = 0;
@@ -91,12 +91,14 @@ void fill_gaps(std::vector<double>& g, int w, int h, int max_ray_cells) {
     }
     if (!any_gap || !any_valid) return;
     const std::size_t cells = static_cast<std::size_t>(w) * h;
+    if (fill_only && fill_only->size() != cells) throw Error("fill_gaps", "internal: the mask of cells to fill differs from the grid");
+    auto wanted = [&](std::size_t k) { return !fill_only || (*fill_only)[k]; };
     std::vector<double> num(cells, 0.0), den(cells, 0.0);
     sweep(g, w, h, max_ray_cells, num, den);
     if (max_ray_cells > 0) {
         // Cells with no valid cell within reach on any ray: the unlimited fill.
         bool far = false;
-        for (std::size_t k = 0; k < cells && !far; ++k) far = std::isnan(g[k]) && !(den[k] > 0);
+        for (std::size_t k = 0; k < cells && !far; ++k) far = std::isnan(g[k]) && !(den[k] > 0) && wanted(k);
         if (far) {
             std::vector<double> num_all(cells, 0.0), den_all(cells, 0.0);
             sweep(g, w, h, 0, num_all, den_all);
@@ -107,7 +109,7 @@ void fill_gaps(std::vector<double>& g, int w, int h, int max_ray_cells) {
     const double mean = sum / double(n_valid);
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, cells, 1u << 16), [&](const tbb::blocked_range<std::size_t>& r) {
         for (std::size_t k = r.begin(); k != r.end(); ++k)
-            if (std::isnan(g[k])) g[k] = den[k] > 0 ? num[k] / den[k] : mean;  // enclosed on all 8 rays: the mean ground
+            if (std::isnan(g[k]) && wanted(k)) g[k] = den[k] > 0 ? num[k] / den[k] : mean;  // enclosed on all 8 rays: the mean ground
     });
 }
 

@@ -4,6 +4,7 @@
 // the nearest valid cell in each of the 8 compass directions; local (a cell
 // depends only on its gap), so windows of a grid fill alike. O(cells), no GDAL.
 #include <cstddef>
+#include <cstdint>
 #include <vector>
 
 namespace cityforge {
@@ -20,7 +21,10 @@ inline constexpr double kGapFillReach_m = 40.0;
 /// `max_ray_cells` > 0: each ray stops after that many cells; a cell whose 8
 /// rays all stop without meeting a valid cell is filled as with no limit (the
 /// nearest valid cells at any distance, else the mean of the grid).
-void fill_gaps(std::vector<double>& grid, int w, int h, int max_ray_cells = 0);
+/// `fill_only` (one byte per cell, when given): only cells marked nonzero are
+/// filled, the others stay NaN (and need no unlimited fill); the filled
+/// cells get the values they get without it.
+void fill_gaps(std::vector<double>& grid, int w, int h, int max_ray_cells = 0, const std::vector<uint8_t>* fill_only = nullptr);
 
 /// Grows values into NaN cells of the row-major `w` x `h` grid of
 /// `channels` interleaved values per cell (a cell is empty when its first

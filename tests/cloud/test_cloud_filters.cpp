@@ -309,6 +309,18 @@ TEST_CASE("Gap fill by strips of rows equals the sweeps over the whole grid, for
             naive_fill_gaps(expected, w, h, limit);
             fill_gaps(filled, w, h, limit);
             CHECK(same_cells(filled, expected));
+            // Only the cells of a mask filled (the others, e.g. beyond a survey, stay
+            // empty): the filled ones get the values of the fill without a mask.
+            std::vector<uint8_t> only(grid.size());
+            for (std::size_t i = 0; i < only.size(); ++i) only[i] = (i / 7 + i / static_cast<std::size_t>(w)) % 3 != 0;
+            std::vector<double> masked = grid;
+            fill_gaps(masked, w, h, limit, &only);
+            bool masked_ok = true;
+            for (std::size_t i = 0; i < grid.size(); ++i) {
+                const bool filled_cell = !std::isnan(grid[i]) || only[i];
+                masked_ok = masked_ok && (filled_cell ? (masked[i] == expected[i] || (std::isnan(masked[i]) && std::isnan(expected[i]))) : std::isnan(masked[i]));
+            }
+            CHECK(masked_ok);
             tbb::global_control one(tbb::global_control::max_allowed_parallelism, 1);
             fill_gaps(one_thread, w, h, limit);
             CHECK(same_cells(one_thread, expected));
