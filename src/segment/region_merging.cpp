@@ -281,8 +281,10 @@ public:
             if (at == none) return cells - 1;
             const uint32_t y = static_cast<uint32_t>(at >> 32), x = static_cast<uint32_t>(at);
             const uint32_t cx = (x >> 3) & 7, cy = (y % kStripe) >> 3;
-            uint32_t m = 0;  // Morton code of the cell within its block
-            for (int bit = 0; bit < 3; ++bit) m |= ((cx >> bit) & 1u) << (2 * bit) | ((cy >> bit) & 1u) << (2 * bit + 1);
+            // Morton code of the cell within its block: the 3 bits of cx at
+            // even positions, those of cy at odd ones
+            static constexpr uint8_t spread[8] = {0, 1, 4, 5, 16, 17, 20, 21};
+            const uint32_t m = spread[cx] | uint32_t(spread[cy]) << 1;
             return (uint64_t(y / kStripe) * blocks + x / 64) * 64 + m;
         };
         std::vector<uint32_t> start(cells + 1, 0);
@@ -707,7 +709,10 @@ public:
                     const auto sq = static_cast<int128>(static_cast<uint128>(static_cast<uint64_t>(half[0])) |
                                                         static_cast<uint128>(static_cast<uint64_t>(half[1])) << 64);
                     S[2 * b] = static_cast<double>(A[6 + b]) / fixed;
-                    S[2 * b + 1] = static_cast<double>(sq) / (fixed * fixed);
+                    // (a value that fits 64 bits converts as one: the same rounding,
+                    // without libgcc's 128-bit conversion call)
+                    const bool fits = half[1] == (half[0] >> 63);
+                    S[2 * b + 1] = (fits ? static_cast<double>(half[0]) : static_cast<double>(sq)) / (fixed * fixed);
                 }
                 R.list = new (inline_bytes(r)) Neighbour[inline_capacity_];
                 R.capacity = inline_capacity_;
