@@ -45,7 +45,7 @@ struct Patch {
 
 struct View {
     const PhotoCamera* cam = nullptr;
-    cv::Mat gray;          // CV_32F
+    cv::Mat gray;          // CV_8U (a quarter of CV_32F's memory; the samples are the same values)
     Eigen::Vector3d c_local;  // centre relative to the block origin
     std::vector<int> neighbours;
     int cell = 1;            // cell side, pixels
@@ -55,8 +55,8 @@ struct View {
 double bilinear(const cv::Mat& m, double x, double y) {
     const int x0 = static_cast<int>(std::floor(x)), y0 = static_cast<int>(std::floor(y));
     const double tx = x - x0, ty = y - y0;
-    const float* r0 = m.ptr<float>(y0);
-    const float* r1 = m.ptr<float>(y0 + 1);
+    const uint8_t* r0 = m.ptr<uint8_t>(y0);
+    const uint8_t* r1 = m.ptr<uint8_t>(y0 + 1);
     return (r0[x0] * (1 - tx) + r0[x0 + 1] * tx) * (1 - ty) + (r1[x0] * (1 - tx) + r1[x0 + 1] * tx) * ty;
 }
 
@@ -74,9 +74,7 @@ public:
         for (std::size_t i = 0; i < images.size(); ++i) {
             View& v = views_[i];
             v.cam = &local_[i];
-            cv::Mat g;
-            cv::cvtColor(images[i], g, cv::COLOR_BGR2GRAY);
-            g.convertTo(v.gray, CV_32F);
+            cv::cvtColor(images[i], v.gray, cv::COLOR_BGR2GRAY);
             v.c_local = local_[i].centre;
         }
         // Cells: at least cell_px pixels and cell_m metres on the surface at
