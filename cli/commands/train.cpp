@@ -88,6 +88,11 @@ void add_train_command(CLI::App& parent, const GlobalFlags& g, CommandList& out)
     cmd->add_option("--pixel-cnn-steps", d.pixel.cnn.steps, "Pixel CNN: training steps (Adam)")->capture_default_str();
     cmd->add_option("--pixel-cnn-channels", d.pixel.cnn.base_channels, "Pixel CNN: channels at full resolution")->capture_default_str();
     cmd->add_option("--pixel-cnn-crop", d.pixel.cnn.crop_cells, "Pixel CNN: training crop side, cells")->capture_default_str();
+    cmd->add_option("--pixel-cnn-tta", d.pixel.cnn.tta,
+                    "Pixel CNN: test-time augmentation, the map averaged over 1 (none), 4 (flips, rot180) or 8 (also transposes) transforms, "
+                    "in the cross-validation's maps and when applied")
+        ->check(CLI::IsMember({1, 4, 8}))
+        ->capture_default_str();
     cmd->add_option("--core-thresholds", o.core_threshold_candidates,
                     "Instance separation: candidate thresholds of the core CNN's map (building cores grown back over the building mask, "
                     "buildings cut where two cores meet; tried after the neck split, the best pooled CV F1 is kept; none = no core CNN)")

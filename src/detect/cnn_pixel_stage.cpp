@@ -21,6 +21,7 @@ void CnnOptions::validate() const {
     if (batch < 1 || batch > 256) throw Error("pixel.cnn.batch", "must be in [1, 256]");
     if (steps < 1 || steps > 1000000) throw Error("pixel.cnn.steps", "must be in [1, 1000000]");
     if (!(learning_rate > 0.0 && learning_rate < 1.0)) throw Error("pixel.cnn.learning_rate", "must be in (0, 1)");
+    if (tta != 1 && tta != 4 && tta != 8) throw Error("pixel.cnn.tta", "must be 1, 4 or 8");
 }
 
 namespace {
@@ -242,7 +243,7 @@ std::vector<float> predict_cnn(const std::vector<uint8_t>& weights, const std::v
     if (input.size() != std::size_t(channels) * w * h) throw Error("pixel CNN", "internal: input size");
     std::vector<float> out(std::size_t(w) * h, 0.0f);
     const int tx = (w + kTile - 1) / kTile, ty = (h + kTile - 1) / kTile;
-    const int N = kTile + 2 * kMargin;
+    const int N = kTile + 2 * kMargin, T = o.tta;
     // One network per task (modules are not shared between threads).
     tbb::parallel_for(0, tx * ty, [&](int k) {
         single_thread();
@@ -256,10 +257,41 @@ std::vector<float> predict_cnn(const std::vector<uint8_t>& weights, const std::v
             for (int y = std::max(0, -y0); y < std::min(N, h - y0); ++y)
                 for (int x = std::max(0, -x0); x < std::min(N, w - x0); ++x)
                     xb[(std::size_t(c) * N + y) * N + x] = input[(std::size_t(c) * h + (y0 + y)) * w + (x0 + x)];
-        const torch::Tensor p = torch::sigmoid(net->forward(torch::from_blob(xb.data(), {1, channels, N, N}, torch::kFloat32))).contiguous();
-        const float* pd = p.data_ptr<float>();
-        for (int y = kMargin; y < kMargin + kTile && y0 + y < h; ++y)
-            for (int x = kMargin; x < kMargin + kTile && x0 + x < w; ++x) out[std::size_t(y0 + y) * w + (x0 + x)] = pd[std::size_t(y) * N + x];
+        if (T == 1) {
+            const torch::Tensor p = torch::sigmoid(net->forward(torch::from_blob(xb.data(), {1, channels, N, N}, torch::kFloat32))).contiguous();
+            const float* pd = p.data_ptr<float>();
+            for (int y = kMargin; y < kMargin + kTile && y0 + y < h; ++y)
+                for (int x = kMargin; x < kMargin + kTile && x0 + x < w; ++x) out[std::size_t(y0 + y) * w + (x0 + x)] = pd[std::size_t(y) * N + x];
+            return;
+        }
+        // Transform t moves tile cell (y, x) to (y', x'): bit 0 flips x, bit 1
+        // flips y, bit 2 then swaps the two (transpose). The network sees the
+        // moved tile; its output at (y', x') belongs to (y, x).
+        const auto moved = [N](int t, int y, int x) {
+            if (t & 1) x = N - 1 - x;
+            if (t & 2) y = N - 1 - y;
+            return t & 4 ? std::size_t(x) * N + y : std::size_t(y) * N + x;
+        };
+        std::vector<float> vals(std::size_t(T) * kTile * kTile), xt(xb.size());
+        for (int t = 0; t < T; ++t) {
+            for (int c = 0; c < channels; ++c)
+                for (int y = 0; y < N; ++y)
+                    for (int x = 0; x < N; ++x) xt[std::size_t(c) * N * N + moved(t, y, x)] = xb[(std::size_t(c) * N + y) * N + x];
+            const torch::Tensor p = torch::sigmoid(net->forward(torch::from_blob(xt.data(), {1, channels, N, N}, torch::kFloat32))).contiguous();
+            const float* pd = p.data_ptr<float>();
+            for (int y = 0; y < kTile; ++y)
+                for (int x = 0; x < kTile; ++x) vals[(std::size_t(y) * kTile + x) * T + t] = pd[moved(t, kMargin + y, kMargin + x)];
+        }
+        // Each cell's values sorted before the sum: the same mean whatever
+        // the order of the transforms (exact equivariance under the group).
+        for (int y = 0; y < kTile && y0 + kMargin + y < h; ++y)
+            for (int x = 0; x < kTile && x0 + kMargin + x < w; ++x) {
+                float* v = &vals[(std::size_t(y) * kTile + x) * T];
+                std::sort(v, v + T);
+                double sum = 0.0;
+                for (int t = 0; t < T; ++t) sum += v[t];
+                out[std::size_t(y0 + kMargin + y) * w + (x0 + kMargin + x)] = static_cast<float>(sum / T);
+            }
     });
     return out;
 }

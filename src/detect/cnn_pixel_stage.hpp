@@ -12,7 +12,11 @@
 // thread), so the same data and options give the same weight bytes whatever
 // the thread count. Prediction cuts the grid into fixed tiles (core 128
 // cells plus a 32-cell margin) computed one per task: any thread count gives
-// the same map.
+// the same map. With test-time augmentation (CnnOptions::tta 4 or 8) each
+// tile is predicted under flips (and transposes), mapped back, and each
+// cell's probabilities are sorted before they are summed, so the mean does
+// not depend on the order of the transforms: a flipped (or, with 8,
+// transposed) square tile gives exactly the flipped map.
 #include <cstdint>
 #include <string>
 #include <vector>
@@ -28,6 +32,11 @@ struct CnnOptions {
     int steps = 1500;            ///< optimisation steps (Adam)
     double learning_rate = 0.003;  ///< Adam step size (halved at 60 % and again at 85 % of the steps)
     uint64_t seed = 1;           ///< weight initialisation, crops and augmentations
+    /// Test-time augmentation at prediction (training is unchanged): 1 = none;
+    /// 4 = the mean probability under identity, left-right flip, up-down
+    /// flip and rot180; 8 = under the 8 dihedral transforms (these plus
+    /// the transposes). Costs that many forward passes.
+    int tta = 1;
     void validate() const;
 };
 
@@ -48,7 +57,8 @@ struct CnnGrid {
 std::vector<uint8_t> train_cnn(const std::vector<const CnnGrid*>& grids, int channels, const CnnOptions& options);
 
 /// Building probability per cell (width x height, row-major) of a planar
-/// `input` grid (channels x height x width) from weights of train_cnn.
+/// `input` grid (channels x height x width) from weights of train_cnn,
+/// averaged over `options.tta` transforms of each tile.
 /// Tiles run in parallel (TBB); the values do not depend on the thread count.
 std::vector<float> predict_cnn(const std::vector<uint8_t>& weights, const std::vector<float>& input, int width, int height, int channels,
                                const CnnOptions& options);

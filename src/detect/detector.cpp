@@ -111,8 +111,10 @@ BoosterOptions booster_from_json(const nlohmann::json& b) {
     return o;
 }
 nlohmann::json cnn_json(const CnnOptions& c) {
-    return {{"base_channels", c.base_channels}, {"levels", c.levels}, {"crop_cells", c.crop_cells},
-            {"batch", c.batch}, {"steps", c.steps}, {"learning_rate", c.learning_rate}, {"seed", c.seed}};
+    nlohmann::json j = {{"base_channels", c.base_channels}, {"levels", c.levels}, {"crop_cells", c.crop_cells},
+                        {"batch", c.batch}, {"steps", c.steps}, {"learning_rate", c.learning_rate}, {"seed", c.seed}};
+    if (c.tta != 1) j["tta"] = c.tta;  // written only when on: models without it keep their header bytes
+    return j;
 }
 CnnOptions cnn_from_json(const nlohmann::json& c) {
     CnnOptions o;
@@ -123,6 +125,7 @@ CnnOptions cnn_from_json(const nlohmann::json& c) {
     o.steps = c.at("steps").get<int>();
     o.learning_rate = c.at("learning_rate").get<double>();
     o.seed = c.at("seed").get<uint64_t>();
+    o.tta = c.value("tta", 1);  // absent: no test-time augmentation
     return o;
 }
 }  // namespace

@@ -1,0 +1,146 @@
+// Test-time augmentation of the CNN pixel stage (CnnOptions::tta): exact
+// equivariance under the averaged transforms, the same map for any thread
+// count, the header key written only when on.
+#include <catch2/catch.hpp>
+#include <tbb/global_control.h>
+
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include "core/random.hpp"
+#include "detect/cnn_pixel_stage.hpp"
+#include "detect/detector.hpp"
+#include "pipeline/footprints_run.hpp"
+#include "pipeline/train_run.hpp"
+#include "footprints_threads.hpp"
+#include "synth_fixture.hpp"
+#include "test_support.hpp"
+
+using namespace cityforge;
+
+namespace {
+constexpr int kChannels = 3;
+
+// A planar grid (kChannels x h x w) of smooth blobs plus noise, so the network
+// sees structure and its output is not flat.
+std::vector<float> blob_grid(int w, int h, uint64_t seed) {
+    std::vector<float> v(std::size_t(kChannels) * w * h);
+    for (int c = 0; c < kChannels; ++c)
+        for (int y = 0; y < h; ++y)
+            for (int x = 0; x < w; ++x) {
+                const bool roof = ((x / 11 + y / 7 + c) % 3) == 0;
+                v[(std::size_t(c) * h + y) * w + x] =
+                    (roof ? 1.0f : -0.5f) + 0.3f * static_cast<float>(unit_from_hash(hash64(seed, uint64_t(c), uint64_t(y), uint64_t(x))) - 0.5);
+            }
+    return v;
+}
+
+// A few steps of training on one grid: weights that are not symmetric.
+std::vector<uint8_t> small_weights(detect::CnnOptions& o) {
+    o.base_channels = 4, o.levels = 2, o.crop_cells = 32, o.batch = 2, o.steps = 15;
+    detect::CnnGrid g;
+    g.width = 96, g.height = 80;
+    g.input = blob_grid(g.width, g.height, 7);
+    g.target.resize(std::size_t(g.width) * g.height), g.weight.assign(g.target.size(), 1.0f);
+    for (int y = 0; y < g.height; ++y)
+        for (int x = 0; x < g.width; ++x) g.target[std::size_t(y) * g.width + x] = g.input[std::size_t(y) * g.width + x] > 0.2f ? 1.0f : 0.0f;
+    return detect::train_cnn({&g}, kChannels, o);
+}
+
+// The grid moved by `t` (bit 0: left-right flip, bit 1: up-down flip, bit 2:
+// then transposed); planar with `channels` planes of a square side n.
+std::vector<float> moved(const std::vector<float>& v, int n, int channels, int t) {
+    std::vector<float> out(v.size());
+    for (int c = 0; c < channels; ++c)
+        for (int y = 0; y < n; ++y)
+            for (int x = 0; x < n; ++x) {
+                int mx = t & 1 ? n - 1 - x : x, my = t & 2 ? n - 1 - y : y;
+                if (t & 4) std::swap(mx, my);
+                out[(std::size_t(c) * n + my) * n + mx] = v[(std::size_t(c) * n + y) * n + x];
+            }
+    return out;
+}
+}  // namespace
+
+TEST_CASE("CNN test-time augmentation: a flipped or transposed tile gives exactly the moved map, same map for 1 and 2 threads", "[detect][cnn]") {
+    detect::CnnOptions o;
+    const std::vector<uint8_t> w = small_weights(o);
+    // One square prediction tile (128 cells, padded alike on every side).
+    const int n = 128;
+    const std::vector<float> in = blob_grid(n, n, 11);
+    const auto predict = [&](const std::vector<float>& x, int tta) {
+        detect::CnnOptions p = o;
+        p.tta = tta;
+        return detect::predict_cnn(w, x, n, n, kChannels, p);
+    };
+    const std::vector<float> m1 = predict(in, 1), m4 = predict(in, 4), m8 = predict(in, 8);
+    CHECK(m4 != m1);
+    CHECK(m8 != m4);
+    for (const float v : m8) REQUIRE((v >= 0.0f && v <= 1.0f));
+    for (int t = 1; t < 8; ++t) {
+        INFO("transform " << t);
+        CHECK(predict(moved(in, n, kChannels, t), 8) == moved(m8, n, 1, t));
+        if (t < 4) CHECK(predict(moved(in, n, kChannels, t), 4) == moved(m4, n, 1, t));  // flips and rot180: the 4-group
+    }
+    // Without augmentation the network alone is not equivariant.
+    CHECK(predict(moved(in, n, kChannels, 1), 1) != moved(m1, n, 1, 1));
+
+    // Several tiles (300 x 200 cells: 3 x 2, edges partial): the same map for 1 and 2 threads.
+    const std::vector<float> big = blob_grid(300, 200, 13);
+    detect::CnnOptions p = o;
+    p.tta = 8;
+    std::vector<float> a, b;
+    {
+        tbb::global_control one(tbb::global_control::max_allowed_parallelism, 1);
+        a = detect::predict_cnn(w, big, 300, 200, kChannels, p);
+    }
+    {
+        tbb::global_control two(tbb::global_control::max_allowed_parallelism, 2);
+        b = detect::predict_cnn(w, big, 300, 200, kChannels, p);
+    }
+    CHECK(a == b);
+    p.tta = 2;
+    CHECK_THROWS_WITH(p.validate(), Catch::Contains("must be 1, 4 or 8"));
+}
+
+TEST_CASE("CNN test-time augmentation in a model file: key only when on, old files keep their bytes, same footprints for 1 and 2 threads",
+          "[detect][cnn][synth]") {
+    test::ScratchDir dir("detect_cnn_tta");
+    const std::string fine = default_model_path(detect::BandLayout{3, -1}, 0.3);
+    const detect::DetectorModel m = detect::read_model_file(fine);
+    REQUIRE(m.options.pixel.kind == detect::PixelStageKind::cnn);
+    // A file without the key reads as tta 1 and writes back the same bytes.
+    const std::string old_bytes = test::slurp(fine);
+    if (old_bytes.find("\"tta\"") == std::string::npos) {
+        CHECK(m.options.pixel.cnn.tta == 1);
+        const std::vector<uint8_t> again = detect::serialize_model(m);
+        CHECK(std::string(again.begin(), again.end()) == old_bytes);
+    }
+    detect::DetectorModel m4 = m;
+    m4.options.pixel.cnn.tta = 4;
+    const std::vector<uint8_t> b4 = detect::serialize_model(m4);
+    CHECK(std::string(b4.begin(), b4.end()).find("\"tta\"") != std::string::npos);
+    const detect::DetectorModel back = detect::parse_model(b4, "tta.cfdet");
+    CHECK(back.options.pixel.cnn.tta == 4);
+    CHECK(detect::serialize_model(back) == b4);
+    detect::DetectorModel m1 = m;
+    m1.options.pixel.cnn.tta = 1;
+    const std::vector<uint8_t> b1 = detect::serialize_model(m1);
+    CHECK(std::string(b1.begin(), b1.end()).find("\"tta\"") == std::string::npos);
+    detect::write_model_file(dir / "tta4.cfdet", m4);
+    detect::write_model_file(dir / "tta1.cfdet", m1);
+
+    // Applied to a synthetic town with 1 and 2 threads: the same footprints;
+    // the augmented map changes them a little, not wholesale.
+    test::ScratchDir town_dir("detect_cnn_tta_town");
+    const SynthResult town = test::make_town(town_dir, 160, 41, 0);
+    FootprintsRunOptions fo;
+    fo.ortho = town.ortho_path;
+    fo.model = dir / "tta4.cfdet";
+    const FootprintsReport r4 = test::run_footprints_1_and_2_threads(dir / "a1.geojson", dir / "a2.geojson", fo);
+    fo.model = dir / "tta1.cfdet";
+    const FootprintsReport r1 = test::run_footprints_1_and_2_threads(dir / "b1.geojson", dir / "b2.geojson", fo);
+    CHECK(r4.buildings > 0);
+    CHECK(r1.buildings > 0);
+}
