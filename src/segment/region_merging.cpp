@@ -8,6 +8,7 @@
 #include <cstring>
 #include <ctime>
 #include <atomic>
+#include <memory>
 #include <new>
 #include <type_traits>
 #include <tbb/task_arena.h>
@@ -482,16 +483,19 @@ public:
                 // first, row by row (the hardware streams whole rows; the
                 // blocks' short rows it does not), into this buffer the
                 // blocks then read from cache.
-                std::vector<int32_t> quantised(Bands > 0 && quantise_rows ? std::size_t(nb) * kStripe * std::size_t(w) : 0);
+                // (not zeroed: every row is written before a block reads it)
+                const std::size_t quantised_size = Bands > 0 && quantise_rows ? std::size_t(nb) * kStripe * std::size_t(w) : 0;
+                const std::unique_ptr<int32_t[]> quantised_buffer(quantised_size ? new int32_t[quantised_size] : nullptr);
+                int32_t* const quantised = quantised_buffer.get();  // null: not quantised
                 for (int ys = band_row(j); ys < band_row(j + 1); ys += kStripe) {
 #if defined(__SSE2__)
-                if (!quantised.empty()) {
+                if (quantised) {
                     const __m128 f4 = _mm_set1_ps(static_cast<float>(fixed));
                     const __m128 half = _mm_set1_ps(0.5f), minus_half = _mm_set1_ps(-0.5f);
                     for (int y = ys; y < std::min(band_row(j + 1), ys + kStripe); ++y)
                         for (int b = 0; b < nb; ++b) {
                             const float* src = band_ptr[b] + std::size_t(y) * w;
-                            int32_t* q = quantised.data() + (std::size_t(b) * kStripe + std::size_t(y - ys)) * w;
+                            int32_t* q = quantised + (std::size_t(b) * kStripe + std::size_t(y - ys)) * w;
                             int t = 0;
                             for (; t + 4 <= w; t += 4) {
                                 const __m128 v = _mm_mul_ps(_mm_loadu_ps(src + t), f4);
@@ -537,10 +541,18 @@ public:
                         const std::size_t ahead = std::size_t(y + kRowsAhead) * w;
                         for (int px = xs; px < x_end; px += 16) {
                             prefetch_line(lab + ahead + px);
-                            if (quantised.empty())
+                            if (!quantised)
                                 for (int b = 0; b < nb; ++b) prefetch_line(band_ptr[b] + ahead + px);
                         }
                     }
+                    // So are the quantised values of the block row kRowsAhead
+                    // down (written for the whole stripe, they have mostly left
+                    // the core's caches by the time a block reads them).
+                    if (quantised && y + kRowsAhead < std::min(band_row(j + 1), ys + kStripe))
+                        for (int b = 0; b < nb; ++b) {
+                            const int32_t* q = quantised + (std::size_t(b) * kStripe + std::size_t(y + kRowsAhead - ys)) * w;
+                            for (int px = xs; px < x_end; px += 16) prefetch_line(q + px);
+                        }
                     // The block row (n <= 64 pixels) as bit masks: run starts,
                     // nodata, and pixels whose label differs above or below
                     // (and below from a region, not nodata). Runs are then
@@ -588,11 +600,12 @@ public:
 #if defined(__SSE2__)
                         if (prefixed) {
                             for (int b = 0; b < Bands; ++b) {
-                                const int32_t* q = quantised.data() + (std::size_t(b) * kStripe + std::size_t(y - ys)) * w + xs;
+                                const int32_t* q = quantised + (std::size_t(b) * kStripe + std::size_t(y - ys)) * w + xs;
                                 int t = 0;
                                 int64_t* ps = prefix[b][0];
                                 int64_t* pq = prefix[b][1];
                                 ps[0] = pq[0] = 0;
+#pragma GCC unroll 4
                                 for (; t < n; ++t) {
                                     const int64_t v = q[t];
                                     ps[t + 1] = ps[t] + v, pq[t + 1] = pq[t] + v * v;
