@@ -53,7 +53,7 @@ void add_train_command(CLI::App& parent, const GlobalFlags& g, CommandList& out)
                     "(tried after the grouping; the best pooled CV F1 is kept; none = never)")
         ->delimiter(',');
     cmd->add_option("--cv-out", o.cv_out_dir,
-                    "Directory for the cross-validation's out-of-fold footprints (pixel space, JSON), pixel map and folds per image "
+                    "Directory for the cross-validation's out-of-fold footprints (pixel space, JSON), pixel map, classified segments and folds per image "
                     "(error analysis)");
     cmd->add_option("--neck-split-m", d.neck_split_m, "Neck split, metres, when there is no cross-validation (0 = off)")->capture_default_str();
     cmd->add_flag("--no-pair-classifier", s->no_pairs, "Buildings from the split levels only (no pair classifier is trained)");
@@ -69,6 +69,12 @@ void add_train_command(CLI::App& parent, const GlobalFlags& g, CommandList& out)
     cmd->add_option("--max-depth", d.booster.max_depth, "Depth of each tree")->capture_default_str();
     cmd->add_option("--learning-rate", d.booster.learning_rate, "Shrinkage (eta)")->capture_default_str();
     cmd->add_option("--seed", d.booster.seed, "Seed of row/column sampling and of the folds (same data and seed, same model bytes)")
+        ->capture_default_str();
+    cmd->add_option("--map-split", d.map_split_threshold,
+                    "Map-guided first segments: each connected piece of a first-scale segment where the pixel stage's map reaches this "
+                    "becomes a segment of its own (0 = off; needs the pixel stage)")
+        ->capture_default_str();
+    cmd->add_option("--map-split-min-m2", d.map_split_min_m2, "Map-guided first segments: smallest piece split off (and smallest rest), square metres")
         ->capture_default_str();
     cmd->add_option("--min-label-share", d.min_label_share, "A segment is building when this share of its pixels is labelled")->capture_default_str();
     cmd->add_option("--min-area-m2", d.min_area_m2, "Smallest building kept when applied, square metres")->capture_default_str();

@@ -70,6 +70,16 @@ void DetectorOptions::validate(int bands) const {
     if (!(min_hole_m2 >= 0.0)) throw Error("min_hole_m2", "must be >= 0");
     if (!(merge_threshold >= 0.0 && merge_threshold < 1.0)) throw Error("merge_threshold", "must be in [0, 1) (0 = off)");
     if (!(neck_split_m >= 0.0 && neck_split_m <= 20.0)) throw Error("neck_split_m", "must be in [0, 20] metres (0 = off)");
+    if (!(map_split_threshold >= 0.0 && map_split_threshold < 1.0)) throw Error("map_split_threshold", "must be in [0, 1) (0 = off)");
+    if (map_split_threshold > 0.0 && !pixel.enabled) throw Error("map_split_threshold", "needs the pixel stage");
+    if (!(map_split_min_m2 >= 0.0 && map_split_min_m2 <= 1000.0)) throw Error("map_split_min_m2", "must be in [0, 1000] square metres");
+}
+
+std::size_t apply_map_split(SceneSegments& segments, const DetectorOptions& options, const std::vector<float>* pixel_map, double gsd_m) {
+    if (!(options.map_split_threshold > 0.0) || pixel_map == nullptr) return 0;
+    if (!(gsd_m > 0.0)) throw Error("map_split", "internal: needs the image's GSD");
+    const auto min_pixels = static_cast<std::size_t>(std::ceil(options.map_split_min_m2 / (gsd_m * gsd_m) - 1e-9));
+    return split_segments_by_map(segments, *pixel_map, options.map_split_threshold, min_pixels);
 }
 
 void encode_linear_counts(Image<float>& image, int band) {
@@ -153,6 +163,7 @@ nlohmann::json to_json(const DetectorOptions& o) {
     // Written only when on: models without the pair classifier keep their header bytes.
     if (o.merge_threshold > 0.0) j["merge_threshold"] = o.merge_threshold;
     if (o.neck_split_m > 0.0) j["neck_split_m"] = o.neck_split_m;  // likewise
+    if (o.map_split_threshold > 0.0) j["map_split"] = {{"threshold", o.map_split_threshold}, {"min_m2", o.map_split_min_m2}};  // likewise
     if (o.instance.enabled())  // likewise
         j["instance"] = {{"core_threshold", o.instance.core_threshold}, {"core_depth_m", o.instance.core_depth_m},
                          {"min_core_m2", o.instance.min_core_m2}, {"cell_m", o.instance.cell_m}, {"cnn", cnn_json(o.instance.cnn)}};
@@ -187,6 +198,10 @@ DetectorOptions detector_options_from_json(const nlohmann::json& j) {
     o.pixel_object_threshold = j.value("pixel_object_threshold", 0.0);
     o.merge_threshold = j.value("merge_threshold", 0.0);
     o.neck_split_m = j.value("neck_split_m", 0.0);
+    if (j.contains("map_split")) {  // absent before map-guided segments, or off
+        o.map_split_threshold = j.at("map_split").at("threshold").get<double>();
+        o.map_split_min_m2 = j.at("map_split").at("min_m2").get<double>();
+    }
     if (j.contains("instance")) {  // absent before the instance stage, or off
         const auto& in = j.at("instance");
         o.instance.core_threshold = in.at("core_threshold").get<double>();
@@ -577,6 +592,7 @@ Detection detect_buildings(const DetectorModel& model, const Image<float>& norma
         progress(0.3, "pixel probability");
     }
     d.segments = segment_scene(normalised, valid, model.options.segmentation, progress.sub(pixel ? 0.3 : 0.0, 0.8), gsd_m);
+    apply_map_split(d.segments, model.options, pixel ? &d.pixel_probability : nullptr, gsd_m);
     const FeatureMatrix f = segment_features(normalised, valid, d.segments, model.layout, gsd_m, pixel ? &d.pixel_probability : nullptr);
     progress(0.9, "features");
     d.probability = segment_probabilities(model, f, threads);

@@ -77,6 +77,17 @@ struct DetectorOptions {
     /// of this radius, grown back over the building pixels); 0 = off (the
     /// training command picks it by cross-validation).
     double neck_split_m = 0.0;
+    /// > 0: map-guided first segments (split_segments_by_map): each
+    /// 4-connected piece of a first-scale segment where the pixel stage's
+    /// map is at or above this becomes a segment of its own (a segment
+    /// straddling a small roof and its yard is split along the map's level
+    /// set) before features, classes and objects; needs the pixel stage;
+    /// 0 = off. Header key "map_split" only when on (older models keep
+    /// their bytes).
+    double map_split_threshold = 0.0;
+    /// Pieces (and what they leave of their segment) smaller than this,
+    /// square metres of ground, stay in the segment.
+    double map_split_min_m2 = 4.0;
     /// Instance separation from the core CNN (off by default; header key
     /// "instance" only when on, so older models keep their bytes).
     InstanceOptions instance;
@@ -127,6 +138,11 @@ void write_model_file(const std::string& path, const DetectorModel& model);
 /// Throws a one-line Error naming `image` when its bands are not the ones
 /// the model was trained on.
 void check_bands(const DetectorModel& model, const BandLayout& image_layout, const std::string& image);
+
+/// DetectorOptions::map_split_threshold applied to `segments` (nothing
+/// when off or without a map): `pixel_map` per pixel, `gsd_m` the image's
+/// ground sample distance in metres. Returns how many segments were added.
+std::size_t apply_map_split(SceneSegments& segments, const DetectorOptions& options, const std::vector<float>* pixel_map, double gsd_m);
 
 /// Building probability of every segment (index = label, 0 unused).
 std::vector<float> segment_probabilities(const DetectorModel& model, const FeatureMatrix& features, int threads = 0);

@@ -60,6 +60,40 @@ SceneSegments segment_scene(const Image<float>& normalised, const std::vector<ui
     return s;
 }
 
+std::size_t split_segments_by_map(SceneSegments& s, const std::vector<float>& map, double threshold, std::size_t min_pixels) {
+    const int w = s.labels.width, h = s.labels.height;
+    const std::size_t n = std::size_t(w) * std::size_t(h);
+    if (map.size() != n) throw Error("split_segments_by_map", "internal: the map is not the size of the segments");
+    std::vector<std::size_t> left(std::size_t(s.count) + 1, 0);  // pixels each segment keeps
+    for (std::size_t i = 0; i < n; ++i) ++left[s.labels.data[i]];
+    std::vector<uint8_t> seen(n, 0);
+    std::vector<std::size_t> piece, stack;
+    const uint32_t before = s.count;
+    for (std::size_t start = 0; start < n; ++start) {
+        const uint32_t k = s.labels.data[start];
+        if (k == 0 || k > before || seen[start] || !(map[start] >= threshold)) continue;
+        // The 4-connected piece of segment k at or above the threshold.
+        piece.clear();
+        stack.assign(1, start);
+        seen[start] = 1;
+        while (!stack.empty()) {
+            const std::size_t i = stack.back();
+            stack.pop_back();
+            piece.push_back(i);
+            const int r = int(i / std::size_t(w)), c = int(i % std::size_t(w));
+            const std::size_t nb[4] = {c > 0 ? i - 1 : n, c + 1 < w ? i + 1 : n, r > 0 ? i - std::size_t(w) : n, r + 1 < h ? i + std::size_t(w) : n};
+            for (const std::size_t j : nb)
+                if (j < n && !seen[j] && s.labels.data[j] == k && map[j] >= threshold) seen[j] = 1, stack.push_back(j);
+        }
+        if (piece.size() < min_pixels || left[k] < piece.size() + min_pixels || left[k] == piece.size()) continue;
+        left[k] -= piece.size();
+        const uint32_t id = ++s.count;
+        for (const std::size_t i : piece) s.labels.data[i] = id;
+        for (auto& chain : s.context) chain.push_back(chain[k]);
+    }
+    return s.count - before;
+}
+
 std::vector<std::string> feature_names(const BandLayout& layout, int context_levels, bool pixel_map) {
     std::vector<std::string> f;
     for (int b = 0; b < layout.bands; ++b) {

@@ -54,6 +54,17 @@ struct SceneSegments {
 SceneSegments segment_scene(const Image<float>& normalised, const std::vector<uint8_t>& valid,
                             const DetectorSegmentationOptions& options, const Progress& progress = {}, double gsd_m = 0.0);
 
+/// Map-guided first segments: every 4-connected piece of a segment whose
+/// pixels have `map` (per pixel, the labels' size; a building probability
+/// in 0..1) at or above `threshold` becomes a segment of its own (label
+/// count+1, ... in raster order of the pieces' first pixels, same context
+/// regions as the segment it came from) when it holds at least
+/// `min_pixels` pixels and leaves at least `min_pixels` to the segment; the
+/// rest keeps its label. A segment entirely above or below the threshold
+/// is unchanged. Splits a segment that straddles a small roof and its yard
+/// along the map's level set. Returns how many segments were added.
+std::size_t split_segments_by_map(SceneSegments& segments, const std::vector<float>& map, double threshold, std::size_t min_pixels);
+
 /// Which bands the image holds: colour bands first (R, G, B when 3+), then
 /// optional near infrared; `nir_band` is its 0-based index or -1. An nDSM
 /// band (heights above ground, 0..20 m scaled to 0..255, add_ndsm_band)

@@ -348,8 +348,8 @@ nlohmann::json polygons_json(const std::vector<std::vector<Polygon>>& objects) {
 }
 
 // Raw little-endian values, written atomically (never half-written).
-template <class T>
-void write_raw(const fs::path& path, const std::vector<T>& v) {
+template <class T, class A>
+void write_raw(const fs::path& path, const std::vector<T, A>& v) {
     write_text_file(path, std::string(reinterpret_cast<const char*>(v.data()), v.size() * sizeof(T)));
 }
 
@@ -376,6 +376,7 @@ void write_cv_out(const std::string& dir, const std::vector<std::string>& orthos
             for (int c = 0; c < w; ++c) fold[std::size_t(r) * w + c] = uint8_t(folds.fold_at(i, c + 0.5, r + 0.5));
         write_raw(fs::path(dir) / (stem + "_cv_fold.u8"), fold);
         write_raw(fs::path(dir) / (stem + "_cv_truth.u8"), li.truth);
+        write_raw(fs::path(dir) / (stem + "_cv_segments.u32"), li.segments.labels.data);
     }
 }
 
@@ -527,6 +528,17 @@ TrainReport run_train(const std::string& out_path, const TrainOptions& o, bool o
     const detect::FoldBlocks folds = o.folds >= 2 ? detect::make_folds(ws, hs, bs, o.folds, o.detector.booster.seed) : detect::FoldBlocks{};
     // The pixel stage (src/detect/pixel_classifier): its out-of-fold maps give the segment features.
     const detect::PixelStage pixel = train_pixel_map_stage(data, layout, o, o.folds >= 2 ? &folds : nullptr);
+    // Map-guided first segments: split along the map each segment will be classified with (out-of-fold in the CV).
+    if (o.detector.map_split_threshold > 0.0 && o.detector.pixel.enabled) {
+        rep.segments = rep.building_segments = 0;
+        for (std::size_t i = 0; i < data.size(); ++i) {
+            LabelledImage& li = data[i];
+            detect::apply_map_split(li.segments, o.detector, &pixel.out_of_fold[i], li.image.gsd_m);
+            li.share = detect::building_share(li.segments, li.truth);
+            rep.segments += li.segments.count;
+            for (uint32_t k = 1; k <= li.segments.count; ++k) rep.building_segments += li.share[k] >= o.detector.min_label_share;
+        }
+    }
     // The core CNN (instance separation): trained when the CV has candidates, or when fixed on without CV.
     const bool want_core = o.folds >= 2 ? !o.core_threshold_candidates.empty() : o.detector.instance.enabled();
     detect::PixelStage core;
