@@ -8,6 +8,7 @@
 #include "core/error.hpp"
 #include "core/grid_fill.hpp"
 #include "core/grid_size.hpp"
+#include "core/morphology.hpp"
 
 namespace cityforge {
 
@@ -29,38 +30,6 @@ GridSpec grid_over_extent(const Extent& e, double cell, double bytes_per_cell, c
     const GridSize size = checked_grid_size(x0, miny, maxx, y1, cell, bytes_per_cell > 0 ? bytes_per_cell : kCloudRasterBytesPerCell, subject);
     return GridSpec{{x0, cell, y1, -cell}, size.width, size.height};
 }
-
-namespace {
-// 1 where a cell with a nonzero count lies within `reach` cells along both
-// axes (a square of 2 reach + 1 cells), else 0: two sliding-window passes,
-// O(cells) whatever the reach.
-std::vector<uint8_t> cells_near_points(const std::vector<uint32_t>& count, int w, int h, int reach) {
-    const std::size_t W = static_cast<std::size_t>(w);
-    std::vector<uint8_t> rows(count.size(), 0), out(count.size(), 0);
-    for (int r = 0; r < h; ++r) {
-        const uint32_t* in = count.data() + static_cast<std::size_t>(r) * W;
-        uint8_t* o = rows.data() + static_cast<std::size_t>(r) * W;
-        int last = -1 - reach;  // column of the last cell with points seen so far
-        for (int c = 0; c < std::min(w, reach); ++c)
-            if (in[c]) last = c;
-        for (int c = 0; c < w; ++c) {
-            if (c + reach < w && in[c + reach]) last = c + reach;
-            o[c] = last >= c - reach ? 1 : 0;
-        }
-    }
-    std::vector<int> last(W, -1 - reach);  // per column, the last row seen with a near cell
-    for (int r = 0; r < std::min(h, reach); ++r)
-        for (std::size_t c = 0; c < W; ++c)
-            if (rows[static_cast<std::size_t>(r) * W + c]) last[c] = r;
-    for (int r = 0; r < h; ++r) {
-        if (r + reach < h)
-            for (std::size_t c = 0; c < W; ++c)
-                if (rows[static_cast<std::size_t>(r + reach) * W + c]) last[c] = r + reach;
-        for (std::size_t c = 0; c < W; ++c) out[static_cast<std::size_t>(r) * W + c] = last[c] >= r - reach ? 1 : 0;
-    }
-    return out;
-}
-}  // namespace
 
 CloudRasters rasterize_cloud(const PointCloud& c, const std::vector<uint8_t>& keep, const std::vector<uint8_t>& is_ground,
                              const GridSpec& g, double unit_m) {
@@ -114,13 +83,16 @@ CloudRasters rasterize_cloud(const PointCloud& c, const std::vector<uint8_t>& ke
     for (std::size_t k = 0; k < n; ++k) dtm[k] = ground_n[k] ? ground_sum[k] / ground_n[k] : NAN;
     // Filled from ground within kGapFillReach_m (a cell depends on nearby ground only: tiles agree).
     // Terrain only where the cloud saw something: a cell with no kept point
-    // within the fill's reach (a square of kGapFillReach_m a side around it)
-    // lies beyond the survey (the box of a corridor, a wide lake) and stays
-    // empty, as PDAL's and LAStools' rasters leave it, instead of an
-    // extrapolation from ground kilometres away. Under a roof the cell holds
-    // the roof's points, so buildings of any size keep their filled ground.
+    // within the fill's reach along both axes (a square of 2 kGapFillReach_m
+    // a side centred on it) lies beyond the survey (the box of a corridor, a
+    // lake without returns) and stays empty, as PDAL's and LAStools' rasters
+    // leave it, instead of an extrapolation from ground kilometres away.
+    // Under a roof the cell holds the roof's points, so buildings of any size
+    // keep their filled ground.
     const int reach = gap_fill_reach_cells(std::abs(g.transform.pixel_width) * unit_m);
-    const std::vector<uint8_t> seen = cells_near_points(above_n, g.width, g.height, reach);
+    std::vector<uint8_t> seen(n);
+    for (std::size_t k = 0; k < n; ++k) seen[k] = above_n[k] ? 1 : 0;
+    seen = morphology_square(seen, g.width, g.height, reach, /*erode=*/false);
     fill_gaps(dtm, g.width, g.height, reach, &seen);
     r.dtm = Image<float>(g.width, g.height, 1, NAN);
     r.ndsm = Image<float>(g.width, g.height, 1, NAN);

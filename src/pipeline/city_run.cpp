@@ -347,6 +347,14 @@ RunManifest plan_run(const RunOptions& in, const Progress& progress) {
         m.grid = {info.transform, info.width, info.height};
         m.crs_wkt = info.crs.wkt;
         gsd_m = std::abs(info.transform.pixel_width) * info.metres_per_unit;
+        if (!o.footprints.empty()) {
+            // Given footprints on the ortho's grid: read now, so that a missing or
+            // unreadable file is refused at plan time (not by every tile), and
+            // the ones outside the cloud are counted as in a run without ortho.
+            PolygonLayer fp = read_polygon_layer(o.footprints, o.buildings.heights.footprint_layer);
+            put_layer_on(fp, info.crs, o.footprints);
+            for (const Feature& f : fp.features) footprint_extents.push_back(parts_extent(f.geometry));
+        }
     } else if (o.footprints.empty()) {
         // Cloud only: a grid of extraction.mask.gsd_m cells (the config's
         // extraction.cloud_grid_m, as `footprints --gsd`) over the cloud's
@@ -420,6 +428,7 @@ RunManifest plan_run(const RunOptions& in, const Progress& progress) {
         PreparedCloud points;
         const Extent covered = covered_part(m, bounds());
         MapPoint centre{0.5 * (covered.min_x + covered.max_x), 0.5 * (covered.min_y + covered.max_y)};
+        progress(0.4, "cloud sample: the 400 m square at the centre of the covered part");  // a streamed pass, not counted
         CloudSample sample = sample_cloud(o.cloud, o.cloud_crs, grid_crs, outliers, centre, &points);
         // Too few points there to measure anything (the box says little of
         // where the points are: an L-shaped survey): the grid's most
@@ -510,6 +519,7 @@ RunManifest plan_run(const RunOptions& in, const Progress& progress) {
         if (o.ortho.empty()) log::info(tiles_left_out_note(m));
         else log::warning(tiles_left_out_note(m));
     }
+    progress(1.0, "planned");  // ends the progress line, whichever passes ran
     return m;
 }
 

@@ -87,8 +87,9 @@ double grid_metres_per_unit(const RunManifest& manifest);
 
 /// Reads the inputs' headers and cuts the grid into tiles. Throws Error naming the file.
 /// With a cloud it streams the cloud's points (its box, a 400 m sample, the
-/// points per tile) and reports each pass to `progress` ("cloud bounds: N of
-/// M points", ...).
+/// points per tile) and reports the box's and the tiles' passes point by
+/// point to `progress` ("cloud bounds: N of M points", ...), the sample's
+/// start, and 1.0 ("planned") at the end.
 RunManifest plan_run(const RunOptions& options, const Progress& progress = {});
 void write_manifest(const std::string& path, const RunManifest& manifest);
 RunManifest read_manifest(const std::string& path);

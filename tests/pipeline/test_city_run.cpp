@@ -287,6 +287,13 @@ TEST_CASE("run with a cloud alone - a grid over its points, tiles without points
         CHECK(quiet.exit_code == 0);
         CHECK(quiet.err.empty());
     }
+    // Footprints given with the ortho are read at plan time: a missing file is
+    // refused there, with no manifest written (before: plan exited 0, every tile failed).
+    const auto missing = test::run_cli("plan --ortho " + s.ortho_path + " --cloud " + s.cloud_path + " --footprints " + (dir / "missing.gpkg") +
+                                       " --out " + (dir / "missing_manifest.json"));
+    CHECK(missing.exit_code == 1);
+    CHECK(missing.err.find((dir / "missing.gpkg") + ": file not found") != std::string::npos);
+    CHECK_FALSE(std::filesystem::exists(dir / "missing_manifest.json"));
     // Without an ortho, ortho_cloud detection cannot be asked for.
     RunOptions o;
     o.cloud = s.cloud_path;
