@@ -143,4 +143,18 @@ TEST_CASE("CNN test-time augmentation in a model file: key only when on, old fil
     const FootprintsReport r1 = test::run_footprints_1_and_2_threads(dir / "b1.geojson", dir / "b2.geojson", fo);
     CHECK(r4.buildings > 0);
     CHECK(r1.buildings > 0);
+    // The header's tta is what the applied model uses: the maps differ, a little
+    // (a mean over transforms of one network), and so do the footprint files.
+    const DetectionImage di = read_detection_image(town.ortho_path);
+    const detect::Detection d4 = detect::detect_buildings(m4, di.normalised, di.valid, di.gsd_m);
+    const detect::Detection d1 = detect::detect_buildings(m1, di.normalised, di.valid, di.gsd_m);
+    REQUIRE(d4.pixel_probability.size() == d1.pixel_probability.size());
+    std::size_t changed = 0, agree = 0;
+    for (std::size_t k = 0; k < d4.pixel_probability.size(); ++k) {
+        changed += d4.pixel_probability[k] != d1.pixel_probability[k];
+        agree += (d4.pixel_probability[k] >= 0.5f) == (d1.pixel_probability[k] >= 0.5f);
+    }
+    CHECK(changed > d4.pixel_probability.size() / 2);
+    CHECK(agree > d4.pixel_probability.size() * 9 / 10);
+    CHECK(test::slurp(dir / "a1.geojson") != test::slurp(dir / "b1.geojson"));
 }

@@ -841,6 +841,13 @@ TEST_CASE("Map-guided first segments in a model: same bytes and footprints for 1
     fo.model = dir / "on1.cfdet";
     const FootprintsReport fr = test::run_footprints_1_and_2_threads(dir / "b1.geojson", dir / "b2.geojson", fo);
     CHECK(fr.buildings > 0);
+    // The split is applied when the model is: the same model with it off classifies fewer segments.
+    detect::DetectorModel m_off = m;
+    m_off.options.map_split_threshold = 0.0;
+    const DetectionImage di = read_detection_image(b.ortho_path);
+    const detect::Detection with_split = detect::detect_buildings(m, di.normalised, di.valid, di.gsd_m);
+    const detect::Detection without_split = detect::detect_buildings(m_off, di.normalised, di.valid, di.gsd_m);
+    CHECK(with_split.segments.count > without_split.segments.count);
     // Without a pixel stage there is no map to split by: refused in one line.
     o.detector.pixel.enabled = false;
     CHECK_THROWS_WITH(run_train(dir / "nopix.cfdet", o), Catch::StartsWith("map_split_threshold"));
