@@ -257,13 +257,6 @@ std::vector<float> predict_cnn(const std::vector<uint8_t>& weights, const std::v
             for (int y = std::max(0, -y0); y < std::min(N, h - y0); ++y)
                 for (int x = std::max(0, -x0); x < std::min(N, w - x0); ++x)
                     xb[(std::size_t(c) * N + y) * N + x] = input[(std::size_t(c) * h + (y0 + y)) * w + (x0 + x)];
-        if (T == 1) {
-            const torch::Tensor p = torch::sigmoid(net->forward(torch::from_blob(xb.data(), {1, channels, N, N}, torch::kFloat32))).contiguous();
-            const float* pd = p.data_ptr<float>();
-            for (int y = kMargin; y < kMargin + kTile && y0 + y < h; ++y)
-                for (int x = kMargin; x < kMargin + kTile && x0 + x < w; ++x) out[std::size_t(y0 + y) * w + (x0 + x)] = pd[std::size_t(y) * N + x];
-            return;
-        }
         // Transform t moves tile cell (y, x) to (y', x'): bit 0 flips x, bit 1
         // flips y, bit 2 then swaps the two (transpose). The network sees the
         // moved tile; its output at (y', x') belongs to (y, x).
@@ -272,12 +265,15 @@ std::vector<float> predict_cnn(const std::vector<uint8_t>& weights, const std::v
             if (t & 2) y = N - 1 - y;
             return t & 4 ? std::size_t(x) * N + y : std::size_t(y) * N + x;
         };
-        std::vector<float> vals(std::size_t(T) * kTile * kTile), xt(xb.size());
+        // (T = 1: the identity alone, the tile as it is; a mean of one value is that value.)
+        std::vector<float> vals(std::size_t(T) * kTile * kTile), xt(T > 1 ? xb.size() : 0);
         for (int t = 0; t < T; ++t) {
-            for (int c = 0; c < channels; ++c)
-                for (int y = 0; y < N; ++y)
-                    for (int x = 0; x < N; ++x) xt[std::size_t(c) * N * N + moved(t, y, x)] = xb[(std::size_t(c) * N + y) * N + x];
-            const torch::Tensor p = torch::sigmoid(net->forward(torch::from_blob(xt.data(), {1, channels, N, N}, torch::kFloat32))).contiguous();
+            if (t > 0)
+                for (int c = 0; c < channels; ++c)
+                    for (int y = 0; y < N; ++y)
+                        for (int x = 0; x < N; ++x) xt[std::size_t(c) * N * N + moved(t, y, x)] = xb[(std::size_t(c) * N + y) * N + x];
+            const torch::Tensor p =
+                torch::sigmoid(net->forward(torch::from_blob(t > 0 ? xt.data() : xb.data(), {1, channels, N, N}, torch::kFloat32))).contiguous();
             const float* pd = p.data_ptr<float>();
             for (int y = 0; y < kTile; ++y)
                 for (int x = 0; x < kTile; ++x) vals[(std::size_t(y) * kTile + x) * T + t] = pd[moved(t, kMargin + y, kMargin + x)];

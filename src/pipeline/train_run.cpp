@@ -497,6 +497,11 @@ TrainReport run_train(const std::string& out_path, const TrainOptions& o, bool o
     TrainReport rep;
     std::vector<LabelledImage> data(o.orthos.size());
     uint64_t fp = detect::fnv1a64("cityforge-train", 15);
+    // The training segments and those labelled building, for the report and the model header.
+    auto count_segments = [&](const LabelledImage& li) {
+        rep.segments += li.segments.count;
+        for (uint32_t k = 1; k <= li.segments.count; ++k) rep.building_segments += li.share[k] >= o.detector.min_label_share;
+    };
     for (std::size_t i = 0; i < o.orthos.size(); ++i) {
         LabelledImage& li = data[i];
         li.image = read_detection_image(o.orthos[i], o.nir_band);
@@ -514,9 +519,8 @@ TrainReport run_train(const std::string& out_path, const TrainOptions& o, bool o
         li.share = detect::building_share(li.segments, li.truth);
         fp = detect::fnv1a64(li.image.normalised.data.data(), li.image.normalised.data.size() * sizeof(float), fp);
         fp = detect::fnv1a64(li.truth.data(), li.truth.size(), fp);
-        rep.segments += li.segments.count;
+        count_segments(li);
         rep.reference_buildings += li.reference.size();
-        for (uint32_t k = 1; k <= li.segments.count; ++k) rep.building_segments += li.share[k] >= o.detector.min_label_share;
         progress(0.5 * double(i + 1) / double(o.orthos.size()), "features");
     }
     if (rep.building_segments == 0) throw Error(o.labels[0], "no training segment is a building (labels and images do not overlap?)");
@@ -529,14 +533,13 @@ TrainReport run_train(const std::string& out_path, const TrainOptions& o, bool o
     // The pixel stage (src/detect/pixel_classifier): its out-of-fold maps give the segment features.
     const detect::PixelStage pixel = train_pixel_map_stage(data, layout, o, o.folds >= 2 ? &folds : nullptr);
     // Map-guided first segments: split along the map each segment will be classified with (out-of-fold in the CV).
-    if (o.detector.map_split_threshold > 0.0 && o.detector.pixel.enabled) {
+    if (o.detector.map_split_threshold > 0.0) {  // validate(): only with the pixel stage
         rep.segments = rep.building_segments = 0;
         for (std::size_t i = 0; i < data.size(); ++i) {
             LabelledImage& li = data[i];
             detect::apply_map_split(li.segments, o.detector, &pixel.out_of_fold[i], li.image.gsd_m);
             li.share = detect::building_share(li.segments, li.truth);
-            rep.segments += li.segments.count;
-            for (uint32_t k = 1; k <= li.segments.count; ++k) rep.building_segments += li.share[k] >= o.detector.min_label_share;
+            count_segments(li);
         }
     }
     // The core CNN (instance separation): trained when the CV has candidates, or when fixed on without CV.
