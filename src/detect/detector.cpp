@@ -297,7 +297,11 @@ DetectorModel parse_model(const std::vector<uint8_t>& in, const std::string& sub
     } catch (const nlohmann::json::exception& e) {
         throw Error(subject, std::string("invalid detector model header: ") + e.what());
     }
-    m.options.validate(m.layout.bands);
+    try {
+        m.options.validate(m.layout.bands);
+    } catch (const Error& e) {  // "option: problem", said of the file that holds it
+        throw Error(subject, std::string("invalid option in the detector model header: ") + e.what());
+    }
     const bool cnn = m.options.pixel.enabled && m.options.pixel.kind != PixelStageKind::boosted;
     const bool merge = m.options.merge_threshold > 0.0;
     const bool instance = m.options.instance.enabled();

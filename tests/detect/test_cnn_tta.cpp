@@ -124,6 +124,11 @@ TEST_CASE("CNN test-time augmentation in a model file: key only when on, old fil
     const detect::DetectorModel back = detect::parse_model(b4, "tta.cfdet");
     CHECK(back.options.pixel.cnn.tta == 4);
     CHECK(detect::serialize_model(back) == b4);
+    // A header option out of range (a hand-made file: the checksum matches) is refused naming the file.
+    detect::DetectorModel m3 = m;
+    m3.options.pixel.cnn.tta = 3;
+    CHECK_THROWS_WITH(detect::parse_model(detect::serialize_model(m3), "hand_made.cfdet"),
+                      Catch::StartsWith("hand_made.cfdet: invalid option in the detector model header: pixel.cnn.tta: must be 1, 4 or 8"));
     detect::DetectorModel m1 = m;
     m1.options.pixel.cnn.tta = 1;
     const std::vector<uint8_t> b1 = detect::serialize_model(m1);
