@@ -563,20 +563,51 @@ void grid_knn(const PointCloud& c, std::size_t k, Visit&& visit) {
     auto cell_index = [&g](int cx, int cy) { return g.index(cx, cy); };  // column-major, within the column's band
     const std::size_t cells = g.cells();
     constexpr std::size_t kGrain = 1u << 16;
-    std::vector<uint32_t> start(cells + 1, 0), order(n);  // order: point indices cell by cell
+    // Uninitialised arrays on huge pages, first written in parallel where
+    // they can be (fresh 4 kB pages zeroed by the calling thread were about
+    // 16 % of a whole-cloud run's samples).
+    LargeVector<uint32_t> start(cells + 1, 0);
+    auto order = large_array<uint32_t>(n);  // point indices cell by cell
     {
-        std::vector<uint32_t> cell_of(n);
+        auto cell_of = large_array<uint32_t>(n);
         tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, kGrain), [&](const tbb::blocked_range<std::size_t>& r) {
             for (std::size_t i = r.begin(); i != r.end(); ++i) cell_of[i] = static_cast<uint32_t>(cell_index(g.col(cxp[i]), g.row(cyp[i])));
         });
-        for (std::size_t i = 0; i < n; ++i) ++start[cell_of[i] + 1];
+        // Counting sort, ascending index per cell. Points in canonical order
+        // (sorted by the grid's column coordinate) fill whole columns in
+        // runs, and columns own disjoint cells: the points then split into
+        // blocks that end where a column does, each counted and placed on
+        // its own (the same order as one pass over all points).
+        std::vector<std::size_t> cuts{0};
+        const bool by_columns = n >= 2 * kGrain && tbb::parallel_reduce(
+            tbb::blocked_range<std::size_t>(1, n, kGrain), true,
+            [&](const tbb::blocked_range<std::size_t>& r, bool ok) {
+                for (std::size_t i = r.begin(); i != r.end() && ok; ++i) ok = cxp[i - 1] <= cxp[i];
+                return ok;
+            },
+            std::logical_and<>());
+        if (by_columns)
+            for (std::size_t b = 4 * kGrain; b < n; b += 4 * kGrain) {
+                std::size_t cut = std::max(b, cuts.back());
+                while (cut < n && g.col(cxp[cut]) == g.col(cxp[cut - 1])) ++cut;
+                if (cut < n && cut > cuts.back()) cuts.push_back(cut);
+            }
+        cuts.push_back(n);
+        const auto blocks = [&](auto&& body) {  // body(first, last) for each block, in parallel
+            tbb::parallel_for(std::size_t(0), cuts.size() - 1, [&](std::size_t b) { body(cuts[b], cuts[b + 1]); });
+        };
+        blocks([&](std::size_t a, std::size_t e) {
+            for (std::size_t i = a; i < e; ++i) ++start[cell_of[i] + 1];
+        });
         for (std::size_t q = 0; q < cells; ++q) start[q + 1] += start[q];
-        std::vector<uint32_t> fill(start.begin(), start.end() - 1);
-        for (std::size_t i = 0; i < n; ++i) order[fill[cell_of[i]]++] = static_cast<uint32_t>(i);  // ascending index per cell
+        LargeVector<uint32_t> fill(start.begin(), start.end() - 1);
+        blocks([&](std::size_t a, std::size_t e) {
+            for (std::size_t i = a; i < e; ++i) order[fill[cell_of[i]]++] = static_cast<uint32_t>(i);
+        });
     }
     // Each cell's z range in floats that enclose its double z values (the
     // float next below / above when rounding went the other way).
-    std::vector<float> zlo(cells), zhi(cells);
+    auto zlo = large_array<float>(cells), zhi = large_array<float>(cells);
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, cells, kGrain / 4), [&](const tbb::blocked_range<std::size_t>& r) {
         for (std::size_t q = r.begin(); q != r.end(); ++q) {
             double lo = INFINITY, hi = -INFINITY;
@@ -789,9 +820,50 @@ void grid_knn(const PointCloud& c, std::size_t k, Visit&& visit) {
     });
 }
 
+// The value at position n / 2 of the values rounded to float and sorted (what
+// std::nth_element gives on a float copy), found by a radix selection over
+// the floats' order-preserving bits: two counting passes of 16 bits, each in
+// parallel (counts are exact, so the value does not depend on the thread
+// count). nth_element on one thread was about a tenth of the filter's wall
+// time on two cores. No NaN among the values (not defined for them).
+float median_as_float(std::span<const double> v) {
+    const std::size_t n = v.size();
+    const auto key = [](double d) {  // order-preserving bits of float(d)
+        const auto b = std::bit_cast<uint32_t>(static_cast<float>(d));
+        return b & 0x80000000u ? ~b : b | 0x80000000u;
+    };
+    using Counts = std::vector<uint64_t>;
+    const auto count = [&](auto&& bin_of) {  // bin_of(key) in 0..65535, or -1 to skip
+        return tbb::parallel_reduce(
+            tbb::blocked_range<std::size_t>(0, n, 1u << 16), Counts(),
+            [&](const tbb::blocked_range<std::size_t>& r, Counts c) {
+                if (c.empty()) c.assign(1u << 16, 0);
+                for (std::size_t i = r.begin(); i != r.end(); ++i)
+                    if (const int b = bin_of(key(v[i])); b >= 0) ++c[static_cast<std::size_t>(b)];
+                return c;
+            },
+            [](Counts a, const Counts& b) {
+                if (a.empty()) return b;
+                for (std::size_t q = 0; q < b.size(); ++q) a[q] += b[q];
+                return a;
+            });
+    };
+    // The bin holding rank `rank` among `c`'s counts; `rank` becomes the rank within it.
+    const auto bin_of_rank = [](const Counts& c, std::size_t& rank) {
+        std::size_t q = 0;
+        for (; c[q] <= rank; ++q) rank -= c[q];
+        return static_cast<uint32_t>(q);
+    };
+    std::size_t rank = n / 2;
+    const uint32_t high = bin_of_rank(count([](uint32_t k) { return static_cast<int>(k >> 16); }), rank);
+    const uint32_t low = bin_of_rank(count([high](uint32_t k) { return k >> 16 == high ? static_cast<int>(k & 0xffffu) : -1; }), rank);
+    const uint32_t k = high << 16 | low;
+    return std::bit_cast<float>(k & 0x80000000u ? k & 0x7fffffffu : ~k);
+}
+
 }  // namespace
 
-double outlier_limit(const std::vector<double>& mean_dist, double std_multiplier) {
+double outlier_limit(std::span<const double> mean_dist, double std_multiplier) {
     const std::size_t n = mean_dist.size();
     if (n == 0) return 0.0;
     // Gross outliers (a few points kilometres away, or a z of -1700 m) would
@@ -800,10 +872,7 @@ double outlier_limit(const std::vector<double>& mean_dist, double std_multiplier
     // neighbours than kGrossOutlierFactor x the median are left out of the
     // mean and sigma (they are over the limit anyway); a cloud without such
     // points gets the plain mean + m * sigma.
-    std::vector<float> sorted(mean_dist.begin(), mean_dist.end());
-    const auto mid = sorted.begin() + static_cast<std::ptrdiff_t>(n / 2);
-    std::nth_element(sorted.begin(), mid, sorted.end());
-    const double median = *mid;
+    const double median = median_as_float(mean_dist);
     const double gross = median > 0 ? kGrossOutlierFactor * median : INFINITY;
     // Sums in index order: the threshold does not depend on the thread count.
     double sum = 0.0, sum2 = 0.0;
@@ -841,19 +910,21 @@ OutlierFilterResult filter_outliers(const PointCloud& c, const OutlierFilterOpti
     // was cut to.
     const std::size_t k = static_cast<std::size_t>(std::max(o.k_neighbours, o.isolated_min_neighbours)) + 1;  // self first
     const auto m = static_cast<std::size_t>(o.isolated_min_neighbours);
-    std::vector<double> mean_dist(n, 0.0);
-    std::vector<uint8_t> isolated(n, 0);
+    // Written once for every point by the parallel search (first touch there).
+    auto mean_dist = large_array<double>(n);
+    auto isolated = large_array<uint8_t>(n);
+    const bool test_isolated = o.isolated_radius > 0.0 && m > 0;
     const auto visit = [&](std::size_t i, const double* best, std::size_t found) {
         // best[0] is the point itself (or a duplicate at distance 0).
         const std::size_t used = std::min(found, static_cast<std::size_t>(o.k_neighbours) + 1);
         double s = 0.0;
         for (std::size_t j = 1; j < used; ++j) s += std::sqrt(best[j]);
         mean_dist[i] = used > 1 ? s / static_cast<double>(used - 1) : 0.0;
-        if (o.isolated_radius > 0.0 && m > 0) isolated[i] = found <= m || best[m] > o.isolated_radius * o.isolated_radius;
+        isolated[i] = test_isolated && (found <= m || best[m] > o.isolated_radius * o.isolated_radius);
     };
     if (k == 9) grid_knn<9>(c, k, visit);  // the defaults: 8 neighbours and the point itself
     else grid_knn<0>(c, k, visit);
-    const double limit = o.max_mean_distance > 0 ? o.max_mean_distance : outlier_limit(mean_dist, o.std_multiplier);
+    const double limit = o.max_mean_distance > 0 ? o.max_mean_distance : outlier_limit({mean_dist.get(), n}, o.std_multiplier);
     r.limit = limit;
     const Counts removed = tbb::parallel_reduce(
         tbb::blocked_range<std::size_t>(0, n, kGrain), Counts{0, 0},

@@ -3,6 +3,7 @@
 // PointCloud in a projected CRS; distances are in CRS units (callers convert
 // metre options with the CRS's linear unit).
 #include <cstdint>
+#include <span>
 #include <vector>
 
 #include "cloud/point_cloud.hpp"
@@ -43,7 +44,7 @@ inline constexpr double kGrossOutlierFactor = 50.0;
 /// The statistical filter's limit for these mean kNN distances (one a point):
 /// mean + std_multiplier * sigma over the points that are not gross outliers
 /// (all of them when none is). 0 for no point.
-double outlier_limit(const std::vector<double>& mean_dist, double std_multiplier);
+double outlier_limit(std::span<const double> mean_dist, double std_multiplier);
 
 /// Statistical outlier removal (3D k nearest neighbours) followed by an
 /// isolated-point filter. Points classified as noise (7, 18) are removed too

@@ -80,6 +80,42 @@ TEST_CASE("Statistical outlier removal drops far points and keeps a clean surfac
     CHECK(r.removed_statistical + r.removed_isolated < 60);  // the surface itself survives (<1.5 %)
 }
 
+TEST_CASE("outlier_limit: the median of the float-rounded distances (radix selection) and mean + m sigma without the gross outliers, for any thread count", "[cloud][filters]") {
+    // The oracle: a float copy sorted, as the filter did with nth_element.
+    const auto oracle = [](const std::vector<double>& v, double m) {
+        std::vector<float> sorted(v.begin(), v.end());
+        std::sort(sorted.begin(), sorted.end());
+        const double median = sorted[v.size() / 2];
+        const double gross = median > 0 ? kGrossOutlierFactor * median : INFINITY;
+        double sum = 0.0, sum2 = 0.0, used = 0.0;
+        for (double d : v)
+            if (d <= gross) sum += d, sum2 += d * d, used += 1;
+        const double mu = sum / used;
+        return mu + m * std::sqrt(std::max(0.0, sum2 / used - mu * mu));
+    };
+    Rng rng(17);
+    for (const std::size_t n : {std::size_t(1), std::size_t(2), std::size_t(3), std::size_t(1000), std::size_t(1001), std::size_t(300000)}) {
+        INFO("n " << n);
+        // Distances over six orders of magnitude, many equal after rounding
+        // to float, a few gross outliers; then values of both signs and zeros
+        // (the selection is defined for any non-NaN value).
+        std::vector<double> d(n), signed_d(n);
+        for (std::size_t i = 0; i < n; ++i) {
+            d[i] = std::pow(10.0, rng.uniform(-3.0, 3.0));
+            if (i % 7 == 0) d[i] = 0.25 + 1e-12 * double(i % 5);  // equal as floats
+            if (i % 997 == 5) d[i] = 1e6;
+            signed_d[i] = i % 3 == 0 ? -d[i] : i % 11 == 0 ? 0.0 : i % 13 == 0 ? -0.0 : d[i];
+        }
+        for (const std::vector<double>* v : {&d, &signed_d}) {
+            const double want = oracle(*v, 3.0);
+            CHECK(outlier_limit(*v, 3.0) == want);
+            tbb::global_control one_thread(tbb::global_control::max_allowed_parallelism, 1);
+            CHECK(outlier_limit(*v, 3.0) == want);
+        }
+    }
+    CHECK(outlier_limit(std::vector<double>{}, 3.0) == 0.0);
+}
+
 TEST_CASE("SMRF ground agrees with the synthetic scene's exact ground class", "[cloud][ground]") {
     ScratchDir dir("smrf");
     make_town(dir, 200, 4, 4);
@@ -133,6 +169,15 @@ TEST_CASE("Outlier filter on grid neighbourhoods flags exactly the points of a w
             tbb::global_control one_thread(tbb::global_control::max_allowed_parallelism, 1);
             CHECK(filter_outliers(c, o).keep == r.keep);
         }
+        // In canonical order (as every command filters): the grid's cells are
+        // then counted and filled by blocks of columns in parallel.
+        canonical_order(c);
+        const OutlierFilterOptions o;
+        const std::vector<uint8_t> oracle = kd_tree_outlier_keep(c, o);
+        const OutlierFilterResult r = filter_outliers(c, o);
+        CHECK(r.keep == oracle);
+        tbb::global_control one_thread(tbb::global_control::max_allowed_parallelism, 1);
+        CHECK(filter_outliers(c, o).keep == r.keep);
     }
 }
 
