@@ -8,6 +8,7 @@
 #include <cstring>
 #include <ctime>
 #include <atomic>
+#include <sys/mman.h>
 #include <memory>
 #include <new>
 #include <type_traits>
@@ -99,6 +100,20 @@ inline int bit_count_sum(uint64_t u, uint64_t v) {
     uint64_t s = u + v;                                               // at most 8: still fits
     s = (s & m4) + ((s >> 4) & m4);                                   // bytes of at most 16
     return static_cast<int>((s * 0x0101010101010101ull) >> 56);
+#endif
+}
+// Backs the pages of [p, p + bytes) (rounded out to whole pages, all in
+// one mapping) in one call instead of one page fault each
+// (MADV_POPULATE_WRITE, Linux 5.14 and later). A hint: where the kernel
+// refuses it, the pages fault in as they are first written, as before.
+inline void populate_for_write(void* p, std::size_t bytes) {
+#if defined(MADV_POPULATE_WRITE)
+    constexpr std::uintptr_t kPage = 4096;  // the smallest page: rounding to it never leaves the mapping
+    const std::uintptr_t first = reinterpret_cast<std::uintptr_t>(p) & ~(kPage - 1);
+    const std::uintptr_t last = reinterpret_cast<std::uintptr_t>(p) + bytes;
+    if (bytes) ::madvise(reinterpret_cast<void*>(first), last - first, MADV_POPULATE_WRITE);
+#else
+    (void)p, (void)bytes;
 #endif
 }
 using merge_queue::MergeQueue;
@@ -317,12 +332,17 @@ public:
         A[2] = A[3] = INT32_MAX, A[4] = A[5] = -1;
     }
     // The records constructed, each written once before the scan (its
-    // head, its accumulators) and once after it (build).
+    // head, its accumulators) and once after it (build). Each task backs
+    // its range's pages first, in one call (populate_for_write): 341,401
+    // records (109 MB) took 57 -> 48 ms CPU with the numbering beside them,
+    // graph CPU -6 to -9.5 ms paired in three sets of 14-16 alternating runs
+    // (session 20).
     void construct_records() {
         const std::size_t words = acc_words();
         const bool in_record = acc_in_record();
         if (!in_record) outside_acc_ = LargeVector<int64_t>(std::size_t(n_) * words);
         tbb::parallel_for(tbb::blocked_range<uint32_t>(0, n_, 1 << 14), [&](const tbb::blocked_range<uint32_t>& rr) {
+            populate_for_write(head_ptr(rr.begin()), std::size_t(rr.size()) * lines_ * sizeof(Line));
             for (uint32_t r = rr.begin(); r != rr.end(); ++r) {
                 NodeHead* R = new (head_ptr(r)) NodeHead();
                 R->list = nullptr, R->capacity = 0;  // the inline list is constructed after the scan
