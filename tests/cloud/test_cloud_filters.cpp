@@ -137,6 +137,36 @@ TEST_CASE("SMRF ground agrees with the synthetic scene's exact ground class", "[
     CHECK(classify_ground(c, {}, trust).from_classification);
 }
 
+TEST_CASE("SMRF on two sites far apart (a grid each, grouped in parallel) flags the points as each site alone does, for any thread count", "[cloud][ground]") {
+    // Two 150 m sites 6 km east and 3 km north of each other: one 1 m grid
+    // over both would hold 1.8e7 cells, so the points are grouped by site.
+    const auto site = [](PointCloud& c, double x0, double y0, uint64_t seed) {
+        Rng rng(seed);
+        for (int q = 0; q < 150 * 150; ++q) {
+            const double x = x0 + (q % 150) + rng.uniform(0.0, 1.0), y = y0 + (q / 150) + rng.uniform(0.0, 1.0);
+            const bool roof = std::abs(x - x0 - 75) < 12 && std::abs(y - y0 - 75) < 9;
+            c.x.push_back(x), c.y.push_back(y), c.z.push_back(20.0 + 0.02 * (x - x0) + (roof ? 7.0 : 0.0) + rng.uniform(-0.05, 0.05));
+            c.intensity.push_back(0), c.classification.push_back(1), c.return_number.push_back(1), c.number_of_returns.push_back(1);
+        }
+    };
+    PointCloud a, b, both;
+    site(a, 400000.0, 5000000.0, 1), site(b, 406000.0, 5003000.0, 2);
+    site(both, 400000.0, 5000000.0, 1), site(both, 406000.0, 5003000.0, 2);
+    GroundFilterOptions go;
+    go.trust_classification = false;
+    const GroundResult ga = classify_ground(a, {}, go), gb = classify_ground(b, {}, go), g = classify_ground(both, {}, go);
+    std::vector<uint8_t> want = ga.is_ground;
+    want.insert(want.end(), gb.is_ground.begin(), gb.is_ground.end());
+    CHECK(g.is_ground == want);
+    CHECK(g.ground_points == ga.ground_points + gb.ground_points);
+    std::size_t roof_ground = 0;  // the roofs are not ground
+    for (std::size_t i = 0; i < both.size(); ++i) roof_ground += g.is_ground[i] && both.z[i] - 20.0 - 0.02 * std::fmod(both.x[i] - 400000.0, 6000.0) > 3.0;
+    CHECK(roof_ground == 0);
+    CHECK(g.ground_points > both.size() / 2);
+    tbb::global_control one_thread(tbb::global_control::max_allowed_parallelism, 1);
+    CHECK(classify_ground(both, {}, go).is_ground == g.is_ground);
+}
+
 TEST_CASE("Outlier filter on grid neighbourhoods flags exactly the points of a whole-cloud k-d tree, for any thread count", "[cloud][filters]") {
     // Real AHN3 lidar (Delft, 675 k points) and IGN Lidar HD; plus far
     // isolated points above and below, which make the grid search reach out.
