@@ -587,10 +587,12 @@ void grid_knn(const PointCloud& c, std::size_t k, Visit&& visit) {
                 return ok;
             },
             std::logical_and<>());
+        std::size_t scanned = 0;
         if (by_columns)
-            for (std::size_t b = 4 * kGrain; b < n; b += 4 * kGrain) {
-                std::size_t cut = std::max(b, cuts.back());
+            for (std::size_t b = 4 * kGrain; b < n && scanned < n; b += 4 * kGrain) {
+                std::size_t cut = std::max(b, scanned);  // never a point twice (one long column)
                 while (cut < n && g.col(cxp[cut]) == g.col(cxp[cut - 1])) ++cut;
+                scanned = cut;
                 if (cut < n && cut > cuts.back()) cuts.push_back(cut);
             }
         cuts.push_back(n);

@@ -133,6 +133,11 @@ TEST_CASE("CNN test-time augmentation in a model file: key only when on, old fil
     m1.options.pixel.cnn.tta = 1;
     const std::vector<uint8_t> b1 = detect::serialize_model(m1);
     CHECK(std::string(b1.begin(), b1.end()).find("\"tta\"") == std::string::npos);
+    // Such a file (as every model before session 19) reads as tta 1 and
+    // writes back the same bytes, whatever the shipped model holds.
+    const detect::DetectorModel old_file = detect::parse_model(b1, "old.cfdet");
+    CHECK(old_file.options.pixel.cnn.tta == 1);
+    CHECK(detect::serialize_model(old_file) == b1);
     detect::write_model_file(dir / "tta4.cfdet", m4);
     detect::write_model_file(dir / "tta1.cfdet", m1);
 
