@@ -823,14 +823,15 @@ void grid_knn(const PointCloud& c, std::size_t k, Visit&& visit) {
     });
 }
 
-// The value at position n / 2 of the values rounded to float and sorted (what
-// std::nth_element gives on a float copy), found by a radix selection over
-// the floats' order-preserving bits: two counting passes of 16 bits, each in
-// parallel (counts are exact, so the value does not depend on the thread
-// count). nth_element on one thread was about a tenth of the filter's wall
-// time on two cores. No NaN among the values (not defined for them).
+}  // namespace
+
+// A radix selection over the floats' order-preserving bits: two counting
+// passes of 16 bits, each in parallel (counts are exact, so the value does not
+// depend on the thread count). nth_element on one thread was about a tenth of
+// the filter's wall time on two cores.
 float median_as_float(std::span<const double> v) {
     const std::size_t n = v.size();
+    if (n == 0) throw Error("median", "internal: no values");
     const auto key = [](double d) {  // order-preserving bits of float(d)
         const auto b = std::bit_cast<uint32_t>(static_cast<float>(d));
         return b & 0x80000000u ? ~b : b | 0x80000000u;
@@ -863,8 +864,6 @@ float median_as_float(std::span<const double> v) {
     const uint32_t k = high << 16 | low;
     return std::bit_cast<float>(k & 0x80000000u ? k & 0x7fffffffu : ~k);
 }
-
-}  // namespace
 
 double outlier_limit(std::span<const double> mean_dist, double std_multiplier) {
     const std::size_t n = mean_dist.size();

@@ -41,6 +41,12 @@ struct OutlierFilterResult {
 /// outliers: left out of the statistics of the outlier limit.
 inline constexpr double kGrossOutlierFactor = 50.0;
 
+/// The value at position size / 2 of the values rounded to float and sorted
+/// ascending (what std::nth_element gives on a float copy; the sign of a zero
+/// may differ). Values must not be NaN. Any thread count, the same value.
+/// Empty input: not allowed (throws Error).
+float median_as_float(std::span<const double> values);
+
 /// The statistical filter's limit for these mean kNN distances (one a point):
 /// mean + std_multiplier * sigma over the points that are not gross outliers
 /// (all of them when none is). 0 for no point.

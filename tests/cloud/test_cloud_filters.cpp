@@ -1,5 +1,7 @@
 #include <catch2/catch.hpp>
 
+#include <bit>
+
 #include <tbb/global_control.h>
 
 #include "cloud/cloud_filters.hpp"
@@ -114,6 +116,24 @@ TEST_CASE("outlier_limit: the median of the float-rounded distances (radix selec
         }
     }
     CHECK(outlier_limit(std::vector<double>{}, 3.0) == 0.0);
+    // The median itself against the sorted float copy: one rank or one ulp
+    // off would show here (both radix passes: values sharing their high 16
+    // bits and differing in the low ones).
+    for (const std::size_t n : {std::size_t(1), std::size_t(2), std::size_t(5), std::size_t(1000), std::size_t(1001), std::size_t(200000)}) {
+        for (int kind = 0; kind < 3; ++kind) {
+            INFO("n " << n << ", kind " << kind);
+            std::vector<double> v(n);
+            for (std::size_t i = 0; i < n; ++i)
+                v[i] = kind == 0   ? std::pow(10.0, rng.uniform(-3.0, 3.0))
+                       : kind == 1 ? std::bit_cast<float>(std::bit_cast<uint32_t>(1.5f) + static_cast<uint32_t>(rng.integer(0, 4000)))  // 1.5 + a few ulps
+                                   : rng.uniform(-5.0, 5.0) * (i % 17 == 0 ? 0.0 : 1.0);
+            std::vector<float> sorted(v.begin(), v.end());
+            std::sort(sorted.begin(), sorted.end());
+            CHECK(median_as_float(v) == sorted[n / 2]);
+            tbb::global_control one_thread(tbb::global_control::max_allowed_parallelism, 1);
+            CHECK(median_as_float(v) == sorted[n / 2]);
+        }
+    }
 }
 
 TEST_CASE("SMRF ground agrees with the synthetic scene's exact ground class", "[cloud][ground]") {
