@@ -1084,8 +1084,11 @@ LargeArray<uint32_t> split_ground_groups(const PointCloud& c, Kept&& kept, doubl
         tbb::blocked_range<std::size_t>(0, n, 1u << 16), std::vector<Key>(),
         [&](const tbb::blocked_range<std::size_t>& r, std::vector<Key> acc) {
             std::vector<Key> here;
-            for (std::size_t i = r.begin(); i != r.end(); ++i)
-                if (kept(i) && (here.empty() || here.back() != key_of(i))) here.push_back(key_of(i));
+            for (std::size_t i = r.begin(); i != r.end(); ++i) {
+                if (!kept(i)) continue;
+                const Key k = key_of(i);  // once a point: two divisions and floors
+                if (here.empty() || here.back() != k) here.push_back(k);
+            }
             std::sort(here.begin(), here.end());
             here.erase(std::unique(here.begin(), here.end()), here.end());
             return unite(std::move(acc), here);
