@@ -12,6 +12,7 @@
 #include <numeric>
 #include <tuple>
 #include <utility>
+#include <tbb/enumerable_thread_specific.h>
 #include <tbb/parallel_for.h>
 #include <tbb/parallel_reduce.h>
 
@@ -837,20 +838,19 @@ float median_as_float(std::span<const double> v) {
         return b & 0x80000000u ? ~b : b | 0x80000000u;
     };
     using Counts = std::vector<uint64_t>;
+    // Counts per thread (integers: their sum does not depend on which thread
+    // counted what), so no 512 KB array is copied per range of values.
     const auto count = [&](auto&& bin_of) {  // bin_of(key) in 0..65535, or -1 to skip
-        return tbb::parallel_reduce(
-            tbb::blocked_range<std::size_t>(0, n, 1u << 16), Counts(),
-            [&](const tbb::blocked_range<std::size_t>& r, Counts c) {
-                if (c.empty()) c.assign(1u << 16, 0);
-                for (std::size_t i = r.begin(); i != r.end(); ++i)
-                    if (const int b = bin_of(key(v[i])); b >= 0) ++c[static_cast<std::size_t>(b)];
-                return c;
-            },
-            [](Counts a, const Counts& b) {
-                if (a.empty()) return b;
-                for (std::size_t q = 0; q < b.size(); ++q) a[q] += b[q];
-                return a;
-            });
+        tbb::enumerable_thread_specific<Counts> local([] { return Counts(1u << 16, 0); });
+        tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, 1u << 16), [&](const tbb::blocked_range<std::size_t>& r) {
+            Counts& c = local.local();
+            for (std::size_t i = r.begin(); i != r.end(); ++i)
+                if (const int b = bin_of(key(v[i])); b >= 0) ++c[static_cast<std::size_t>(b)];
+        });
+        Counts total(1u << 16, 0);
+        for (const Counts& c : local)
+            for (std::size_t q = 0; q < total.size(); ++q) total[q] += c[q];
+        return total;
     };
     // The bin holding rank `rank` among `c`'s counts; `rank` becomes the rank within it.
     const auto bin_of_rank = [](const Counts& c, std::size_t& rank) {
