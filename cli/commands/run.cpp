@@ -31,7 +31,7 @@ RunShare mpi_share() {
 // The inputs `run` and `plan` share; given options override the config file.
 struct RunInputs {
     std::string ortho, cloud, cloud_crs, footprints, config, formats, lods, vertical_crs, id_field, fit, db, working_crs, out_crs, texture_ortho;
-    int tile_size = 0, threads = -1;
+    int tile_size = 0, threads = -1, concurrent_tiles = -1;
     double overlap_m = -1;
 };
 
@@ -46,6 +46,7 @@ void add_run_inputs(CLI::App* cmd, RunInputs& r) {
     cmd->add_option("--tile-size", r.tile_size, "Tile core edge in pixels (default 4000)");
     cmd->add_option("--overlap-m", r.overlap_m, "Context around each tile, metres (default 100)");
     cmd->add_option("--threads", r.threads, "Threads (default: all cores)");
+    cmd->add_option("--concurrent-tiles", r.concurrent_tiles, "Tiles processed at once (default 0: 2 with 2 or more threads, else 1; each holds its window's cloud)");
     cmd->add_option("--formats", r.formats, "Comma-separated: geojson, gpkg, citygml, cityjson, cityjsonseq, 3dtiles, gltf");
     cmd->add_option("--lod", r.lods, "Comma-separated levels of detail: 0, 1, 2");
     cmd->add_option("--db", r.db, "Also write the building table to PostGIS: \"PG:dbname=... [tables=NAME]\" (table replaced)");
@@ -68,6 +69,7 @@ RunManifest plan_from(const RunInputs& rc, const Progress& progress) {
     if (rc.tile_size > 0) ro.tile_size_px = rc.tile_size;
     if (rc.overlap_m >= 0) ro.overlap_m = rc.overlap_m;
     if (rc.threads >= 0) ro.threads = rc.threads;
+    if (rc.concurrent_tiles >= 0) ro.concurrent_tiles = rc.concurrent_tiles;
     if (!rc.formats.empty()) ro.buildings.model.formats = split_list(rc.formats);
     if (!rc.lods.empty()) ro.buildings.model.lods = parse_lods(rc.lods);
     if (!rc.vertical_crs.empty()) ro.buildings.model.vertical_crs = rc.vertical_crs;

@@ -11,6 +11,9 @@
 #include <sstream>
 #include <tbb/global_control.h>
 #include <thread>
+#include <atomic>
+#include <exception>
+#include <mutex>
 
 #include "cloud/cloud_reader.hpp"
 #include "cloud/las.hpp"
@@ -89,6 +92,7 @@ void RunOptions::validate() const {
     if (tile_size_px < 64) throw Error("--tile-size", "must be at least 64 pixels");
     if (!(overlap_m >= 0)) throw Error("--overlap-m", "must be >= 0");
     if (threads < 0) throw Error("--threads", "must be >= 0");
+    if (concurrent_tiles < 0) throw Error("--concurrent-tiles", "must be >= 0");
     if (!(footprint_grid_m > 0)) throw Error("footprint_grid_m", "must be > 0");
     if (!(extraction.mask.gsd_m > 0)) throw Error("cloud_grid_m", "must be > 0");
     buildings.validate();
@@ -113,6 +117,7 @@ json to_json(const RunOptions& o) {
             {"tile_size_px", o.tile_size_px},
             {"overlap_m", o.overlap_m},
             {"threads", o.threads},
+            {"concurrent_tiles", o.concurrent_tiles},
             {"keep_rasters", o.keep_rasters},
             {"extraction",
              {{"min_height_m", m.min_height_m},
@@ -157,14 +162,14 @@ json to_json(const RunOptions& o) {
 }
 
 RunOptions run_options_from_json(const json& j, const std::string& where, RunOptions o) {
-    check_keys(j, {"ortho", "cloud", "cloud_crs", "footprints", "working_crs", "out_crs", "tile_size_px", "overlap_m", "threads", "keep_rasters", "extraction", "cleaning",
+    check_keys(j, {"ortho", "cloud", "cloud_crs", "footprints", "working_crs", "out_crs", "tile_size_px", "overlap_m", "threads", "concurrent_tiles", "keep_rasters", "extraction", "cleaning",
                    "heights", "roofs", "export"},
                where);
     take(j, "keep_rasters", o.keep_rasters, where);
     take(j, "ortho", o.ortho, where), take(j, "cloud", o.cloud, where), take(j, "cloud_crs", o.cloud_crs, where);
     take(j, "footprints", o.footprints, where), take(j, "tile_size_px", o.tile_size_px, where);
     take(j, "working_crs", o.working_crs, where), take(j, "out_crs", o.out_crs, where);
-    take(j, "overlap_m", o.overlap_m, where), take(j, "threads", o.threads, where);
+    take(j, "overlap_m", o.overlap_m, where), take(j, "threads", o.threads, where), take(j, "concurrent_tiles", o.concurrent_tiles, where);
     if (j.contains("extraction")) {
         const json& x = j["extraction"];
         const std::string w = where + ": extraction";
@@ -1273,6 +1278,15 @@ RunReport merge_tiles(const RunManifest& m, const std::string& out_dir, const Pr
     return rep;
 }
 
+namespace {
+// Tiles run at once (RunOptions::concurrent_tiles; 0 = 2 with 2 or more threads).
+int concurrent_tiles_of(const RunOptions& o) {
+    if (o.concurrent_tiles > 0) return o.concurrent_tiles;
+    const int threads = o.threads > 0 ? o.threads : static_cast<int>(tbb::global_control::active_value(tbb::global_control::max_allowed_parallelism));
+    return threads >= 2 ? 2 : 1;
+}
+}  // namespace
+
 RunReport run_city(const RunManifest& m, const std::string& out_dir, const RunShare& share, const Progress& progress) {
     if (share.size < 1 || share.rank < 0 || share.rank >= share.size) throw Error("--mpi", "bad rank/size");
     std::unique_ptr<tbb::global_control> limit;
@@ -1310,13 +1324,37 @@ RunReport run_city(const RunManifest& m, const std::string& out_dir, const RunSh
     for (const TileSpec& t : m.tiles)
         if (t.index % share.size == share.rank) mine.push_back(t.index);
     const Progress tiles_progress = progress.sub(0.05, share.rank == 0 ? 0.85 : 1.0);
-    for (std::size_t i = 0; i < mine.size(); ++i) {
-        const TileReport r = run_tile(m, mine[i], out_dir);
-        const double done = double(i + 1) / double(mine.size());
-        std::ostringstream msg;  // the progress line adds the ETA
-        msg << "tile " << i + 1 << "/" << mine.size() << " (" << r.status << ")";
-        tiles_progress(done, msg.str());
-    }
+    // Tiles at once: each a thread taking the next tile; their inner
+    // parallel steps share the run's TBB workers. Every tile writes only its
+    // own files, so the outputs are the same for any count.
+    ensure_directory(fs::path(out_dir) / "tiles");
+    if (m.options.keep_rasters) ensure_directory(fs::path(out_dir) / "rasters");
+    const std::size_t at_once = std::min<std::size_t>(mine.size(), std::size_t(concurrent_tiles_of(m.options)));
+    std::atomic<std::size_t> next{0};
+    std::size_t finished = 0;
+    std::mutex finished_mutex;
+    std::exception_ptr failure;
+    auto work = [&]() {
+        try {
+            for (std::size_t i = next++; i < mine.size(); i = next++) {
+                const TileReport r = run_tile(m, mine[i], out_dir);
+                std::lock_guard lock(finished_mutex);
+                ++finished;
+                std::ostringstream msg;  // the progress line adds the ETA
+                msg << "tile " << finished << "/" << mine.size() << " (" << r.status << ")";
+                tiles_progress(double(finished) / double(mine.size()), msg.str());
+            }
+        } catch (...) {
+            next = mine.size();  // the other threads stop after their tile
+            std::lock_guard lock(finished_mutex);
+            if (!failure) failure = std::current_exception();
+        }
+    };
+    std::vector<std::thread> workers;
+    for (std::size_t k = 1; k < at_once; ++k) workers.emplace_back(work);
+    work();
+    for (std::thread& w : workers) w.join();
+    if (failure) std::rethrow_exception(failure);
     phases["tiles"] = since(run_start) - phases["split"];
     if (share.rank != 0) return {};
     // Rank 0 merges once every tile has its report.

@@ -32,6 +32,15 @@ TEST_CASE("run is tile-invariant and thread-invariant - byte-identical outputs -
         INFO(f);
         CHECK(same_bytes(dir / (std::string("one/") + f), dir / (std::string("many/") + f)));
     }
+    // Three tiles at once on two threads: the same bytes.
+    const auto at_once = test::run_command(env + test::cli() + " run " + common + " --tile-size 350 --threads 2 --concurrent-tiles 3 --out " + (dir / "at_once"));
+    INFO(at_once.err);
+    REQUIRE(at_once.exit_code == 0);
+    for (const char* f : kOutputs) {
+        INFO(f);
+        CHECK(same_bytes(dir / (std::string("one/") + f), dir / (std::string("at_once/") + f)));
+    }
+    CHECK(nlohmann::json::parse(test::slurp(dir / "at_once/run_report.json"))["options"]["concurrent_tiles"] == 3);
     const auto report = nlohmann::json::parse(test::slurp(dir / "many/run_report.json"));
     CHECK(report["tiles"].size() == 9);
     CHECK(report["counts"]["buildings"] == s.buildings);
