@@ -221,27 +221,38 @@ std::vector<BuildingHeight> compute_building_heights(const PointCloud& c, const 
             }
         }
         const double area_m2 = parts_area(parts) * o.unit_m * o.unit_m;
-        // Candidates: points in the bounding box grown by the widest ground ring.
+        // Candidates: points in the bounding box grown by a ground ring. The
+        // narrowest ring first; the widest (4x) only when the narrowest lacks
+        // ground points. A smaller box visits a subset of the same cells in
+        // the same order, so the narrowest ring's points come in the same
+        // order either way, and the results are those of the widest box.
         std::vector<double> roof, ground_dist, ground_z;
         std::vector<std::array<double, 2>> ground_xy;
         std::vector<std::pair<double, double>> roof_xy;
         std::vector<uint32_t> roof_id;
         std::vector<uint8_t> roof_is_building;
-        grid.for_each_in(extent_of(parts, max_buffer), [&](uint32_t i) {
-            const double x = c.x[i], y = c.y[i];
-            const bool inside = inside_any(parts, x, y);
-            if (is_ground[i]) {
-                if (!inside) {
-                    const double d = distance_to_parts(parts, x, y);
-                    if (d <= max_buffer) ground_dist.push_back(d), ground_z.push_back(c.z[i]), ground_xy.push_back({x, y});
+        const double first_ring = o.ground_buffer_m / o.unit_m;  // the loop's first ring below
+        auto gather = [&](double reach) {
+            roof.clear(), ground_dist.clear(), ground_z.clear(), ground_xy.clear(), roof_xy.clear(), roof_id.clear(), roof_is_building.clear();
+            // The box is grown a little beyond `reach`: every point within `reach` of the parts is in it.
+            grid.for_each_in(extent_of(parts, reach * (1.0 + 1e-9) + 1e-9), [&](uint32_t i) {
+                const double x = c.x[i], y = c.y[i];
+                const bool inside = inside_any(parts, x, y);
+                if (is_ground[i]) {
+                    if (!inside) {
+                        const double d = distance_to_parts(parts, x, y);
+                        if (d <= reach) ground_dist.push_back(d), ground_z.push_back(c.z[i]), ground_xy.push_back({x, y});
+                    }
+                } else if (inside && is_roof_candidate(c.classification[i])) {
+                    roof.push_back(c.z[i]);
+                    roof_xy.emplace_back(x, y);
+                    roof_id.push_back(i);
+                    roof_is_building.push_back(c.classification[i] == las_class::building);
                 }
-            } else if (inside && is_roof_candidate(c.classification[i])) {
-                roof.push_back(c.z[i]);
-                roof_xy.emplace_back(x, y);
-                roof_id.push_back(i);
-                roof_is_building.push_back(c.classification[i] == las_class::building);
-            }
-        });
+            });
+        };
+        gather(first_ring);
+        if (static_cast<int>(ground_z.size()) < o.min_ground_points) gather(max_buffer);
         // Ground: the narrowest ring (1x, 2x, 4x the buffer) with enough points.
         const std::array<double, 2> centroid = area_centroid(parts);
         std::string quality = "good";
