@@ -101,21 +101,21 @@ void trim_crown_fill(std::vector<uint8_t>& mask, const std::vector<uint8_t>& cro
                      int tolerance) {
     std::vector<uint32_t> labels, sizes;
     const uint32_t count = label_components(mask, 1, w, h, labels, sizes);
-    std::vector<std::vector<std::size_t>> measured(count + 1);
-    std::vector<uint8_t> has_crown_fill(count + 1, 0);
+    // Per component: its measured cells and its crown-fill cells (each list
+    // in raster order), so each component visits only its own cells.
+    std::vector<std::vector<std::size_t>> measured(count + 1), crown_fill(count + 1);
     for (std::size_t k = 0; k < mask.size(); ++k)
         if (const uint32_t l = labels[k]) {
             if (evidence[k]) measured[l].push_back(k);
-            else if (crown_only[k]) has_crown_fill[l] = 1;
+            else if (crown_only[k]) crown_fill[l].push_back(k);
         }
     for (uint32_t l = 1; l <= count; ++l) {
-        if (!has_crown_fill[l] || measured[l].empty()) continue;
+        if (crown_fill[l].empty() || measured[l].empty()) continue;
         std::optional<OrientedRectangle> rect = cells_rectangle(measured[l], w);
         if (!rect) continue;
         rect->length += 2.0 * tolerance, rect->width += 2.0 * tolerance;
-        for (std::size_t k = 0; k < mask.size(); ++k)
-            if (labels[k] == l && !evidence[k] && crown_only[k] &&
-                !rect->contains({static_cast<double>(k % static_cast<std::size_t>(w)) + 0.5, static_cast<double>(k / static_cast<std::size_t>(w)) + 0.5}))
+        for (const std::size_t k : crown_fill[l])
+            if (!rect->contains({static_cast<double>(k % static_cast<std::size_t>(w)) + 0.5, static_cast<double>(k / static_cast<std::size_t>(w)) + 0.5}))
                 mask[k] = 0;
     }
 }
