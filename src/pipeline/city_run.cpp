@@ -10,6 +10,7 @@
 #include <set>
 #include <sstream>
 #include <tbb/global_control.h>
+#include <tbb/parallel_for.h>
 #include <thread>
 #include <atomic>
 #include <exception>
@@ -1142,20 +1143,29 @@ RunReport merge_tiles(const RunManifest& m, const std::string& out_dir, const Pr
         if (tr.status == "failed") rep.warnings.push_back("tile " + std::to_string(t.index) + " failed: " + tr.reason);
         rep.peak_memory_mb = std::max(rep.peak_memory_mb, tr.peak_memory_mb);
         rep.tiles.push_back(tr);
-        if (tr.status != "done") continue;
-        std::ifstream lines(dir / (tile_name(t.index) + ".jsonl"));
+    }
+    // The finished tiles' building lines, parsed in parallel (one task per
+    // tile), joined in tile order.
+    std::vector<std::vector<Building>> per_tile(rep.tiles.size());
+    tbb::parallel_for(std::size_t(0), rep.tiles.size(), [&](std::size_t k) {
+        if (rep.tiles[k].status != "done") return;
+        const fs::path path = dir / (tile_name(rep.tiles[k].index) + ".jsonl");
+        std::ifstream lines(path);
         std::string line;
         int n = 0;
         while (std::getline(lines, line)) {
             ++n;
-            const std::string where = (dir / (tile_name(t.index) + ".jsonl")).string() + " line " + std::to_string(n);
+            const std::string where = path.string() + " line " + std::to_string(n);
             try {
-                buildings.push_back(building_from_json(json::parse(line), where));
+                per_tile[k].push_back(building_from_json(json::parse(line), where));
             } catch (const json::exception& e) {
                 throw Error(where, std::string("invalid JSON: ") + e.what());
             }
         }
-    }
+    }, tbb::simple_partitioner());
+    for (std::vector<Building>& tile : per_tile)
+        for (Building& b : tile) buildings.push_back(std::move(b));
+    per_tile.clear();
     if (m.tiles_left_out > 0) rep.warnings.push_back(tiles_left_out_note(m));
     // Every tile failed: nothing to model, and empty city models would read as
     // "no buildings here". The tiles' reports (DIR/tiles/) keep every reason.

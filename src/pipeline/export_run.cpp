@@ -3,8 +3,11 @@
 #include <algorithm>
 #include <chrono>
 #include <filesystem>
+#include <functional>
+#include <mutex>
 #include <optional>
 #include <set>
+#include <tbb/parallel_for.h>
 
 #include "core/atomic_file.hpp"
 #include "core/error.hpp"
@@ -167,19 +170,32 @@ ExportReport write_city_model(const CityModel& model, const CrsInfo& crs, const 
                      ") has no EPSG code: CityGML is written without srsName (its header comment names the CRS), CityJSON without referenceSystem");
     const std::size_t steps = o.formats.size() + (wants(o.formats, "citygml") && wants(o.lods, 2) ? 1 : 0);
     std::size_t done = 0;
-    auto timed = [&](const std::string& format, const std::string& file, auto&& write) {
-        progress(double(done) / double(steps), format);
-        const auto t0 = std::chrono::steady_clock::now();
-        const std::string path = (fs::path(out_dir) / file).string();
-        write(path);
-        rep.seconds[format] = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-        rep.files.emplace(format, path);  // a writer may have named its main file (3dtiles: tileset.json)
-        ++done;
+    // Each format is one task, written on its own file from the same model:
+    // the tasks run in parallel (the bytes of each file do not depend on it);
+    // the report and the progress are updated under one lock.
+    std::mutex lock;
+    std::vector<std::function<void()>> writers;
+    auto timed = [&](const std::string& format, const std::string& file, auto write) {
+        writers.push_back([&, format, file, write]() {
+            {
+                std::lock_guard g(lock);
+                progress(double(done) / double(steps), format);
+            }
+            const auto t0 = std::chrono::steady_clock::now();
+            const std::string path = (fs::path(out_dir) / file).string();
+            write(path);
+            std::lock_guard g(lock);
+            rep.seconds[format] = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+            rep.files.emplace(format, path);  // a writer may have named its main file (3dtiles: tileset.json)
+            ++done;
+        });
     };
 
+    // The flat tables' rows, shared by the GeoJSON and GeoPackage tasks.
+    std::vector<FieldDefinition> fields{{"cityforge_id", FieldType::string}};
+    std::vector<Feature> features;
     if (wants(o.formats, "geojson") || wants(o.formats, "gpkg") || !o.database.empty()) {
         // Flat tables: the source attributes plus ours, one row per building (failed ones say why).
-        std::vector<FieldDefinition> fields{{"cityforge_id", FieldType::string}};
         std::vector<std::string> names;
         if (!model.buildings.empty())
             for (const auto& [name, value] : model.buildings.front().attributes) names.push_back(name);
@@ -198,7 +214,6 @@ ExportReport write_city_model(const CityModel& model, const CrsInfo& crs, const 
         }
         for (const FieldDefinition& f : kOwnFieldDefinitions) fields.push_back(f);
         const double unit3 = model.crs.volume_unit_m3();
-        std::vector<Feature> features;
         features.reserve(model.buildings.size());
         for (const Building& b : model.buildings) {
             Feature f;
@@ -288,10 +303,14 @@ ExportReport write_city_model(const CityModel& model, const CrsInfo& crs, const 
             Tiles3dWriteOptions t = o.tiles;
             t.prefer_lod2 = wants(o.lods, 2);
             const Tiles3dWriteReport tr = write_3dtiles(p, model, crs, t, atlas ? &*atlas : nullptr);
-            rep.files["3dtiles"] = (fs::path(p) / "tileset.json").string();
+            {
+                std::lock_guard g(lock);
+                rep.files["3dtiles"] = (fs::path(p) / "tileset.json").string();
+            }
             log::info(p + ": " + std::to_string(tr.buildings) + " buildings in " + std::to_string(tr.content_tiles) + " tiles (depth " +
                       std::to_string(tr.depth) + ", " + std::to_string(tr.triangles) + " triangles)");
         });
+    tbb::parallel_for(std::size_t(0), writers.size(), [&](std::size_t k) { writers[k](); }, tbb::simple_partitioner());
     progress(1.0, "written");
     return rep;
 }
