@@ -6,6 +6,8 @@
 #include <filesystem>
 #include <memory>
 #include <new>
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
 
 #include "cloud/cloud_rasters.hpp"
 #include "core/error.hpp"
@@ -132,82 +134,99 @@ FootprintTable footprint_table(const BuildingMask& mask, const Image<float>& nds
         {"raw_area_m2", FieldType::real},     {"geodesic_area_m2", FieldType::real}, {"perimeter_m", FieldType::real},
         {"orientation_deg", FieldType::real}, {"fit_area_error_pct", FieldType::real}, {"fit_iou", FieldType::real},
         {"n_vertices", FieldType::integer},   {"height_p50_m", FieldType::real}};
-    std::vector<Feature>& features = table.features;
-    double error_sum = 0.0;
-    for (uint32_t id = 1; id <= mask.count; ++id) {
-        if (id >= polygons.size() || polygons[id].empty()) continue;  // a label left empty (a crown dropped, absorbed)
-        // One polygon per building: its largest part (the detection keeps
-        // buildings in one part; this guards any other source).
-        const Polygon& pixels = *std::max_element(polygons[id].begin(), polygons[id].end(),
-                                                  [](const Polygon& a, const Polygon& b) { return polygon_area(a) < polygon_area(b); });
-        // Douglas–Peucker may fold a ring onto itself: then the exact pixel outline.
-        Polygon raw = simplify_polygon(pixels, o.simplify_m / unit);
-        if (!polygon_is_valid(raw)) raw = pixels;
-        Feature f;
-        std::string status = "ok", reason, fit = to_string(o.fit);
-        Polygon out = raw;
-        double orientation = 0.0, err = 0.0, iou = 1.0;
-        try {
-            const OrientedRectangle rect = minimum_area_rectangle(raw);
-            orientation = rect.orientation_deg;
-            if (o.fit == FootprintFit::rectangle) {
-                out = rect.polygon();
-                const FitAccuracy acc = fit_accuracy(raw, out);
-                err = acc.area_error_pct, iou = acc.iou;
-            } else if (o.fit == FootprintFit::regularised) {
-                RegularizeOptions go = o.regularize;
-                go.merge_offset /= unit, go.min_edge /= unit, go.match_area_max_offset /= unit;
-                out = regularised_fit(pixels, rect.orientation_deg, grid.pixel_width, o.simplify_m / unit, polygon_area(raw), go);
-                const FitAccuracy acc = fit_accuracy(raw, out);
-                err = acc.area_error_pct, iou = acc.iou;
-            } else if (o.fit == FootprintFit::recursive) {
-                RecursiveFitOptions ro = o.recursive;
-                ro.min_rectangle_area /= unit * unit;
-                ro.match_area_max_offset /= unit;
-                const RecursiveFit rf = recursive_rectangle_fit(raw, ro);
-                out = rf.polygon;
-                err = rf.accuracy.area_error_pct, iou = rf.accuracy.iou;
-            }
-            if (o.fit == FootprintFit::recursive || o.fit == FootprintFit::regularised) {
-                // Round and many-sided buildings: the smoothed pixel outline, not a staircase of rectangles.
-                if (const std::optional<Polygon> curved = curved_outline(pixels, std::abs(grid.pixel_width), o.curved)) {
-                    out = *curved, fit = "curved";
+    // Each building's outline and fit is a task of its own (rows by label);
+    // the table is then filled in label order, so its bytes do not depend
+    // on the thread count.
+    struct Row {
+        bool present = false;
+        Feature feature;
+        double error_pct = 0.0;
+    };
+    std::vector<Row> rows(std::size_t(mask.count) + 1);
+    tbb::parallel_for(tbb::blocked_range<uint32_t>(1, mask.count + 1, 8), [&](const tbb::blocked_range<uint32_t>& range) {
+        for (uint32_t id = range.begin(); id != range.end(); ++id) {
+            if (id >= polygons.size() || polygons[id].empty()) continue;  // a label left empty (a crown dropped, absorbed)
+            // One polygon per building: its largest part (the detection keeps
+            // buildings in one part; this guards any other source).
+            const Polygon& pixels = *std::max_element(polygons[id].begin(), polygons[id].end(),
+                                                      [](const Polygon& a, const Polygon& b) { return polygon_area(a) < polygon_area(b); });
+            // Douglas–Peucker may fold a ring onto itself: then the exact pixel outline.
+            Polygon raw = simplify_polygon(pixels, o.simplify_m / unit);
+            if (!polygon_is_valid(raw)) raw = pixels;
+            Feature f;
+            std::string status = "ok", reason, fit = to_string(o.fit);
+            Polygon out = raw;
+            double orientation = 0.0, err = 0.0, iou = 1.0;
+            try {
+                const OrientedRectangle rect = minimum_area_rectangle(raw);
+                orientation = rect.orientation_deg;
+                if (o.fit == FootprintFit::rectangle) {
+                    out = rect.polygon();
                     const FitAccuracy acc = fit_accuracy(raw, out);
                     err = acc.area_error_pct, iou = acc.iou;
+                } else if (o.fit == FootprintFit::regularised) {
+                    RegularizeOptions go = o.regularize;
+                    go.merge_offset /= unit, go.min_edge /= unit, go.match_area_max_offset /= unit;
+                    out = regularised_fit(pixels, rect.orientation_deg, grid.pixel_width, o.simplify_m / unit, polygon_area(raw), go);
+                    const FitAccuracy acc = fit_accuracy(raw, out);
+                    err = acc.area_error_pct, iou = acc.iou;
+                } else if (o.fit == FootprintFit::recursive) {
+                    RecursiveFitOptions ro = o.recursive;
+                    ro.min_rectangle_area /= unit * unit;
+                    ro.match_area_max_offset /= unit;
+                    const RecursiveFit rf = recursive_rectangle_fit(raw, ro);
+                    out = rf.polygon;
+                    err = rf.accuracy.area_error_pct, iou = rf.accuracy.iou;
+                }
+                if (o.fit == FootprintFit::recursive || o.fit == FootprintFit::regularised) {
+                    // Round and many-sided buildings: the smoothed pixel outline, not a staircase of rectangles.
+                    if (const std::optional<Polygon> curved = curved_outline(pixels, std::abs(grid.pixel_width), o.curved)) {
+                        out = *curved, fit = "curved";
+                        const FitAccuracy acc = fit_accuracy(raw, out);
+                        err = acc.area_error_pct, iou = acc.iou;
+                    }
+                }
+            } catch (const Error& e) {
+                status = "fit_failed", reason = e.what();
+            }
+            orient_polygon(out);
+            if (status == "ok" && !polygon_is_valid(out)) {
+                // A fit that kept an outline passing one vertex twice (a pocket
+                // open to the outside only diagonally, e.g. on sparse LiDAR): the
+                // pocket filled (fill_pinched_pockets) gives a simple ring.
+                const Polygon filled = fill_pinched_pockets(out);
+                if (polygon_is_valid(filled)) {
+                    reason = "a pocket open only diagonally was filled";
+                    const FitAccuracy acc = fit_accuracy(raw, filled);
+                    out = filled, err = acc.area_error_pct, iou = acc.iou;
+                } else {
+                    status = "fit_failed", reason = "the fit is not a valid polygon", out = raw, err = 0.0, iou = 1.0;
                 }
             }
-        } catch (const Error& e) {
-            status = "fit_failed", reason = e.what();
+            std::vector<Ring> rings{out.outer};
+            for (const Ring& h : out.holes) rings.push_back(h);
+            std::size_t vertices = out.outer.size();
+            for (const Ring& h : out.holes) vertices += h.size();
+            std::vector<double>& hv = heights[id];
+            const std::optional<double> h50 = percentile(hv, 50.0);
+            f.geometry = {out};
+            const std::string& source = id < sources.size() && !sources[id].empty() ? sources[id] : mode_source;
+            // The id (when not given) is the row's number, set below in label order.
+            f.values = {ids.empty() ? int64_t(0) : ids[id], mode, source, fit, status, reason,
+                        polygon_area(out) * unit * unit, polygon_area(raw) * unit * unit,
+                        crs.empty() ? AttributeValue() : AttributeValue(geodesic_area_m2(rings, crs)),
+                        polygon_perimeter(out) * unit, orientation, err, iou, int64_t(vertices),
+                        h50 ? AttributeValue(*h50 * z_unit) : AttributeValue()};
+            rows[id].present = true, rows[id].feature = std::move(f), rows[id].error_pct = err;
         }
-        orient_polygon(out);
-        if (status == "ok" && !polygon_is_valid(out)) {
-            // A fit that kept an outline passing one vertex twice (a pocket
-            // open to the outside only diagonally, e.g. on sparse LiDAR): the
-            // pocket filled (fill_pinched_pockets) gives a simple ring.
-            const Polygon filled = fill_pinched_pockets(out);
-            if (polygon_is_valid(filled)) {
-                reason = "a pocket open only diagonally was filled";
-                const FitAccuracy acc = fit_accuracy(raw, filled);
-                out = filled, err = acc.area_error_pct, iou = acc.iou;
-            } else {
-                status = "fit_failed", reason = "the fit is not a valid polygon", out = raw, err = 0.0, iou = 1.0;
-            }
-        }
-        std::vector<Ring> rings{out.outer};
-        for (const Ring& h : out.holes) rings.push_back(h);
-        std::size_t vertices = out.outer.size();
-        for (const Ring& h : out.holes) vertices += h.size();
-        std::vector<double>& hv = heights[id];
-        const std::optional<double> h50 = percentile(hv, 50.0);
-        f.geometry = {out};
-        const std::string& source = id < sources.size() && !sources[id].empty() ? sources[id] : mode_source;
-        f.values = {ids.empty() ? int64_t(features.size() + 1) : ids[id], mode, source, fit, status, reason,
-                    polygon_area(out) * unit * unit, polygon_area(raw) * unit * unit,
-                    crs.empty() ? AttributeValue() : AttributeValue(geodesic_area_m2(rings, crs)),
-                    polygon_perimeter(out) * unit, orientation, err, iou, int64_t(vertices),
-                    h50 ? AttributeValue(*h50 * z_unit) : AttributeValue()};
-        error_sum += std::abs(err);
-        features.push_back(std::move(f));
+    });
+    std::vector<Feature>& features = table.features;
+    double error_sum = 0.0;
+    for (Row& row : rows) {
+        if (!row.present) continue;
+        if (ids.empty()) row.feature.values[0] = int64_t(features.size() + 1);
+        error_sum += std::abs(row.error_pct);
+        features.push_back(std::move(row.feature));
     }
     table.mean_abs_fit_area_error_pct = features.empty() ? 0.0 : error_sum / static_cast<double>(features.size());
     return table;
