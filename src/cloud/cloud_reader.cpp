@@ -421,6 +421,9 @@ std::size_t CloudReader::read_chunk(PointCloud& out, std::size_t max_points) {
             return 0;
         }
         seen_ += n;
+        // LAS coordinates are integers x a scale of at most 1e4 + an offset of
+        // at most 1e12 (checked on open): always finite, nothing to scan.
+        if (format_ == CloudFormat::las) return n;
         auto non_finite = [&](std::size_t i) { return !std::isfinite(out.x[i]) || !std::isfinite(out.y[i]) || !std::isfinite(out.z[i]); };
         if (!any_point(base, out.size(), non_finite)) return n;  // the usual case: no compaction pass
         const std::size_t dropped = out.remove_from(base, non_finite);

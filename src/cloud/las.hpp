@@ -3,6 +3,7 @@
 // 7: xyz, intensity, returns, class, GPS time, RGB). Our own code: Debian 12
 // has neither PDAL nor LASzip. Reads are streamed in chunks.
 #include <array>
+#include <cmath>
 #include <cstdint>
 #include <fstream>
 #include <memory>
@@ -113,8 +114,25 @@ public:
     /// min <= max, not all zero). At the end of the file a warning names the
     /// file and the count; if every point was outside, read_chunk throws.
     uint64_t dropped_outside_bounds() const { return dropped_outside_; }
+    /// The screen read_chunk applies to each point (coordinates in the
+    /// file's units): true when the header's bounds are usable and the point
+    /// lies beyond them by more than one scale quantum.
+    bool outside_bounds(double x, double y, double z) const {
+        if (!screen_bounds_) return false;
+        const double v[3] = {x, y, z};
+        for (int k = 0; k < 3; ++k)
+            if (v[k] < header_.min[k] - bounds_tolerance_[k] || v[k] > header_.max[k] + bounds_tolerance_[k]) return true;
+        return false;
+    }
+    /// For a caller that screens raw records (read_records) with
+    /// outside_bounds itself: adds `points` screened, `dropped` of them
+    /// outside, to dropped_outside_bounds(); `points` = 0 marks the end of the
+    /// file and gives read_chunk's end-of-file warning (or its error when
+    /// every point was outside).
+    void account_screened(uint64_t points, uint64_t dropped);
 
 private:
+    void report_end();
     std::size_t read_chunk_unscreened(PointCloud& out, std::size_t max_points);
     /// n records (n <= points_remaining()) into `out`.
     std::size_t read_into(char* out, std::size_t n);
@@ -126,12 +144,21 @@ private:
     std::vector<char> buffer_;
     std::unique_ptr<LazPointSource> laz_;
     bool screen_bounds_ = false, end_reported_ = false;
+    bool chunk_has_outside_ = false;  ///< the last chunk read_chunk_unscreened decoded has a point outside_bounds
     std::array<double, 3> bounds_tolerance_{};
     uint64_t dropped_outside_ = 0, screened_ = 0;
 };
 
 /// Reads the whole file into memory (explicit: callers that know it fits).
 PointCloud read_las(const std::string& path, LasHeader* header = nullptr);
+
+/// Bounds and return counts of point records, as a LAS header keeps them.
+struct LasRecordStats {
+    std::array<double, 3> min{HUGE_VAL, HUGE_VAL, HUGE_VAL};     ///< of the coordinates as stored (scale grid)
+    std::array<double, 3> max{-HUGE_VAL, -HUGE_VAL, -HUGE_VAL};
+    std::array<uint64_t, 15> by_return{};                        ///< points with return number 1..15
+    void add(const LasRecordStats& o);
+};
 
 /// Streams points into a LAS 1.4 point-format-7 file. The file appears under
 /// `path` only after close() succeeds (temporary file + rename); a writer
@@ -148,6 +175,10 @@ public:
 
     /// Appends all points of `cloud` (colour written as 0 when it has none).
     void write(const PointCloud& cloud);
+    /// Appends `n` point-format-7 records of 36 bytes encoded on this
+    /// writer's scale and offset (as write and split_las_into_windows encode
+    /// them); the header's bounds and return counts are taken from them.
+    void write_records(const char* records, std::size_t n);
     /// Finishes the header (counts, bounds) and moves the file into place.
     void close();
     uint64_t points_written() const { return count_; }
@@ -157,11 +188,25 @@ private:
     std::string tmp_path_;
     std::ofstream out_;
     std::array<double, 3> scale_, offset_;
-    std::array<double, 3> min_, max_;
-    std::array<uint64_t, 15> by_return_{};
+    LasRecordStats stats_;
+    std::vector<char> buffer_;  ///< encoded records of write(), reused
     uint64_t count_ = 0;
     uint32_t offset_to_points_ = 0;
     bool closed_ = false;
 };
+
+/// One streaming pass over a LAS or LAZ file writes the points inside each
+/// window {min_x, min_y, max_x, max_y} (min_x <= x < max_x, min_y <= y <
+/// max_y, file units; windows may overlap and a point goes to each that
+/// holds it) to out_paths[w], a LasWriter file on the source's scale and
+/// offset with `crs_wkt`, in file order. The files hold the same bytes as
+/// reading the source with read_chunk (its bounds screen included) and
+/// writing each window's points with LasWriter::write, but the records are
+/// re-encoded straight from the source's, in parallel, without a
+/// PointCloud, `chunk_points` at a time (memory: about 100 bytes each).
+/// Returns each window's point count.
+std::vector<uint64_t> split_las_into_windows(const std::string& path, const std::vector<std::array<double, 4>>& windows,
+                                             const std::vector<std::string>& out_paths, const std::string& crs_wkt,
+                                             std::size_t chunk_points = std::size_t(1) << 21);
 
 }  // namespace cityforge

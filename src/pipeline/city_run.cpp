@@ -623,9 +623,16 @@ std::vector<std::pair<std::string, FieldType>> attribute_types_from(const json& 
 
 fs::path tile_cloud_path(const std::string& out_dir, int k) { return fs::path(out_dir) / "cloud_tiles" / (tile_name(k) + ".las"); }
 
+Extent window_extent_of(const GeoTransform& gt, const PixelWindow& w) {
+    const MapPoint a = gt.pixel_to_map({double(w.col), double(w.row)});
+    const MapPoint b = gt.pixel_to_map({double(w.col + w.width), double(w.row + w.height)});
+    return {std::min(a.x, b.x), std::min(a.y, b.y), std::max(a.x, b.x), std::max(a.y, b.y)};
+}
+
 // One streaming pass over a LAS cloud writes each tile window's points (in
 // file order, on the source's integer grid, so coordinates are unchanged) to
-// DIR/cloud_tiles/: each tile then reads its window, not the whole file.
+// DIR/cloud_tiles/ (split_las_into_windows): each tile then reads its
+// window, not the whole file.
 // Only for LAS clouds already in the grid's CRS; other tiles read the source.
 void split_cloud(const RunManifest& m, const std::string& out_dir) {
     const RunOptions& o = m.options;
@@ -647,47 +654,15 @@ void split_cloud(const RunManifest& m, const std::string& out_dir) {
         write_text_file(dir / "not_split", "tiles read the COPC source's nodes in their window\n");
         return;
     }
-    LasReader reader(o.cloud);
-    const LasHeader header = reader.header();
-    struct Window {
-        Extent e;
-        std::unique_ptr<LasWriter> writer;
-        PointCloud pending;
-    };
-    std::vector<Window> windows;
+    std::vector<std::array<double, 4>> windows;
+    std::vector<std::string> paths;
     for (const TileSpec& t : m.tiles) {
-        const MapPoint a = m.grid.transform.pixel_to_map({double(t.window.col), double(t.window.row)});
-        const MapPoint b = m.grid.transform.pixel_to_map({double(t.window.col + t.window.width), double(t.window.row + t.window.height)});
-        Window w;
-        w.e = {std::min(a.x, b.x), std::min(a.y, b.y), std::max(a.x, b.x), std::max(a.y, b.y)};
-        w.writer = std::make_unique<LasWriter>(tile_cloud_path(out_dir, t.index).string(), header.scale, header.offset, cloud_crs.wkt);
-        windows.push_back(std::move(w));
+        const Extent e = window_extent_of(m.grid.transform, t.window);
+        windows.push_back({e.min_x, e.min_y, e.max_x, e.max_y});
+        paths.push_back(tile_cloud_path(out_dir, t.index).string());
     }
-    PointCloud chunk;
-    auto flush = [](Window& w) {
-        w.writer->write(w.pending);
-        w.pending.clear();
-    };
-    while (true) {
-        chunk.clear();
-        if (reader.read_chunk(chunk, 1u << 20) == 0) break;
-        for (Window& w : windows) {
-            for (std::size_t i = 0; i < chunk.size(); ++i)
-                if (chunk.x[i] >= w.e.min_x && chunk.x[i] < w.e.max_x && chunk.y[i] >= w.e.min_y && chunk.y[i] < w.e.max_y) w.pending.append(chunk, i);
-            if (w.pending.size() >= (1u << 16)) flush(w);
-        }
-    }
-    for (Window& w : windows) {
-        flush(w);
-        w.writer->close();
-    }
+    split_las_into_windows(o.cloud, windows, paths, cloud_crs.wkt);
     write_text_file(dir / "complete", "cloud split into " + std::to_string(windows.size()) + " tile windows\n");
-}
-
-Extent window_extent_of(const GeoTransform& gt, const PixelWindow& w) {
-    const MapPoint a = gt.pixel_to_map({double(w.col), double(w.row)});
-    const MapPoint b = gt.pixel_to_map({double(w.col + w.width), double(w.row + w.height)});
-    return {std::min(a.x, b.x), std::min(a.y, b.y), std::max(a.x, b.x), std::max(a.y, b.y)};
 }
 
 bool intersects(const PixelWindow& a, const PixelWindow& b) {

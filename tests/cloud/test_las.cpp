@@ -1,4 +1,5 @@
 #include <catch2/catch.hpp>
+#include <cmath>
 #include <cstring>
 #include <fstream>
 
@@ -152,4 +153,71 @@ TEST_CASE("LAS text fields: up to the first NUL, padding dropped, an empty recor
     CHECK(las_text(user, sizeof user) == "copc");
     const char padded[8] = {'P', 'D', 'A', 'L', ' ', ' ', ' ', ' '};  // no NUL at all: the length bounds the read
     CHECK(las_text(padded, sizeof padded) == "PDAL");
+}
+
+TEST_CASE("Splitting a LAS file into overlapping windows gives the bytes of reading it and writing each window's points", "[cloud][las][split]") {
+    ScratchDir dir("las_split");
+    // Autzen: point format 3 (records re-encoded as format 7); a copy whose
+    // header bounds leave out some points (read_chunk's screen drops them).
+    const std::string autzen = shared_data("autzen_oregon/autzen_trim.las");
+    const std::string cut = dir / "cut.las";
+    {
+        std::ofstream(cut, std::ios::binary) << slurp(autzen);
+        LasReader r(cut);
+        const double max_x = (r.header().min[0] + r.header().max[0]) / 2;
+        patch(cut, 179, &max_x, 8);
+    }
+    // Delft: point format 1 (no colour); a synthetic format-7 file.
+    const std::string synthetic = dir / "synthetic.las";
+    {
+        LasWriter w(synthetic, {0.001, 0.001, 0.001}, {500000, 4400000, 0}, "PROJCS[\"dummy\"]");
+        w.write(small_cloud());
+        w.close();
+    }
+    for (const std::string& src : {autzen, cut, shared_data("delft_ahn3_bgt_west/ahn3_delft_west.las"), synthetic}) {
+        LasHeader h;
+        const PointCloud all = read_las(src, &h);
+        const double x0 = h.min[0], y0 = h.min[1], dx = h.max[0] - h.min[0], dy = h.max[1] - h.min[1];
+        // A 3 x 2 grid of overlapping windows, one past the data, one
+        // covering everything, an empty one, one with a NaN edge, one with
+        // an edge on a point.
+        std::vector<std::array<double, 4>> windows;
+        for (int i = 0; i < 3; ++i)
+            for (int j = 0; j < 2; ++j)
+                windows.push_back({x0 + dx * (i / 3.0 - 0.05), y0 + dy * (j / 2.0 - 0.1), x0 + dx * ((i + 1) / 3.0 + 0.05), y0 + dy * ((j + 1) / 2.0 + 0.1)});
+        windows.push_back({x0 + 2 * dx, y0, x0 + 3 * dx, y0 + dy});
+        windows.push_back({x0 - 1, y0 - 1, x0 + dx + 1, y0 + dy + 1});
+        windows.push_back({x0 + dx / 2, y0, x0 + dx / 2, y0 + dy});
+        windows.push_back({std::nan(""), y0, x0 + dx, y0 + dy});
+        windows.push_back({all.x[all.size() / 2], all.y[all.size() / 3], all.x[all.size() / 4] + dx / 10, y0 + dy});
+        std::vector<std::string> ours, expected;
+        for (std::size_t w = 0; w < windows.size(); ++w) {
+            ours.push_back(dir / ("ours_" + std::to_string(w) + ".las"));
+            expected.push_back(dir / ("expected_" + std::to_string(w) + ".las"));
+            // The reference: every point read, tested against the window, written.
+            PointCloud in;
+            for (std::size_t i = 0; i < all.size(); ++i)
+                if (all.x[i] >= windows[w][0] && all.x[i] < windows[w][2] && all.y[i] >= windows[w][1] && all.y[i] < windows[w][3]) in.append(all, i);
+            LasWriter wr(expected.back(), h.scale, h.offset, "WKT");
+            wr.write(in);
+            wr.close();
+        }
+        for (std::size_t chunk : {std::size_t(1) << 21, std::size_t(70001), std::size_t(1000)}) {
+            const std::vector<uint64_t> counts = split_las_into_windows(src, windows, ours, "WKT", chunk);
+            REQUIRE(counts.size() == windows.size());
+            uint64_t sum = 0;
+            for (std::size_t w = 0; w < windows.size(); ++w) {
+                INFO(src << " window " << w << " chunk " << chunk);
+                CHECK(slurp(ours[w]) == slurp(expected[w]));
+                CHECK(read_las(ours[w]).size() == counts[w]);
+                sum += counts[w];
+            }
+            CHECK(sum > all.size());  // the windows overlap
+            CHECK(counts[7] == all.size());
+            CHECK(counts[6] == 0);
+            CHECK(counts[8] == 0);
+            CHECK(counts[9] == 0);
+        }
+    }
+    CHECK_THROWS_WITH(split_las_into_windows(autzen, {{0, 0, 1, 1}}, {}, ""), Catch::Contains("1 windows but 0 output files"));
 }
