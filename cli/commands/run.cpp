@@ -96,7 +96,7 @@ void prepare_run_folder(const GlobalFlags& g, const std::string& out, const RunM
         bool same = false;
         try {
             const RunManifest before = read_manifest(stored.string());
-            same = to_json(before.options) == to_json(m.options) && before.tiles.size() == m.tiles.size() && before.overlap_px == m.overlap_px;
+            same = same_plan(before, m);
         } catch (const Error&) {
             if (!g.overwrite) throw;
         }

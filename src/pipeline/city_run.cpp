@@ -23,6 +23,8 @@
 #include "core/error.hpp"
 #include "core/grid_fill.hpp"
 #include "core/log.hpp"
+#include "core/memory.hpp"
+#include "core/parallel.hpp"
 #include "core/version.hpp"
 #include "crs/crs.hpp"
 #include "footprint/building_mask.hpp"
@@ -1122,7 +1124,7 @@ RunReport merge_tiles(const RunManifest& m, const std::string& out_dir, const Pr
     // The finished tiles' building lines, parsed in parallel (one task per
     // tile), joined in tile order.
     std::vector<std::vector<Building>> per_tile(rep.tiles.size());
-    tbb::parallel_for(std::size_t(0), rep.tiles.size(), [&](std::size_t k) {
+    parallel_tasks_in_order(rep.tiles.size(), 1, [&](std::size_t k) {  // the first bad line in tile order is the error
         if (rep.tiles[k].status != "done") return;
         const fs::path path = dir / (tile_name(rep.tiles[k].index) + ".jsonl");
         std::ifstream lines(path);
@@ -1137,7 +1139,7 @@ RunReport merge_tiles(const RunManifest& m, const std::string& out_dir, const Pr
                 throw Error(where, std::string("invalid JSON: ") + e.what());
             }
         }
-    }, tbb::simple_partitioner());
+    });
     for (std::vector<Building>& tile : per_tile)
         for (Building& b : tile) buildings.push_back(std::move(b));
     per_tile.clear();
@@ -1263,12 +1265,37 @@ RunReport merge_tiles(const RunManifest& m, const std::string& out_dir, const Pr
     return rep;
 }
 
+bool same_plan(const RunManifest& stored, const RunManifest& m) {
+    auto work = [](const RunOptions& o) {
+        json j = to_json(o);
+        j.erase("threads"), j.erase("concurrent_tiles");
+        return j;
+    };
+    return work(stored.options) == work(m.options) && stored.tiles.size() == m.tiles.size() && stored.overlap_px == m.overlap_px;
+}
+
 namespace {
-// Tiles run at once (RunOptions::concurrent_tiles; 0 = 2 with 2 or more threads).
-int concurrent_tiles_of(const RunOptions& o) {
-    if (o.concurrent_tiles > 0) return o.concurrent_tiles;
+// Tiles run at once (RunOptions::concurrent_tiles), never more than the
+// threads asked for. Automatic: 2 with 2 or more threads when two of the
+// largest windows fit in half the usable memory, by an estimate with room to
+// spare: 100 bytes per point (a 2400 px window of 11.5 M points peaked at
+// 1.2 GB) for twice the cloud's mean density, and 50 bytes per pixel.
+int concurrent_tiles_of(const RunManifest& m) {
+    const RunOptions& o = m.options;
     const int threads = o.threads > 0 ? o.threads : static_cast<int>(tbb::global_control::active_value(tbb::global_control::max_allowed_parallelism));
-    return threads >= 2 ? 2 : 1;
+    if (o.concurrent_tiles > 0) return std::max(1, std::min(o.concurrent_tiles, threads));
+    if (threads < 2 || m.tiles.size() < 2) return 1;
+    double largest_px = 0.0;
+    for (const TileSpec& t : m.tiles) largest_px = std::max(largest_px, double(t.window.width) * double(t.window.height));
+    double points = 0.0;
+    if (!o.cloud.empty()) points = double(CloudReader(o.cloud).announced_points());
+    const double grid_px = std::max(1.0, double(m.grid.width) * double(m.grid.height));
+    const double tile_bytes = 100.0 * 2.0 * points * std::min(1.0, largest_px / grid_px) + 50.0 * largest_px;
+    const double usable = usable_memory_bytes();
+    const bool two = usable <= 0.0 || 2.0 * tile_bytes <= 0.5 * usable;
+    log::info(std::string(two ? "2 tiles at once" : "1 tile at a time") + " (about " + format_bytes(tile_bytes) + " per tile, " +
+              format_bytes(usable) + " usable; --concurrent-tiles sets it)");
+    return two ? 2 : 1;
 }
 }  // namespace
 
@@ -1289,7 +1316,7 @@ RunReport run_city(const RunManifest& m, const std::string& out_dir, const RunSh
     const std::string plan_path = stored.string();
     if (fs::exists(stored)) {
         const RunManifest before = read_manifest(plan_path);
-        if (to_json(before.options) != to_json(m.options) || before.tiles.size() != m.tiles.size() || before.overlap_px != m.overlap_px)
+        if (!same_plan(before, m))
             throw Error(out_dir, "holds a run with other options or tiles; resume with the same options or use a new folder");
     } else if (share.rank == 0) {
         write_manifest(plan_path, m);
@@ -1314,7 +1341,12 @@ RunReport run_city(const RunManifest& m, const std::string& out_dir, const RunSh
     // own files, so the outputs are the same for any count.
     ensure_directory(fs::path(out_dir) / "tiles");
     if (m.options.keep_rasters) ensure_directory(fs::path(out_dir) / "rasters");
-    const std::size_t at_once = std::min<std::size_t>(mine.size(), std::size_t(concurrent_tiles_of(m.options)));
+    const std::size_t at_once = std::min<std::size_t>(mine.size(), std::size_t(concurrent_tiles_of(m)));
+    // --threads N is the whole run's: each tile's thread is one of them.
+    std::unique_ptr<tbb::global_control> tile_threads;
+    if (m.options.threads > 0 && at_once > 1)
+        tile_threads = std::make_unique<tbb::global_control>(tbb::global_control::max_allowed_parallelism,
+                                                      std::max<std::size_t>(1, std::size_t(m.options.threads) - at_once + 1));
     std::atomic<std::size_t> next{0};
     std::size_t finished = 0;
     std::mutex finished_mutex;

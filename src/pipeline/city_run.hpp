@@ -98,6 +98,11 @@ double grid_metres_per_unit(const RunManifest& manifest);
 RunManifest plan_run(const RunOptions& options, const Progress& progress = {});
 void write_manifest(const std::string& path, const RunManifest& manifest);
 RunManifest read_manifest(const std::string& path);
+/// Whether an earlier run's manifest (`stored`) plans the same work as `m`,
+/// so its finished tiles can be kept: the same options, tiles and overlap.
+/// How the work is spread (threads, concurrent_tiles) may differ: the
+/// outputs do not depend on it.
+bool same_plan(const RunManifest& stored, const RunManifest& m);
 
 struct TileReport {
     int index = 0;

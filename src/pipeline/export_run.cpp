@@ -7,9 +7,9 @@
 #include <mutex>
 #include <optional>
 #include <set>
-#include <tbb/parallel_for.h>
 
 #include "core/atomic_file.hpp"
+#include "core/parallel.hpp"
 #include "core/error.hpp"
 #include "core/log.hpp"
 #include "crs/crs.hpp"
@@ -310,7 +310,9 @@ ExportReport write_city_model(const CityModel& model, const CrsInfo& crs, const 
             log::info(p + ": " + std::to_string(tr.buildings) + " buildings in " + std::to_string(tr.content_tiles) + " tiles (depth " +
                       std::to_string(tr.depth) + ", " + std::to_string(tr.triangles) + " triangles)");
         });
-    tbb::parallel_for(std::size_t(0), writers.size(), [&](std::size_t k) { writers[k](); }, tbb::simple_partitioner());
+    // Every format is written even when another fails; the first failing
+    // format (in the order above) is the error reported.
+    parallel_tasks_in_order(writers.size(), 1, [&](std::size_t k) { writers[k](); });
     progress(1.0, "written");
     return rep;
 }

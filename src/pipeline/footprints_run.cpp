@@ -6,11 +6,10 @@
 #include <filesystem>
 #include <memory>
 #include <new>
-#include <tbb/blocked_range.h>
-#include <tbb/parallel_for.h>
 
 #include "cloud/cloud_rasters.hpp"
 #include "core/error.hpp"
+#include "core/parallel.hpp"
 #include "core/memory.hpp"
 #include "core/log.hpp"
 #include "footprint/rectangle_fit.hpp"
@@ -143,9 +142,11 @@ FootprintTable footprint_table(const BuildingMask& mask, const Image<float>& nds
         double error_pct = 0.0;
     };
     std::vector<Row> rows(std::size_t(mask.count) + 1);
-    tbb::parallel_for(tbb::blocked_range<uint32_t>(1, mask.count + 1, 8), [&](const tbb::blocked_range<uint32_t>& range) {
-        for (uint32_t id = range.begin(); id != range.end(); ++id) {
-            if (id >= polygons.size() || polygons[id].empty()) continue;  // a label left empty (a crown dropped, absorbed)
+    // An error is that of the lowest failing label, whatever the scheduling.
+    parallel_tasks_in_order(mask.count, 8, [&](std::size_t task) {
+        {
+            const uint32_t id = static_cast<uint32_t>(task + 1);
+            if (id >= polygons.size() || polygons[id].empty()) return;  // a label left empty (a crown dropped, absorbed)
             // One polygon per building: its largest part (the detection keeps
             // buildings in one part; this guards any other source).
             const Polygon& pixels = *std::max_element(polygons[id].begin(), polygons[id].end(),

@@ -86,53 +86,69 @@ TEST_CASE("A flat box gets its exact height - too few points give nulls with a f
     CHECK(h[1].height_quality == "no_roof_points");
 }
 
-TEST_CASE("The ground ring widens to 6 and 12 m when the 3 m ring lacks ground - its points are exactly those within the ring", "[heights]") {
+TEST_CASE("The ground ring widens to 6 and 12 m when the 3 m ring lacks ground - its points are exactly those within the ring - in metres and in feet", "[heights]") {
     // A 20 x 10 m roof at 112 m; around it a yard of non-ground points out to
-    // `yard` metres, then ground on a tilted plane. Three buildings, far
+    // `yard` metres, then ground on a tilted plane. Four buildings, far
     // apart: yards of 0 (3 m ring), 4 (6 m ring) and 8 m (12 m ring), and one
-    // whose 3 m ring holds only 3 ground points (< 5: widened to 6 m).
-    PointCloud c;
-    auto add = [&](double x, double y, double z, uint8_t cls) {
-        c.x.push_back(x), c.y.push_back(y), c.z.push_back(z), c.classification.push_back(cls);
-        c.intensity.push_back(0), c.return_number.push_back(1), c.number_of_returns.push_back(1);
-    };
-    auto outside_distance = [](double x, double y, double x0, double y0) {  // to the box [x0, x0+20] x [y0, y0+10]
-        const double dx = std::max({x0 - x, 0.0, x - (x0 + 20)}), dy = std::max({y0 - y, 0.0, y - (y0 + 10)});
-        return std::hypot(dx, dy);
-    };
-    struct Site { double x0, yard; int extra; double ring; };
-    const std::vector<Site> sites{{0, 0, 0, 3}, {200, 4, 0, 6}, {400, 8, 0, 12}, {600, 4, 3, 6}};
-    std::vector<std::vector<Polygon>> footprints;
-    std::vector<uint8_t> ground;
-    for (const Site& s : sites) {
-        for (double x = s.x0 - 20; x <= s.x0 + 40; x += 0.5)
-            for (double y = -20; y <= 30; y += 0.5) {
-                const double d = outside_distance(x, y, s.x0, 0);
-                const bool roof = d == 0 && x > s.x0 && x < s.x0 + 20 && y > 0 && y < 10;
-                if (roof) add(x, y, 112.0, las_class::building);
-                else if (d > 0 && d <= s.yard) add(x, y, 100.0, 1);  // unclassified, not ground
-                else if (d > 0) add(x, y, 100.0 + 0.02 * (x - s.x0) + 0.01 * y, las_class::ground);
+    // whose 3 m ring holds only 4 ground points (one short of 5: widened to
+    // 6 m). The same scene in a CRS of international feet gives the same
+    // rings and points, and the same heights in metres.
+    for (const double unit : {1.0, 0.3048}) {
+        INFO("CRS unit " << unit << " m");
+        PointCloud c;
+        auto add = [&](double x, double y, double z, uint8_t cls) {  // metres in, CRS units stored
+            c.x.push_back(x / unit), c.y.push_back(y / unit), c.z.push_back(z / unit), c.classification.push_back(cls);
+            c.intensity.push_back(0), c.return_number.push_back(1), c.number_of_returns.push_back(1);
+        };
+        auto outside_distance = [](double x, double y, double x0, double y0) {  // metres, to the box [x0, x0+20] x [y0, y0+10]
+            const double dx = std::max({x0 - x, 0.0, x - (x0 + 20)}), dy = std::max({y0 - y, 0.0, y - (y0 + 10)});
+            return std::hypot(dx, dy);
+        };
+        struct Site { double x0, yard; int extra; double ring; };
+        const std::vector<Site> sites{{0, 0, 0, 3}, {200, 4, 0, 6}, {400, 8, 0, 12}, {600, 4, 4, 6}};
+        std::vector<std::vector<Polygon>> footprints;
+        std::vector<uint8_t> ground;
+        std::vector<double> mx, my;  // metres, per point
+        for (const Site& s : sites) {
+            // Points a quarter cell off the edges: none lies exactly at a ring's distance.
+            for (double x = s.x0 - 19.75; x <= s.x0 + 40; x += 0.5)
+                for (double y = -19.75; y <= 30; y += 0.5) {
+                    const double d = outside_distance(x, y, s.x0, 0);
+                    const bool roof = d == 0;
+                    if (roof) add(x, y, 112.0, las_class::building);
+                    else if (d > 0 && d <= s.yard) add(x, y, 100.0, 1);  // unclassified, not ground
+                    else add(x, y, 100.0 + 0.02 * (x - s.x0) + 0.01 * y, las_class::ground);
+                    mx.push_back(x), my.push_back(y);
+                }
+            for (int k = 0; k < s.extra; ++k) {
+                add(s.x0 + 2 + 4 * k, -1.1, 100.0 + 0.02 * (2 + 4 * k) - 0.01, las_class::ground);
+                mx.push_back(s.x0 + 2 + 4 * k), my.push_back(-1.1);
             }
-        for (int k = 0; k < s.extra; ++k) add(s.x0 + 5 + 5 * k, -1.0, 100.0 + 0.02 * (5 + 5 * k) - 0.01, las_class::ground);
-        Polygon box;
-        box.outer = {{s.x0, 0}, {s.x0 + 20, 0}, {s.x0 + 20, 10}, {s.x0, 10}};
-        footprints.push_back({box});
-    }
-    for (std::size_t i = 0; i < c.size(); ++i) ground.push_back(c.classification[i] == las_class::ground);
-    const auto h = compute_building_heights(c, {}, ground, footprints, HeightOptions{});
-    REQUIRE(h.size() == sites.size());
-    for (std::size_t b = 0; b < sites.size(); ++b) {
-        INFO("site " << b);
-        const Site& s = sites[b];
-        int64_t within = 0;  // ground points within the ring, counted directly
-        for (std::size_t i = 0; i < c.size(); ++i)
-            if (ground[i] && outside_distance(c.x[i], c.y[i], s.x0, 0) > 0 && outside_distance(c.x[i], c.y[i], s.x0, 0) <= s.ring) ++within;
-        CHECK(h[b].ground_buffer_used_m == Approx(s.ring));
-        CHECK(h[b].n_points_ground == within);
-        CHECK(h[b].height_quality == (s.ring == 3 ? "good" : "ground_buffer_widened"));
-        REQUIRE(h[b].ground_z);
-        CHECK(*h[b].ground_z == Approx(100.0 + 0.02 * 10 + 0.01 * 5).margin(0.02));  // the plane at the centroid
-        CHECK(*h[b].height_m == Approx(112.0 - *h[b].ground_z));
+            Polygon box;
+            box.outer = {{s.x0 / unit, 0}, {(s.x0 + 20) / unit, 0}, {(s.x0 + 20) / unit, 10 / unit}, {s.x0 / unit, 10 / unit}};
+            footprints.push_back({box});
+        }
+        for (std::size_t i = 0; i < c.size(); ++i) ground.push_back(c.classification[i] == las_class::ground);
+        HeightOptions o;
+        o.unit_m = o.z_unit_m = unit;
+        const auto h = compute_building_heights(c, {}, ground, footprints, o);
+        REQUIRE(h.size() == sites.size());
+        for (std::size_t b = 0; b < sites.size(); ++b) {
+            INFO("site " << b);
+            const Site& s = sites[b];
+            int64_t within = 0;  // ground points within the ring, counted directly
+            for (std::size_t i = 0; i < c.size(); ++i) {
+                const double d = outside_distance(mx[i], my[i], s.x0, 0);
+                if (ground[i] && d > 0 && d <= s.ring) ++within;
+            }
+            CHECK(h[b].ground_buffer_used_m == Approx(s.ring));
+            CHECK(h[b].n_points_ground == within);
+            CHECK(h[b].height_quality == (s.ring == 3 ? "good" : "ground_buffer_widened"));
+            REQUIRE(h[b].ground_z);
+            CHECK(*h[b].ground_z * unit == Approx(100.0 + 0.02 * 10 + 0.01 * 5).margin(0.02));  // the plane at the centroid
+            REQUIRE(h[b].height_m);
+            CHECK(*h[b].height_m == Approx(112.0 - *h[b].ground_z * unit).margin(1e-6));
+        }
     }
 }
 

@@ -14,7 +14,7 @@ using test::ScratchDir;
 
 namespace {
 const char* kOutputs[] = {"buildings.geojson", "buildings.gpkg", "buildings_lod1.gml", "buildings_lod2.gml", "buildings.city.json",
-                          "buildings.city.jsonl"};
+                          "buildings.city.jsonl", "buildings.glb", "3dtiles/tileset.json"};
 bool same_bytes(const std::string& a, const std::string& b) { return test::slurp(a) == test::slurp(b) && !test::slurp(a).empty(); }
 }  // namespace
 
@@ -41,6 +41,15 @@ TEST_CASE("run is tile-invariant and thread-invariant - byte-identical outputs -
         CHECK(same_bytes(dir / (std::string("one/") + f), dir / (std::string("at_once/") + f)));
     }
     CHECK(nlohmann::json::parse(test::slurp(dir / "at_once/run_report.json"))["options"]["concurrent_tiles"] == 3);
+    // Resumed with another count of tiles at once and of threads (e.g. after
+    // running out of memory): the same plan, so its finished tiles are kept.
+    std::filesystem::remove(dir / "at_once/tiles/tile_00004.json");
+    std::filesystem::remove(dir / "at_once/buildings.city.json");
+    const auto resumed_at_once =
+        test::run_command(env + test::cli() + " run " + common + " --tile-size 350 --threads 1 --concurrent-tiles 1 --out " + (dir / "at_once"));
+    INFO(resumed_at_once.err);
+    REQUIRE(resumed_at_once.exit_code == 0);
+    CHECK(same_bytes(dir / "one/buildings.city.json", dir / "at_once/buildings.city.json"));
     const auto report = nlohmann::json::parse(test::slurp(dir / "many/run_report.json"));
     CHECK(report["tiles"].size() == 9);
     CHECK(report["counts"]["buildings"] == s.buildings);
