@@ -503,7 +503,8 @@ void LasWriter::write_records(const char* records, std::size_t n) {
                     const double v = double(get<int32_t>(p + 4 * k)) * scale_[k] + offset_[k];
                     acc.min[k] = std::min(acc.min[k], v), acc.max[k] = std::max(acc.max[k], v);
                 }
-                ++acc.by_return[(static_cast<uint8_t>(p[14]) & 0x0F) - 1];
+                // Return number 0 (invalid in LAS 1.4) has no bin: not counted.
+                if (const int ret = static_cast<uint8_t>(p[14]) & 0x0F; ret >= 1) ++acc.by_return[ret - 1];
             }
             return acc;
         },

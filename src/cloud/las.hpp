@@ -177,7 +177,8 @@ public:
     void write(const PointCloud& cloud);
     /// Appends `n` point-format-7 records of 36 bytes encoded on this
     /// writer's scale and offset (as write and split_las_into_windows encode
-    /// them); the header's bounds and return counts are taken from them.
+    /// them); the header's bounds and return counts are taken from them (a
+    /// record with return number 0, invalid in LAS 1.4, is in no return's count).
     void write_records(const char* records, std::size_t n);
     /// Finishes the header (counts, bounds) and moves the file into place.
     void close();

@@ -71,6 +71,30 @@ TEST_CASE("A writer that is not closed leaves no file", "[cloud][las][errors]") 
     CHECK(dir.file_count() == 0);
 }
 
+TEST_CASE("Raw records with return number 0 are written but counted in no return bin", "[cloud][las][errors]") {
+    ScratchDir dir("las_return0");
+    std::vector<char> records(2 * 36, 0);
+    records[14] = 0x10;           // return 0 of 1 (invalid in LAS 1.4)
+    records[36 + 14] = 0x11;      // return 1 of 1
+    records[36 + 0] = 100;        // x = 100 units
+    {
+        LasWriter w(dir / "r.las", {0.01, 0.01, 0.01}, {0, 0, 0}, "");
+        w.write_records(records.data(), 2);
+        w.close();
+    }
+    std::ifstream in(dir / "r.las", std::ios::binary);
+    std::array<uint64_t, 15> by_return{};
+    in.seekg(255);
+    in.read(reinterpret_cast<char*>(by_return.data()), sizeof(by_return));
+    REQUIRE(in);
+    CHECK(by_return[0] == 1);
+    for (int r = 1; r < 15; ++r) CHECK(by_return[r] == 0);
+    LasHeader h;
+    const PointCloud c = read_las(dir / "r.las", &h);
+    CHECK(c.size() == 2);
+    CHECK(h.max[0] == Approx(1.0));
+}
+
 TEST_CASE("Real LAS 1.2 files: Autzen (format 3 - RGB - CRS) and AHN3 Delft (format 1 - no CRS)", "[cloud][las][real]") {
     LasHeader h;
     const PointCloud autzen = read_las(shared_data("autzen_oregon/autzen_trim.las"), &h);
