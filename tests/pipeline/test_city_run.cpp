@@ -23,22 +23,18 @@ TEST_CASE("run is tile-invariant and thread-invariant - byte-identical outputs -
     const SynthResult s = test::make_town(dir, 500, 4, 8.0);
     const std::string common = "--ortho " + s.ortho_path + " --cloud " + s.cloud_path + " --vertical-crs EPSG:5773 --overlap-m 60 --quiet";
     const std::string env = "SOURCE_DATE_EPOCH=1700000000 ";
-    // One tile on two threads; 9 tiles of 350 px on one thread.
+    // One tile on two threads; 9 tiles of 350 px on one thread; 9 tiles,
+    // three at once on two threads: the same bytes.
     REQUIRE(test::run_command(env + test::cli() + " run " + common + " --tile-size 4000 --threads 2 --out " + (dir / "one")).exit_code == 0);
-    const auto many = test::run_command(env + test::cli() + " run " + common + " --tile-size 350 --threads 1 --out " + (dir / "many"));
-    INFO(many.err);
-    REQUIRE(many.exit_code == 0);
-    for (const char* f : kOutputs) {
-        INFO(f);
-        CHECK(same_bytes(dir / (std::string("one/") + f), dir / (std::string("many/") + f)));
-    }
-    // Three tiles at once on two threads: the same bytes.
-    const auto at_once = test::run_command(env + test::cli() + " run " + common + " --tile-size 350 --threads 2 --concurrent-tiles 3 --out " + (dir / "at_once"));
-    INFO(at_once.err);
-    REQUIRE(at_once.exit_code == 0);
-    for (const char* f : kOutputs) {
-        INFO(f);
-        CHECK(same_bytes(dir / (std::string("one/") + f), dir / (std::string("at_once/") + f)));
+    for (const auto& [name, options] : {std::pair<std::string, std::string>{"many", " --tile-size 350 --threads 1"},
+                                        {"at_once", " --tile-size 350 --threads 2 --concurrent-tiles 3"}}) {
+        const auto tiled = test::run_command(env + test::cli() + " run " + common + options + " --out " + (dir / name));
+        INFO(name << ": " << tiled.err);
+        REQUIRE(tiled.exit_code == 0);
+        for (const char* f : kOutputs) {
+            INFO(f);
+            CHECK(same_bytes(dir / (std::string("one/") + f), dir / (name + "/" + f)));
+        }
     }
     CHECK(nlohmann::json::parse(test::slurp(dir / "at_once/run_report.json"))["options"]["concurrent_tiles"] == 3);
     // Resumed with another count of tiles at once and of threads (e.g. after
