@@ -10,7 +10,7 @@
 #include <set>
 #include <sstream>
 #include <tbb/global_control.h>
-#include <tbb/parallel_for.h>
+#include <system_error>
 #include <thread>
 #include <atomic>
 #include <exception>
@@ -1368,7 +1368,13 @@ RunReport run_city(const RunManifest& m, const std::string& out_dir, const RunSh
         }
     };
     std::vector<std::thread> workers;
-    for (std::size_t k = 1; k < at_once; ++k) workers.emplace_back(work);
+    for (std::size_t k = 1; k < at_once; ++k) {
+        try {
+            workers.emplace_back(work);
+        } catch (const std::system_error&) {
+            break;  // no thread to be had: the threads started (and this one) do the tiles
+        }
+    }
     work();
     for (std::thread& w : workers) w.join();
     if (failure) std::rethrow_exception(failure);
