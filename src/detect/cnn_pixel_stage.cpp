@@ -24,11 +24,16 @@ void CnnOptions::validate() const {
     if (tta != 1 && tta != 4 && tta != 8) throw Error("pixel.cnn.tta", "must be 1, 4 or 8");
 }
 
+void CnnTiling::validate() const {
+    if (kept_cells < 16 || kept_cells > 1024 || kept_cells % 16 != 0)
+        throw Error("pixel CNN tiling", "kept cells must be a multiple of 16 in [16, 1024]");
+}
+
 namespace {
 
 constexpr char kMagic[] = "CFCNN1";
 constexpr std::size_t kMagicLen = 6;
-constexpr int kTile = 128, kMargin = 32;  // prediction tiles (cells); both multiples of 16
+constexpr int kMargin = 32;  // context around a prediction tile's kept cells (cells; a multiple of 16)
 
 // One torch intra-op thread on the calling thread (OpenMP ICVs are per
 // thread; oneDNN and the BLAS follow them).
@@ -238,12 +243,14 @@ std::vector<uint8_t> train_cnn(const std::vector<const CnnGrid*>& grids, int cha
 }
 
 std::vector<float> predict_cnn(const std::vector<uint8_t>& weights, const std::vector<float>& input, int w, int h, int channels,
-                               const CnnOptions& o) {
+                               const CnnOptions& o, const CnnTiling& tiling) {
     o.validate();
+    tiling.validate();
     if (input.size() != std::size_t(channels) * w * h) throw Error("pixel CNN", "internal: input size");
     std::vector<float> out(std::size_t(w) * h, 0.0f);
-    const int tx = (w + kTile - 1) / kTile, ty = (h + kTile - 1) / kTile;
-    const int N = kTile + 2 * kMargin, T = o.tta;
+    const int K = tiling.kept_cells, step = 1 << o.levels;
+    const int tx = (w + K - 1) / K, ty = (h + K - 1) / K;
+    const int T = o.tta;
     // One network per task (modules are not shared between threads).
     tbb::parallel_for(0, tx * ty, [&](int k) {
         single_thread();
@@ -251,38 +258,47 @@ std::vector<float> predict_cnn(const std::vector<uint8_t>& weights, const std::v
         UNet net(channels, o);
         load(net, weights, "pixel CNN");
         net->eval();
-        const int x0 = (k % tx) * kTile - kMargin, y0 = (k / tx) * kTile - kMargin;
-        std::vector<float> xb(std::size_t(channels) * N * N, 0.0f);
+        const int x0 = (k % tx) * K - kMargin, y0 = (k / tx) * K - kMargin;
+        // The tile: its kx x ky kept cells (K x K but at the grid's far
+        // edges) and a margin on each side; nx x ny cells in all (K + 2
+        // margins, or clipped: a margin past the last kept cell rounded up
+        // to a multiple of 2^levels). Cells outside the grid are 0.
+        const int kx = std::min(K, w - (x0 + kMargin)), ky = std::min(K, h - (y0 + kMargin));
+        const auto side = [&](int kept) { return tiling.clip_edges ? (kept + 2 * kMargin + step - 1) / step * step : K + 2 * kMargin; };
+        const int nx = side(kx), ny = side(ky);
+        std::vector<float> xb(std::size_t(channels) * ny * nx, 0.0f);
         for (int c = 0; c < channels; ++c)
-            for (int y = std::max(0, -y0); y < std::min(N, h - y0); ++y)
-                for (int x = std::max(0, -x0); x < std::min(N, w - x0); ++x)
-                    xb[(std::size_t(c) * N + y) * N + x] = input[(std::size_t(c) * h + (y0 + y)) * w + (x0 + x)];
+            for (int y = std::max(0, -y0); y < std::min(ny, h - y0); ++y)
+                for (int x = std::max(0, -x0); x < std::min(nx, w - x0); ++x)
+                    xb[(std::size_t(c) * ny + y) * nx + x] = input[(std::size_t(c) * h + (y0 + y)) * w + (x0 + x)];
         // Transform t moves tile cell (y, x) to (y', x'): bit 0 flips x, bit 1
-        // flips y, bit 2 then swaps the two (transpose). The network sees the
-        // moved tile; its output at (y', x') belongs to (y, x).
-        const auto moved = [N](int t, int y, int x) {
-            if (t & 1) x = N - 1 - x;
-            if (t & 2) y = N - 1 - y;
-            return t & 4 ? std::size_t(x) * N + y : std::size_t(y) * N + x;
+        // flips y, bit 2 then swaps the two (transpose: the moved tile is nx
+        // high and ny wide). The network sees the moved tile; its output at
+        // (y', x') belongs to (y, x).
+        const auto moved = [nx, ny](int t, int y, int x) {
+            if (t & 1) x = nx - 1 - x;
+            if (t & 2) y = ny - 1 - y;
+            return t & 4 ? std::size_t(x) * ny + y : std::size_t(y) * nx + x;
         };
         // (T = 1: the identity alone, the tile as it is; a mean of one value is that value.)
-        std::vector<float> vals(std::size_t(T) * kTile * kTile), xt(T > 1 ? xb.size() : 0);
+        std::vector<float> vals(std::size_t(T) * kx * ky), xt(T > 1 ? xb.size() : 0);
         for (int t = 0; t < T; ++t) {
             if (t > 0)
                 for (int c = 0; c < channels; ++c)
-                    for (int y = 0; y < N; ++y)
-                        for (int x = 0; x < N; ++x) xt[std::size_t(c) * N * N + moved(t, y, x)] = xb[(std::size_t(c) * N + y) * N + x];
+                    for (int y = 0; y < ny; ++y)
+                        for (int x = 0; x < nx; ++x) xt[std::size_t(c) * nx * ny + moved(t, y, x)] = xb[(std::size_t(c) * ny + y) * nx + x];
+            const int64_t th = t & 4 ? nx : ny, tw = t & 4 ? ny : nx;
             const torch::Tensor p =
-                torch::sigmoid(net->forward(torch::from_blob(t > 0 ? xt.data() : xb.data(), {1, channels, N, N}, torch::kFloat32))).contiguous();
+                torch::sigmoid(net->forward(torch::from_blob(t > 0 ? xt.data() : xb.data(), {1, channels, th, tw}, torch::kFloat32))).contiguous();
             const float* pd = p.data_ptr<float>();
-            for (int y = 0; y < kTile; ++y)
-                for (int x = 0; x < kTile; ++x) vals[(std::size_t(y) * kTile + x) * T + t] = pd[moved(t, kMargin + y, kMargin + x)];
+            for (int y = 0; y < ky; ++y)
+                for (int x = 0; x < kx; ++x) vals[(std::size_t(y) * kx + x) * T + t] = pd[moved(t, kMargin + y, kMargin + x)];
         }
         // Each cell's values sorted before the sum: the same mean whatever
         // the order of the transforms (exact equivariance under the group).
-        for (int y = 0; y < kTile && y0 + kMargin + y < h; ++y)
-            for (int x = 0; x < kTile && x0 + kMargin + x < w; ++x) {
-                float* v = &vals[(std::size_t(y) * kTile + x) * T];
+        for (int y = 0; y < ky; ++y)
+            for (int x = 0; x < kx; ++x) {
+                float* v = &vals[(std::size_t(y) * kx + x) * T];
                 std::sort(v, v + T);
                 double sum = 0.0;
                 for (int t = 0; t < T; ++t) sum += v[t];

@@ -10,13 +10,17 @@
 // (never torch's generator), crops and augmentations are drawn from it too,
 // and every torch computation runs on ONE intra-op thread (set per calling
 // thread), so the same data and options give the same weight bytes whatever
-// the thread count. Prediction cuts the grid into fixed tiles (core 128
-// cells plus a 32-cell margin) computed one per task: any thread count gives
-// the same map. With test-time augmentation (CnnOptions::tta 4 or 8) each
-// tile is predicted under flips (and transposes), mapped back, and each
-// cell's probabilities are sorted before they are summed, so the mean does
-// not depend on the order of the transforms: a flipped (or, with 8,
-// transposed) square tile gives exactly the flipped map.
+// the thread count. Prediction cuts the grid into fixed tiles (CnnTiling:
+// up to kept_cells x kept_cells cells plus a 32-cell margin) computed one
+// per task: any thread count gives the same map. Training's maps (the
+// cross-validation's out-of-fold maps) use kCnnTrainingTiling, applied
+// models kCnnDetectionTiling (larger tiles: less margin work per kept cell).
+// With test-time augmentation (CnnOptions::tta 4 or 8) each tile is
+// predicted under flips (and transposes), mapped back, and each cell's
+// probabilities are sorted before they are summed, so the mean does not
+// depend on the order of the transforms: a grid that is exactly one tile
+// (unclipped: kept_cells square; clipped: sides plus 64 multiples of
+// 2^levels), flipped (or, with 8, transposed), gives exactly the moved map.
 #include <cstdint>
 #include <string>
 #include <vector>
@@ -40,6 +44,33 @@ struct CnnOptions {
     void validate() const;
 };
 
+/// How predict_cnn cuts a grid into prediction tiles. Tile k keeps the
+/// cells [kx * kept_cells, (kx + 1) * kept_cells) in each axis (clipped to
+/// the grid) and sees a 32-cell margin around them; cells outside the grid
+/// are 0. Every tile's place and size depend on the grid's size alone,
+/// never on the thread count.
+struct CnnTiling {
+    int kept_cells = 128;  ///< kept cells per tile side; a multiple of 16 in [16, 1024]
+    /// false: every tile is (kept_cells + 64) cells square, an edge tile
+    /// padded with zeros; true: an edge tile ends a margin past its last kept
+    /// cell, rounded up to a multiple of 2^levels (less work, other values
+    /// in the last ~40 cells of the grid).
+    bool clip_edges = false;
+    void validate() const;
+};
+
+/// The tiling of maps made in training (the cross-validation's out-of-fold
+/// maps, which the segment stage learns from): 128-cell tiles, unclipped.
+/// Shipped models' bytes and CV figures depend on it; do not change it.
+inline constexpr CnnTiling kCnnTrainingTiling{128, false};
+
+/// The tiling of an applied model (footprints, run, bench_detect): 256-cell
+/// tiles, edge tiles clipped. Its margins cost 1.5x the kept cells' work
+/// rather than 2.25x; maps differ from training's tiling only within about
+/// 40 cells of a 128-cell tile boundary that is not a 256-cell one, and of
+/// the grid's far edges (README "Test-time augmentation").
+inline constexpr CnnTiling kCnnDetectionTiling{256, true};
+
 /// One training grid, planar: `input` = channels x height x width values
 /// (about zero-mean, unit scale; the pixel stage gives cells without data
 /// the band's mean, as the filter bank does), `target` = per
@@ -58,10 +89,10 @@ std::vector<uint8_t> train_cnn(const std::vector<const CnnGrid*>& grids, int cha
 
 /// Building probability per cell (width x height, row-major) of a planar
 /// `input` grid (channels x height x width) from weights of train_cnn,
-/// averaged over `options.tta` transforms of each tile.
+/// averaged over `options.tta` transforms of each tile of `tiling`.
 /// Tiles run in parallel (TBB); the values do not depend on the thread count.
 std::vector<float> predict_cnn(const std::vector<uint8_t>& weights, const std::vector<float>& input, int width, int height, int channels,
-                               const CnnOptions& options);
+                               const CnnOptions& options, const CnnTiling& tiling);
 
 /// Throws Error naming `subject` unless `weights` is a complete weight blob
 /// of the network of `options` with `channels` inputs (count, shapes,

@@ -399,7 +399,8 @@ PixelStage train_cnn_stage(const std::vector<PixelTrainingImage>& images, const 
             std::vector<float> cp(p.cell_valid.size(), 0.0f);
             for (int f = 0; f < fold_count; ++f) {
                 if (m[std::size_t(f)].empty()) continue;
-                const std::vector<float> q = predict_cnn(m[std::size_t(f)], p.grid.input, p.grid.width, p.grid.height, layout.bands, o.cnn);
+                const std::vector<float> q =
+                    predict_cnn(m[std::size_t(f)], p.grid.input, p.grid.width, p.grid.height, layout.bands, o.cnn, kCnnTrainingTiling);
                 for (std::size_t c = 0; c < cp.size(); ++c)
                     if (p.cell_valid[c] && p.fold[c] == f) cp[c] = q[c];
             }
@@ -414,13 +415,14 @@ PixelStage train_cnn_stage(const std::vector<PixelTrainingImage>& images, const 
 }  // namespace
 
 std::vector<float> pixel_probability(const std::vector<uint8_t>& model, const Image<float>& img, const std::vector<uint8_t>& valid,
-                                     const BandLayout& layout, double gsd_m, const PixelClassifierOptions& o, int threads) {
+                                     const BandLayout& layout, double gsd_m, const PixelClassifierOptions& o, int threads,
+                                     const CnnTiling& cnn_tiling) {
     if (o.kind == PixelStageKind::both) {
         const auto [boosted, cnn] = unpack_pixel_models(model, "pixel models");
         PixelClassifierOptions ob = o, oc = o;
         ob.kind = PixelStageKind::boosted, oc.kind = PixelStageKind::cnn;
         std::vector<float> p = pixel_probability(boosted, img, valid, layout, gsd_m, ob, threads);
-        const std::vector<float> q = pixel_probability(cnn, img, valid, layout, gsd_m, oc, threads);
+        const std::vector<float> q = pixel_probability(cnn, img, valid, layout, gsd_m, oc, threads, cnn_tiling);
         for (std::size_t i = 0; i < p.size(); ++i) p[i] = 0.5f * (p[i] + q[i]);
         return p;
     }
@@ -430,7 +432,7 @@ std::vector<float> pixel_probability(const std::vector<uint8_t>& model, const Im
         const int f = pixel_cell_factor(gsd_m, o);
         std::vector<uint8_t> cv;
         const CnnGrid g = cnn_grid(img, valid, f, cv);
-        std::vector<float> cp = predict_cnn(model, g.input, g.width, g.height, layout.bands, o.cnn);
+        std::vector<float> cp = predict_cnn(model, g.input, g.width, g.height, layout.bands, o.cnn, cnn_tiling);
         for (std::size_t c = 0; c < cp.size(); ++c)
             if (!cv[c]) cp[c] = 0.0f;
         return upsample(cp, g.width, g.height, f, img.width, img.height, valid);

@@ -272,7 +272,8 @@ detect::PixelStage train_pixel_map_stage(const std::vector<LabelledImage>& data,
     detect::PixelStage s = detect::train_pixel_stage(px, layout, o.detector.pixel, folds, o.folds);
     if (!folds)
         for (const LabelledImage& li : data)
-            s.out_of_fold.push_back(detect::pixel_probability(s.model, li.image.normalised, li.image.valid, layout, li.image.gsd_m, o.detector.pixel));
+            s.out_of_fold.push_back(detect::pixel_probability(s.model, li.image.normalised, li.image.valid, layout, li.image.gsd_m,
+                                                              o.detector.pixel, 0, detect::kCnnTrainingTiling));
     return s;
 }
 
