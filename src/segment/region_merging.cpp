@@ -987,17 +987,11 @@ public:
         return wc_ * hc + (1.0 - wc_) * (wcmp_ * h_cmpct + (1.0 - wcmp_) * h_smooth);
     }
 
-    // Every region's nearest neighbour (lowest (cost, key)) from the edge
-    // costs cached on both sides by build(), in parallel.
-    void initial_nearest_neighbours() {
-        tbb::parallel_for(tbb::blocked_range<uint32_t>(1, n_, 4096), [&](const tbb::blocked_range<uint32_t>& rr) {
-            for (uint32_t r = rr.begin(); r != rr.end(); ++r)
-                if (alive(r)) rescan_nn(r);
-        });
-    }
-    // Nearest neighbour of r from the cached edge costs (exact: an edge's
-    // cost changes only when one of its regions merges, and score_merged
-    // then rewrites it on both sides).
+    // Nearest neighbour of r (lowest (cost, key)) from the cached edge costs
+    // (exact: build() caches each edge's cost on both sides, and an edge's
+    // cost changes only when one of its regions merges, when merge()
+    // rewrites it on both sides). merge_regions finds every region's first
+    // one in its first pass over the records.
     void rescan_nn(uint32_t r) {
         uint32_t best = 0, best_key = UINT32_MAX;  // best_key loaded only on a tie
         double best_cost = INFINITY;
@@ -1263,8 +1257,6 @@ RegionMergingResult merge_regions(const Image<float>& image, const Image<uint32_
         while (uf[x] != x) x = uf[x] = uf[uf[x]];
         return x;
     };
-    // Every strategy caches the edge costs (rag checks its entries against them).
-    g.initial_nearest_neighbours();
 
     result.graph_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t_graph).count();
     result.graph_cpu_seconds = process_cpu_seconds() - c_graph;
@@ -1307,12 +1299,28 @@ RegionMergingResult merge_regions(const Image<float>& image, const Image<uint32_
             }
         };
         constexpr uint32_t kEntriesAhead = 8;
-        if (s == 0) {  // one pass over all records: the live regions and their entries
-            // (on one thread: by chunks on both, 4 MP Autzen seeds took
-            // 10 -> 8 ms wall but 10 -> 15-18 ms CPU)
+        if (s == 0) {
+            // One pass over all records, on one thread: every region's
+            // nearest neighbour (from the edge costs the build cached on
+            // both sides), the live regions and their entries. A mutual pair
+            // is queued when its higher node is reached (the lower one's
+            // nearest neighbour is known by then): the same entry as from
+            // the lower node (the edge's cost is the same double on both
+            // sides), and the queue pops by (cost, keys) whatever order the
+            // entries came in. One pass instead of a parallel one for the
+            // nearest neighbours and this one reading every record again
+            // (341,401 Autzen seeds: the two took 8 + 10.5 ms CPU).
             for (uint32_t r = 1; r < n; ++r) {
-                if (r + kEntriesAhead < n) g.prefetch_node(g.nn(r + kEntriesAhead), 1);  // read by queued_nn
-                if (g.alive(r)) previous_compact[r] = g.key_of(r), live.push_back(r), queue_initial(r);
+                if (r + kEntriesAhead < n) g.prefetch_node(r + kEntriesAhead, 4);  // head and the list, read next
+                if (!g.alive(r)) continue;
+                g.rescan_nn(r);
+                previous_compact[r] = g.key_of(r), live.push_back(r);
+                if (o.strategy != QueueStrategy::mutual) {
+                    queue_initial(r);
+                } else {
+                    const uint32_t k = g.nn(r);
+                    if (k && k < r && g.nn(k) == r && g.nn_cost(r) < threshold) initial.push_back(entry(k, r, g.nn_cost(r)));
+                }
             }
         } else {
             for (uint32_t r : live) queue_initial(r);
@@ -1405,7 +1413,7 @@ RegionMergingResult merge_regions(const Image<float>& image, const Image<uint32_
         live.clear();
         for (const auto& kr : by_key) live.push_back(kr.second);
         std::sort(live.begin(), live.end());
-        previous_compact = compact;
+        previous_compact.swap(compact);  // (compact is not read again)
         previous_count = next;
         level.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
         level.cpu_seconds = thread_cpu_seconds() - c0;
