@@ -1064,8 +1064,17 @@ TileReport run_tile(const RunManifest& m, int k, const std::string& out_dir, con
     TileReport rep;
     rep.index = k;
     if (fs::exists(summary)) {
-        rep.status = "skipped";
-        return rep;
+        std::string status;
+        try {
+            std::ifstream in(summary);
+            status = json::parse(in).value("status", "");
+        } catch (const std::exception&) {  // unreadable: the tile runs again and rewrites it
+        }
+        if (status == "done") {
+            rep.status = "skipped";
+            return rep;
+        }
+        log::info("tile " + std::to_string(k) + ": " + (status == "failed" ? "failed before, running it again" : "its report is unreadable, running it again"));
     }
     const auto t0 = std::chrono::steady_clock::now();
     std::vector<std::string> warnings;
@@ -1274,28 +1283,53 @@ bool same_plan(const RunManifest& stored, const RunManifest& m) {
     return work(stored.options) == work(m.options) && stored.tiles.size() == m.tiles.size() && stored.overlap_px == m.overlap_px;
 }
 
+double estimated_tile_bytes(double window_points, double window_pixels) { return 100.0 * window_points + 50.0 * window_pixels; }
+
+int choose_concurrent_tiles(int requested, int threads, std::size_t tiles, double tile_bytes, double usable_bytes) {
+    threads = std::max(1, threads);
+    if (requested > 0) return std::min(requested, threads);
+    if (threads < 2 || tiles < 2) return 1;
+    return usable_bytes <= 0.0 || 2.0 * tile_bytes <= 0.5 * usable_bytes ? 2 : 1;
+}
+
 namespace {
-// Tiles run at once (RunOptions::concurrent_tiles), never more than the
-// threads asked for. Automatic: 2 with 2 or more threads when two of the
-// largest windows fit in half the usable memory, by an estimate with room to
-// spare: 100 bytes per point (a 2400 px window of 11.5 M points peaked at
-// 1.2 GB) for twice the cloud's mean density, and 50 bytes per pixel.
-int concurrent_tiles_of(const RunManifest& m) {
+// Points of the run's largest tile window: exact from the split's tile files
+// when the cloud was split; else twice the cloud's mean density over the
+// largest window (the header's count, or for a text cloud without one, a
+// point per 20 bytes of the file: more points than any XYZ line holds).
+double largest_tile_points(const RunManifest& m, const std::string& out_dir, double largest_px) {
+    const RunOptions& o = m.options;
+    if (o.cloud.empty()) return 0.0;
+    if (fs::exists(fs::path(out_dir) / "cloud_tiles" / "complete")) {
+        double most = 0.0;
+        for (const TileSpec& t : m.tiles)
+            if (const fs::path p = tile_cloud_path(out_dir, t.index); fs::exists(p)) most = std::max(most, double(CloudReader(p.string()).announced_points()));
+        return most;
+    }
+    const CloudReader reader(o.cloud);
+    double points = double(reader.announced_points());
+    if (points == 0.0) {
+        std::error_code ec;
+        const auto bytes = fs::file_size(o.cloud, ec);
+        points = ec ? 0.0 : double(bytes) / 20.0;
+    }
+    const double grid_px = std::max(1.0, double(m.grid.width) * double(m.grid.height));
+    return 2.0 * points * std::min(1.0, largest_px / grid_px);
+}
+
+// The run's tiles at once (choose_concurrent_tiles), the automatic choice logged.
+int concurrent_tiles_of(const RunManifest& m, const std::string& out_dir) {
     const RunOptions& o = m.options;
     const int threads = o.threads > 0 ? o.threads : static_cast<int>(tbb::global_control::active_value(tbb::global_control::max_allowed_parallelism));
-    if (o.concurrent_tiles > 0) return std::max(1, std::min(o.concurrent_tiles, threads));
-    if (threads < 2 || m.tiles.size() < 2) return 1;
+    if (o.concurrent_tiles > 0 || threads < 2 || m.tiles.size() < 2) return choose_concurrent_tiles(o.concurrent_tiles, threads, m.tiles.size(), 0.0, 0.0);
     double largest_px = 0.0;
     for (const TileSpec& t : m.tiles) largest_px = std::max(largest_px, double(t.window.width) * double(t.window.height));
-    double points = 0.0;
-    if (!o.cloud.empty()) points = double(CloudReader(o.cloud).announced_points());
-    const double grid_px = std::max(1.0, double(m.grid.width) * double(m.grid.height));
-    const double tile_bytes = 100.0 * 2.0 * points * std::min(1.0, largest_px / grid_px) + 50.0 * largest_px;
+    const double tile_bytes = estimated_tile_bytes(largest_tile_points(m, out_dir, largest_px), largest_px);
     const double usable = usable_memory_bytes();
-    const bool two = usable <= 0.0 || 2.0 * tile_bytes <= 0.5 * usable;
-    log::info(std::string(two ? "2 tiles at once" : "1 tile at a time") + " (about " + format_bytes(tile_bytes) + " per tile, " +
+    const int at_once = choose_concurrent_tiles(0, threads, m.tiles.size(), tile_bytes, usable);
+    log::info(std::string(at_once == 2 ? "2 tiles at once" : "1 tile at a time") + " (about " + format_bytes(tile_bytes) + " per tile, " +
               format_bytes(usable) + " usable; --concurrent-tiles sets it)");
-    return two ? 2 : 1;
+    return at_once;
 }
 }  // namespace
 
@@ -1341,7 +1375,7 @@ RunReport run_city(const RunManifest& m, const std::string& out_dir, const RunSh
     // own files, so the outputs are the same for any count.
     ensure_directory(fs::path(out_dir) / "tiles");
     if (m.options.keep_rasters) ensure_directory(fs::path(out_dir) / "rasters");
-    const std::size_t at_once = std::min<std::size_t>(mine.size(), std::size_t(concurrent_tiles_of(m)));
+    const std::size_t at_once = std::min<std::size_t>(mine.size(), std::size_t(concurrent_tiles_of(m, out_dir)));
     // --threads N is the whole run's: each tile's thread is one of them.
     std::unique_ptr<tbb::global_control> tile_threads;
     if (m.options.threads > 0 && at_once > 1)

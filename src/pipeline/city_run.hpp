@@ -46,8 +46,9 @@ struct RunOptions {
     int threads = 0;          ///< 0 = all cores
     /// Tiles processed at once (each holds its window's cloud, rasters and
     /// buildings: about 1.2 GB for 2000 px tiles at 0.5 m and 8 points/m²).
-    /// 0 = automatic: 2 when the run has at least 2 threads, else 1. The
-    /// outputs do not depend on it (each tile's work is its own).
+    /// 0 = automatic (choose_concurrent_tiles): 2 when the run has at least
+    /// 2 threads and two of its largest tiles fit in half the usable memory,
+    /// else 1. The outputs do not depend on it (each tile's work is its own).
     int concurrent_tiles = 0;
     double footprint_grid_m = 1.0;  ///< grid cell when there is no ortho (footprints given), metres
     /// Write each tile core's DSM, DTM and nDSM (float32 GeoTIFF on the
@@ -119,9 +120,22 @@ struct TileReport {
     std::vector<std::pair<std::string, FieldType>> attribute_types;
 };
 
+/// Bytes one tile holds at its peak, estimated with room to spare: 100 bytes
+/// per point of its window (a 2400 px window of 11.5 M points peaked at
+/// 1.2 GB) and 50 bytes per pixel of its window.
+double estimated_tile_bytes(double window_points, double window_pixels);
+
+/// Tiles a run processes at once. `requested` > 0 is taken, capped by
+/// `threads` (at least 1); 0 = automatic: 2 when `threads` >= 2, the run has
+/// 2 or more `tiles` and two tiles of `tile_bytes` fit in half of
+/// `usable_bytes` (0 = unknown: they are taken to fit), else 1.
+int choose_concurrent_tiles(int requested, int threads, std::size_t tiles, double tile_bytes, double usable_bytes);
+
 /// Runs tile `k` into `out_dir`/tiles/ (tile_K.jsonl: one building per line,
-/// tile_K.json: its report). Skips a tile whose report exists. Errors of the
-/// tile's data are caught and reported as a failed tile.
+/// tile_K.json: its report). Skips a tile whose report says it is done; a
+/// tile that failed (or whose report cannot be read) runs again, so a rerun
+/// after mending the cause (a file replaced, memory freed) completes the
+/// run. Errors of the tile's data are caught and reported as a failed tile.
 TileReport run_tile(const RunManifest& manifest, int k, const std::string& out_dir, const Progress& progress = {});
 
 struct RunReport {

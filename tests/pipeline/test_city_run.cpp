@@ -141,6 +141,75 @@ TEST_CASE("plan - run one tile - merge-tiles - MPI ranks - a failed tile is repo
     CHECK(std::filesystem::exists(dir / "broken/tiles/tile_00000.json"));
 }
 
+TEST_CASE("run: a tile that fails while another runs is reported and the others finish whole - a rerun after mending redoes it, same bytes", "[run]") {
+    namespace fs = std::filesystem;
+    ScratchDir dir("run_tile_fault");
+    const SynthResult s = test::make_town(dir, 400, 12, 8.0);
+    const std::string env = "SOURCE_DATE_EPOCH=1700000000 ";
+    const std::string cmd = env + test::cli() + " run --ortho " + s.ortho_path + " --cloud " + s.cloud_path +
+                            " --vertical-crs EPSG:5773 --overlap-m 60 --tile-size 400 --threads 2 --concurrent-tiles 2 --quiet --out ";
+    const auto clean = test::run_command(cmd + (dir / "clean"));
+    INFO(clean.err);
+    REQUIRE(clean.exit_code == 0);
+    REQUIRE(nlohmann::json::parse(test::slurp(dir / "clean/run_report.json"))["tiles"].size() == 4);
+    // The same run folder with its tiles lost and one tile's cloud truncated
+    // (a disk fault): the four tiles run again, two at once.
+    fs::copy(dir / "clean", dir / "faulty", fs::copy_options::recursive);
+    fs::remove_all(dir / "faulty/tiles");
+    const fs::path broken = dir / "faulty/cloud_tiles/tile_00001.las";
+    fs::resize_file(broken, 300);
+    const auto faulty = test::run_command(cmd + (dir / "faulty"));
+    INFO(faulty.err);
+    REQUIRE(faulty.exit_code == 0);  // three tiles of four: a result, with the failure said
+    const auto report = nlohmann::json::parse(test::slurp(dir / "faulty/run_report.json"));
+    REQUIRE(report["tiles"].size() == 4);
+    CHECK(report["tiles"][1]["status"] == "failed");
+    CHECK(report["tiles"][1]["reason"].get<std::string>().find("tile_00001.las") != std::string::npos);
+    bool said = false;
+    for (const auto& w : report["warnings"]) said = said || w.get<std::string>().find("tile 1 failed") != std::string::npos;
+    CHECK(said);
+    for (int k : {0, 2, 3}) {  // the tiles that ran beside it are whole: the clean run's bytes
+        INFO("tile " << k);
+        CHECK(report["tiles"][k]["status"] == "done");
+        const std::string name = "tiles/tile_0000" + std::to_string(k) + ".jsonl";
+        CHECK(same_bytes(dir / ("clean/" + name), dir / ("faulty/" + name)));
+    }
+    for (const auto& e : fs::directory_iterator(dir / "faulty/tiles")) {  // no temporary left behind
+        INFO(e.path());
+        CHECK(e.path().filename().string().find(".part-") == std::string::npos);
+    }
+    // Mended (the file restored), the same command runs the failed tile again
+    // and keeps the others: the clean run's bytes.
+    fs::copy_file(dir / "clean/cloud_tiles/tile_00001.las", broken, fs::copy_options::overwrite_existing);
+    const auto mended = test::run_command(cmd + (dir / "faulty"));
+    INFO(mended.err);
+    REQUIRE(mended.exit_code == 0);
+    CHECK(nlohmann::json::parse(test::slurp(dir / "faulty/run_report.json"))["tiles"][1]["status"] == "done");
+    for (const char* f : kOutputs) {
+        INFO(f);
+        CHECK(same_bytes(dir / (std::string("clean/") + f), dir / (std::string("faulty/") + f)));
+    }
+}
+
+TEST_CASE("run: tiles at once - the automatic choice by memory and threads", "[run]") {
+    // Asked for: taken, never more than the threads.
+    CHECK(choose_concurrent_tiles(3, 2, 9, 1e12, 1e9) == 2);
+    CHECK(choose_concurrent_tiles(1, 2, 9, 0.0, 24e9) == 1);
+    CHECK(choose_concurrent_tiles(2, 0, 9, 0.0, 24e9) == 1);
+    // Automatic: one thread or one tile -> 1.
+    CHECK(choose_concurrent_tiles(0, 1, 9, 1e6, 24e9) == 1);
+    CHECK(choose_concurrent_tiles(0, 2, 1, 1e6, 24e9) == 1);
+    // Two tiles must fit in half the usable memory.
+    const double tile = estimated_tile_bytes(11.5e6 * 2, 2400.0 * 2400.0);  // a 2400 px window at twice 8 points/m²
+    CHECK(tile == Approx(100.0 * 23e6 + 50.0 * 5.76e6));
+    CHECK(choose_concurrent_tiles(0, 2, 16, tile, 24e9) == 2);
+    CHECK(choose_concurrent_tiles(0, 2, 16, tile, 4.0 * tile) == 2);
+    CHECK(choose_concurrent_tiles(0, 2, 16, tile, 4.0 * tile - 1.0) == 1);
+    CHECK(choose_concurrent_tiles(0, 8, 16, tile, 2e9) == 1);
+    // Memory unknown: taken to fit.
+    CHECK(choose_concurrent_tiles(0, 2, 16, tile, 0.0) == 2);
+}
+
 TEST_CASE("run without a cloud - ortho-only footprints as one tile - no heights said in every row", "[run]") {
     ScratchDir dir("run_ortho");
     const SynthResult s = test::make_town(dir, 300, 8, 0.0);
