@@ -114,6 +114,9 @@ struct TileReport {
     /// window grown around them (the result does not depend on the tiling).
     std::size_t grown = 0;
     std::map<std::string, double> seconds;  ///< per stage
+    /// The process's peak resident memory (MB) when the tile finished: with
+    /// tiles at once it includes the other tiles' memory, so it bounds the
+    /// tile's own from above.
     double peak_memory_mb = 0.0;
     /// Declared type of each building attribute (source layer and stages), so
     /// that the merge keeps a field's type when all its values are null.
