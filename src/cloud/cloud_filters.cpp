@@ -571,10 +571,10 @@ void grid_knn(const PointCloud& c, std::size_t k, Visit&& visit) {
     LargeVector<uint32_t> start(cells + 1, 0);
     auto order = large_array<uint32_t>(n);  // point indices cell by cell
     {
-        auto cell_of = large_array<uint32_t>(n);
-        tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, kGrain), [&](const tbb::blocked_range<std::size_t>& r) {
-            for (std::size_t i = r.begin(); i != r.end(); ++i) cell_of[i] = static_cast<uint32_t>(cell_index(g.col(cxp[i]), g.row(cyp[i])));
-        });
+        // Each point's cell, computed in the counting pass and again in the
+        // placing pass (the same function of the same coordinates): cheaper
+        // than 4 bytes a point of fresh memory to hold it (0.5 GB at 127 M points).
+        const auto cell_of = [&](std::size_t i) { return cell_index(g.col(cxp[i]), g.row(cyp[i])); };
         // Counting sort, ascending index per cell. Points in canonical order
         // (sorted by the grid's column coordinate) fill whole columns in
         // runs, and columns own disjoint cells: the points then split into
@@ -601,12 +601,12 @@ void grid_knn(const PointCloud& c, std::size_t k, Visit&& visit) {
             tbb::parallel_for(std::size_t(0), cuts.size() - 1, [&](std::size_t b) { body(cuts[b], cuts[b + 1]); });
         };
         blocks([&](std::size_t a, std::size_t e) {
-            for (std::size_t i = a; i < e; ++i) ++start[cell_of[i] + 1];
+            for (std::size_t i = a; i < e; ++i) ++start[cell_of(i) + 1];
         });
         for (std::size_t q = 0; q < cells; ++q) start[q + 1] += start[q];
         LargeVector<uint32_t> fill(start.begin(), start.end() - 1);
         blocks([&](std::size_t a, std::size_t e) {
-            for (std::size_t i = a; i < e; ++i) order[fill[cell_of[i]]++] = static_cast<uint32_t>(i);
+            for (std::size_t i = a; i < e; ++i) order[fill[cell_of(i)]++] = static_cast<uint32_t>(i);
         });
     }
     // Each cell's z range in floats that enclose its double z values (the
@@ -914,15 +914,17 @@ OutlierFilterResult filter_outliers(const PointCloud& c, const OutlierFilterOpti
     const auto m = static_cast<std::size_t>(o.isolated_min_neighbours);
     // Written once for every point by the parallel search (first touch there).
     auto mean_dist = large_array<double>(n);
-    auto isolated = large_array<uint8_t>(n);
     const bool test_isolated = o.isolated_radius > 0.0 && m > 0;
+    // An isolated point is marked in r.keep's bit 1 (kIsolated) until the
+    // limit is known, rather than in an array of its own (fresh memory).
+    constexpr uint8_t kIsolated = 2;
     const auto visit = [&](std::size_t i, const double* best, std::size_t found) {
         // best[0] is the point itself (or a duplicate at distance 0).
         const std::size_t used = std::min(found, static_cast<std::size_t>(o.k_neighbours) + 1);
         double s = 0.0;
         for (std::size_t j = 1; j < used; ++j) s += std::sqrt(best[j]);
         mean_dist[i] = used > 1 ? s / static_cast<double>(used - 1) : 0.0;
-        isolated[i] = test_isolated && (found <= m || best[m] > o.isolated_radius * o.isolated_radius);
+        if (test_isolated && (found <= m || best[m] > o.isolated_radius * o.isolated_radius)) r.keep[i] |= kIsolated;
     };
     if (k == 9) grid_knn<9>(c, k, visit);  // the defaults: 8 neighbours and the point itself
     else grid_knn<0>(c, k, visit);
@@ -932,9 +934,11 @@ OutlierFilterResult filter_outliers(const PointCloud& c, const OutlierFilterOpti
         tbb::blocked_range<std::size_t>(0, n, kGrain), Counts{0, 0},
         [&](const tbb::blocked_range<std::size_t>& b, Counts counts) {
             for (std::size_t i = b.begin(); i != b.end(); ++i) {
-                if (!r.keep[i]) continue;
+                const uint8_t v = r.keep[i];
+                r.keep[i] = v & 1;
+                if (!(v & 1)) continue;
                 if (mean_dist[i] > limit) r.keep[i] = 0, ++counts.first;  // statistical first, as the noise classes
-                else if (isolated[i]) r.keep[i] = 0, ++counts.second;
+                else if (v & kIsolated) r.keep[i] = 0, ++counts.second;
             }
             return counts;
         },
