@@ -11,7 +11,7 @@ PACKAGES=(
   libopencv-dev libopencv-imgproc-dev libopencv-core-dev
   libopencv-calib3d-dev libopencv-features2d-dev libopencv-imgcodecs-dev colmap
   catch2 libtbb-dev nlohmann-json3-dev libcli11-dev libgeos-dev libnanoflann-dev
-  libxml2-utils libsqlite3-dev
+  libxml2-utils libsqlite3-dev python3
   libxgboost-dev libtorch-dev
   openmpi-bin
   chromium postgresql-15 postgresql-15-postgis-3
