@@ -5,8 +5,14 @@
 #include <torch/torch.h>
 
 #include <algorithm>
+#include <c10/core/CPUAllocator.h>
 #include <cmath>
+#include <cstdlib>
 #include <cstring>
+#include <map>
+#include <mutex>
+#include <new>
+#include <vector>
 
 #include "core/error.hpp"
 #include "core/random.hpp"
@@ -40,6 +46,99 @@ constexpr int kMargin = 32;  // context around a prediction tile's kept cells (c
 void single_thread() {
     if (at::get_num_threads() != 1) at::set_num_threads(1);
 }
+
+// Torch's CPU memory through a cache of freed blocks of 64 kB or more, by
+// exact size. A prediction tile's convolutions allocate and free the same
+// buffers of tens of MB for every tile and transform; glibc hands blocks that
+// large back to the kernel on every free (mmap, or trimming a thread's heap),
+// and the next tile faults them in again, zeroed: 2.6 M page faults and about
+// 4 system seconds in bench_detect's two chains. The cache holds at most
+// kCacheBytes and is emptied when the last prediction or training using it
+// ends (CachedTorchMemory), so the process keeps no memory afterwards. Only
+// where memory comes from changes, never a value (torch writes every output
+// element it allocates).
+class BlockCacheAllocator final : public c10::Allocator {
+public:
+    static constexpr std::size_t kHeader = 64;  // the block's size, and 64-byte alignment of the data after it
+    static constexpr std::size_t kMinCached = std::size_t(64) << 10;
+    static constexpr std::size_t kCacheBytes = std::size_t(512) << 20;
+
+    c10::DataPtr allocate(std::size_t n) const override {
+        void* p = take(n);
+        return {p, p, &release, c10::Device(c10::DeviceType::CPU)};
+    }
+    c10::DeleterFnPtr raw_deleter() const override { return &release; }
+
+    /// Starts (users 0 -> 1) or ends (1 -> 0, the cache freed) a use of the cache.
+    static void use(int delta) {
+        std::vector<void*> freed;
+        {
+            State& s = state();
+            std::lock_guard lock(s.mutex);
+            s.users += delta;
+            if (s.users > 0) return;
+            for (auto& [size, raw] : s.blocks) freed.push_back(raw);
+            s.blocks.clear(), s.cached = 0;
+        }
+        for (void* raw : freed) std::free(raw);
+    }
+
+private:
+    struct State {
+        std::mutex mutex;
+        std::multimap<std::size_t, void*> blocks;  // size -> raw block (header first)
+        std::size_t cached = 0;
+        int users = 0;
+    };
+    static State& state() {
+        static State* s = new State;  // never destroyed: tensors may be freed after static destructors ran
+        return *s;
+    }
+    static void* take(std::size_t n) {
+        if (n >= kMinCached) {
+            State& s = state();
+            std::lock_guard lock(s.mutex);
+            if (const auto it = s.blocks.find(n); it != s.blocks.end()) {
+                void* raw = it->second;
+                s.blocks.erase(it), s.cached -= n;
+                return static_cast<char*>(raw) + kHeader;
+            }
+        }
+        void* raw = std::aligned_alloc(kHeader, kHeader + (n + kHeader - 1) / kHeader * kHeader);
+        if (!raw) throw std::bad_alloc();
+        *static_cast<std::size_t*>(raw) = n;
+        return static_cast<char*>(raw) + kHeader;
+    }
+    static void release(void* p) {
+        if (!p) return;
+        void* raw = static_cast<char*>(p) - kHeader;
+        const std::size_t n = *static_cast<const std::size_t*>(raw);
+        if (n >= kMinCached) {
+            State& s = state();
+            std::lock_guard lock(s.mutex);
+            if (s.users > 0 && s.cached + n <= kCacheBytes) {
+                s.blocks.emplace(n, raw), s.cached += n;
+                return;
+            }
+        }
+        std::free(raw);
+    }
+};
+
+// While alive, torch's CPU tensors use BlockCacheAllocator (installed once,
+// for the process: blocks it handed out must come back to it).
+class CachedTorchMemory {
+public:
+    CachedTorchMemory() {
+        static BlockCacheAllocator allocator;
+        static std::once_flag installed;
+        std::call_once(installed, [] { c10::SetCPUAllocator(&allocator, /*priority=*/1); });
+        BlockCacheAllocator::use(+1);
+    }
+    ~CachedTorchMemory() { BlockCacheAllocator::use(-1); }
+    CachedTorchMemory(const CachedTorchMemory&) = delete;
+    CachedTorchMemory& operator=(const CachedTorchMemory&) = delete;
+};
 
 struct ConvBnImpl : torch::nn::Module {
     torch::nn::Conv2d conv{nullptr};
@@ -176,6 +275,7 @@ void load(UNet& net, const std::vector<uint8_t>& in, const std::string& subject)
 std::vector<uint8_t> train_cnn(const std::vector<const CnnGrid*>& grids, int channels, const CnnOptions& o) {
     o.validate();
     if (grids.empty() || channels < 1) throw Error("pixel CNN", "no training grid");
+    const CachedTorchMemory memory;
     single_thread();
     const int S = o.crop_cells, B = o.batch;
     // Grids are drawn in proportion to their trainable cells.
@@ -248,6 +348,7 @@ std::vector<float> predict_cnn(const std::vector<uint8_t>& weights, const std::v
     tiling.validate();
     if (input.size() != std::size_t(channels) * w * h) throw Error("pixel CNN", "internal: input size");
     std::vector<float> out(std::size_t(w) * h, 0.0f);
+    const CachedTorchMemory memory;
     const int K = tiling.kept_cells, step = 1 << o.levels;
     const int tx = (w + K - 1) / K, ty = (h + K - 1) / K;
     const int T = o.tta;
