@@ -25,6 +25,10 @@ RunShare mpi_share() {
     if (!rank || !size) throw Error("--mpi", "no MPI rank in the environment; start with mpirun -np N");
     RunShare s;
     s.rank = std::atoi(rank), s.size = std::atoi(size);
+    // The job's id, the same on every rank: failed tiles of an earlier run are then run again.
+    if (const char* ns = env("PMIX_NAMESPACE", "OMPI_MCA_ess_base_jobid", "PMI_JOBID")) s.job = ns;
+    else if (const char* slurm = std::getenv("SLURM_JOB_ID"))
+        s.job = std::string(slurm) + "." + (std::getenv("SLURM_STEP_ID") ? std::getenv("SLURM_STEP_ID") : "0");
     return s;
 }
 
@@ -129,8 +133,8 @@ void add_run_commands(CLI::App& parent, const GlobalFlags& g, CommandList& out) 
     // What only the config holds: every key with its default (schema and example named).
     run_cmd->footer("Config file (--config): JSON, schema schemas/run_config.schema.json, example samples/run.json; unknown keys are "
                     "refused, command-line options override it. Keys and defaults:\n" + to_json(RunOptions{}).dump(2) +
-                    "\nDIR may hold an earlier run of the same command: its finished tiles are kept and skipped (a folder made "
-                    "with other options is refused).");
+                    "\nDIR may hold an earlier run of the same command: its finished tiles are kept and skipped, tiles that "
+                    "failed run again (a folder made with other options is refused).");
     out.push_back({run_cmd, [rs, &g]() {
                        const RunManifest manifest = rs->manifest.empty() ? plan_from(rs->inputs, make_progress(g)) : read_manifest(rs->manifest);
                        if (rs->tile >= 0) {

@@ -1054,7 +1054,7 @@ std::vector<Building> tile_buildings(const RunManifest& m, const TileSpec& t, co
 
 }  // namespace
 
-TileReport run_tile(const RunManifest& m, int k, const std::string& out_dir, const Progress& progress) {
+TileReport run_tile(const RunManifest& m, int k, const std::string& out_dir, const Progress& progress, const TileResume& resume) {
     if (k < 0 || k >= static_cast<int>(m.tiles.size())) throw Error("--tile", "no tile " + std::to_string(k) + " (the manifest has " + std::to_string(m.tiles.size()) + ")");
     std::unique_ptr<tbb::global_control> limit;
     if (m.options.threads > 0) limit = std::make_unique<tbb::global_control>(tbb::global_control::max_allowed_parallelism, m.options.threads);
@@ -1070,7 +1070,7 @@ TileReport run_tile(const RunManifest& m, int k, const std::string& out_dir, con
             status = json::parse(in).value("status", "");
         } catch (const std::exception&) {  // unreadable: the tile runs again and rewrites it
         }
-        if (status == "done") {
+        if (status == "done" || (status == "failed" && !resume.rerun_failed)) {
             rep.status = "skipped";
             return rep;
         }
@@ -1092,6 +1092,7 @@ TileReport run_tile(const RunManifest& m, int k, const std::string& out_dir, con
     rep.peak_memory_mb = peak_memory_mb();
     json j{{"index", k}, {"status", rep.status}, {"reason", rep.reason}, {"buildings", rep.buildings}, {"grown", rep.grown}, {"seconds", rep.seconds},
            {"peak_memory_mb", rep.peak_memory_mb}, {"warnings", warnings}, {"attribute_types", attribute_types_json(rep.attribute_types)}};
+    if (!resume.job.empty()) j["job"] = resume.job;
     write_text_file(summary, j.dump(2) + "\n");
     progress(1.0, tile_name(k));
     return rep;
@@ -1283,6 +1284,23 @@ bool same_plan(const RunManifest& stored, const RunManifest& m) {
     return work(stored.options) == work(m.options) && stored.tiles.size() == m.tiles.size() && stored.overlap_px == m.overlap_px;
 }
 
+namespace {
+// Whether a tile's report is final for rank 0's merge: it exists and, for a
+// multi-rank job with an id, says "done" or was written by this job (a
+// "failed" report of an earlier run is being redone by its rank).
+bool tile_report_ready(const fs::path& summary, const std::string& job) {
+    if (!fs::exists(summary)) return false;
+    if (job.empty()) return true;
+    try {
+        std::ifstream in(summary);
+        const json r = json::parse(in);
+        return r.value("status", "") == "done" || r.value("job", "") == job;
+    } catch (const std::exception&) {
+        return false;  // being replaced, or damaged: its rank rewrites it
+    }
+}
+}  // namespace
+
 double estimated_tile_bytes(double window_points, double window_pixels) { return 100.0 * window_points + 50.0 * window_pixels; }
 
 int choose_concurrent_tiles(int requested, int threads, std::size_t tiles, double tile_bytes, double usable_bytes) {
@@ -1303,7 +1321,12 @@ double largest_tile_points(const RunManifest& m, const std::string& out_dir, dou
     if (fs::exists(fs::path(out_dir) / "cloud_tiles" / "complete")) {
         double most = 0.0;
         for (const TileSpec& t : m.tiles)
-            if (const fs::path p = tile_cloud_path(out_dir, t.index); fs::exists(p)) most = std::max(most, double(CloudReader(p.string()).announced_points()));
+            if (const fs::path p = tile_cloud_path(out_dir, t.index); fs::exists(p)) {
+                try {
+                    most = std::max(most, double(CloudReader(p.string()).announced_points()));
+                } catch (const Error&) {  // a damaged tile file: that tile fails and says why, the others run
+                }
+            }
         return most;
     }
     const CloudReader reader(o.cloud);
@@ -1381,6 +1404,11 @@ RunReport run_city(const RunManifest& m, const std::string& out_dir, const RunSh
     if (m.options.threads > 0 && at_once > 1)
         tile_threads = std::make_unique<tbb::global_control>(tbb::global_control::max_allowed_parallelism,
                                                       std::max<std::size_t>(1, std::size_t(m.options.threads) - at_once + 1));
+    // With several ranks, rank 0 tells this job's reports from older ones by
+    // the job id; without one, a failed tile of an earlier run is kept as it is.
+    const TileResume resume{share.size == 1 || !share.job.empty(), share.job};
+    if (!resume.rerun_failed && share.rank == 0)
+        log::warning("no MPI job id in the environment: tiles that failed in an earlier run of " + out_dir + " are not run again");
     std::atomic<std::size_t> next{0};
     std::size_t finished = 0;
     std::mutex finished_mutex;
@@ -1388,7 +1416,7 @@ RunReport run_city(const RunManifest& m, const std::string& out_dir, const RunSh
     auto work = [&]() {
         try {
             for (std::size_t i = next++; i < mine.size(); i = next++) {
-                const TileReport r = run_tile(m, mine[i], out_dir);
+                const TileReport r = run_tile(m, mine[i], out_dir, {}, resume);
                 std::lock_guard lock(finished_mutex);
                 ++finished;
                 std::ostringstream msg;  // the progress line adds the ETA
@@ -1418,7 +1446,7 @@ RunReport run_city(const RunManifest& m, const std::string& out_dir, const RunSh
     const auto wait0 = std::chrono::steady_clock::now();
     for (;;) {
         bool all = true;
-        for (const TileSpec& t : m.tiles) all = all && fs::exists(fs::path(out_dir) / "tiles" / (tile_name(t.index) + ".json"));
+        for (const TileSpec& t : m.tiles) all = all && tile_report_ready(fs::path(out_dir) / "tiles" / (tile_name(t.index) + ".json"), share.size > 1 ? share.job : "");
         if (all) break;
         if (since(wait0) > share.wait_seconds) throw Error(out_dir, "other ranks' tiles did not finish in time");
         std::this_thread::sleep_for(std::chrono::milliseconds(200));

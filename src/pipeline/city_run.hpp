@@ -136,10 +136,21 @@ int choose_concurrent_tiles(int requested, int threads, std::size_t tiles, doubl
 
 /// Runs tile `k` into `out_dir`/tiles/ (tile_K.jsonl: one building per line,
 /// tile_K.json: its report). Skips a tile whose report says it is done; a
-/// tile that failed (or whose report cannot be read) runs again, so a rerun
-/// after mending the cause (a file replaced, memory freed) completes the
-/// run. Errors of the tile's data are caught and reported as a failed tile.
-TileReport run_tile(const RunManifest& manifest, int k, const std::string& out_dir, const Progress& progress = {});
+/// tile that failed (unless `resume.rerun_failed` is false) or whose report
+/// cannot be read runs again, so a rerun after mending the cause (a file
+/// replaced, memory freed) completes the run. Errors of the tile's data are
+/// caught and reported as a failed tile.
+/// How run_tile treats an earlier report of its tile.
+struct TileResume {
+    /// A report saying "failed" runs the tile again (false: it is kept, as
+    /// a finished one; ranks of a job without a job id, whose rank 0 could
+    /// not tell an old failed report from a new one).
+    bool rerun_failed = true;
+    /// The launcher's job id, written into the report ("job") so that rank 0
+    /// of a multi-rank run waits for this job's report of a tile run again.
+    std::string job;
+};
+TileReport run_tile(const RunManifest& manifest, int k, const std::string& out_dir, const Progress& progress = {}, const TileResume& resume = {});
 
 struct RunReport {
     std::size_t buildings = 0, valid_lod1 = 0, valid_lod2 = 0;
@@ -166,6 +177,10 @@ RunReport merge_tiles(const RunManifest& manifest, const std::string& out_dir, c
 /// One process's share of a distributed run: tiles k with k % size == rank.
 struct RunShare {
     int rank = 0, size = 1;
+    /// The launcher's job id, the same on every rank (PMIx namespace, Open
+    /// MPI job id, Slurm job and step); empty when unknown. With several
+    /// ranks and no job id, failed tiles of an earlier run are not run again.
+    std::string job;
     double wait_seconds = 3600.0;  ///< rank 0 waits this long for the others' tiles before merging
 };
 

@@ -118,6 +118,25 @@ TEST_CASE("plan - run one tile - merge-tiles - MPI ranks - a failed tile is repo
             INFO(f);
             CHECK(same_bytes(dir / (std::string("slurm/") + f), dir / (std::string("mpi/") + f)));
         }
+        // Resumed with a tile that failed before (rank 1's tile 5): rank 0
+        // merges only once this job's report of it is there (before, the old
+        // "failed" report let it merge without the tile and exit 0).
+        {
+            auto r5 = nlohmann::json::parse(test::slurp(dir / "mpi/tiles/tile_00005.json"));
+            r5["status"] = "failed", r5["reason"] = "an earlier fault";
+            std::ofstream(dir / "mpi/tiles/tile_00005.json") << r5.dump(2);
+            std::filesystem::remove(dir / "mpi/tiles/tile_00005.jsonl");
+            std::filesystem::remove(dir / "mpi/buildings.city.json");
+        }
+        const auto resumed = test::run_command(env + "OMPI_ALLOW_RUN_AS_ROOT=1 OMPI_ALLOW_RUN_AS_ROOT_CONFIRM=1 mpirun --oversubscribe -np 2 " +
+                                               test::cli() + " run --manifest " + (dir / "m.json") + " --mpi --out " + (dir / "mpi") + " --quiet");
+        INFO(resumed.out + resumed.err);
+        REQUIRE(resumed.exit_code == 0);
+        CHECK(nlohmann::json::parse(test::slurp(dir / "mpi/tiles/tile_00005.json"))["status"] == "done");
+        for (const char* f : kOutputs) {
+            INFO(f);
+            CHECK(same_bytes(dir / (std::string("slurm/") + f), dir / (std::string("mpi/") + f)));
+        }
     } else {
         WARN("mpirun not installed: the MPI path was not exercised");
     }
@@ -147,13 +166,15 @@ TEST_CASE("run: a tile that fails while another runs is reported and the others 
     const SynthResult s = test::make_town(dir, 400, 12, 8.0);
     const std::string env = "SOURCE_DATE_EPOCH=1700000000 ";
     const std::string cmd = env + test::cli() + " run --ortho " + s.ortho_path + " --cloud " + s.cloud_path +
-                            " --vertical-crs EPSG:5773 --overlap-m 60 --tile-size 270 --threads 2 --concurrent-tiles 2 --quiet --out ";
-    const auto clean = test::run_command(cmd + (dir / "clean"));
+                            " --vertical-crs EPSG:5773 --overlap-m 60 --tile-size 270 --threads 2 --quiet --out ";
+    const auto clean = test::run_command(cmd + (dir / "clean") + " --concurrent-tiles 2");
     INFO(clean.err);
     REQUIRE(clean.exit_code == 0);
     REQUIRE(nlohmann::json::parse(test::slurp(dir / "clean/run_report.json"))["tiles"].size() == 9);
     // The same run folder with its tiles lost and the last tile's cloud
-    // truncated (a disk fault): the nine tiles run again, two at once. The
+    // truncated (a disk fault): the nine tiles run again (the automatic
+    // count of tiles at once reads the split files' headers: a damaged one
+    // must not stop the run before its tiles). The
     // tiles whose windows (grown around a building, too) read that file fail
     // with it; the others do not.
     fs::copy(dir / "clean", dir / "faulty", fs::copy_options::recursive);
@@ -184,14 +205,16 @@ TEST_CASE("run: a tile that fails while another runs is reported and the others 
         INFO(e.path());
         CHECK(e.path().filename().string().find(".part-") == std::string::npos);
     }
-    // Mended (the file restored), the same command runs the failed tile again
-    // and keeps the others: the clean run's bytes.
+    // Mended (the file restored), the same command runs the failed tiles again
+    // and keeps the others (their reports, which hold seconds, untouched): the clean run's bytes.
+    const std::string tile0_report = test::slurp(dir / "faulty/tiles/tile_00000.json");
     fs::copy_file(dir / "clean/cloud_tiles/tile_00008.las", broken, fs::copy_options::overwrite_existing);
     const auto mended = test::run_command(cmd + (dir / "faulty"));
     INFO(mended.err);
     REQUIRE(mended.exit_code == 0);
     const auto mended_report = nlohmann::json::parse(test::slurp(dir / "faulty/run_report.json"));
     for (int k = 0; k < 9; ++k) CHECK(mended_report["tiles"][k]["status"] == "done");
+    CHECK(test::slurp(dir / "faulty/tiles/tile_00000.json") == tile0_report);
     for (const char* f : kOutputs) {
         INFO(f);
         CHECK(same_bytes(dir / (std::string("clean/") + f), dir / (std::string("faulty/") + f)));
