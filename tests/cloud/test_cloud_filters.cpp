@@ -194,6 +194,17 @@ TEST_CASE("Outlier filter on grid neighbourhoods flags exactly the points of a w
         INFO(rel);
         PointCloud c = read_las(shared_data(rel));
         REQUIRE(c.size() > 10000);
+        // Noise classes (neither file has any): points in the surface, and
+        // copies far above and below, which the search also finds isolated.
+        for (std::size_t at : {c.size() / 5, c.size() / 7}) c.classification[at] = las_class::low_noise;
+        c.classification[c.size() / 11] = las_class::high_noise;
+        for (const auto& [dz, cls] : {std::pair{250.0, las_class::high_noise}, std::pair{-90.0, las_class::low_noise}}) {
+            PointCloud one;
+            one.reserve(1, c.has_color(), c.has_gps_time());
+            one.append(c, c.size() / 4);
+            one.z[0] += dz, one.classification[0] = cls;
+            c.append(one, 0);
+        }
         for (const double dz : {80.0, -60.0, 300.0}) {
             PointCloud one;
             one.reserve(1, c.has_color(), c.has_gps_time());
@@ -211,9 +222,11 @@ TEST_CASE("Outlier filter on grid neighbourhoods flags exactly the points of a w
             o.k_neighbours = k_neighbours, o.isolated_min_neighbours = isolated_min;
             const std::vector<uint8_t> oracle = kd_tree_outlier_keep(c, o);
             const OutlierFilterResult r = filter_outliers(c, o);
-            std::size_t differ = 0, removed = 0;
-            for (std::size_t i = 0; i < c.size(); ++i) differ += r.keep[i] != oracle[i], removed += !r.keep[i];
+            std::size_t differ = 0, removed = 0, not_flag = 0;
+            for (std::size_t i = 0; i < c.size(); ++i) differ += r.keep[i] != oracle[i], removed += !r.keep[i], not_flag += r.keep[i] > 1;
             CHECK(differ == 0);
+            CHECK(not_flag == 0);  // keep is 0 or 1, whatever the search marked on the way
+            CHECK(r.removed_statistical >= 5);  // the noise classes count as statistical removals
             CHECK(removed >= 3);
             for (std::size_t i = c.size() - 3; i < c.size(); ++i) CHECK_FALSE(r.keep[i]);
             tbb::global_control one_thread(tbb::global_control::max_allowed_parallelism, 1);
