@@ -42,7 +42,8 @@ static int run_bench(int argc, char** argv) {
     t = now();
     std::vector<float> pix;
     if (model.options.pixel.enabled)
-        pix = detect::pixel_probability(model.pixel_model, img.normalised, img.valid, img.layout, img.gsd_m, model.options.pixel);
+        pix = detect::pixel_probability(model.pixel_model, img.normalised, img.valid, img.layout, img.gsd_m, model.options.pixel, 0,
+                                         detect::kCnnDetectionTiling);
     const double t_pix = now() - t;
     t = now();
     const detect::SceneSegments seg = detect::segment_scene(img.normalised, img.valid, model.options.segmentation, {}, img.gsd_m);

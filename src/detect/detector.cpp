@@ -592,7 +592,7 @@ Detection detect_buildings(const DetectorModel& model, const Image<float>& norma
     Detection d;
     const bool pixel = model.options.pixel.enabled;
     if (pixel) {
-        d.pixel_probability = pixel_probability(model.pixel_model, normalised, valid, model.layout, gsd_m, model.options.pixel, threads);
+        d.pixel_probability = pixel_probability(model.pixel_model, normalised, valid, model.layout, gsd_m, model.options.pixel, threads, kCnnDetectionTiling);
         progress(0.3, "pixel probability");
     }
     d.segments = segment_scene(normalised, valid, model.options.segmentation, progress.sub(pixel ? 0.3 : 0.0, 0.8), gsd_m);
@@ -608,7 +608,8 @@ Detection detect_buildings(const DetectorModel& model, const Image<float>& norma
         d.groups = merge_groups(pairs, pp, building, model.options.merge_threshold);
     }
     if (model.options.instance.enabled())
-        d.core_probability = pixel_probability(model.core_model, normalised, valid, model.layout, gsd_m, model.options.instance.pixel_options(), threads);
+        d.core_probability = pixel_probability(model.core_model, normalised, valid, model.layout, gsd_m, model.options.instance.pixel_options(), threads,
+                                                kCnnDetectionTiling);
     d.building = object_pixels(d.segments, d.probability, model.options, pixel ? &d.pixel_probability : nullptr, d.groups.empty() ? nullptr : &d.groups,
                                d.core_probability.empty() ? nullptr : &d.core_probability, gsd_m);
     progress(1.0, "classified");

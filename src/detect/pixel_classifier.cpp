@@ -421,7 +421,7 @@ std::vector<float> pixel_probability(const std::vector<uint8_t>& model, const Im
         const auto [boosted, cnn] = unpack_pixel_models(model, "pixel models");
         PixelClassifierOptions ob = o, oc = o;
         ob.kind = PixelStageKind::boosted, oc.kind = PixelStageKind::cnn;
-        std::vector<float> p = pixel_probability(boosted, img, valid, layout, gsd_m, ob, threads);
+        std::vector<float> p = pixel_probability(boosted, img, valid, layout, gsd_m, ob, threads, cnn_tiling);
         const std::vector<float> q = pixel_probability(cnn, img, valid, layout, gsd_m, oc, threads, cnn_tiling);
         for (std::size_t i = 0; i < p.size(); ++i) p[i] = 0.5f * (p[i] + q[i]);
         return p;

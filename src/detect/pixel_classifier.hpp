@@ -72,11 +72,13 @@ std::pair<std::vector<uint8_t>, std::vector<uint8_t>> unpack_pixel_models(const 
 /// Building probability per image pixel (w x h, row-major; 0 outside
 /// `valid`) from a pixel model (XGBoost UBJSON, CNN weights for kind cnn,
 /// a pack of both for kind both). Any thread count gives the same values.
-/// `cnn_tiling` = the CNN's prediction tiles (kinds cnn and both): an
-/// applied model's by default; maps made in training pass kCnnTrainingTiling.
+/// `threads`: 0 = all. `cnn_tiling` = the CNN's prediction tiles (kinds cnn
+/// and both; no default, so that no caller changes a model's maps unawares):
+/// kCnnDetectionTiling where a model is applied, kCnnTrainingTiling for maps
+/// made in training (the shipped models' CV figures and bytes depend on it).
 std::vector<float> pixel_probability(const std::vector<uint8_t>& model, const Image<float>& normalised, const std::vector<uint8_t>& valid,
-                                     const BandLayout& layout, double gsd_m, const PixelClassifierOptions& options, int threads = 0,
-                                     const CnnTiling& cnn_tiling = kCnnDetectionTiling);
+                                     const BandLayout& layout, double gsd_m, const PixelClassifierOptions& options, int threads,
+                                     const CnnTiling& cnn_tiling);
 
 /// One labelled training image of the pixel stage.
 struct PixelTrainingImage {

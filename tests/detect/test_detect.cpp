@@ -602,11 +602,11 @@ TEST_CASE("The pixel stage: a filter bank per cell and boosted trees find anothe
     std::vector<float> p1, p2;
     {
         tbb::global_control one(tbb::global_control::max_allowed_parallelism, 1);
-        p1 = detect::pixel_probability(st.model, ib.normalised, ib.valid, ib.layout, ib.gsd_m, po, 1);
+        p1 = detect::pixel_probability(st.model, ib.normalised, ib.valid, ib.layout, ib.gsd_m, po, 1, detect::kCnnDetectionTiling);
     }
     {
         tbb::global_control two(tbb::global_control::max_allowed_parallelism, 2);
-        p2 = detect::pixel_probability(st.model, ib.normalised, ib.valid, ib.layout, ib.gsd_m, po, 2);
+        p2 = detect::pixel_probability(st.model, ib.normalised, ib.valid, ib.layout, ib.gsd_m, po, 2, detect::kCnnDetectionTiling);
     }
     CHECK(p1 == p2);
     // Building and other cells weigh alike in training, so probabilities
@@ -654,11 +654,11 @@ TEST_CASE("The CNN pixel stage: same weight bytes and out-of-fold maps for 1 and
     std::vector<float> p1, p2;
     {
         tbb::global_control one(tbb::global_control::max_allowed_parallelism, 1);
-        p1 = detect::pixel_probability(s1.model, ib.normalised, ib.valid, ib.layout, ib.gsd_m, po, 1);
+        p1 = detect::pixel_probability(s1.model, ib.normalised, ib.valid, ib.layout, ib.gsd_m, po, 1, detect::kCnnDetectionTiling);
     }
     {
         tbb::global_control two(tbb::global_control::max_allowed_parallelism, 2);
-        p2 = detect::pixel_probability(s1.model, ib.normalised, ib.valid, ib.layout, ib.gsd_m, po, 2);
+        p2 = detect::pixel_probability(s1.model, ib.normalised, ib.valid, ib.layout, ib.gsd_m, po, 2, detect::kCnnDetectionTiling);
     }
     CHECK(p1 == p2);
     double f1 = 0.0;
