@@ -90,6 +90,21 @@ def main():
         if oh["scale"] != h["scale"] or oh["offset"] != h["offset"]:
             print(f"{path}: scale/offset {oh['scale']} {oh['offset']}, source {h['scale']} {h['offset']}")
             return 1
+        # The header readers rely on: the legacy count (the count for
+        # formats 0-5; for 6+ LAS 1.4 asks 0, our writer puts the count, which
+        # readers of 1.4 ignore), and bounds that enclose every point (within
+        # one scale quantum).
+        with open(path, "rb") as f:
+            raw = f.read(375)
+        legacy = struct.unpack_from("<I", raw, 107)[0]
+        if legacy not in ((0, len(got)) if oh["fmt"] >= 6 else (len(got),)):
+            print(f"{path}: legacy point count {legacy} for {len(got)} points of format {oh['fmt']}")
+            return 1
+        for p in got:
+            for k, v in enumerate((p[0] * sx + ox, p[1] * sy + oy, p[2] * sz + oz)):
+                if v < oh["min"][k] - h["scale"][k] or v > oh["max"][k] + h["scale"][k]:
+                    print(f"{path}: point {p[:3]} outside the header's bounds {oh['min']} {oh['max']}")
+                    return 1
         if len(got) != len(expected[w]):
             print(f"{path}: {len(got)} points, expected {len(expected[w])}")
             return 1
