@@ -7,6 +7,7 @@
 #include <cmath>
 #include <filesystem>
 #include <fstream>
+#include <optional>
 #include <set>
 #include <sstream>
 #include <tbb/global_control.h>
@@ -1052,6 +1053,22 @@ std::vector<Building> tile_buildings(const RunManifest& m, const TileSpec& t, co
     return out;
 }
 
+// A tile report's status and the job that wrote it ("" when absent);
+// nothing when the file is missing or is not a JSON object.
+struct TileReportState {
+    std::string status, job;
+};
+std::optional<TileReportState> read_tile_report_state(const fs::path& summary) {
+    try {
+        std::ifstream in(summary);
+        if (!in) return std::nullopt;
+        const json r = json::parse(in);
+        return TileReportState{r.value("status", ""), r.value("job", "")};
+    } catch (const std::exception&) {
+        return std::nullopt;
+    }
+}
+
 }  // namespace
 
 TileReport run_tile(const RunManifest& m, int k, const std::string& out_dir, const Progress& progress, const TileResume& resume) {
@@ -1064,12 +1081,8 @@ TileReport run_tile(const RunManifest& m, int k, const std::string& out_dir, con
     TileReport rep;
     rep.index = k;
     if (fs::exists(summary)) {
-        std::string status;
-        try {
-            std::ifstream in(summary);
-            status = json::parse(in).value("status", "");
-        } catch (const std::exception&) {  // unreadable: the tile runs again and rewrites it
-        }
+        const auto before = read_tile_report_state(summary);  // unreadable: the tile runs again and rewrites it
+        const std::string status = before ? before->status : "";
         if (status == "done" || (status == "failed" && !resume.rerun_failed)) {
             rep.status = "skipped";
             return rep;
@@ -1291,13 +1304,8 @@ namespace {
 bool tile_report_ready(const fs::path& summary, const std::string& job) {
     if (!fs::exists(summary)) return false;
     if (job.empty()) return true;
-    try {
-        std::ifstream in(summary);
-        const json r = json::parse(in);
-        return r.value("status", "") == "done" || r.value("job", "") == job;
-    } catch (const std::exception&) {
-        return false;  // being replaced, or damaged: its rank rewrites it
-    }
+    const auto r = read_tile_report_state(summary);  // unreadable: being replaced, or damaged; its rank rewrites it
+    return r && (r->status == "done" || r->job == job);
 }
 }  // namespace
 

@@ -134,12 +134,6 @@ double estimated_tile_bytes(double window_points, double window_pixels);
 /// `usable_bytes` (0 = unknown: they are taken to fit), else 1.
 int choose_concurrent_tiles(int requested, int threads, std::size_t tiles, double tile_bytes, double usable_bytes);
 
-/// Runs tile `k` into `out_dir`/tiles/ (tile_K.jsonl: one building per line,
-/// tile_K.json: its report). Skips a tile whose report says it is done; a
-/// tile that failed (unless `resume.rerun_failed` is false) or whose report
-/// cannot be read runs again, so a rerun after mending the cause (a file
-/// replaced, memory freed) completes the run. Errors of the tile's data are
-/// caught and reported as a failed tile.
 /// How run_tile treats an earlier report of its tile.
 struct TileResume {
     /// A report saying "failed" runs the tile again (false: it is kept, as
@@ -150,6 +144,12 @@ struct TileResume {
     /// of a multi-rank run waits for this job's report of a tile run again.
     std::string job;
 };
+/// Runs tile `k` into `out_dir`/tiles/ (tile_K.jsonl: one building per line,
+/// tile_K.json: its report). Skips a tile whose report says it is done; a
+/// tile that failed (unless `resume.rerun_failed` is false) or whose report
+/// cannot be read runs again, so a rerun after mending the cause (a file
+/// replaced, memory freed) completes the run. Errors of the tile's data are
+/// caught and reported as a failed tile.
 TileReport run_tile(const RunManifest& manifest, int k, const std::string& out_dir, const Progress& progress = {}, const TileResume& resume = {});
 
 struct RunReport {

@@ -208,6 +208,14 @@ TEST_CASE("run: a tile that fails while another runs is reported and the others 
     // Mended (the file restored), the same command runs the failed tiles again
     // and keeps the others (their reports, which hold seconds, untouched): the clean run's bytes.
     const std::string tile0_report = test::slurp(dir / "faulty/tiles/tile_00000.json");
+    // And a finished tile whose report was damaged runs again too (its
+    // report unreadable; the merge would refuse it).
+    int damaged = -1;
+    for (int k = 1; k < 9 && damaged < 0; ++k)
+        if (report["tiles"][k]["status"] == "done") damaged = k;
+    REQUIRE(damaged > 0);
+    const fs::path damaged_report = dir / ("faulty/tiles/tile_0000" + std::to_string(damaged) + ".json");
+    fs::resize_file(damaged_report, 40);
     fs::copy_file(dir / "clean/cloud_tiles/tile_00008.las", broken, fs::copy_options::overwrite_existing);
     const auto mended = test::run_command(cmd + (dir / "faulty"));
     INFO(mended.err);
@@ -215,6 +223,7 @@ TEST_CASE("run: a tile that fails while another runs is reported and the others 
     const auto mended_report = nlohmann::json::parse(test::slurp(dir / "faulty/run_report.json"));
     for (int k = 0; k < 9; ++k) CHECK(mended_report["tiles"][k]["status"] == "done");
     CHECK(test::slurp(dir / "faulty/tiles/tile_00000.json") == tile0_report);
+    CHECK(nlohmann::json::parse(test::slurp(damaged_report))["status"] == "done");
     for (const char* f : kOutputs) {
         INFO(f);
         CHECK(same_bytes(dir / (std::string("clean/") + f), dir / (std::string("faulty/") + f)));
