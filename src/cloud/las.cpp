@@ -524,12 +524,11 @@ void LasWriter::close() {
         out_.seekp(pos);
         out_.write(static_cast<const char*>(data), static_cast<std::streamsize>(len));
     };
-    const uint32_t legacy = count_ <= std::numeric_limits<uint32_t>::max() ? static_cast<uint32_t>(count_) : 0;
-    seek_put(107, &legacy, 4);
-    for (int r = 0; r < 5; ++r) {
-        const uint32_t v = count_ <= std::numeric_limits<uint32_t>::max() ? static_cast<uint32_t>(stats_.by_return[r]) : 0;
-        seek_put(111 + 4 * r, &v, 4);
-    }
+    // The legacy point count (107) and legacy counts by return (111..130)
+    // stay zero: a LAS 1.4 file of point format 7 with a WKT CRS cannot be
+    // read by a LAS 1.0-1.3 reader, so it does not keep legacy compatibility
+    // and the specification (1.4 R15, "Legacy Number of point records")
+    // requires zero there; the 64-bit counts below are the counts.
     if (count_ == 0) stats_.min.fill(0.0), stats_.max.fill(0.0);
     for (int k = 0; k < 3; ++k) {
         seek_put(179 + 16 * k, &stats_.max[k], 8);

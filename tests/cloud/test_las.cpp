@@ -61,6 +61,17 @@ TEST_CASE("LAS 1.4 format 7 round trip keeps coordinates - attributes and CRS", 
     }
     CHECK(h.min[0] == Approx(500000.0));
     CHECK(h.max[2] == Approx(38.0));
+    // Format 7 with a WKT CRS keeps no legacy compatibility: the legacy
+    // counts (point count at byte 107, counts by return at 111..130) must be
+    // zero (LAS 1.4 R15); the 64-bit count at 247 holds the points.
+    const std::string bytes = slurp(dir / "a.las");
+    REQUIRE(bytes.size() > 255);
+    uint32_t legacy[6];
+    std::memcpy(legacy, bytes.data() + 107, sizeof legacy);
+    for (uint32_t v : legacy) CHECK(v == 0);
+    uint64_t count = 0;
+    std::memcpy(&count, bytes.data() + 247, 8);
+    CHECK(count == 1000);
 }
 
 TEST_CASE("A writer that is not closed leaves no file", "[cloud][las][errors]") {
