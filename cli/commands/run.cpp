@@ -114,6 +114,26 @@ void prepare_run_folder(const GlobalFlags& g, const std::string& out, const RunM
     log::info(out + ": earlier run state removed (--overwrite); the run starts afresh");
 }
 
+// Exit status of a run or merge whose result leaves tiles out: 5 (a partial
+// result) with one error line naming the count and the first failure, printed
+// whatever --quiet says, so scripts and schedulers see that the outputs miss
+// tiles; 0 when every tile is in.
+int partial_result_exit(const RunReport& r) {
+    std::size_t failed = 0;
+    const TileReport* first = nullptr;
+    for (const auto& t : r.tiles)
+        if (t.status == "failed") {
+            ++failed;
+            if (!first) first = &t;
+        }
+    if (failed == 0) return 0;
+    std::fprintf(stderr,
+                 "cityforge: error: %s: partial result: %zu of %zu tiles failed (first: tile %d: %s); the outputs hold the other tiles; run the "
+                 "same command again to retry the failed ones\n",
+                 r.report_path.c_str(), failed, r.tiles.size(), first->index, first->reason.empty() ? "no reason recorded" : first->reason.c_str());
+    return 5;
+}
+
 }  // namespace
 
 void add_run_commands(CLI::App& parent, const GlobalFlags& g, CommandList& out) {
@@ -169,7 +189,7 @@ void add_run_commands(CLI::App& parent, const GlobalFlags& g, CommandList& out) 
                            std::fprintf(stderr, "cityforge: wall seconds: split %.1f, tiles %.1f, merge %.1f, export %.1f, view %.1f\n", wall("split"),
                                         wall("tiles"), wall("merge"), wall("export"), wall("view"));
                        }
-                       return 0;
+                       return share.rank == 0 ? partial_result_exit(r) : 0;
                    }});
 
     struct PlanState {
@@ -203,7 +223,7 @@ void add_run_commands(CLI::App& parent, const GlobalFlags& g, CommandList& out) 
                        if (!g.quiet)
                            std::fprintf(stderr, "cityforge: %zu buildings from %zu tiles -> %s\n", r.buildings, r.tiles.size(),
                                         r.report_path.c_str());
-                       return 0;
+                       return partial_result_exit(r);
                    }});
 }
 

@@ -183,7 +183,11 @@ TEST_CASE("run: a tile that fails while another runs is reported and the others 
     fs::resize_file(broken, 300);
     const auto faulty = test::run_command(cmd + (dir / "faulty"));
     INFO(faulty.err);
-    REQUIRE(faulty.exit_code == 0);  // some tiles: a result, with the failures said
+    // Some tiles: a result with the failures said, and exit 5 (a partial
+    // result: scripts and schedulers must see that tiles are missing).
+    REQUIRE(faulty.exit_code == 5);
+    CHECK(faulty.err.find("partial result") != std::string::npos);
+    CHECK(faulty.err.find("tile 8: ") != std::string::npos);
     const auto report = nlohmann::json::parse(test::slurp(dir / "faulty/run_report.json"));
     REQUIRE(report["tiles"].size() == 9);
     CHECK(report["tiles"][8]["status"] == "failed");
