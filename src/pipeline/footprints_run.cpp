@@ -30,23 +30,6 @@
 
 namespace cityforge {
 
-FootprintFit footprint_fit_from_string(const std::string& s) {
-    if (s == "raw") return FootprintFit::raw;
-    if (s == "rectangle") return FootprintFit::rectangle;
-    if (s == "recursive") return FootprintFit::recursive;
-    if (s == "regularised" || s == "regularized") return FootprintFit::regularised;
-    throw Error("--fit", "must be raw, rectangle, recursive or regularised, not '" + s + "'");
-}
-std::string to_string(FootprintFit f) {
-    switch (f) {
-        case FootprintFit::raw: return "raw";
-        case FootprintFit::rectangle: return "rectangle";
-        case FootprintFit::recursive: return "recursive";
-        case FootprintFit::regularised: return "regularised";
-    }
-    return "raw";
-}
-
 DetectionMode detection_mode_from_string(const std::string& s) {
     if (s == "auto") return DetectionMode::automatic;
     if (s == "ortho_cloud") return DetectionMode::ortho_cloud;
@@ -143,83 +126,31 @@ FootprintTable footprint_table(const BuildingMask& mask, const Image<float>& nds
     };
     std::vector<Row> rows(std::size_t(mask.count) + 1);
     // An error is that of the lowest failing label, whatever the scheduling.
+    const OutlineFitOptions fit_options{o.fit, o.simplify_m, o.recursive, o.regularize, o.curved};
     parallel_tasks_in_order(mask.count, 8, [&](std::size_t task) {
-        {
-            const uint32_t id = static_cast<uint32_t>(task + 1);
-            if (id >= polygons.size() || polygons[id].empty()) return;  // a label left empty (a crown dropped, absorbed)
-            // One polygon per building: its largest part (the detection keeps
-            // buildings in one part; this guards any other source).
-            const Polygon& pixels = *std::max_element(polygons[id].begin(), polygons[id].end(),
-                                                      [](const Polygon& a, const Polygon& b) { return polygon_area(a) < polygon_area(b); });
-            // Douglas–Peucker may fold a ring onto itself: then the exact pixel outline.
-            Polygon raw = simplify_polygon(pixels, o.simplify_m / unit);
-            if (!polygon_is_valid(raw)) raw = pixels;
-            Feature f;
-            std::string status = "ok", reason, fit = to_string(o.fit);
-            Polygon out = raw;
-            double orientation = 0.0, err = 0.0, iou = 1.0;
-            try {
-                const OrientedRectangle rect = minimum_area_rectangle(raw);
-                orientation = rect.orientation_deg;
-                if (o.fit == FootprintFit::rectangle) {
-                    out = rect.polygon();
-                    const FitAccuracy acc = fit_accuracy(raw, out);
-                    err = acc.area_error_pct, iou = acc.iou;
-                } else if (o.fit == FootprintFit::regularised) {
-                    RegularizeOptions go = o.regularize;
-                    go.merge_offset /= unit, go.min_edge /= unit, go.match_area_max_offset /= unit;
-                    out = regularised_fit(pixels, rect.orientation_deg, grid.pixel_width, o.simplify_m / unit, polygon_area(raw), go);
-                    const FitAccuracy acc = fit_accuracy(raw, out);
-                    err = acc.area_error_pct, iou = acc.iou;
-                } else if (o.fit == FootprintFit::recursive) {
-                    RecursiveFitOptions ro = o.recursive;
-                    ro.min_rectangle_area /= unit * unit;
-                    ro.match_area_max_offset /= unit;
-                    const RecursiveFit rf = recursive_rectangle_fit(raw, ro);
-                    out = rf.polygon;
-                    err = rf.accuracy.area_error_pct, iou = rf.accuracy.iou;
-                }
-                if (o.fit == FootprintFit::recursive || o.fit == FootprintFit::regularised) {
-                    // Round and many-sided buildings: the smoothed pixel outline, not a staircase of rectangles.
-                    if (const std::optional<Polygon> curved = curved_outline(pixels, std::abs(grid.pixel_width), o.curved)) {
-                        out = *curved, fit = "curved";
-                        const FitAccuracy acc = fit_accuracy(raw, out);
-                        err = acc.area_error_pct, iou = acc.iou;
-                    }
-                }
-            } catch (const Error& e) {
-                status = "fit_failed", reason = e.what();
-            }
-            orient_polygon(out);
-            if (status == "ok" && !polygon_is_valid(out)) {
-                // A fit that kept an outline passing one vertex twice (a pocket
-                // open to the outside only diagonally, e.g. on sparse LiDAR): the
-                // pocket filled (fill_pinched_pockets) gives a simple ring.
-                const Polygon filled = fill_pinched_pockets(out);
-                if (polygon_is_valid(filled)) {
-                    reason = "a pocket open only diagonally was filled";
-                    const FitAccuracy acc = fit_accuracy(raw, filled);
-                    out = filled, err = acc.area_error_pct, iou = acc.iou;
-                } else {
-                    status = "fit_failed", reason = "the fit is not a valid polygon", out = raw, err = 0.0, iou = 1.0;
-                }
-            }
-            std::vector<Ring> rings{out.outer};
-            for (const Ring& h : out.holes) rings.push_back(h);
-            std::size_t vertices = out.outer.size();
-            for (const Ring& h : out.holes) vertices += h.size();
-            std::vector<double>& hv = heights[id];
-            const std::optional<double> h50 = percentile(hv, 50.0);
-            f.geometry = {out};
-            const std::string& source = id < sources.size() && !sources[id].empty() ? sources[id] : mode_source;
-            // The id (when not given) is the row's number, set below in label order.
-            f.values = {ids.empty() ? int64_t(0) : ids[id], mode, source, fit, status, reason,
-                        polygon_area(out) * unit * unit, polygon_area(raw) * unit * unit,
-                        crs.empty() ? AttributeValue() : AttributeValue(geodesic_area_m2(rings, crs)),
-                        polygon_perimeter(out) * unit, orientation, err, iou, int64_t(vertices),
-                        h50 ? AttributeValue(*h50 * z_unit) : AttributeValue()};
-            rows[id].present = true, rows[id].feature = std::move(f), rows[id].error_pct = err;
-        }
+        const uint32_t id = static_cast<uint32_t>(task + 1);
+        if (id >= polygons.size() || polygons[id].empty()) return;  // a label left empty (a crown dropped, absorbed)
+        // One polygon per building: its largest part (the detection keeps
+        // buildings in one part; this guards any other source).
+        const Polygon& pixels = *std::max_element(polygons[id].begin(), polygons[id].end(),
+                                                  [](const Polygon& a, const Polygon& b) { return polygon_area(a) < polygon_area(b); });
+        const FittedOutline fitted = fit_building_outline(pixels, fit_options, grid.pixel_width, unit);
+        const Polygon& out = fitted.outline;
+        std::vector<Ring> rings{out.outer};
+        for (const Ring& h : out.holes) rings.push_back(h);
+        std::size_t vertices = out.outer.size();
+        for (const Ring& h : out.holes) vertices += h.size();
+        const std::optional<double> h50 = percentile(heights[id], 50.0);
+        const std::string& source = id < sources.size() && !sources[id].empty() ? sources[id] : mode_source;
+        Feature f;
+        f.geometry = {out};
+        // The id (when not given) is the row's number, set below in label order.
+        f.values = {ids.empty() ? int64_t(0) : ids[id], mode, source, fitted.fit, fitted.status, fitted.reason,
+                    polygon_area(out) * unit * unit, polygon_area(fitted.raw) * unit * unit,
+                    crs.empty() ? AttributeValue() : AttributeValue(geodesic_area_m2(rings, crs)),
+                    polygon_perimeter(out) * unit, fitted.orientation_deg, fitted.area_error_pct, fitted.iou, int64_t(vertices),
+                    h50 ? AttributeValue(*h50 * z_unit) : AttributeValue()};
+        rows[id].present = true, rows[id].feature = std::move(f), rows[id].error_pct = fitted.area_error_pct;
     });
     std::vector<Feature>& features = table.features;
     double error_sum = 0.0;

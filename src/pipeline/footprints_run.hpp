@@ -20,10 +20,9 @@
 #include "footprint/roof_seams.hpp"
 #include "footprint/segment_classifier.hpp"
 #include "footprint/ortho_refine.hpp"
+#include "footprint/outline_fit.hpp"
 
 namespace cityforge {
-
-enum class FootprintFit { raw, rectangle, recursive, regularised };
 
 /// Detection mode; `automatic` picks ortho_cloud with an ortho and heights,
 /// otherwise the one input's mode. "cloud" stands for the height source: a
@@ -40,8 +39,6 @@ std::string to_string(DetectionMode m);
 enum class OrthoDetector { automatic, model, rules };
 OrthoDetector ortho_detector_from_string(const std::string& s);
 std::string to_string(OrthoDetector d);
-FootprintFit footprint_fit_from_string(const std::string& s);
-std::string to_string(FootprintFit f);
 
 struct FootprintsRunOptions {
     std::string cloud;             ///< point cloud (LAS, PLY, XYZ)

@@ -1,0 +1,50 @@
+#pragma once
+// One building's footprint from its pixel outline: the simplified outline,
+// then the fit asked for (minimum-area rectangle, recursive rectangles or
+// edge regularisation), a smooth outline for round buildings, and a valid
+// polygon or the reason there is none. Planar, in the outline's CRS units
+// (a projected CRS; `metres_per_unit` converts the options' metres); no GDAL.
+#include <string>
+
+#include "core/geometry.hpp"
+#include "footprint/curved_outline.hpp"
+#include "footprint/rectangle_fit.hpp"
+#include "footprint/regularize.hpp"
+
+namespace cityforge {
+
+/// The footprint geometry written for a building.
+enum class FootprintFit { raw, rectangle, recursive, regularised };
+/// "raw", "rectangle", "recursive", "regularised" (or "regularized"); throws Error naming --fit otherwise.
+FootprintFit footprint_fit_from_string(const std::string& s);
+std::string to_string(FootprintFit f);
+
+/// What fit_building_outline does; lengths in metres, areas in m².
+struct OutlineFitOptions {
+    FootprintFit fit = FootprintFit::recursive;
+    double simplify_m = 0.25;          ///< Douglas–Peucker tolerance of the raw outline
+    RecursiveFitOptions recursive;     ///< the recursive fit (areas in m², lengths in metres)
+    RegularizeOptions regularize;      ///< the regularised fit's snapping (metres)
+    CurvedOutlineOptions curved;       ///< round buildings (recursive and regularised fits only)
+};
+
+/// One building's outline and how it was fitted. Polygons in the pixel
+/// outline's CRS units; `outline` is oriented (orient_polygon).
+struct FittedOutline {
+    Polygon raw;                  ///< the simplified pixel outline (the pixel outline itself where simplifying folds it)
+    Polygon outline;              ///< the footprint: the fit, or `raw` when the fit failed
+    std::string fit;              ///< the fit used: to_string(options.fit), or "curved"
+    std::string status = "ok";    ///< "ok" or "fit_failed"
+    std::string reason;           ///< why the fit failed, or what was mended (a pocket filled); empty otherwise
+    double orientation_deg = 0.0; ///< the minimum-area rectangle's orientation
+    double area_error_pct = 0.0;  ///< the fit's area against `raw`'s, percent (0 for raw and failed fits)
+    double iou = 1.0;             ///< the fit's intersection over union with `raw`
+};
+
+/// Fits one building's pixel outline `pixels` (rings along pixel edges of
+/// `pixel_size` CRS units; its largest part, holes allowed). A fit that
+/// throws, or gives an invalid polygon that filling diagonal-only pockets
+/// does not mend, leaves `raw` with status "fit_failed" and the reason.
+FittedOutline fit_building_outline(const Polygon& pixels, const OutlineFitOptions& options, double pixel_size, double metres_per_unit);
+
+}  // namespace cityforge
