@@ -108,6 +108,8 @@ void radix_sort_keys(const SortKey* a, SortKey* out, std::size_t m, int width) {
 
 // Uninitialised arrays from LargeBufferAllocator: large ones on transparent
 // huge pages (fresh 4 kB pages cost 1.8-2.0 system s more at 60 M points).
+// The temporary arrays of canonical_order and filter_outliers come from the
+// block cache instead (cached_array, same pages): see filter_outliers.
 template <class T>
 struct LargeDelete {
     std::size_t n;
@@ -122,8 +124,8 @@ LargeArray<T> large_array(std::size_t n) {
 
 template <class Index>
 struct Permutation {
-    LargeArray<Index> order;      ///< order[rank] = index of the point of that rank
-    LargeArray<uint64_t> scratch;  ///< at least n entries, free for the caller
+    CachedArray<Index> order;      ///< order[rank] = index of the point of that rank
+    CachedArray<uint64_t> scratch;  ///< at least n entries, free for the caller
 };
 
 // The permutation that sorts the points by canonical_order's key: order[r] is
@@ -138,7 +140,8 @@ struct Permutation {
 // comparison: 28 % of a `heights` run.) Fresh memory: the permutation and the
 // scratch buffer, 12 bytes a point when n < 2^32 (fresh pages are dear on a
 // VM: the former 24-byte copy of every point and a buffer of 8 took most of
-// this step's time at 60 M points). Points equal in every attribute are
+// this step's time at 60 M points); both go back to the block cache at the
+// end, where filter_outliers takes them again. Points equal in every attribute are
 // interchangeable, so the result does not depend on the thread count.
 template <class Index, class Less>
 Permutation<Index> canonical_permutation(const PointCloud& c, Less&& key_less) {
@@ -175,7 +178,7 @@ Permutation<Index> canonical_permutation(const PointCloud& c, Less&& key_less) {
         first[b + 1] = sum;
     }
     // Not zero-filled: every entry is written below.
-    auto order = large_array<Index>(n);
+    auto order = cached_array<Index>(n);
     struct XY {
         double x, y;
     };
@@ -186,7 +189,7 @@ Permutation<Index> canonical_permutation(const PointCloud& c, Less&& key_less) {
     // cache on every point.) The scratch holds 8 bytes a point (later used to
     // permute the attributes), a bucket more when the split is uneven.
     const std::size_t split = static_cast<std::size_t>(std::upper_bound(first.begin(), first.end(), n / 2) - first.begin()) - 1;
-    auto scratch = large_array<uint64_t>(std::max(n, 2 * (n - first[split])));
+    auto scratch = cached_array<uint64_t>(std::max(n, 2 * (n - first[split])));
     XY* copy = reinterpret_cast<XY*>(scratch.get());
     auto less = [&](const std::pair<XY, Index>& a, const std::pair<XY, Index>& b) {
         if (a.first.x < b.first.x) return true;
@@ -565,11 +568,15 @@ void grid_knn(const PointCloud& c, std::size_t k, Visit&& visit) {
     auto cell_index = [&g](int cx, int cy) { return g.index(cx, cy); };  // column-major, within the column's band
     const std::size_t cells = g.cells();
     constexpr std::size_t kGrain = 1u << 16;
-    // Uninitialised arrays on huge pages, first written in parallel where
-    // they can be (fresh 4 kB pages zeroed by the calling thread were about
-    // 16 % of a whole-cloud run's samples).
-    LargeVector<uint32_t> start(cells + 1, 0);
-    auto order = large_array<uint32_t>(n);  // point indices cell by cell
+    // Uninitialised arrays on huge pages from the block cache (canonical
+    // order's permutation: `order` first, it fits that one's `order`), first
+    // written in parallel (fresh 4 kB pages zeroed by the calling thread were
+    // about 16 % of a whole-cloud run's samples).
+    auto order = cached_array<uint32_t>(n);  // point indices cell by cell
+    auto start = cached_array<uint32_t>(cells + 1);  // start[q]: cell q's first position in `order`; start[cells] = n
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, cells + 1, kGrain), [&](const tbb::blocked_range<std::size_t>& r) {
+        std::fill(start.get() + r.begin(), start.get() + r.end(), 0u);
+    });
     {
         // Each point's cell, computed in the counting pass and again in the
         // placing pass (the same function of the same coordinates): cheaper
@@ -600,18 +607,21 @@ void grid_knn(const PointCloud& c, std::size_t k, Visit&& visit) {
         const auto blocks = [&](auto&& body) {  // body(first, last) for each block, in parallel
             tbb::parallel_for(std::size_t(0), cuts.size() - 1, [&](std::size_t b) { body(cuts[b], cuts[b + 1]); });
         };
+        // Counted into start[q], summed to each cell's end, then the points
+        // placed from the last backwards, each at its cell's end moved one
+        // down: ascending index per cell, and start[q] ends at the cell's
+        // first position (no second array of cells for the fill positions).
         blocks([&](std::size_t a, std::size_t e) {
-            for (std::size_t i = a; i < e; ++i) ++start[cell_of(i) + 1];
+            for (std::size_t i = a; i < e; ++i) ++start[cell_of(i)];
         });
         for (std::size_t q = 0; q < cells; ++q) start[q + 1] += start[q];
-        LargeVector<uint32_t> fill(start.begin(), start.end() - 1);
         blocks([&](std::size_t a, std::size_t e) {
-            for (std::size_t i = a; i < e; ++i) order[fill[cell_of(i)]++] = static_cast<uint32_t>(i);
+            for (std::size_t i = e; i-- > a;) order[--start[cell_of(i)]] = static_cast<uint32_t>(i);
         });
     }
     // Each cell's z range in floats that enclose its double z values (the
     // float next below / above when rounding went the other way).
-    auto zlo = large_array<float>(cells), zhi = large_array<float>(cells);
+    auto zlo = cached_array<float>(cells), zhi = cached_array<float>(cells);
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, cells, kGrain / 4), [&](const tbb::blocked_range<std::size_t>& r) {
         for (std::size_t q = r.begin(); q != r.end(); ++q) {
             double lo = INFINITY, hi = -INFINITY;
@@ -887,6 +897,13 @@ double outlier_limit(std::span<const double> mean_dist, double std_multiplier) {
 }
 
 OutlierFilterResult filter_outliers(const PointCloud& c, const OutlierFilterOptions& o) {
+    // The block cache emptied when this returns (declared first: destroyed
+    // after every array below went back to it): the filter ends the chain of
+    // reuse that canonical_order starts, so no cached block sits beside the
+    // next step's memory (peak RSS, the streamed windows' budget).
+    struct ReleaseCache {
+        ~ReleaseCache() { release_large_buffer_cache(); }
+    } release_at_end;
     o.validate();
     OutlierFilterResult r;
     const std::size_t n = c.size();
@@ -912,8 +929,9 @@ OutlierFilterResult filter_outliers(const PointCloud& c, const OutlierFilterOpti
     // was cut to.
     const std::size_t k = static_cast<std::size_t>(std::max(o.k_neighbours, o.isolated_min_neighbours)) + 1;  // self first
     const auto m = static_cast<std::size_t>(o.isolated_min_neighbours);
-    // Written once for every point by the parallel search (first touch there).
-    auto mean_dist = large_array<double>(n);
+    // Written once for every point by the parallel search (first touch
+    // there). From the block cache: canonical_order's scratch of 8 bytes a point.
+    auto mean_dist = cached_array<double>(n);
     const bool test_isolated = o.isolated_radius > 0.0 && m > 0;
     // An isolated point is marked in r.keep's bit 1 (kIsolated) until the
     // limit is known, rather than in an array of its own (fresh memory).

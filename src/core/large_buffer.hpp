@@ -4,10 +4,19 @@
 // the page-fault cost of first touching hundreds of MB by ~500x on kernels
 // where THP is in "madvise" mode (Debian's default). Smaller blocks use new
 // (aligned new for over-aligned types).
+//
+// Besides, a process-wide cache of large blocks for temporary arrays that one
+// step frees and the next one allocates again (canonical_order's permutation,
+// then the outlier filter's arrays): a fresh block is memory the kernel zeroes
+// on first touch (on a VM, memory the host may have to back anew: 5.3-5.6 s
+// system time of the outlier filter at 127 M points), a cached one holds
+// pages already touched. Only CachedArray uses it; LargeVector does not.
 #include <cstddef>
 #include <cstdlib>
+#include <memory>
 #include <new>
 #include <sys/mman.h>
+#include <type_traits>
 #include <vector>
 
 namespace cityforge {
@@ -49,5 +58,73 @@ struct LargeBufferAllocator {
 /// std::vector whose large allocations use transparent huge pages.
 template <typename T>
 using LargeVector = std::vector<T, LargeBufferAllocator<T>>;
+
+/// Requests of at least this many bytes go through the block cache; smaller
+/// ones are plain new / delete.
+inline constexpr std::size_t kCachedBlockMinBytes = std::size_t(4) << 20;
+/// Cached blocks are whole multiples of this (2 MiB, a huge page), aligned to it.
+inline constexpr std::size_t kCachedBlockAlign = std::size_t(2) << 20;
+
+/// A block of `bytes` (>= kCachedBlockMinBytes; the block spans `bytes`
+/// rounded up to 2 MiB), 2 MiB-aligned, marked for huge pages. Taken from the
+/// cache when a cached block is large enough (the smallest such; the part
+/// beyond the request stays cached), its bytes then stale: the caller must
+/// write every byte before reading it. When no cached block is large enough,
+/// the cache is emptied first (its memory back to the kernel) and fresh zeroed
+/// pages are mapped, so the process never holds cached blocks beside a new
+/// mapping. Thread-safe. Throws std::bad_alloc when the kernel refuses.
+void* acquire_cached_block(std::size_t bytes);
+
+/// Gives back a block of acquire_cached_block (the same `bytes`): kept in the
+/// cache (joined with a cached neighbour in memory) while the cache's bytes
+/// stay within its limit, else unmapped. Thread-safe; never throws.
+void return_cached_block(void* p, std::size_t bytes) noexcept;
+
+/// Unmaps every cached block (the memory goes back to the kernel). A step that
+/// ends a chain of reuse calls it (filter_outliers does at its end), so cached
+/// blocks never sit beside the next step's memory. Thread-safe.
+void release_large_buffer_cache() noexcept;
+
+/// Limit of the cache in bytes (default: a quarter of physical memory); a
+/// lower limit unmaps blocks until the cache fits. 0 disables caching.
+void set_large_buffer_cache_limit(std::size_t bytes) noexcept;
+std::size_t large_buffer_cache_limit() noexcept;
+
+/// Counters of the cache since the process started (bytes are whole blocks,
+/// 2 MiB multiples): for tests and benchmarks.
+struct LargeBufferCacheStats {
+    std::size_t cached_bytes = 0;  ///< held in the cache now
+    std::size_t cached_blocks = 0;  ///< separate blocks held now
+    std::size_t reused_bytes = 0;  ///< handed out from the cache
+    std::size_t mapped_bytes = 0;  ///< freshly mapped
+    std::size_t unmapped_bytes = 0;  ///< given back to the kernel
+};
+LargeBufferCacheStats large_buffer_cache_stats() noexcept;
+
+/// Deleter of CachedArray: returns large blocks to the cache.
+template <class T>
+struct CachedArrayDelete {
+    std::size_t n = 0;  ///< elements
+    void operator()(T* p) const noexcept {
+        if (n * sizeof(T) >= kCachedBlockMinBytes) return_cached_block(p, n * sizeof(T));
+        else ::operator delete(p, std::align_val_t(alignof(T)));
+    }
+};
+/// An array of trivial elements, NOT initialised (large ones may hold stale
+/// bytes of an earlier array): every element must be written before it is read.
+template <class T>
+using CachedArray = std::unique_ptr<T[], CachedArrayDelete<T>>;
+
+/// n uninitialised elements of a trivially copyable T, large arrays from the
+/// block cache (see acquire_cached_block).
+template <class T>
+CachedArray<T> cached_array(std::size_t n) {
+    static_assert(std::is_trivially_copyable_v<T> && std::is_trivially_destructible_v<T>, "cached_array holds plain values");
+    static_assert(alignof(T) <= kCachedBlockAlign);
+    if (n > std::size_t(-1) / sizeof(T)) throw std::bad_alloc();
+    const std::size_t bytes = n * sizeof(T);
+    void* p = bytes >= kCachedBlockMinBytes ? acquire_cached_block(bytes) : ::operator new(bytes, std::align_val_t(alignof(T)));
+    return CachedArray<T>(static_cast<T*>(p), CachedArrayDelete<T>{n});
+}
 
 }  // namespace cityforge

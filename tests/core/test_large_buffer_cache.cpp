@@ -1,0 +1,188 @@
+#include <catch2/catch.hpp>
+#include <algorithm>
+#include <cstdint>
+#include <cstring>
+#include <utility>
+#include <vector>
+#include <tbb/global_control.h>
+#include <tbb/parallel_for.h>
+
+#include "cloud/cloud_filters.hpp"
+#include "core/large_buffer.hpp"
+#include "core/random.hpp"
+
+using namespace cityforge;
+
+namespace {
+constexpr std::size_t kMiB = std::size_t(1) << 20;
+// Restores the cache's limit and empties it on both ends of a test.
+struct FreshCache {
+    std::size_t limit = large_buffer_cache_limit();
+    FreshCache() { release_large_buffer_cache(); }
+    ~FreshCache() {
+        release_large_buffer_cache();
+        set_large_buffer_cache_limit(limit);
+    }
+};
+}  // namespace
+
+TEST_CASE("the large block cache hands a freed block out again, split and joined, and empties itself before mapping", "[core][large_buffer]") {
+    FreshCache fresh;
+    set_large_buffer_cache_limit(std::size_t(1) << 30);
+    const auto before = large_buffer_cache_stats();
+    void* a = acquire_cached_block(10 * kMiB + 1);  // 12 MiB block
+    REQUIRE(reinterpret_cast<std::uintptr_t>(a) % kCachedBlockAlign == 0);
+    std::memset(a, 0x5a, 10 * kMiB + 1);
+    CHECK(large_buffer_cache_stats().mapped_bytes - before.mapped_bytes == 12 * kMiB);
+    return_cached_block(a, 10 * kMiB + 1);
+    CHECK(large_buffer_cache_stats().cached_bytes == 12 * kMiB);
+
+    // The same pages again, stale bytes and all: no new mapping.
+    void* b = acquire_cached_block(12 * kMiB);
+    CHECK(b == a);
+    CHECK(static_cast<unsigned char*>(b)[12345] == 0x5a);
+    CHECK(large_buffer_cache_stats().mapped_bytes - before.mapped_bytes == 12 * kMiB);
+    CHECK(large_buffer_cache_stats().cached_bytes == 0);
+    return_cached_block(b, 12 * kMiB);
+
+    // A smaller request takes the front of the block; the rest stays cached
+    // and both join again when the front comes back.
+    void* c = acquire_cached_block(5 * kMiB);  // 6 MiB
+    CHECK(c == a);
+    CHECK(large_buffer_cache_stats().cached_bytes == 6 * kMiB);
+    void* d = acquire_cached_block(6 * kMiB);
+    CHECK(d == static_cast<char*>(a) + 6 * kMiB);
+    return_cached_block(c, 5 * kMiB);
+    return_cached_block(d, 6 * kMiB);
+    CHECK(large_buffer_cache_stats().cached_blocks == 1);
+    CHECK(large_buffer_cache_stats().cached_bytes == 12 * kMiB);
+
+    // A request no cached block holds: the cache is unmapped first, then fresh zeroed memory.
+    const auto mid = large_buffer_cache_stats();
+    void* e = acquire_cached_block(20 * kMiB);
+    const auto after = large_buffer_cache_stats();
+    CHECK(after.cached_bytes == 0);
+    CHECK(after.unmapped_bytes - mid.unmapped_bytes == 12 * kMiB);
+    CHECK(after.mapped_bytes - mid.mapped_bytes == 20 * kMiB);
+    CHECK(static_cast<unsigned char*>(e)[20 * kMiB - 1] == 0);
+    return_cached_block(e, 20 * kMiB);
+    release_large_buffer_cache();
+    CHECK(large_buffer_cache_stats().cached_bytes == 0);
+    CHECK(large_buffer_cache_stats().cached_blocks == 0);
+}
+
+TEST_CASE("the large block cache keeps to its limit", "[core][large_buffer]") {
+    FreshCache fresh;
+    set_large_buffer_cache_limit(16 * kMiB);
+    void* a = acquire_cached_block(8 * kMiB);
+    void* b = acquire_cached_block(8 * kMiB);  // a mapping of its own: the cache is empty
+    void* c = acquire_cached_block(8 * kMiB);
+    return_cached_block(a, 8 * kMiB);
+    return_cached_block(b, 8 * kMiB);
+    CHECK(large_buffer_cache_stats().cached_bytes == 16 * kMiB);
+    const auto full = large_buffer_cache_stats();
+    return_cached_block(c, 8 * kMiB);  // over the limit: unmapped
+    CHECK(large_buffer_cache_stats().cached_bytes == 16 * kMiB);
+    CHECK(large_buffer_cache_stats().unmapped_bytes - full.unmapped_bytes == 8 * kMiB);
+    set_large_buffer_cache_limit(8 * kMiB);  // a lower limit unmaps down to it
+    CHECK(large_buffer_cache_stats().cached_bytes <= 8 * kMiB);
+    set_large_buffer_cache_limit(0);  // caching off
+    CHECK(large_buffer_cache_stats().cached_bytes == 0);
+    void* d = acquire_cached_block(8 * kMiB);
+    return_cached_block(d, 8 * kMiB);
+    CHECK(large_buffer_cache_stats().cached_bytes == 0);
+}
+
+TEST_CASE("the large block cache never hands one block out twice, under tbb::parallel_for", "[core][large_buffer]") {
+    FreshCache fresh;
+    set_large_buffer_cache_limit(std::size_t(1) << 30);
+    for (const int threads : {1, 2, 4}) {
+        INFO(threads << " threads");
+        tbb::global_control limit(tbb::global_control::max_allowed_parallelism, threads);
+        // Tasks take blocks of several sizes, hold them while they fill every
+        // page with their own id, check the ids and give them back; the ranges
+        // held at any one time must not overlap.
+        constexpr std::size_t kTasks = 32;
+        std::vector<std::pair<std::uintptr_t, std::uintptr_t>> held(kTasks);
+        std::vector<int> ok(kTasks, 0);
+        tbb::parallel_for(std::size_t(0), kTasks, [&](std::size_t t) {
+            const std::size_t bytes = (4 + 2 * (t % 4)) * kMiB;
+            bool good = true;
+            for (int round = 0; round < 3; ++round) {
+                auto* p = static_cast<uint64_t*>(acquire_cached_block(bytes));
+                const std::size_t words = bytes / sizeof(uint64_t);
+                for (std::size_t w = 0; w < words; w += 512) p[w] = t * 1000 + static_cast<std::size_t>(round);
+                for (std::size_t w = 0; w < words; w += 512) good &= p[w] == t * 1000 + static_cast<std::size_t>(round);
+                if (round == 2) held[t] = {reinterpret_cast<std::uintptr_t>(p), reinterpret_cast<std::uintptr_t>(p) + bytes};
+                else return_cached_block(p, bytes);
+            }
+            ok[t] = good;
+        });
+        CHECK(std::count(ok.begin(), ok.end(), 1) == static_cast<long>(kTasks));
+        std::vector<std::pair<std::uintptr_t, std::uintptr_t>> sorted = held;
+        std::sort(sorted.begin(), sorted.end());
+        for (std::size_t t = 1; t < kTasks; ++t) CHECK(sorted[t - 1].second <= sorted[t].first);
+        for (std::size_t t = 0; t < kTasks; ++t) return_cached_block(reinterpret_cast<void*>(held[t].first), held[t].second - held[t].first);
+        release_large_buffer_cache();
+    }
+}
+
+TEST_CASE("cached_array holds small arrays on the heap and large ones in cached blocks", "[core][large_buffer]") {
+    FreshCache fresh;
+    set_large_buffer_cache_limit(std::size_t(1) << 30);
+    {
+        CachedArray<double> small = cached_array<double>(100);
+        small[99] = 1.5;
+        CHECK(small[99] == 1.5);
+        CHECK(large_buffer_cache_stats().cached_bytes == 0);
+    }
+    CHECK(large_buffer_cache_stats().cached_bytes == 0);  // small arrays never enter the cache
+    const double* first = nullptr;
+    {
+        CachedArray<double> big = cached_array<double>(kMiB);  // 8 MiB
+        big[kMiB - 1] = 2.0;
+        first = big.get();
+    }
+    CHECK(large_buffer_cache_stats().cached_bytes == 8 * kMiB);
+    CachedArray<uint32_t> again = cached_array<uint32_t>(2 * kMiB);  // the same 8 MiB
+    CHECK(static_cast<const void*>(again.get()) == static_cast<const void*>(first));
+}
+
+TEST_CASE("canonical_order and filter_outliers give the same flags from cached blocks full of stale bytes as from fresh memory, and empty the cache", "[core][large_buffer][cloud][filters]") {
+    FreshCache fresh;
+    // 4 M points: the permutation, the filter's order, its mean distances and
+    // its grid's cells (~1.1 M: their first positions, z ranges) are all
+    // blocks of 4 MiB or more.
+    PointCloud base;
+    Rng rng(23);
+    for (int i = 0; i < 4000000; ++i) {
+        base.x.push_back(rng.uniform(0, 700)), base.y.push_back(rng.uniform(0, 700));
+        base.z.push_back(10 + 0.05 * rng.normal() + (i % 997 == 0 ? rng.uniform(-30, 30) : 0.0));
+        base.classification.push_back(1), base.intensity.push_back(static_cast<uint16_t>(i % 7)), base.return_number.push_back(1),
+            base.number_of_returns.push_back(1);
+    }
+    const auto run = [&] {
+        PointCloud c = base;
+        canonical_order(c);
+        OutlierFilterResult r = filter_outliers(c, OutlierFilterOptions{});
+        CHECK(large_buffer_cache_stats().cached_bytes == 0);  // emptied at the filter's end
+        return std::make_pair(std::move(c), std::move(r));
+    };
+    set_large_buffer_cache_limit(0);  // every block fresh (zeroed) memory
+    const auto [fresh_cloud, fresh_result] = run();
+    set_large_buffer_cache_limit(std::size_t(1) << 30);
+    const auto reused_before = large_buffer_cache_stats().reused_bytes;
+    {  // the cache seeded with one large block of 0xff bytes: canonical_order takes its arrays from it
+        void* stale = acquire_cached_block(128 * kMiB);
+        std::memset(stale, 0xff, 128 * kMiB);
+        return_cached_block(stale, 128 * kMiB);
+    }
+    const auto [cloud, result] = run();
+    CHECK(large_buffer_cache_stats().reused_bytes - reused_before >= 96 * kMiB);  // canonical order's blocks, then the filter's
+    CHECK(cloud.x == fresh_cloud.x);
+    CHECK(cloud.z == fresh_cloud.z);
+    CHECK(result.keep == fresh_result.keep);
+    CHECK(result.limit == fresh_result.limit);
+    CHECK(result.removed_statistical == fresh_result.removed_statistical);
+    CHECK(result.removed_statistical > 1000);
+}
