@@ -7,6 +7,7 @@
 #include <fcntl.h>
 #include <filesystem>
 #include <fstream>
+#include <functional>
 #include <gdal_priv.h>
 #include <map>
 #include <nlohmann/json.hpp>
@@ -314,6 +315,233 @@ GpsFrames gps_frames(const OrientRunOptions& o, double lat_deg, double lon_deg) 
     return f;
 }
 
+namespace {
+// The working folder of one orientation: COLMAP's files under colmap/.
+struct OrientWork {
+    fs::path colmap_dir, img_dir, log, db;
+    explicit OrientWork(const fs::path& work)
+        : colmap_dir(work / "colmap"), img_dir(colmap_dir / "images"), log(colmap_dir / "colmap.log"), db(colmap_dir / "database.db") {}
+};
+
+// Downscaled PNG copies of the photos (COLMAP and the dense steps see the
+// same pixels), at most max_image_px on the longer side; returns the scale.
+double write_working_images(const OrientRunOptions& o, const std::vector<std::string>& names, const cv::Mat& first, const OrientWork& w,
+                            const Progress& progress) {
+    ensure_directory(w.img_dir);
+    double scale = 1.0;
+    for (std::size_t i = 0; i < names.size(); ++i) {
+        const std::string src = (fs::path(o.images_dir) / names[i]).string();
+        cv::Mat m = read_colour_image(src);
+        if (m.cols != first.cols || m.rows != first.rows)
+            throw Error(src, "image size differs from " + names[0] + " (one camera per block)");
+        const int longest = std::max(m.cols, m.rows);
+        scale = longest > o.max_image_px ? double(o.max_image_px) / longest : 1.0;
+        if (scale < 1.0) cv::resize(m, m, cv::Size(), scale, scale, cv::INTER_AREA);
+        const fs::path dst = w.img_dir / (fs::path(names[i]).stem().string() + ".png");
+        if (!cv::imwrite(dst.string(), m)) throw Error(dst.string(), "cannot write image");
+        progress(0.1 * double(i + 1) / double(names.size()), "images " + std::to_string(i + 1) + "/" + std::to_string(names.size()));
+    }
+    return scale;
+}
+
+// COLMAP's SIFT features of the working images (one camera: the given
+// pinhole matrix, scaled, or a simple radial model to self-calibrate).
+void extract_features(const OrientRunOptions& o, const OrientWork& w, int longest_px, double scale, const std::optional<CameraMatrix>& k,
+                      const Progress& progress) {
+    std::vector<std::string> fe{o.colmap, "feature_extractor", "--database_path", w.db.string(), "--image_path", w.img_dir.string(),
+                                "--ImageReader.single_camera", "1", "--SiftExtraction.use_gpu", "0",
+                                "--SiftExtraction.num_threads", std::to_string(o.threads), "--SiftExtraction.max_num_features",
+                                std::to_string(o.max_features),
+                                // No up-sampled first octave on large photos: at 2000 px it quadruples
+                                // the work for features finer than the block needs.
+                                "--SiftExtraction.first_octave", longest_px * scale >= 1200 ? "0" : "-1"};
+    if (k) {
+        // COLMAP's principal point: top-left pixel centre at (0.5, 0.5).
+        char params[200];
+        std::snprintf(params, sizeof params, "%.6f,%.6f,%.6f,%.6f", k->fx * scale, k->fy * scale, (k->cx + 0.5) * scale,
+                      (k->cy + 0.5) * scale);
+        fe.insert(fe.end(), {"--ImageReader.camera_model", "PINHOLE", "--ImageReader.camera_params", params});
+    } else {
+        fe.insert(fe.end(), {"--ImageReader.camera_model", "SIMPLE_RADIAL"});
+    }
+    run_tool(fe, w.log, "feature extraction", progress);
+}
+
+struct MatchCounts {
+    std::size_t matches = 0, pairs = 0;  ///< putative matches, and image pairs with any
+};
+
+// Matching is ours (photo/feature_matching): COLMAP's CPU matcher builds
+// FLANN's randomised kd-trees from the unseeded rand() and its matches
+// differ by 1-2 per pair from run to run. Brute force on COLMAP's
+// descriptors with its rules, pairs in file order, the same bytes for any
+// thread count (keypoints at the image edge are left out: COLMAP leaves
+// their descriptors uninitialised); COLMAP then verifies them
+// geometrically in one thread (matches_importer: its RANSAC draws from a
+// PRNG seeded with 0).
+MatchCounts match_and_verify(const OrientRunOptions& o, const OrientWork& w, const Progress& progress) {
+    MatchCounts counts;
+    photo::renumber_colmap_images(w.db.string());  // ids in name order, not in the order threads finished
+    const std::vector<photo::ImageFeatures> features = photo::read_colmap_features(w.db.string());
+    const int n = static_cast<int>(features.size());
+    const auto pairs = o.matcher == "sequential" ? photo::sequential_pairs(n, o.sequential_overlap) : photo::exhaustive_pairs(n);
+    std::vector<photo::PairMatches> matches;
+    tbb::task_arena arena(o.threads);
+    arena.execute([&] { matches = photo::match_image_pairs(features, pairs, {}, progress.sub(0.0, 0.75)); });
+    for (const auto& p : matches) counts.matches += p.matches.size(), counts.pairs += p.matches.empty() ? 0 : 1;
+    const fs::path list = w.colmap_dir / "matches.txt";
+    photo::write_colmap_match_list(list.string(), features, matches);
+    run_tool({o.colmap, "matches_importer", "--database_path", w.db.string(), "--match_list_path", list.string(), "--match_type", "raw",
+              "--SiftMatching.use_gpu", "0", "--SiftMatching.num_threads", "1"},
+             w.log, "match verification", progress.sub(0.75, 1.0));
+    return counts;
+}
+
+// COLMAP's incremental mapping; returns the folder of the largest
+// reconstruction. One mapper thread: with two, COLMAP's bundle adjustment
+// and triangulation give a different model from run to run (measured); with
+// one and the fixed seed the model is the same bytes.
+fs::path map_block(const OrientRunOptions& o, const OrientWork& w, bool calibrated, const Progress& progress) {
+    const fs::path sparse = w.colmap_dir / "sparse";
+    ensure_directory(sparse);
+    std::vector<std::string> mapper{o.colmap, "mapper", "--database_path", w.db.string(), "--image_path", w.img_dir.string(),
+                                    "--output_path", sparse.string(), "--Mapper.num_threads", "1", "--random_seed", "0"};
+    // A calibrated camera stays fixed: nadir blocks over flat ground make the
+    // focal length nearly unobservable in self-calibration.
+    if (calibrated) mapper.insert(mapper.end(), {"--Mapper.ba_refine_focal_length", "0", "--Mapper.ba_refine_extra_params", "0"});
+    try {
+        run_tool(mapper, w.log, "mapping", progress);
+    } catch (const Error&) {
+        throw Error(o.images_dir, "COLMAP could not orient the photos (no image pair to start from): the photos do not overlap or have no texture");
+    }
+    fs::path best;
+    std::uintmax_t best_size = 0;
+    if (fs::is_directory(sparse))
+        for (const auto& e : fs::directory_iterator(sparse)) {
+            const fs::path imgs = e.path() / "images.bin";
+            if (fs::exists(imgs) && fs::file_size(imgs) > best_size) best = e.path(), best_size = fs::file_size(imgs);
+        }
+    if (best.empty()) throw Error(o.images_dir, "COLMAP oriented no image pair: the photos do not overlap or have no texture");
+    return best;
+}
+
+// The reconstruction's undistorted images and its model as text; returns
+// the undistortion folder (images/) and the text model's folder.
+std::pair<fs::path, fs::path> undistort_model(const OrientRunOptions& o, const OrientWork& w, const fs::path& reconstruction) {
+    const fs::path undist = w.colmap_dir / "undistorted";
+    run_tool({o.colmap, "image_undistorter", "--image_path", w.img_dir.string(), "--input_path", reconstruction.string(), "--output_path",
+              undist.string(), "--output_type", "COLMAP"},
+             w.log, "undistortion");
+    const fs::path txt = w.colmap_dir / "model_txt";
+    ensure_directory(txt);
+    run_tool({o.colmap, "model_converter", "--input_path", (undist / "sparse").string(), "--output_path", txt.string(), "--output_type", "TXT"},
+             w.log, "model conversion");
+    return {undist, txt};
+}
+
+// The similarity from the model frame to the output CRS, fitted on the
+// oriented photos that have GPS positions.
+struct BlockGeoreference {
+    photo::Similarity similarity;
+    std::vector<std::string> images;    ///< oriented photos with a GPS position (the model's PNG names)
+    std::vector<Eigen::Vector3d> model; ///< their camera centres, model frame
+    std::vector<Eigen::Vector3d> gps;   ///< their GPS positions in the output CRS, less `origin`
+    Eigen::Vector3d origin;             ///< a round origin near the block (numerics)
+};
+
+BlockGeoreference georeference_block(const std::vector<photo::PhotoCamera>& cams, const std::map<std::string, GpsFix>& gps,
+                                     const std::function<std::string(const std::string&)>& original_name, const GpsFrames& frames,
+                                     const std::string& images_dir) {
+    BlockGeoreference g;
+    std::vector<double> gx, gy, gz;
+    for (const auto& c : cams) {
+        const auto it = gps.find(original_name(c.image));
+        if (it == gps.end()) continue;
+        g.images.push_back(c.image);
+        gx.push_back(it->second.lon), gy.push_back(it->second.lat), gz.push_back(it->second.h);
+    }
+    if (g.images.size() < 3) throw Error(images_dir, "fewer than 3 oriented photos have GPS positions: cannot georeference (do the photos overlap?)");
+    transform_points(frames.gps, frames.out, gx, gy, gz, "GPS positions");
+    g.origin = Eigen::Vector3d(std::floor(gx[0] / 1000) * 1000, std::floor(gy[0] / 1000) * 1000, 0.0);
+    for (std::size_t i = 0; i < g.images.size(); ++i) {
+        for (const auto& c : cams)
+            if (c.image == g.images[i]) g.model.push_back(c.centre);
+        g.gps.push_back(Eigen::Vector3d(gx[i], gy[i], gz[i]) - g.origin);
+    }
+    g.similarity = photo::fit_similarity(g.model, g.gps, images_dir);
+    g.similarity.translation += g.origin;
+    return g;
+}
+
+// A block that does not fit its GPS positions is mis-oriented: refused when
+// the RMSE exceeds max(2 m, 0.35 x the typical spacing of the photos).
+void check_gps_fit(const BlockGeoreference& g, double rmse_m, bool calibrated, const std::string& images_dir) {
+    std::vector<double> spacing;
+    for (std::size_t i = 0; i < g.gps.size(); ++i) {
+        double nearest = 1e300;
+        for (std::size_t j = 0; j < g.gps.size(); ++j)
+            if (j != i) nearest = std::min(nearest, (g.gps[i] - g.gps[j]).norm());
+        spacing.push_back(nearest);
+    }
+    std::sort(spacing.begin(), spacing.end());
+    const double typical = spacing[spacing.size() / 2];
+    if (rmse_m > std::max(2.0, 0.35 * typical)) {
+        char buf[300];
+        std::snprintf(buf, sizeof buf,
+                      "oriented camera centres disagree with the GPS positions (RMSE %.1f m, photo spacing %.1f m): "
+                      "the orientation is wrong%s",
+                      rmse_m, typical, calibrated ? "" : " (self-calibration of nadir photos is weak: give --camera K.txt)");
+        throw Error(images_dir, buf);
+    }
+}
+
+// The model's sparse points in the map frame, coloured; sets the height
+// range the scene spans (1st-99th percentile, padded by 10 % + 1 m).
+PointCloud sparse_cloud_in_map(const photo::ColmapModel& model, const photo::Similarity& sim, photo::CameraSet& set, const std::string& images_dir) {
+    PointCloud cloud;
+    std::vector<double> zs;
+    for (const auto& p : model.points) {
+        const Eigen::Vector3d w = sim.apply(p.xyz);
+        cloud.x.push_back(w.x()), cloud.y.push_back(w.y()), cloud.z.push_back(w.z());
+        cloud.classification.push_back(1);
+        cloud.return_number.push_back(1), cloud.number_of_returns.push_back(1);
+        cloud.intensity.push_back(0);
+        cloud.red.push_back(p.rgb[0] * 257), cloud.green.push_back(p.rgb[1] * 257), cloud.blue.push_back(p.rgb[2] * 257);
+        zs.push_back(w.z());
+    }
+    if (zs.size() < 10) throw Error(images_dir, "COLMAP triangulated fewer than 10 points: the photos do not overlap");
+    std::sort(zs.begin(), zs.end());
+    const double zlo = zs[zs.size() / 100], zhi = zs[zs.size() - 1 - zs.size() / 100];
+    const double pad = 0.1 * (zhi - zlo) + 1.0;
+    set.scene_z_range_m = {zlo - pad, zhi + pad};
+    return cloud;
+}
+
+nlohmann::json orient_report_json(const OrientRunOptions& o, const OrientRunResult& r, const MatchCounts& matched, double scale,
+                                  const GpsFrames& frames, const photo::CameraSet& set) {
+    nlohmann::json j;
+    j["crs"] = r.crs;
+    j["engine"] = "COLMAP feature_extractor; cityforge brute-force SIFT matching (" + o.matcher +
+                  " pairs), COLMAP matches_importer (geometric verification), mapper (1 thread, seed 0), image_undistorter; CPU";
+    j["max_features"] = o.max_features;
+    j["matched_pairs"] = matched.pairs;
+    j["matches"] = matched.matches;
+    j["images"] = r.images;
+    j["oriented"] = r.oriented;
+    j["sparse_points"] = r.sparse_points;
+    j["mean_reprojection_error_px"] = r.mean_reprojection_error_px;
+    j["image_scale"] = scale;
+    j["georeferencing"] = {{"method", "similarity (Umeyama) from model camera centres to GPS positions in " + r.crs},
+                           {"gps_source", o.gps}, {"gps_crs", frames.gps.label()}, {"scale_m_per_model_unit", r.scale}, {"rmse_m", r.gps_rmse_m}};
+    j["vertical_crs"] = z_crs_label(frames.out);
+    j["residuals_m"] = nlohmann::json::array();
+    for (const auto& e : r.residuals) j["residuals_m"].push_back({{"image", e.image}, {"dx", e.dx_m}, {"dy", e.dy_m}, {"dz", e.dz_m}});
+    j["scene_z_range_m"] = set.scene_z_range_m;
+    j["seconds"] = r.seconds;
+    return j;
+}
+}  // namespace
+
 OrientRunResult run_orient(const OrientRunOptions& o, const Progress& progress) {
     o.validate();
     const auto t0 = std::chrono::steady_clock::now();
@@ -344,101 +572,15 @@ OrientRunResult run_orient(const OrientRunOptions& o, const Progress& progress) 
             unregister_temporary(p);
         }
     } cleanup{work};
-    const fs::path colmap_dir = work / "colmap", img_dir = colmap_dir / "images";
-    ensure_directory(img_dir);
-    // Downscaled copies (COLMAP and the dense steps see the same pixels).
-    double scale = 1.0;
-    for (std::size_t i = 0; i < names.size(); ++i) {
-        const std::string src = (fs::path(o.images_dir) / names[i]).string();
-        cv::Mat m = read_colour_image(src);
-        if (m.cols != first.cols || m.rows != first.rows)
-            throw Error(src, "image size differs from " + names[0] + " (one camera per block)");
-        const int longest = std::max(m.cols, m.rows);
-        scale = longest > o.max_image_px ? double(o.max_image_px) / longest : 1.0;
-        if (scale < 1.0) cv::resize(m, m, cv::Size(), scale, scale, cv::INTER_AREA);
-        const fs::path dst = img_dir / (fs::path(names[i]).stem().string() + ".png");
-        if (!cv::imwrite(dst.string(), m)) throw Error(dst.string(), "cannot write image");
-        progress(0.1 * double(i + 1) / double(names.size()), "images " + std::to_string(i + 1) + "/" + std::to_string(names.size()));
-    }
-    const fs::path log = colmap_dir / "colmap.log", db = colmap_dir / "database.db";
-    const std::string th = std::to_string(o.threads);
-    std::vector<std::string> fe{o.colmap, "feature_extractor", "--database_path", db.string(), "--image_path", img_dir.string(),
-                                "--ImageReader.single_camera", "1", "--SiftExtraction.use_gpu", "0",
-                                "--SiftExtraction.num_threads", th, "--SiftExtraction.max_num_features",
-                                std::to_string(o.max_features),
-                                // No up-sampled first octave on large photos: at 2000 px it quadruples
-                                // the work for features finer than the block needs.
-                                "--SiftExtraction.first_octave",
-                                std::max(first.cols, first.rows) * scale >= 1200 ? "0" : "-1"};
-    if (k) {
-        // COLMAP's principal point: top-left pixel centre at (0.5, 0.5).
-        char params[200];
-        std::snprintf(params, sizeof params, "%.6f,%.6f,%.6f,%.6f", k->fx * scale, k->fy * scale, (k->cx + 0.5) * scale,
-                      (k->cy + 0.5) * scale);
-        fe.insert(fe.end(), {"--ImageReader.camera_model", "PINHOLE", "--ImageReader.camera_params", params});
-    } else {
-        fe.insert(fe.end(), {"--ImageReader.camera_model", "SIMPLE_RADIAL"});
-    }
-    run_tool(fe, log, "feature extraction", progress.sub(0.1, 0.3));
+    const OrientWork w(work);
+    const double scale = write_working_images(o, names, first, w, progress);
+    extract_features(o, w, std::max(first.cols, first.rows), scale, k, progress.sub(0.1, 0.3));
     progress(0.3, "features");
-    // Matching is ours (photo/feature_matching): COLMAP's CPU matcher builds
-    // FLANN's randomised kd-trees from the unseeded rand() and its matches
-    // differ by 1-2 per pair from run to run. Brute force on COLMAP's
-    // descriptors with its rules, pairs in file order, the same bytes for any
-    // thread count (keypoints at the image edge are left out: COLMAP leaves
-    // their descriptors uninitialised); COLMAP then verifies them
-    // geometrically in one thread (matches_importer: its RANSAC draws from a
-    // PRNG seeded with 0).
-    std::size_t match_count = 0, pair_count = 0;
-    {
-        photo::renumber_colmap_images(db.string());  // ids in name order, not in the order threads finished
-        const std::vector<photo::ImageFeatures> features = photo::read_colmap_features(db.string());
-        const int n = static_cast<int>(features.size());
-        const auto pairs = o.matcher == "sequential" ? photo::sequential_pairs(n, o.sequential_overlap) : photo::exhaustive_pairs(n);
-        std::vector<photo::PairMatches> matches;
-        tbb::task_arena arena(o.threads);
-        arena.execute([&] { matches = photo::match_image_pairs(features, pairs, {}, progress.sub(0.3, 0.45)); });
-        for (const auto& p : matches) match_count += p.matches.size(), pair_count += p.matches.empty() ? 0 : 1;
-        photo::write_colmap_match_list((colmap_dir / "matches.txt").string(), features, matches);
-    }
-    run_tool({o.colmap, "matches_importer", "--database_path", db.string(), "--match_list_path", (colmap_dir / "matches.txt").string(),
-              "--match_type", "raw", "--SiftMatching.use_gpu", "0", "--SiftMatching.num_threads", "1"},
-             log, "match verification", progress.sub(0.45, 0.5));
+    const MatchCounts matched = match_and_verify(o, w, progress.sub(0.3, 0.5));
     progress(0.5, "matching");
-    const fs::path sparse = colmap_dir / "sparse";
-    ensure_directory(sparse);
-    // One mapper thread: with two, COLMAP's bundle adjustment and
-    // triangulation give a different model from run to run (measured); with
-    // one and the fixed seed the model is the same bytes.
-    std::vector<std::string> mapper{o.colmap, "mapper", "--database_path", db.string(), "--image_path", img_dir.string(),
-                                    "--output_path", sparse.string(), "--Mapper.num_threads", "1", "--random_seed", "0"};
-    // A calibrated camera stays fixed: nadir blocks over flat ground make the
-    // focal length nearly unobservable in self-calibration.
-    if (k) mapper.insert(mapper.end(), {"--Mapper.ba_refine_focal_length", "0", "--Mapper.ba_refine_extra_params", "0"});
-    try {
-        run_tool(mapper, log, "mapping", progress.sub(0.5, 0.8));
-    } catch (const Error&) {
-        throw Error(o.images_dir, "COLMAP could not orient the photos (no image pair to start from): the photos do not overlap or have no texture");
-    }
+    const fs::path reconstruction = map_block(o, w, k.has_value(), progress.sub(0.5, 0.8));
     progress(0.8, "mapping");
-    // The largest reconstruction.
-    fs::path best;
-    std::uintmax_t best_size = 0;
-    if (fs::is_directory(sparse))
-        for (const auto& e : fs::directory_iterator(sparse)) {
-            const fs::path imgs = e.path() / "images.bin";
-            if (fs::exists(imgs) && fs::file_size(imgs) > best_size) best = e.path(), best_size = fs::file_size(imgs);
-        }
-    if (best.empty()) throw Error(o.images_dir, "COLMAP oriented no image pair: the photos do not overlap or have no texture");
-    const fs::path undist = colmap_dir / "undistorted";
-    run_tool({o.colmap, "image_undistorter", "--image_path", img_dir.string(), "--input_path", best.string(), "--output_path",
-              undist.string(), "--output_type", "COLMAP"},
-             log, "undistortion");
-    const fs::path txt = colmap_dir / "model_txt";
-    ensure_directory(txt);
-    run_tool({o.colmap, "model_converter", "--input_path", (undist / "sparse").string(), "--output_path", txt.string(),
-              "--output_type", "TXT"},
-             log, "model conversion");
+    const auto [undist, txt] = undistort_model(o, w, reconstruction);
     progress(0.9, "undistortion");
 
     const photo::ColmapModel model = photo::read_colmap_text_model(txt.string());
@@ -450,81 +592,28 @@ OrientRunResult run_orient(const OrientRunOptions& o, const Progress& progress) 
             if (fs::path(n).stem().string() == fs::path(png).stem().string()) return n;
         return png;
     };
-    std::vector<std::string> used;
-    std::vector<double> gx, gy, gz;
-    for (const auto& c : cams) {
-        const auto it = gps.find(original_name(c.image));
-        if (it == gps.end()) continue;
-        used.push_back(c.image);
-        gx.push_back(it->second.lon), gy.push_back(it->second.lat), gz.push_back(it->second.h);
-    }
-    if (used.size() < 3) throw Error(o.images_dir, "fewer than 3 oriented photos have GPS positions: cannot georeference (do the photos overlap?)");
-    transform_points(frames.gps, out_crs, gx, gy, gz, "GPS positions");
-    const Eigen::Vector3d origin(std::floor(gx[0] / 1000) * 1000, std::floor(gy[0] / 1000) * 1000, 0.0);
-    std::vector<Eigen::Vector3d> from, to;
-    for (std::size_t i = 0; i < used.size(); ++i) {
-        for (const auto& c : cams)
-            if (c.image == used[i]) from.push_back(c.centre);
-        to.push_back(Eigen::Vector3d(gx[i], gy[i], gz[i]) - origin);
-    }
-    photo::Similarity sim = photo::fit_similarity(from, to, o.images_dir);
-    sim.translation += origin;
+    const BlockGeoreference geo = georeference_block(cams, gps, original_name, frames, o.images_dir);
 
     OrientRunResult r;
     r.images = static_cast<int>(names.size());
     r.oriented = static_cast<int>(cams.size());
-    r.scale = sim.scale;
+    r.scale = geo.similarity.scale;
     r.crs = out_crs.label();
     r.mean_reprojection_error_px = model.mean_reprojection_error_px();
     double sq = 0;
-    for (std::size_t i = 0; i < used.size(); ++i) {
-        const Eigen::Vector3d d = sim.apply(from[i]) - (to[i] + origin);
-        r.residuals.push_back({original_name(used[i]), d.x(), d.y(), d.z()});
+    for (std::size_t i = 0; i < geo.images.size(); ++i) {
+        const Eigen::Vector3d d = geo.similarity.apply(geo.model[i]) - (geo.gps[i] + geo.origin);
+        r.residuals.push_back({original_name(geo.images[i]), d.x(), d.y(), d.z()});
         sq += d.squaredNorm();
     }
-    r.gps_rmse_m = std::sqrt(sq / double(used.size()));
-    // A block that does not fit its GPS positions is mis-oriented: refuse it.
-    {
-        std::vector<double> spacing;
-        for (std::size_t i = 0; i < used.size(); ++i) {
-            double nearest = 1e300;
-            for (std::size_t j = 0; j < used.size(); ++j)
-                if (j != i) nearest = std::min(nearest, (to[i] - to[j]).norm());
-            spacing.push_back(nearest);
-        }
-        std::sort(spacing.begin(), spacing.end());
-        const double typical = spacing[spacing.size() / 2];
-        if (r.gps_rmse_m > std::max(2.0, 0.35 * typical)) {
-            char buf[300];
-            std::snprintf(buf, sizeof buf,
-                          "oriented camera centres disagree with the GPS positions (RMSE %.1f m, photo spacing %.1f m): "
-                          "the orientation is wrong%s",
-                          r.gps_rmse_m, typical, k ? "" : " (self-calibration of nadir photos is weak: give --camera K.txt)");
-            throw Error(o.images_dir, buf);
-        }
-    }
+    r.gps_rmse_m = std::sqrt(sq / double(geo.images.size()));
+    check_gps_fit(geo, r.gps_rmse_m, k.has_value(), o.images_dir);
 
     photo::CameraSet set;
     set.crs = out_crs.label();
     set.crs_wkt = out_crs.wkt;
-    for (const auto& c : cams) set.cameras.push_back(photo::transform_camera(c, sim));
-    // Sparse cloud in the map frame, and the height range it spans.
-    PointCloud sparse_cloud;
-    std::vector<double> zs;
-    for (const auto& p : model.points) {
-        const Eigen::Vector3d w = sim.apply(p.xyz);
-        sparse_cloud.x.push_back(w.x()), sparse_cloud.y.push_back(w.y()), sparse_cloud.z.push_back(w.z());
-        sparse_cloud.classification.push_back(1);
-        sparse_cloud.return_number.push_back(1), sparse_cloud.number_of_returns.push_back(1);
-        sparse_cloud.intensity.push_back(0);
-        sparse_cloud.red.push_back(p.rgb[0] * 257), sparse_cloud.green.push_back(p.rgb[1] * 257), sparse_cloud.blue.push_back(p.rgb[2] * 257);
-        zs.push_back(w.z());
-    }
-    if (zs.size() < 10) throw Error(o.images_dir, "COLMAP triangulated fewer than 10 points: the photos do not overlap");
-    std::sort(zs.begin(), zs.end());
-    const double zlo = zs[zs.size() / 100], zhi = zs[zs.size() - 1 - zs.size() / 100];
-    const double pad = 0.1 * (zhi - zlo) + 1.0;
-    set.scene_z_range_m = {zlo - pad, zhi + pad};
+    for (const auto& c : cams) set.cameras.push_back(photo::transform_camera(c, geo.similarity));
+    const PointCloud sparse_cloud = sparse_cloud_in_map(model, geo.similarity, set, o.images_dir);
     r.sparse_points = sparse_cloud.size();
 
     // Final layout.
@@ -532,27 +621,8 @@ OrientRunResult run_orient(const OrientRunOptions& o, const Progress& progress) 
     for (const auto& c : set.cameras) fs::rename(undist / "images" / c.image, work / "images" / c.image);
     photo::write_cameras_json((work / "cameras.json").string(), set);
     write_cloud_las((work / "sparse.las").string(), sparse_cloud, out_crs.wkt, "cityforge orient (COLMAP sparse)");
-    nlohmann::json j;
-    j["crs"] = r.crs;
-    j["engine"] = "COLMAP feature_extractor; cityforge brute-force SIFT matching (" + o.matcher +
-                  " pairs), COLMAP matches_importer (geometric verification), mapper (1 thread, seed 0), image_undistorter; CPU";
-    j["max_features"] = o.max_features;
-    j["matched_pairs"] = pair_count;
-    j["matches"] = match_count;
-    j["images"] = r.images;
-    j["oriented"] = r.oriented;
-    j["sparse_points"] = r.sparse_points;
-    j["mean_reprojection_error_px"] = r.mean_reprojection_error_px;
-    j["image_scale"] = scale;
-    j["georeferencing"] = {{"method", "similarity (Umeyama) from model camera centres to GPS positions in " + r.crs},
-                           {"gps_source", o.gps}, {"gps_crs", frames.gps.label()}, {"scale_m_per_model_unit", r.scale}, {"rmse_m", r.gps_rmse_m}};
-    j["vertical_crs"] = z_crs_label(out_crs);
-    j["residuals_m"] = nlohmann::json::array();
-    for (const auto& e : r.residuals) j["residuals_m"].push_back({{"image", e.image}, {"dx", e.dx_m}, {"dy", e.dy_m}, {"dz", e.dz_m}});
-    j["scene_z_range_m"] = set.scene_z_range_m;
     r.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-    j["seconds"] = r.seconds;
-    write_text_file(work / "orient_report.json", j.dump(2) + "\n");
+    write_text_file(work / "orient_report.json", orient_report_json(o, r, matched, scale, frames, set).dump(2) + "\n");
     if (fs::exists(out)) fs::remove_all(out);
     fs::rename(work, out);
     cleanup.keep = true;
