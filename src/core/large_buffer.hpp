@@ -62,42 +62,42 @@ using LargeVector = std::vector<T, LargeBufferAllocator<T>>;
 /// Requests of at least this many bytes go through the block cache; smaller
 /// ones are plain new / delete.
 inline constexpr std::size_t kCachedBlockMinBytes = std::size_t(4) << 20;
-/// Cached blocks are whole multiples of this (2 MiB, a huge page), aligned to it.
+/// Blocks are whole multiples of this (2 MiB, a huge page), aligned to it.
 inline constexpr std::size_t kCachedBlockAlign = std::size_t(2) << 20;
 
-/// A block of `bytes` (>= kCachedBlockMinBytes; the block spans `bytes`
-/// rounded up to 2 MiB), 2 MiB-aligned, marked for huge pages. Taken from the
-/// cache when a cached block is large enough (the smallest such; the part
-/// beyond the request stays cached), its bytes then stale: the caller must
-/// write every byte before reading it. When no cached block is large enough,
-/// the cache is emptied first (its memory back to the kernel) and fresh zeroed
-/// pages are mapped, so the process never holds cached blocks beside a new
-/// mapping. Thread-safe. Throws std::bad_alloc when the kernel refuses.
+/// A block of at least `bytes` (>= kCachedBlockMinBytes; rounded up to
+/// 2 MiB), 2 MiB-aligned, marked for huge pages. The smallest cached block
+/// that holds the request is handed out whole, its bytes stale: the caller
+/// must write every byte it reads. When no cached block is large enough, the
+/// cache is emptied first (its blocks freed) and a new block allocated
+/// (aligned_alloc, as LargeBufferAllocator), so the process never holds
+/// cached blocks beside a new one. Thread-safe. Throws std::bad_alloc.
 void* acquire_cached_block(std::size_t bytes);
 
-/// Gives back a block of acquire_cached_block (the same `bytes`): kept in the
-/// cache (joined with a cached neighbour in memory) while the cache's bytes
-/// stay within its limit, else unmapped. Thread-safe; never throws.
+/// Gives back a block of acquire_cached_block (`bytes` as requested; the
+/// cache knows the block's size): kept in the cache while the cache's bytes
+/// stay within its limit, else freed. A pointer the cache did not hand out
+/// is ignored. Thread-safe; never throws.
 void return_cached_block(void* p, std::size_t bytes) noexcept;
 
-/// Unmaps every cached block (the memory goes back to the kernel). A step that
-/// ends a chain of reuse calls it (filter_outliers does at its end), so cached
-/// blocks never sit beside the next step's memory. Thread-safe.
+/// Frees every cached block. A step that ends a chain of reuse calls it
+/// (filter_outliers does when it returns), so cached blocks never sit beside
+/// the next step's memory. Thread-safe.
 void release_large_buffer_cache() noexcept;
 
 /// Limit of the cache in bytes (default: a quarter of physical memory); a
-/// lower limit unmaps blocks until the cache fits. 0 disables caching.
+/// lower limit frees blocks until the cache fits. 0 disables caching.
 void set_large_buffer_cache_limit(std::size_t bytes) noexcept;
 std::size_t large_buffer_cache_limit() noexcept;
 
-/// Counters of the cache since the process started (bytes are whole blocks,
+/// Counters of the cache since the process started (bytes of whole blocks,
 /// 2 MiB multiples): for tests and benchmarks.
 struct LargeBufferCacheStats {
-    std::size_t cached_bytes = 0;  ///< held in the cache now
-    std::size_t cached_blocks = 0;  ///< separate blocks held now
-    std::size_t reused_bytes = 0;  ///< handed out from the cache
-    std::size_t mapped_bytes = 0;  ///< freshly mapped
-    std::size_t unmapped_bytes = 0;  ///< given back to the kernel
+    std::size_t cached_bytes = 0;     ///< held in the cache now
+    std::size_t cached_blocks = 0;    ///< blocks held now
+    std::size_t reused_bytes = 0;     ///< handed out from the cache
+    std::size_t allocated_bytes = 0;  ///< newly allocated
+    std::size_t freed_bytes = 0;      ///< freed (emptied, over the limit)
 };
 LargeBufferCacheStats large_buffer_cache_stats() noexcept;
 

@@ -26,46 +26,49 @@ struct FreshCache {
 };
 }  // namespace
 
-TEST_CASE("the large block cache hands a freed block out again, split and joined, and empties itself before mapping", "[core][large_buffer]") {
+TEST_CASE("the large block cache hands a freed block out again, the smallest that fits, and empties itself before allocating", "[core][large_buffer]") {
     FreshCache fresh;
     set_large_buffer_cache_limit(std::size_t(1) << 30);
     const auto before = large_buffer_cache_stats();
-    void* a = acquire_cached_block(10 * kMiB + 1);  // 12 MiB block
+    void* a = acquire_cached_block(10 * kMiB + 1);  // a 12 MiB block
     REQUIRE(reinterpret_cast<std::uintptr_t>(a) % kCachedBlockAlign == 0);
     std::memset(a, 0x5a, 10 * kMiB + 1);
-    CHECK(large_buffer_cache_stats().mapped_bytes - before.mapped_bytes == 12 * kMiB);
+    CHECK(large_buffer_cache_stats().allocated_bytes - before.allocated_bytes == 12 * kMiB);
     return_cached_block(a, 10 * kMiB + 1);
     CHECK(large_buffer_cache_stats().cached_bytes == 12 * kMiB);
 
-    // The same pages again, stale bytes and all: no new mapping.
+    // The same block again, stale bytes and all: nothing allocated.
     void* b = acquire_cached_block(12 * kMiB);
     CHECK(b == a);
     CHECK(static_cast<unsigned char*>(b)[12345] == 0x5a);
-    CHECK(large_buffer_cache_stats().mapped_bytes - before.mapped_bytes == 12 * kMiB);
+    CHECK(large_buffer_cache_stats().allocated_bytes - before.allocated_bytes == 12 * kMiB);
     CHECK(large_buffer_cache_stats().cached_bytes == 0);
     return_cached_block(b, 12 * kMiB);
 
-    // A smaller request takes the front of the block; the rest stays cached
-    // and both join again when the front comes back.
-    void* c = acquire_cached_block(5 * kMiB);  // 6 MiB
+    // A smaller request gets the block whole; the next one a block of its own.
+    void* c = acquire_cached_block(5 * kMiB);
     CHECK(c == a);
-    CHECK(large_buffer_cache_stats().cached_bytes == 6 * kMiB);
     void* d = acquire_cached_block(6 * kMiB);
-    CHECK(d == static_cast<char*>(a) + 6 * kMiB);
-    return_cached_block(c, 5 * kMiB);
+    CHECK(d != a);
+    return_cached_block(c, 5 * kMiB);  // back at its whole size
     return_cached_block(d, 6 * kMiB);
-    CHECK(large_buffer_cache_stats().cached_blocks == 1);
-    CHECK(large_buffer_cache_stats().cached_bytes == 12 * kMiB);
+    CHECK(large_buffer_cache_stats().cached_blocks == 2);
+    CHECK(large_buffer_cache_stats().cached_bytes == 18 * kMiB);
+    void* e = acquire_cached_block(5 * kMiB);  // the smaller of the two
+    CHECK(e == d);
+    return_cached_block(e, 5 * kMiB);
+    return_cached_block(e, 5 * kMiB);  // a second return of one block is ignored
+    return_cached_block(reinterpret_cast<char*>(e) + 64, 5 * kMiB);  // so is a pointer never handed out
+    CHECK(large_buffer_cache_stats().cached_blocks == 2);
 
-    // A request no cached block holds: the cache is unmapped first, then fresh zeroed memory.
+    // A request no cached block holds: the cache is freed first, then a new block.
     const auto mid = large_buffer_cache_stats();
-    void* e = acquire_cached_block(20 * kMiB);
+    void* f = acquire_cached_block(20 * kMiB);
     const auto after = large_buffer_cache_stats();
     CHECK(after.cached_bytes == 0);
-    CHECK(after.unmapped_bytes - mid.unmapped_bytes == 12 * kMiB);
-    CHECK(after.mapped_bytes - mid.mapped_bytes == 20 * kMiB);
-    CHECK(static_cast<unsigned char*>(e)[20 * kMiB - 1] == 0);
-    return_cached_block(e, 20 * kMiB);
+    CHECK(after.freed_bytes - mid.freed_bytes == 18 * kMiB);
+    CHECK(after.allocated_bytes - mid.allocated_bytes == 20 * kMiB);
+    return_cached_block(f, 20 * kMiB);
     release_large_buffer_cache();
     CHECK(large_buffer_cache_stats().cached_bytes == 0);
     CHECK(large_buffer_cache_stats().cached_blocks == 0);
@@ -75,16 +78,16 @@ TEST_CASE("the large block cache keeps to its limit", "[core][large_buffer]") {
     FreshCache fresh;
     set_large_buffer_cache_limit(16 * kMiB);
     void* a = acquire_cached_block(8 * kMiB);
-    void* b = acquire_cached_block(8 * kMiB);  // a mapping of its own: the cache is empty
+    void* b = acquire_cached_block(8 * kMiB);  // a block of its own: the cache is empty
     void* c = acquire_cached_block(8 * kMiB);
     return_cached_block(a, 8 * kMiB);
     return_cached_block(b, 8 * kMiB);
     CHECK(large_buffer_cache_stats().cached_bytes == 16 * kMiB);
     const auto full = large_buffer_cache_stats();
-    return_cached_block(c, 8 * kMiB);  // over the limit: unmapped
+    return_cached_block(c, 8 * kMiB);  // over the limit: freed
     CHECK(large_buffer_cache_stats().cached_bytes == 16 * kMiB);
-    CHECK(large_buffer_cache_stats().unmapped_bytes - full.unmapped_bytes == 8 * kMiB);
-    set_large_buffer_cache_limit(8 * kMiB);  // a lower limit unmaps down to it
+    CHECK(large_buffer_cache_stats().freed_bytes - full.freed_bytes == 8 * kMiB);
+    set_large_buffer_cache_limit(8 * kMiB);  // a lower limit frees down to it
     CHECK(large_buffer_cache_stats().cached_bytes <= 8 * kMiB);
     set_large_buffer_cache_limit(0);  // caching off
     CHECK(large_buffer_cache_stats().cached_bytes == 0);
@@ -150,12 +153,12 @@ TEST_CASE("cached_array holds small arrays on the heap and large ones in cached 
 
 TEST_CASE("canonical_order and filter_outliers give the same flags from cached blocks full of stale bytes as from fresh memory, and empty the cache", "[core][large_buffer][cloud][filters]") {
     FreshCache fresh;
-    // 4 M points: the permutation, the filter's order, its mean distances and
-    // its grid's cells (~1.1 M: their first positions, z ranges) are all
-    // blocks of 4 MiB or more.
+    // 4.5 M points: the permutation (18 and 36 MB), the filter's mean
+    // distances and point order (36, 18 MB) and its grid's cells (~1.25 M:
+    // their first positions, z ranges; 5 MB each) are all blocks of 4 MiB or more.
     PointCloud base;
     Rng rng(23);
-    for (int i = 0; i < 4000000; ++i) {
+    for (int i = 0; i < 4500000; ++i) {
         base.x.push_back(rng.uniform(0, 700)), base.y.push_back(rng.uniform(0, 700));
         base.z.push_back(10 + 0.05 * rng.normal() + (i % 997 == 0 ? rng.uniform(-30, 30) : 0.0));
         base.classification.push_back(1), base.intensity.push_back(static_cast<uint16_t>(i % 7)), base.return_number.push_back(1),
@@ -171,14 +174,17 @@ TEST_CASE("canonical_order and filter_outliers give the same flags from cached b
     set_large_buffer_cache_limit(0);  // every block fresh (zeroed) memory
     const auto [fresh_cloud, fresh_result] = run();
     set_large_buffer_cache_limit(std::size_t(1) << 30);
-    const auto reused_before = large_buffer_cache_stats().reused_bytes;
-    {  // the cache seeded with one large block of 0xff bytes: canonical_order takes its arrays from it
-        void* stale = acquire_cached_block(128 * kMiB);
-        std::memset(stale, 0xff, 128 * kMiB);
-        return_cached_block(stale, 128 * kMiB);
+    {  // the cache seeded with blocks of 0xff bytes, one for each array of canonical_order and the filter
+        std::vector<std::pair<void*, std::size_t>> stale;
+        for (const std::size_t mib : {8, 8, 8, 24, 40}) stale.emplace_back(acquire_cached_block(mib * kMiB), mib * kMiB);
+        for (const auto& [p, bytes] : stale) std::memset(p, 0xff, bytes), return_cached_block(p, bytes);
     }
+    const auto seeded = large_buffer_cache_stats();
     const auto [cloud, result] = run();
-    CHECK(large_buffer_cache_stats().reused_bytes - reused_before >= 96 * kMiB);  // canonical order's blocks, then the filter's
+    // Every array of both steps from the stale blocks: the permutation's two,
+    // then the filter's mean distances, point order, cell starts, z ranges.
+    CHECK(large_buffer_cache_stats().allocated_bytes == seeded.allocated_bytes);
+    CHECK(large_buffer_cache_stats().reused_bytes - seeded.reused_bytes == (24 + 40 + 40 + 24 + 8 + 8 + 8) * kMiB);
     CHECK(cloud.x == fresh_cloud.x);
     CHECK(cloud.z == fresh_cloud.z);
     CHECK(result.keep == fresh_result.keep);
