@@ -32,7 +32,7 @@ int main(int argc, char** argv) {
     app.add_flag("--progress", g.progress, "Show progress even when stderr is not a terminal");
     app.add_flag("--overwrite", g.overwrite, "Replace existing outputs (refused otherwise)");
     app.footer("Exit status: 0 success, 1 data error (bad or unusable input, output exists, nothing found), 2 usage error, "
-               "3 out of memory, 4 an audit gate failed, 70 internal error.");
+               "3 out of memory, 4 an audit gate failed, 5 a partial result (run, merge-tiles: some tiles failed), 70 internal error.");
 
     cli::CommandList commands;
     cli::add_info_command(app, g, commands);

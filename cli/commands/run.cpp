@@ -115,10 +115,10 @@ void prepare_run_folder(const GlobalFlags& g, const std::string& out, const RunM
 }
 
 // Exit status of a run or merge whose result leaves tiles out: 5 (a partial
-// result) with one error line naming the count and the first failure, printed
-// whatever --quiet says, so scripts and schedulers see that the outputs miss
-// tiles; 0 when every tile is in.
-int partial_result_exit(const RunReport& r) {
+// result) with one error line naming the count, the first failure and how to
+// complete the result (`retry`), printed whatever --quiet says, so scripts
+// and schedulers see that the outputs miss tiles; 0 when every tile is in.
+int partial_result_exit(const RunReport& r, const std::string& retry) {
     std::size_t failed = 0;
     const TileReport* first = nullptr;
     for (const auto& t : r.tiles)
@@ -127,10 +127,9 @@ int partial_result_exit(const RunReport& r) {
             if (!first) first = &t;
         }
     if (failed == 0) return 0;
-    std::fprintf(stderr,
-                 "cityforge: error: %s: partial result: %zu of %zu tiles failed (first: tile %d: %s); the outputs hold the other tiles; run the "
-                 "same command again to retry the failed ones\n",
-                 r.report_path.c_str(), failed, r.tiles.size(), first->index, first->reason.empty() ? "no reason recorded" : first->reason.c_str());
+    std::fprintf(stderr, "cityforge: error: %s: partial result: %zu of %zu tiles failed (first: tile %d: %s); the outputs hold the other tiles; %s\n",
+                 r.report_path.c_str(), failed, r.tiles.size(), first->index, first->reason.empty() ? "no reason recorded" : first->reason.c_str(),
+                 retry.c_str());
     return 5;
 }
 
@@ -189,7 +188,12 @@ void add_run_commands(CLI::App& parent, const GlobalFlags& g, CommandList& out) 
                            std::fprintf(stderr, "cityforge: wall seconds: split %.1f, tiles %.1f, merge %.1f, export %.1f, view %.1f\n", wall("split"),
                                         wall("tiles"), wall("merge"), wall("export"), wall("view"));
                        }
-                       return share.rank == 0 ? partial_result_exit(r) : 0;
+                       if (share.rank != 0) return 0;
+                       // Several ranks without a job id keep failed tiles (they cannot tell an old failure from a new one).
+                       return partial_result_exit(r, share.size > 1 && share.job.empty()
+                                                         ? "run the failed tiles again with `cityforge run --manifest " + rs->out + "/manifest.json --tile K --out " + rs->out +
+                                                               "`, then merge-tiles"
+                                                         : "run the same command again to retry the failed ones");
                    }});
 
     struct PlanState {
@@ -223,7 +227,8 @@ void add_run_commands(CLI::App& parent, const GlobalFlags& g, CommandList& out) 
                        if (!g.quiet)
                            std::fprintf(stderr, "cityforge: %zu buildings from %zu tiles -> %s\n", r.buildings, r.tiles.size(),
                                         r.report_path.c_str());
-                       return partial_result_exit(r);
+                       return partial_result_exit(r, "run the failed tiles again with `cityforge run --manifest " + ms->manifest + " --tile K --out " + ms->out +
+                                                             "`, then merge-tiles again");
                    }});
 }
 

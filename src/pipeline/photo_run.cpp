@@ -787,8 +787,12 @@ PhotoRunResult run_photo(const PhotoRunOptions& o, const Progress& progress) {
             r.run_dir = (out / "run").string();
             r.city = run_city(plan_run(ro), r.run_dir, {}, progress.sub(0.8, 0.99));
             std::size_t failed = 0;
-            for (const auto& t : r.city.tiles) failed += t.status == "failed";
-            if (failed) throw Error(r.run_dir, std::to_string(failed) + " tile(s) of the building run failed: " + r.city.tiles[0].reason);
+            const TileReport* first = nullptr;
+            for (const auto& t : r.city.tiles)
+                if (t.status == "failed") ++failed, first = first ? first : &t;
+            if (first)
+                throw Error(r.run_dir, std::to_string(failed) + " tile(s) of the building run failed; first, tile " + std::to_string(first->index) +
+                                           ": " + first->reason);
         }
     } catch (...) {
         std::error_code ec;

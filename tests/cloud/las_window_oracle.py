@@ -91,14 +91,17 @@ def main():
             print(f"{path}: scale/offset {oh['scale']} {oh['offset']}, source {h['scale']} {h['offset']}")
             return 1
         # The header readers rely on: the legacy count (the count for
-        # formats 0-5; for 6+ LAS 1.4 asks 0, our writer puts the count, which
-        # readers of 1.4 ignore), and bounds that enclose every point (within
-        # one scale quantum).
+        # formats 0-5; 0 for 6+, which keep no legacy compatibility: LAS 1.4
+        # R15), the 64-bit count of LAS 1.4, and bounds that enclose every
+        # point (within one scale quantum).
         with open(path, "rb") as f:
             raw = f.read(375)
         legacy = struct.unpack_from("<I", raw, 107)[0]
-        if legacy not in ((0, len(got)) if oh["fmt"] >= 6 else (len(got),)):
+        if legacy != (0 if oh["fmt"] >= 6 else len(got)):
             print(f"{path}: legacy point count {legacy} for {len(got)} points of format {oh['fmt']}")
+            return 1
+        if raw[25] >= 4 and struct.unpack_from("<Q", raw, 247)[0] != len(got):
+            print(f"{path}: point count {struct.unpack_from('<Q', raw, 247)[0]} for {len(got)} points")
             return 1
         for p in got:
             for k, v in enumerate((p[0] * sx + ox, p[1] * sy + oy, p[2] * sz + oz)):

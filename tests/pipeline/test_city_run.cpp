@@ -187,7 +187,7 @@ TEST_CASE("run: a tile that fails while another runs is reported and the others 
     // result: scripts and schedulers must see that tiles are missing).
     REQUIRE(faulty.exit_code == 5);
     CHECK(faulty.err.find("partial result") != std::string::npos);
-    CHECK(faulty.err.find("tile 8: ") != std::string::npos);
+    CHECK(faulty.err.find("tile_00008.las: corrupt LAS header") != std::string::npos);  // the first failed tile's reason
     const auto report = nlohmann::json::parse(test::slurp(dir / "faulty/run_report.json"));
     REQUIRE(report["tiles"].size() == 9);
     CHECK(report["tiles"][8]["status"] == "failed");
@@ -195,6 +195,14 @@ TEST_CASE("run: a tile that fails while another runs is reported and the others 
     bool said = false;
     for (const auto& w : report["warnings"]) said = said || w.get<std::string>().find("tile 8 failed") != std::string::npos;
     CHECK(said);
+    // merge-tiles of the same folder says the same (exit 5) and how to run the failed tile.
+    const auto merged = test::run_command(env + test::cli() + " merge-tiles --quiet --manifest " + (dir / "faulty/manifest.json") + " --out " +
+                                          (dir / "faulty"));
+    INFO(merged.err);
+    CHECK(merged.exit_code == 5);
+    CHECK(merged.err.find("partial result") != std::string::npos);
+    CHECK(merged.err.find("tile_00008.las: corrupt LAS header") != std::string::npos);
+    CHECK(merged.err.find("--tile K") != std::string::npos);
     int done = 0;
     for (int k = 0; k < 9; ++k) {  // the tiles that finished are whole: the clean run's bytes
         INFO("tile " << k);
