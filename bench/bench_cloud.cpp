@@ -7,11 +7,13 @@
 //   build/bin/bench_cloud FILE.las            (any LAS/LAZ the reader takes)
 //   build/bin/bench_cloud --synth SIZE_M [DENSITY]   (default 8 pts/m²)
 //   build/bin/bench_cloud --read FILE.las [REPEATS]  (reading only, whole and streamed, REPEATS times)
+//   build/bin/bench_cloud --digest FILE.las  (read_las once; a digest of every array of the cloud)
 #include "bench_main.hpp"
 #include <chrono>
 #include <cstdint>
 #include <cstdio>
 #include <cstdlib>
+#include <cstring>
 #include <ctime>
 #include <filesystem>
 #include <string>
@@ -52,14 +54,43 @@ uint64_t digest(const std::vector<uint8_t>& v) {
     for (uint8_t b : v) h = (h ^ b) * 1099511628211ull;
     return h;
 }
+// FNV-1a over the 8-byte words of an array's bytes (then its tail bytes),
+// seeded with its size: equal digests of two reads = the same bytes.
+template <class T>
+uint64_t array_digest(const std::vector<T>& v) {
+    const auto* p = reinterpret_cast<const unsigned char*>(v.data());
+    const std::size_t bytes = v.size() * sizeof(T);
+    uint64_t h = 1469598103934665603ull ^ bytes;
+    std::size_t i = 0;
+    for (; i + 8 <= bytes; i += 8) {
+        uint64_t w;
+        std::memcpy(&w, p + i, 8);
+        h = (h ^ w) * 1099511628211ull;
+    }
+    for (; i < bytes; ++i) h = (h ^ p[i]) * 1099511628211ull;
+    return h;
+}
 }  // namespace
 
 static int run_bench(int argc, char** argv) {
     if (argc < 2) {
-        std::fprintf(stderr, "usage: bench_cloud FILE.las | --synth SIZE_M [DENSITY] | --read FILE.las [REPEATS]\n");
+        std::fprintf(stderr, "usage: bench_cloud FILE.las | --synth SIZE_M [DENSITY] | --read FILE.las [REPEATS] | --digest FILE.las\n");
         return 2;
     }
     std::string path = argv[1];
+    if (path == "--digest") {  // the cloud's bytes, to compare two builds' readers
+        if (argc < 3) throw Error("--digest", "needs a LAS file");
+        const PointCloud c = read_las(argv[2]);
+        const std::pair<const char*, uint64_t> arrays[] = {
+            {"x", array_digest(c.x)}, {"y", array_digest(c.y)}, {"z", array_digest(c.z)}, {"intensity", array_digest(c.intensity)},
+            {"classification", array_digest(c.classification)}, {"return_number", array_digest(c.return_number)},
+            {"number_of_returns", array_digest(c.number_of_returns)}, {"gps_time", array_digest(c.gps_time)},
+            {"red", array_digest(c.red)}, {"green", array_digest(c.green)}, {"blue", array_digest(c.blue)}};
+        uint64_t all = 1469598103934665603ull;
+        for (const auto& [name, d] : arrays) std::printf("  %-18s %016llx\n", name, static_cast<unsigned long long>(d)), all = (all ^ d) * 1099511628211ull;
+        std::printf("cloud digest %016llx (%zu points)\n", static_cast<unsigned long long>(all), c.size());
+        return 0;
+    }
     if (path == "--read") {  // reading alone, repeated (page cache warm after the first)
         if (argc < 3) throw Error("--read", "needs a LAS file");
         const int repeats = argc > 3 ? int(cityforge::bench::parse_number(argv[3], "REPEATS")) : 1;
@@ -130,5 +161,5 @@ static int run_bench(int argc, char** argv) {
 }
 
 int main(int argc, char** argv) {
-    return cityforge::bench::run_main(argc, argv, "bench_cloud", "bench_cloud FILE.las | --synth SIZE_M [DENSITY] | --read FILE.las [REPEATS]", run_bench);
+    return cityforge::bench::run_main(argc, argv, "bench_cloud", "bench_cloud FILE.las | --synth SIZE_M [DENSITY] | --read FILE.las [REPEATS] | --digest FILE.las", run_bench);
 }

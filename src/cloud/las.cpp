@@ -8,7 +8,10 @@
 #include <filesystem>
 #include <limits>
 #include <vector>
+#include <cerrno>
+#include <fcntl.h>
 #include <sys/mman.h>
+#include <unistd.h>
 #include <tbb/parallel_for.h>
 
 #include "core/atomic_file.hpp"
@@ -116,6 +119,17 @@ void PointCloud::append(const PointCloud& src, std::size_t i) {
 }
 
 namespace {
+// Reads exactly `bytes` at `offset` of `fd` (pread, again after a signal or
+// a short read); false when the file ends first or a read fails.
+bool read_at(int fd, char* out, std::size_t bytes, uint64_t offset) {
+    while (bytes > 0) {
+        const ssize_t got = ::pread(fd, out, std::min<std::size_t>(bytes, std::size_t(1) << 30), static_cast<off_t>(offset));
+        if (got < 0 && errno == EINTR) continue;
+        if (got <= 0) return false;
+        out += got, bytes -= static_cast<std::size_t>(got), offset += static_cast<uint64_t>(got);
+    }
+    return true;
+}
 // Marks the whole 2 MiB pages inside a fresh block of `v`'s capacity for
 // transparent huge pages (a hint, as LargeBufferAllocator gives): a cloud of
 // 127 M points first touches ~5.5 GB, 1.3 M page faults on 4 kB pages.
@@ -297,7 +311,13 @@ LasReader::LasReader(const std::string& path) : path_(path) {
     if (h.point_count > (file_size - h.offset_to_points) / static_cast<uint64_t>(h.point_record_length))
         throw Error(path, "header says " + std::to_string(h.point_count) + " points but the file holds only " +
                               std::to_string((file_size - h.offset_to_points) / h.point_record_length) + " (truncated or corrupt)");
-    in_.seekg(h.offset_to_points);
+    fd_ = ::open(path.c_str(), O_RDONLY | O_CLOEXEC);
+    if (fd_ < 0) throw Error(path, "cannot open for reading");
+    ::posix_fadvise(fd_, 0, 0, POSIX_FADV_SEQUENTIAL);  // a hint: a larger read-ahead window
+}
+
+LasReader::~LasReader() {
+    if (fd_ >= 0) ::close(fd_);
 }
 
 std::size_t LasReader::reserve_hint() const {
@@ -326,9 +346,8 @@ std::size_t LasReader::read_into(char* out, std::size_t n) {
     if (laz_) {
         if (laz_->read(out, n) != n) throw Error(path_, "LAZ chunks hold fewer points than the header announces");
     } else {
-        const auto bytes = static_cast<std::streamsize>(n * static_cast<std::size_t>(header_.point_record_length));
-        in_.read(out, bytes);
-        if (in_.gcount() != bytes) throw Error(path_, "truncated point records");
+        const std::size_t rl = static_cast<std::size_t>(header_.point_record_length);
+        if (!read_at(fd_, out, n * rl, header_.offset_to_points + read_ * rl)) throw Error(path_, "truncated point records");
     }
     read_ += n;
     return n;
@@ -373,8 +392,9 @@ std::size_t LasReader::read_chunk(PointCloud& out, std::size_t max_points) {
 
 std::size_t LasReader::read_chunk_unscreened(PointCloud& out, std::size_t max_points) {
     if (laz_ && read_ == 0) laz_->set_point_fields_only(true);  // LAZ: skip layers a PointCloud does not hold
-    std::vector<char>& buf = buffer_;  // reused between chunks: no page faults per chunk
-    const std::size_t n = read_records(buf, max_points);
+    // LAZ: the chunk's records decoded into buffer_ (reused between chunks).
+    // LAS: read below, block by block, by the tasks that decode them.
+    const std::size_t n = laz_ ? read_records(buffer_, max_points) : static_cast<std::size_t>(std::min<uint64_t>(max_points, points_remaining()));
     if (n == 0) return 0;
     const LasHeader& h = header_;
     const std::size_t rl = h.point_record_length;
@@ -390,13 +410,12 @@ std::size_t LasReader::read_chunk_unscreened(PointCloud& out, std::size_t max_po
     if (color) out.red.resize(base + n), out.green.resize(base + n), out.blue.resize(base + n);
     // Records decoded in parallel blocks: each point's fields depend on its
     // record only. The bounds screen is checked on the way.
-    std::atomic<bool> outside{false};
-    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, 1u << 16), [&](const tbb::blocked_range<std::size_t>& range) {
+    auto decode = [&](const char* records, std::size_t first, std::size_t count) {
         bool out_here = false;
-        for (std::size_t i = range.begin(); i != range.end(); ++i) {
-            const LasPoint q = decode_record(buf.data() + i * rl, h, layout);
+        for (std::size_t i = 0; i != count; ++i) {
+            const LasPoint q = decode_record(records + i * rl, h, layout);
             out_here = out_here || outside_bounds(q.x, q.y, q.z);
-            const std::size_t k = base + i;
+            const std::size_t k = base + first + i;
             out.x[k] = q.x, out.y[k] = q.y, out.z[k] = q.z;
             out.intensity[k] = q.intensity;
             out.return_number[k] = q.return_number, out.number_of_returns[k] = q.number_of_returns;
@@ -404,8 +423,31 @@ std::size_t LasReader::read_chunk_unscreened(PointCloud& out, std::size_t max_po
             if (gps) out.gps_time[k] = q.gps_time;
             if (color) out.red[k] = q.red, out.green[k] = q.green, out.blue[k] = q.blue;
         }
-        if (out_here) outside.store(true, std::memory_order_relaxed);
-    });
+        return out_here;
+    };
+    std::atomic<bool> outside{false};
+    if (laz_) {
+        tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, 1u << 16), [&](const tbb::blocked_range<std::size_t>& range) {
+            if (decode(buffer_.data() + range.begin() * rl, range.begin(), range.size())) outside.store(true, std::memory_order_relaxed);
+        });
+    } else {
+        // Blocks of ~256 kB of records, each read with pread at its own
+        // offset into its task's buffer, which stays in that core's cache for
+        // the decoding: the copy out of the page cache is shared by the cores
+        // and no chunk-sized buffer is written and read again. A block the
+        // file no longer holds (cut short since it was opened) is the one
+        // "truncated point records" error, whichever task meets it.
+        const std::size_t block = std::max<std::size_t>(1, (std::size_t(256) << 10) / rl);
+        const uint64_t start = h.offset_to_points + read_ * rl;
+        tbb::parallel_for(std::size_t(0), (n + block - 1) / block, [&](std::size_t b) {
+            thread_local std::vector<char> records;
+            const std::size_t first = b * block, count = std::min(block, n - first);
+            if (records.size() < count * rl) records.resize(count * rl);
+            if (!read_at(fd_, records.data(), count * rl, start + first * rl)) throw Error(path_, "truncated point records");
+            if (decode(records.data(), first, count)) outside.store(true, std::memory_order_relaxed);
+        });
+        read_ += n;
+    }
     chunk_has_outside_ = outside.load();
     return n;
 }

@@ -85,6 +85,9 @@ int las_min_record_length(int format);
 class LasReader {
 public:
     explicit LasReader(const std::string& path);
+    ~LasReader();
+    LasReader(const LasReader&) = delete;
+    LasReader& operator=(const LasReader&) = delete;
     const LasHeader& header() const { return header_; }
     /// Appends up to `max_points` points to `out`; returns how many were read
     /// (0 at the end). Throws Error on a truncated file.
@@ -138,6 +141,9 @@ private:
     std::size_t read_into(char* out, std::size_t n);
     std::string path_;
     std::ifstream in_;
+    /// Uncompressed LAS: the file opened once more for its records, read
+    /// with pread at their offsets (by several threads at once); -1 for LAZ.
+    int fd_ = -1;
     LasHeader header_;
     uint64_t read_ = 0;
     uint64_t total_ = 0;  ///< points this reader hands out (all, or the selected chunks')
