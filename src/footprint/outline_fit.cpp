@@ -25,6 +25,11 @@ std::string to_string(FootprintFit f) {
     return "raw";
 }
 
+void OutlineFitOptions::validate() const {
+    if (!(simplify_m >= 0.0)) throw Error("simplify_m", "must be >= 0 metres");
+    curved.validate();
+}
+
 namespace {
 // The fit asked for, and a smooth outline for round buildings; throws where a fit fails.
 void fit_outline(const Polygon& pixels, const OutlineFitOptions& o, double pixel_size, double unit, FittedOutline& r) {
@@ -58,6 +63,8 @@ void fit_outline(const Polygon& pixels, const OutlineFitOptions& o, double pixel
 }  // namespace
 
 FittedOutline fit_building_outline(const Polygon& pixels, const OutlineFitOptions& o, double pixel_size, double unit) {
+    if (!(std::abs(pixel_size) > 0.0)) throw Error("fit_building_outline", "the pixel size must not be zero");
+    if (!(unit > 0.0)) throw Error("fit_building_outline", "metres per CRS unit must be positive");
     FittedOutline r;
     // Douglas–Peucker may fold a ring onto itself: then the exact pixel outline.
     r.raw = simplify_polygon(pixels, o.simplify_m / unit);
@@ -66,7 +73,10 @@ FittedOutline fit_building_outline(const Polygon& pixels, const OutlineFitOption
     try {
         fit_outline(pixels, o, pixel_size, unit, r);
     } catch (const Error& e) {
+        // Whatever the fit had set (a recursive fit before a failed curved
+        // outline, say) is dropped: a failed fit leaves the raw outline.
         r.status = "fit_failed", r.reason = e.what();
+        r.outline = r.raw, r.fit = to_string(o.fit), r.area_error_pct = 0.0, r.iou = 1.0;
     }
     orient_polygon(r.outline);
     if (r.status == "ok" && !polygon_is_valid(r.outline)) {

@@ -17,15 +17,19 @@ namespace cityforge {
 enum class FootprintFit { raw, rectangle, recursive, regularised };
 /// "raw", "rectangle", "recursive", "regularised" (or "regularized"); throws Error naming --fit otherwise.
 FootprintFit footprint_fit_from_string(const std::string& s);
+/// The fit's name as footprint_fit_from_string reads it ("regularised", not "regularized").
 std::string to_string(FootprintFit f);
 
-/// What fit_building_outline does; lengths in metres, areas in m².
+/// What fit_building_outline does. Here the nested fits' lengths and areas
+/// are in metres and m² (their own headers say CRS units: the lengths and
+/// areas are converted with `metres_per_unit` before they are applied).
 struct OutlineFitOptions {
     FootprintFit fit = FootprintFit::recursive;
-    double simplify_m = 0.25;          ///< Douglas–Peucker tolerance of the raw outline
-    RecursiveFitOptions recursive;     ///< the recursive fit (areas in m², lengths in metres)
-    RegularizeOptions regularize;      ///< the regularised fit's snapping (metres)
-    CurvedOutlineOptions curved;       ///< round buildings (recursive and regularised fits only)
+    double simplify_m = 0.25;          ///< Douglas–Peucker tolerance of the raw outline, metres (>= 0)
+    RecursiveFitOptions recursive;     ///< the recursive fit: min_rectangle_area in m², match_area_max_offset in metres
+    RegularizeOptions regularize;      ///< the regularised fit: merge_offset, min_edge, match_area_max_offset in metres
+    CurvedOutlineOptions curved;       ///< round buildings (recursive and regularised fits only; in pixels)
+    void validate() const;             ///< throws Error naming the option
 };
 
 /// One building's outline and how it was fitted. Polygons in the pixel
@@ -42,9 +46,11 @@ struct FittedOutline {
 };
 
 /// Fits one building's pixel outline `pixels` (rings along pixel edges of
-/// `pixel_size` CRS units; its largest part, holes allowed). A fit that
-/// throws, or gives an invalid polygon that filling diagonal-only pockets
-/// does not mend, leaves `raw` with status "fit_failed" and the reason.
+/// `pixel_size` CRS units, non-zero; its largest part, holes allowed;
+/// `metres_per_unit` > 0). A fit that throws, or gives an invalid polygon
+/// that filling diagonal-only pockets does not mend, leaves `raw` (fit: the
+/// fit asked for, area error 0, IoU 1) with status "fit_failed" and the
+/// reason. Throws Error for a zero pixel size or a unit that is not positive.
 FittedOutline fit_building_outline(const Polygon& pixels, const OutlineFitOptions& options, double pixel_size, double metres_per_unit);
 
 }  // namespace cityforge

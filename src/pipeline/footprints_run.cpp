@@ -126,7 +126,9 @@ FootprintTable footprint_table(const BuildingMask& mask, const Image<float>& nds
     };
     std::vector<Row> rows(std::size_t(mask.count) + 1);
     // An error is that of the lowest failing label, whatever the scheduling.
-    const OutlineFitOptions fit_options{o.fit, o.simplify_m, o.recursive, o.regularize, o.curved};
+    OutlineFitOptions fit_options;
+    fit_options.fit = o.fit, fit_options.simplify_m = o.simplify_m;
+    fit_options.recursive = o.recursive, fit_options.regularize = o.regularize, fit_options.curved = o.curved;
     parallel_tasks_in_order(mask.count, 8, [&](std::size_t task) {
         const uint32_t id = static_cast<uint32_t>(task + 1);
         if (id >= polygons.size() || polygons[id].empty()) return;  // a label left empty (a crown dropped, absorbed)
@@ -338,200 +340,236 @@ FootprintsReport run_footprints(const std::string& output_path, const Footprints
 }
 
 namespace {
+// The detection mode `automatic` stands for, from the inputs given.
+DetectionMode resolve_detection_mode(const FootprintsRunOptions& o) {
+    if (o.mode != DetectionMode::automatic) return o.mode;
+    const bool heights = !o.cloud.empty() || !o.ndsm.empty() || o.ndsm_band > 0;
+    // A model given with heights is applied (with them as its nDSM band when trained so).
+    return !o.model.empty() && !o.ortho.empty() ? DetectionMode::ortho_only
+           : heights && !o.ortho.empty()        ? DetectionMode::ortho_cloud
+           : heights                            ? DetectionMode::cloud_only
+                                                : DetectionMode::ortho_only;
+}
+
+// What a footprint run works on: the working grid and CRS, their units, the
+// ortho (its pixels where the mode uses them), the nDSM and the cloud's cells.
+struct FootprintScene {
+    GridSpec grid;
+    CrsInfo crs;        ///< the working CRS
+    CrsInfo input_crs;  ///< the CRS the footprints are written in by default
+    double unit = 1.0, z_unit = 1.0;  ///< metres per horizontal / vertical unit of `crs`
+    std::unique_ptr<RasterReader> ortho;
+    OrthoImage img;            ///< the ortho's colour bands (not the nDSM band) and valid pixels
+    Image<float> ndsm_band;    ///< the ortho's nDSM band, when --ndsm-band
+    Image<float> ndsm;         ///< heights above ground on `grid` (empty in ortho-only mode)
+    BuildingCells cells;       ///< building evidence from the heights (not in ortho-only mode)
+};
+
+// The ortho opened on the working CRS (a lon/lat ortho on its UTM zone), its
+// bands checked against the options, and its pixels read when the mode uses
+// them; with --ndsm-band the nDSM band leaves the colours.
+void open_ortho(const FootprintsRunOptions& o, DetectionMode mode, FootprintScene& s) {
+    RasterOpenOptions ro;
+    ro.project_geographic = true;  // metres: a lon/lat ortho is read on its UTM zone
+    ro.working_crs = o.working_crs;
+    s.ortho = std::make_unique<RasterReader>(o.ortho, ro);
+    const RasterInfo& info = s.ortho->info();
+    if (info.warped) log::info(o.ortho + ": " + info.source_crs.label() + " read on " + info.crs.label() + " (working CRS)");
+    s.grid = {info.transform, info.width, info.height};
+    s.crs = info.crs;
+    s.input_crs = info.source_crs;
+    s.unit = info.metres_per_unit, s.z_unit = s.crs.z_unit_m;
+    if (o.ndsm_band > info.band_count())
+        throw Error(o.ortho, "has " + std::to_string(info.band_count()) + " bands; --ndsm-band " + std::to_string(o.ndsm_band) + " does not exist");
+    if (o.nir_band > info.band_count())
+        throw Error(o.ortho, "has " + std::to_string(info.band_count()) + " bands; --nir-band " + std::to_string(o.nir_band) + " does not exist");
+    for (const int b : {o.ndsm_band, o.nir_band})
+        if (b > 0 && b == info.alpha_band) throw Error(o.ortho, "band " + std::to_string(b) + " is the alpha band (a mask), not an image band");
+    const bool learned = mode == DetectionMode::ortho_only && o.detector != OrthoDetector::rules && o.segments.empty();  // reads its own bands
+    if ((mode != DetectionMode::cloud_only && !learned) || o.ndsm_band > 0) s.img = read_ortho(*s.ortho);
+    if (o.ndsm_band <= 0) return;
+    // The nDSM band leaves the colours.
+    OrthoImage& img = s.img;
+    const int b = o.ndsm_band - 1;
+    s.ndsm_band = Image<float>(img.image.width, img.image.height, 1, 0.0f);
+    std::copy(img.image.band_data(b), img.image.band_data(b) + img.image.pixel_count(), s.ndsm_band.data.begin());
+    gaps_to_nan(s.ndsm_band, info, o.ndsm_band);
+    Image<float> colours(img.image.width, img.image.height, img.image.bands - 1, 0.0f);
+    for (int k = 0, out = 0; k < img.image.bands; ++k)
+        if (k != b) std::copy(img.image.band_data(k), img.image.band_data(k) + img.image.pixel_count(), colours.band_data(out++));
+    img.image = std::move(colours);
+    // A nodata value in the height band alone does not make the colours invalid.
+    std::vector<int> sources;
+    for (int k : image_bands(info))
+        if (k != o.ndsm_band) sources.push_back(k);
+    img.valid = valid_pixels(*s.ortho, {0, 0, info.width, info.height}, img.image, sources);
+    if (img.image.bands == 0 && mode != DetectionMode::cloud_only) throw Error(o.ortho, "has no colour band besides the nDSM band");
+}
+
+// Building cells and the nDSM from the point cloud, held whole or read window
+// by window (cloud_windows.hpp): the same decisions either way. Without an
+// ortho the grid is laid over the cloud's points.
+void cells_from_cloud(const FootprintsRunOptions& o, FootprintScene& s, FootprintsReport& rep, const Progress& progress) {
+    BuildingMaskOptions mo = o.mask;
+    rep.height_source = "point cloud";
+    // Whole-cloud decisions made before the cloud is read, alike whether it
+    // is held whole or read window by window (cloud_windows.hpp).
+    const CrsInfo target = s.ortho ? s.ortho->info().crs : CrsInfo{};
+    const bool windows = read_cloud_by_windows(CloudReader(o.cloud), o.max_points_in_memory, 0.0);  // the grid covers the whole box anyway
+    if (!s.ortho) {
+        s.unit = require_cloud_crs(o.cloud, o.cloud_crs).linear_unit_m;
+        s.grid = grid_over_extent(cloud_point_bounds(o.cloud), o.mask.gsd_m / s.unit, 0, o.cloud);
+    }
+    const GridSpec& grid = s.grid;
+    const CloudPlan plan = plan_cloud(o.cloud, o.cloud_crs, target, o.outliers, grid.transform.pixel_to_map({grid.width / 2.0, grid.height / 2.0}));
+    mo.gsd_m = std::abs(grid.transform.pixel_width) * s.unit;
+    rep.cloud_cell_factor = o.cloud_cell_factor > 0 ? o.cloud_cell_factor : cloud_cell_factor(plan.density_m2, mo.gsd_m);
+    const int f = rep.cloud_cell_factor;
+    WindowCloudCells wc;
+    if (windows) {
+        const GridSpec coarse = cloud_cell_grid(grid, 0, 0, f);
+        const double cell_m = mo.gsd_m * f;
+        const double tile_m = window_tile_edge_m(o.cloud_tile_m, o.cloud_overlap_m, plan.density_m2, o.max_points_in_memory);
+        WindowedRasters w = rasterize_cloud_by_windows(o.cloud, o.cloud_crs, target, coarse, s.unit, plan.outliers, o.ground,
+                                                       std::max(16, static_cast<int>(std::lround(tile_m / cell_m))),
+                                                       static_cast<int>(std::ceil(o.cloud_overlap_m / cell_m)), progress.sub(0.0, 0.3));
+        if (w.core_points == 0)
+            throw Error(o.cloud, s.ortho ? "does not overlap " + o.ortho + ": no kept point of the cloud lies on its grid" : "no kept point");
+        s.crs = w.crs;
+        if (s.input_crs.empty()) s.input_crs = w.source_crs;
+        s.z_unit = w.crs.z_unit_m;
+        rep.cloud_windows = w.windows;
+        mo.min_height_m /= s.z_unit;
+        wc = cloud_cells_from_rasters(std::move(w.rasters), grid.width, grid.height, 0, 0, f, mo);
+    } else {
+        const PreparedCloud pc = prepare_cloud(o.cloud, o.cloud_crs, target, plan.outliers, o.ground);
+        s.crs = pc.crs;
+        if (s.input_crs.empty()) s.input_crs = pc.source_crs;
+        s.z_unit = pc.crs.z_unit_m;
+        if (s.ortho) require_cloud_overlap(pc, o.cloud, s.ortho->info().extent, o.ortho);
+        progress(0.3, "cloud");
+        mo.min_height_m /= s.z_unit;
+        wc = cloud_cells_on_window(pc, grid, 0, 0, f, s.unit, mo);
+    }
+    s.cells = std::move(wc.cells);
+    s.ndsm = std::move(wc.rasters.ndsm);
+}
+
+// Building cells from an nDSM raster or band: no classes, so vegetation is told by roughness.
+void cells_from_ndsm(const FootprintsRunOptions& o, FootprintScene& s, FootprintsReport& rep) {
+    if (o.ndsm_band > 0) {
+        rep.height_source = "ortho band " + std::to_string(o.ndsm_band);
+        s.ndsm = std::move(s.ndsm_band);
+    } else {
+        rep.height_source = "nDSM raster";
+        s.ndsm = read_ndsm_raster(o.ndsm, s.grid, s.crs);
+        if (s.input_crs.empty()) s.input_crs = s.crs;
+        s.unit = ground_metres_per_unit(s.crs, s.grid.transform, s.grid.width, s.grid.height), s.z_unit = s.crs.z_unit_m;
+        if (!(s.unit > 0.0)) throw Error(o.ndsm, "an nDSM in a geographic CRS needs metres: warp it (gdalwarp -t_srs) or give it as a band of the ortho");
+    }
+    BuildingMaskOptions mo = o.mask;
+    mo.gsd_m = std::abs(s.grid.transform.pixel_width) * s.unit;
+    mo.min_height_m /= s.z_unit;
+    const Image<float> none(s.ndsm.width, s.ndsm.height, 1, NAN);
+    s.cells = building_cells(s.ndsm, s.ndsm, none, none, mo);
+}
+
+// Ortho-only, learned detection (src/detect): segments and outlines from the model's own segmentation.
+BuildingMask detect_with_model(const FootprintsRunOptions& o, const FootprintScene& s, FootprintsReport& rep, const Progress& progress) {
+    DetectionImage di = read_detection_image(o.ortho, o.nir_band);
+    const std::string path = o.model.empty() ? default_model_path(di.layout, di.gsd_m) : o.model;
+    const detect::DetectorModel model = detect::read_model_file(path);
+    if (model.layout.ndsm_band >= 0 && (!o.ndsm.empty() || !o.cloud.empty())) {
+        // A model trained with heights gets them as its last band.
+        rep.height_source = !o.cloud.empty() ? "point cloud" : "nDSM raster";
+        add_ndsm_band(di, heights_on_image_grid(di, o.ndsm, o.cloud, o.cloud_crs));
+    }
+    rep.detector = "model " + path;
+    BuildingMask mask = detect_building_mask(model, di, 0, progress.sub(0.1, 0.55));
+    if (s.ortho->info().warped) mask = mask_on_working_grid(mask, di.grid, di.crs, s.grid, s.crs, o.ortho);
+    return mask;
+}
+
+// The segments of --segments (the level of segment_scale), or none.
+Image<uint32_t> given_segments(const FootprintsRunOptions& o, const GridSpec& grid, FootprintsReport& rep) {
+    if (o.segments.empty()) return {};
+    const std::string path = segments_file(o.segments, o.segmentation.segment_scale);
+    rep.segments_path = path;
+    return read_segments(path, grid, rep.segments);
+}
+
+// Ortho-only with the hand-set segment rules (footprint/segment_classifier).
+BuildingMask detect_with_rules(const FootprintsRunOptions& o, const FootprintScene& s, const BuildingMaskOptions& mo, const SegmentClassifierOptions& co,
+                               FootprintsReport& rep, const Progress& progress) {
+    rep.detector = "rules";
+    Image<float> normalised = s.img.image;
+    normalize_bands(normalised, s.img.valid);
+    Image<uint32_t> segments = given_segments(o, s.grid, rep);
+    if (o.segments.empty())
+        segments = segment_at_scale(normalised, s.img.valid, o.segmentation.watershed, o.segmentation.segment_scale, rep.segments, progress.sub(0.35, 0.55));
+    refine_segment_boundaries(normalised, normalised.bands, segments, rep.segments, o.segmentation.refine_passes);
+    std::vector<uint8_t> building;
+    classify_segments(s.img.image, segments, rep.segments, co, building);
+    return label_buildings(std::move(building), s.grid.width, s.grid.height, mo);
+}
+
+// Buildings from the heights' cells; in ortho_cloud mode each redrawn along
+// the ortho's edges and split at roof seams; hidden roofs completed.
+BuildingMask detect_from_heights(const FootprintsRunOptions& o, DetectionMode mode, FootprintScene& s, const BuildingMaskOptions& mo,
+                                 const SegmentClassifierOptions& co, FootprintsReport& rep, const Progress& progress) {
+    BuildingMask mask = buildings_from_cells(s.cells, s.grid.width, s.grid.height, mo);
+    if (mode == DetectionMode::ortho_cloud) {
+        // Each building redrawn along the ortho's edges (see footprint/ortho_refine.hpp).
+        const Image<uint32_t> segments = given_segments(o, s.grid, rep);
+        const std::vector<uint8_t> vegetation = s.cells.used_classes ? std::vector<uint8_t>{} : vegetation_pixels(s.img.image, co);
+        progress(0.45, "buildings");
+        OrthoRefineOptions ro = o.segmentation;
+        ro.cloud_edges = rep.cloud_cell_factor == 1;
+        ro.max_crown_plane_sigma_m /= s.z_unit, ro.min_crown_local_roughness_m /= s.z_unit, ro.gsd_m = mo.gsd_m;
+        rep.crowns_dropped =
+            static_cast<int>(refine_buildings_with_ortho(mask, s.cells, s.img.image, s.img.valid, s.ndsm, 20.0 / s.z_unit, segments, vegetation, ro));
+        RoofSeamOptions so = o.seams;
+        so.gsd_m = mo.gsd_m, so.ridge_rise_m /= s.z_unit, so.valley_depth_m /= s.z_unit;
+        rep.seam_splits = split_at_roof_seams(mask, s.img.image, s.img.valid, s.ndsm, so);
+    }
+    if (mo.hidden_completion_max_share > 0) rep.hidden_completed_cells = complete_hidden_roofs(mask, s.cells, mo.hidden_completion_max_share);
+    return mask;
+}
+
 FootprintsReport run_footprints_unguarded(const std::string& output_path, const FootprintsRunOptions& o, const Progress& progress) {
     const auto t0 = std::chrono::steady_clock::now();
     o.validate();
     const std::string driver = vector_driver_for(output_path);
     FootprintsReport rep;
-    const bool heights = !o.cloud.empty() || !o.ndsm.empty() || o.ndsm_band > 0;
-    DetectionMode mode = o.mode;
-    if (mode == DetectionMode::automatic)
-        // A model given with heights is applied (with them as its nDSM band when trained so).
-        mode = !o.model.empty() && !o.ortho.empty()   ? DetectionMode::ortho_only
-               : heights && !o.ortho.empty()          ? DetectionMode::ortho_cloud
-               : heights                              ? DetectionMode::cloud_only
-                                                      : DetectionMode::ortho_only;
+    const DetectionMode mode = resolve_detection_mode(o);
     rep.mode = to_string(mode);
-    GridSpec grid;
-    CrsInfo crs;
-    BuildingMask mask;
-    Image<float> ndsm;  // empty in ortho-only mode
-    double unit = 1.0, z_unit = 1.0;
-    std::unique_ptr<RasterReader> ortho;
-    OrthoImage img;
-    CrsInfo input_crs;  // the CRS the footprints are written in by default
-    if (!o.ortho.empty()) {
-        RasterOpenOptions ro;
-        ro.project_geographic = true;  // metres: a lon/lat ortho is read on its UTM zone
-        ro.working_crs = o.working_crs;
-        ortho = std::make_unique<RasterReader>(o.ortho, ro);
-        const RasterInfo& info = ortho->info();
-        if (info.warped) log::info(o.ortho + ": " + info.source_crs.label() + " read on " + info.crs.label() + " (working CRS)");
-        grid = {info.transform, info.width, info.height};
-        crs = info.crs;
-        input_crs = info.source_crs;
-        unit = info.metres_per_unit, z_unit = crs.z_unit_m;
-        if (o.ndsm_band > info.band_count())
-            throw Error(o.ortho, "has " + std::to_string(info.band_count()) + " bands; --ndsm-band " + std::to_string(o.ndsm_band) + " does not exist");
-        if (o.nir_band > info.band_count())
-            throw Error(o.ortho, "has " + std::to_string(info.band_count()) + " bands; --nir-band " + std::to_string(o.nir_band) + " does not exist");
-        for (const int b : {o.ndsm_band, o.nir_band})
-            if (b > 0 && b == info.alpha_band) throw Error(o.ortho, "band " + std::to_string(b) + " is the alpha band (a mask), not an image band");
-        const bool learned = mode == DetectionMode::ortho_only && o.detector != OrthoDetector::rules && o.segments.empty();  // reads its own bands
-        if ((mode != DetectionMode::cloud_only && !learned) || o.ndsm_band > 0) img = read_ortho(*ortho);
-    }
-    Image<float> ndsm_band;
-    if (o.ndsm_band > 0) {
-        // The nDSM band leaves the colours.
-        const int b = o.ndsm_band - 1;
-        ndsm_band = Image<float>(img.image.width, img.image.height, 1, 0.0f);
-        std::copy(img.image.band_data(b), img.image.band_data(b) + img.image.pixel_count(), ndsm_band.data.begin());
-        gaps_to_nan(ndsm_band, ortho->info(), o.ndsm_band);
-        Image<float> colours(img.image.width, img.image.height, img.image.bands - 1, 0.0f);
-        for (int k = 0, out = 0; k < img.image.bands; ++k)
-            if (k != b) std::copy(img.image.band_data(k), img.image.band_data(k) + img.image.pixel_count(), colours.band_data(out++));
-        img.image = std::move(colours);
-        // A nodata value in the height band alone does not make the colours invalid.
-        std::vector<int> sources;
-        for (int k : image_bands(ortho->info()))
-            if (k != o.ndsm_band) sources.push_back(k);
-        const RasterInfo& oi = ortho->info();
-        img.valid = valid_pixels(*ortho, {0, 0, oi.width, oi.height}, img.image, sources);
-        if (img.image.bands == 0 && mode != DetectionMode::cloud_only) throw Error(o.ortho, "has no colour band besides the nDSM band");
-    }
-    BuildingCells cells;
+    FootprintScene s;
+    if (!o.ortho.empty()) open_ortho(o, mode, s);
     if (mode != DetectionMode::ortho_only) {
-        BuildingMaskOptions mo = o.mask;
-        if (!o.cloud.empty()) {
-            rep.height_source = "point cloud";
-            // Whole-cloud decisions made before the cloud is read, alike whether it
-            // is held whole or read window by window (cloud_windows.hpp).
-            const CrsInfo target = ortho ? ortho->info().crs : CrsInfo{};
-            const bool windows = read_cloud_by_windows(CloudReader(o.cloud), o.max_points_in_memory, 0.0);  // the grid covers the whole box anyway
-            if (!ortho) {
-                unit = require_cloud_crs(o.cloud, o.cloud_crs).linear_unit_m;
-                grid = grid_over_extent(cloud_point_bounds(o.cloud), o.mask.gsd_m / unit, 0, o.cloud);
-            }
-            const CloudPlan plan = plan_cloud(o.cloud, o.cloud_crs, target, o.outliers,
-                                              grid.transform.pixel_to_map({grid.width / 2.0, grid.height / 2.0}));
-            mo.gsd_m = std::abs(grid.transform.pixel_width) * unit;
-            rep.cloud_cell_factor = o.cloud_cell_factor > 0 ? o.cloud_cell_factor : cloud_cell_factor(plan.density_m2, mo.gsd_m);
-            const int f = rep.cloud_cell_factor;
-            WindowCloudCells wc;
-            if (windows) {
-                const GridSpec coarse = cloud_cell_grid(grid, 0, 0, f);
-                const double cell_m = mo.gsd_m * f;
-                const double tile_m = window_tile_edge_m(o.cloud_tile_m, o.cloud_overlap_m, plan.density_m2, o.max_points_in_memory);
-                WindowedRasters w = rasterize_cloud_by_windows(o.cloud, o.cloud_crs, target, coarse, unit, plan.outliers, o.ground,
-                                                               std::max(16, static_cast<int>(std::lround(tile_m / cell_m))),
-                                                               static_cast<int>(std::ceil(o.cloud_overlap_m / cell_m)), progress.sub(0.0, 0.3));
-                if (w.core_points == 0)
-                    throw Error(o.cloud, ortho ? "does not overlap " + o.ortho + ": no kept point of the cloud lies on its grid" : "no kept point");
-                crs = w.crs;
-                if (input_crs.empty()) input_crs = w.source_crs;
-                z_unit = w.crs.z_unit_m;
-                rep.cloud_windows = w.windows;
-                mo.min_height_m /= z_unit;
-                wc = cloud_cells_from_rasters(std::move(w.rasters), grid.width, grid.height, 0, 0, f, mo);
-            } else {
-                const PreparedCloud pc = prepare_cloud(o.cloud, o.cloud_crs, target, plan.outliers, o.ground);
-                crs = pc.crs;
-                if (input_crs.empty()) input_crs = pc.source_crs;
-                z_unit = pc.crs.z_unit_m;
-                if (ortho) require_cloud_overlap(pc, o.cloud, ortho->info().extent, o.ortho);
-                progress(0.3, "cloud");
-                mo.min_height_m /= z_unit;
-                wc = cloud_cells_on_window(pc, grid, 0, 0, f, unit, mo);
-            }
-            cells = std::move(wc.cells);
-            ndsm = std::move(wc.rasters.ndsm);
-        } else {
-            // An nDSM raster or band: no classes, so vegetation is told by roughness.
-            if (o.ndsm_band > 0) {
-                rep.height_source = "ortho band " + std::to_string(o.ndsm_band);
-                ndsm = std::move(ndsm_band);
-            } else {
-                rep.height_source = "nDSM raster";
-                ndsm = read_ndsm_raster(o.ndsm, grid, crs);
-                if (input_crs.empty()) input_crs = crs;
-                unit = ground_metres_per_unit(crs, grid.transform, grid.width, grid.height), z_unit = crs.z_unit_m;
-                if (!(unit > 0.0)) throw Error(o.ndsm, "an nDSM in a geographic CRS needs metres: warp it (gdalwarp -t_srs) or give it as a band of the ortho");
-            }
-            mo.gsd_m = std::abs(grid.transform.pixel_width) * unit;
-            mo.min_height_m /= z_unit;
-            const Image<float> none(ndsm.width, ndsm.height, 1, NAN);
-            cells = building_cells(ndsm, ndsm, none, none, mo);
-        }
-        rep.used_classes = cells.used_classes;
+        if (!o.cloud.empty()) cells_from_cloud(o, s, rep, progress);
+        else cells_from_ndsm(o, s, rep);
+        rep.used_classes = s.cells.used_classes;
     }
     BuildingMaskOptions mo = o.mask;
-    mo.gsd_m = std::abs(grid.transform.pixel_width) * unit;
-    mo.split_step_m /= z_unit, mo.split_gap_step_m /= z_unit;
+    mo.gsd_m = std::abs(s.grid.transform.pixel_width) * s.unit;
+    mo.split_step_m /= s.z_unit, mo.split_gap_step_m /= s.z_unit;
     SegmentClassifierOptions co = o.classifier;
-    if (ortho) co.gsd_m = ortho->info().gsd.x_m;
+    if (s.ortho) co.gsd_m = s.ortho->info().gsd.x_m;
     // The NIR band's index among the colours (the nDSM band left them).
     co.nir_band = o.nir_band > 0 ? o.nir_band - 1 - (o.ndsm_band > 0 && o.ndsm_band < o.nir_band ? 1 : 0) : -1;
-    if (mode == DetectionMode::ortho_only && o.detector != OrthoDetector::rules && o.segments.empty()) {
-        // Learned detection (src/detect): segments and outlines from the model's own segmentation.
-        DetectionImage di = read_detection_image(o.ortho, o.nir_band);
-        const std::string path = o.model.empty() ? default_model_path(di.layout, di.gsd_m) : o.model;
-        const detect::DetectorModel model = detect::read_model_file(path);
-        if (model.layout.ndsm_band >= 0 && (!o.ndsm.empty() || !o.cloud.empty())) {
-            // A model trained with heights gets them as its last band.
-            rep.height_source = !o.cloud.empty() ? "point cloud" : "nDSM raster";
-            add_ndsm_band(di, heights_on_image_grid(di, o.ndsm, o.cloud, o.cloud_crs));
-        }
-        rep.detector = "model " + path;
-        mask = detect_building_mask(model, di, 0, progress.sub(0.1, 0.55));
-        if (ortho->info().warped) mask = mask_on_working_grid(mask, di.grid, di.crs, grid, crs, o.ortho);
-    } else if (mode == DetectionMode::ortho_only) {
-        rep.detector = "rules";
-        Image<float> normalised = img.image;
-        normalize_bands(normalised, img.valid);
-        Image<uint32_t> segments;
-        if (!o.segments.empty()) {
-            const std::string path = segments_file(o.segments, o.segmentation.segment_scale);
-            segments = read_segments(path, grid, rep.segments);
-            rep.segments_path = path;
-        } else {
-            segments = segment_at_scale(normalised, img.valid, o.segmentation.watershed, o.segmentation.segment_scale, rep.segments,
-                                        progress.sub(0.35, 0.55));
-        }
-        refine_segment_boundaries(normalised, normalised.bands, segments, rep.segments, o.segmentation.refine_passes);
-        std::vector<uint8_t> building;
-        classify_segments(img.image, segments, rep.segments, co, building);
-        mask = label_buildings(std::move(building), grid.width, grid.height, mo);
-    } else {
-        mask = buildings_from_cells(cells, grid.width, grid.height, mo);
-        if (mode == DetectionMode::ortho_cloud) {
-            // Each building redrawn along the ortho's edges (see footprint/ortho_refine.hpp).
-            Image<uint32_t> segments;
-            if (!o.segments.empty()) {
-                const std::string path = segments_file(o.segments, o.segmentation.segment_scale);
-                segments = read_segments(path, grid, rep.segments);
-                rep.segments_path = path;
-            }
-            const std::vector<uint8_t> vegetation = cells.used_classes ? std::vector<uint8_t>{} : vegetation_pixels(img.image, co);
-            progress(0.45, "buildings");
-            OrthoRefineOptions ro = o.segmentation;
-            ro.cloud_edges = rep.cloud_cell_factor == 1;
-            ro.max_crown_plane_sigma_m /= z_unit, ro.min_crown_local_roughness_m /= z_unit, ro.gsd_m = mo.gsd_m;
-            rep.crowns_dropped = static_cast<int>(refine_buildings_with_ortho(mask, cells, img.image, img.valid, ndsm, 20.0 / z_unit, segments, vegetation, ro));
-            RoofSeamOptions so = o.seams;
-            so.gsd_m = mo.gsd_m, so.ridge_rise_m /= z_unit, so.valley_depth_m /= z_unit;
-            rep.seam_splits = split_at_roof_seams(mask, img.image, img.valid, ndsm, so);
-        }
-        if (mo.hidden_completion_max_share > 0) rep.hidden_completed_cells = complete_hidden_roofs(mask, cells, mo.hidden_completion_max_share);
-    }
+    BuildingMask mask = mode == DetectionMode::ortho_only && o.detector != OrthoDetector::rules && o.segments.empty()
+                            ? detect_with_model(o, s, rep, progress)
+                        : mode == DetectionMode::ortho_only ? detect_with_rules(o, s, mo, co, rep, progress)
+                                                            : detect_from_heights(o, mode, s, mo, co, rep, progress);
     // What found each building (the `source` field).
     const std::string first_source = mode == DetectionMode::ortho_only ? (rep.detector == "rules" ? "image_rules" : "image_model")
                                      : rep.height_source == "point cloud"  ? "cloud"
                                                                            : "ndsm";
     std::vector<std::string> sources(mask.count + 1, first_source);
-    if (mode == DetectionMode::ortho_cloud) add_self_trained_buildings(mask, sources, img, ortho->info(), ndsm, o, mo, rep, progress.sub(0.5, 0.6));
-    rep.width = grid.width, rep.height = grid.height;
+    if (mode == DetectionMode::ortho_cloud) add_self_trained_buildings(mask, sources, s.img, s.ortho->info(), s.ndsm, o, mo, rep, progress.sub(0.5, 0.6));
+    rep.width = s.grid.width, rep.height = s.grid.height;
     progress(0.6, "detection");
-    FootprintTable table = footprint_table(mask, ndsm, grid.transform, 0, 0, {}, rep.mode, unit, z_unit, crs, o, sources);
+    FootprintTable table = footprint_table(mask, s.ndsm, s.grid.transform, 0, 0, {}, rep.mode, s.unit, s.z_unit, s.crs, o, sources);
     rep.buildings = table.features.size();
     for (const Feature& f : table.features) {
         const std::string& src = std::get<std::string>(f.values[2]);
@@ -547,12 +585,12 @@ FootprintsReport run_footprints_unguarded(const std::string& output_path, const 
     VectorWriteOptions wopt;
     wopt.driver = driver;
     // Written in the input's CRS (or --out-crs), whatever CRS the work was done in.
-    CrsInfo out_crs = !o.out_crs.empty() ? crs_from_user_input(o.out_crs, "--out-crs") : input_crs.empty() ? crs : input_crs;
-    out_crs = combine_with_vertical(out_crs, crs);
-    if (!same_horizontal_crs(out_crs, crs)) reproject_features(table.features, crs, out_crs, output_path);
+    CrsInfo out_crs = !o.out_crs.empty() ? crs_from_user_input(o.out_crs, "--out-crs") : s.input_crs.empty() ? s.crs : s.input_crs;
+    out_crs = combine_with_vertical(out_crs, s.crs);
+    if (!same_horizontal_crs(out_crs, s.crs)) reproject_features(table.features, s.crs, out_crs, output_path);
     write_polygon_features(output_path, out_crs, table.fields, table.features, wopt);
     rep.crs = out_crs.label();
-    rep.working_crs = crs.label();
+    rep.working_crs = s.crs.label();
     rep.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
     progress(1.0, "written");
     return rep;

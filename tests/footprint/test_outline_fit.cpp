@@ -93,6 +93,38 @@ TEST_CASE("Outline fits: a rotated rectangle, an L, a circle and the raw outline
     }
 }
 
+TEST_CASE("Outline fits: the recursive and regularised fits' options in metres reach them in a foot CRS", "[footprint][fit]") {
+    const double ft = 0.3048, px = 0.5 / ft;
+    // 30 m x 20 m with a 5 m x 3 m notch (15 m²) in one corner.
+    const Polygon notch = pixel_outline(px, [&](double x, double y) {
+        const double u = x * ft - 10.0, v = y * ft - 10.0;
+        return u >= 0 && u < 30 && v >= 0 && v < 20 && !(u >= 25 && v >= 17);
+    });
+    OutlineFitOptions o;
+    o.fit = FootprintFit::recursive;
+    o.recursive.tolerance_pct = 0.0;
+    o.recursive.match_area_max_offset = 0.0;
+    o.recursive.min_rectangle_area = 20.0;  // m²: the 15 m² notch is not cut (in ft² it would be)
+    CHECK(fit_building_outline(notch, o, px, ft).outline.outer.size() == 4);
+    o.recursive.min_rectangle_area = 10.0;  // m²: it is
+    CHECK(fit_building_outline(notch, o, px, ft).outline.outer.size() == 6);
+    // A 1 m step along one side: absorbed by a 3 m minimum edge, kept by a 0.25 m one.
+    const Polygon step = pixel_outline(px, [&](double x, double y) {
+        const double u = x * ft - 10.0, v = y * ft - 10.0;
+        return u >= 0 && u < 30 && v >= 0 && v < (u < 15 ? 20 : 21);
+    });
+    o.fit = FootprintFit::regularised;
+    o.regularize.min_edge = 3.0, o.regularize.merge_offset = 3.0, o.regularize.match_area_max_offset = 0.0;
+    const FittedOutline coarse = fit_building_outline(step, o, px, ft);
+    CHECK(coarse.fit == "regularised");
+    CHECK(coarse.outline.outer.size() == 4);
+    o.regularize.min_edge = 0.25, o.regularize.merge_offset = 0.25;
+    CHECK(fit_building_outline(step, o, px, ft).outline.outer.size() == 6);
+    // A zero pixel size or a unit that is not positive is refused.
+    CHECK_THROWS_WITH(fit_building_outline(step, o, 0.0, ft), Catch::Contains("pixel size"));
+    CHECK_THROWS_WITH(fit_building_outline(step, o, px, 0.0), Catch::Contains("metres per CRS unit"));
+}
+
 TEST_CASE("Fit names: every fit reads back from its name - an unknown name is refused naming --fit", "[footprint][fit]") {
     for (FootprintFit f : {FootprintFit::raw, FootprintFit::rectangle, FootprintFit::recursive, FootprintFit::regularised})
         CHECK(footprint_fit_from_string(to_string(f)) == f);
