@@ -475,7 +475,10 @@ LasWriter::LasWriter(const std::string& path, const std::array<double, 3>& scale
 
     std::vector<char> hdr(kHeaderSize, 0);
     std::memcpy(hdr.data(), "LASF", 4);
-    put<uint16_t>(hdr, 6, crs_wkt.empty() ? 0 : 0x10);  // global encoding: bit 4 = CRS is WKT
+    // Global encoding bit 4: the CRS is WKT. Always set: point formats 6-10
+    // with the bit clear are a file error (LAS 1.4 R15, "Coordinate Reference
+    // System Representation"), with or without a CRS record.
+    put<uint16_t>(hdr, 6, 0x10);
     hdr[24] = 1;
     hdr[25] = 4;
     std::strncpy(hdr.data() + 26, "cityforge", 32);
@@ -567,7 +570,7 @@ void LasWriter::close() {
         out_.write(static_cast<const char*>(data), static_cast<std::streamsize>(len));
     };
     // The legacy point count (107) and legacy counts by return (111..130)
-    // stay zero: a LAS 1.4 file of point format 7 with a WKT CRS cannot be
+    // stay zero: a LAS 1.4 file of point format 7 (WKT bit set) cannot be
     // read by a LAS 1.0-1.3 reader, so it does not keep legacy compatibility
     // and the specification (1.4 R15, "Legacy Number of point records")
     // requires zero there; the 64-bit counts below are the counts.

@@ -72,6 +72,20 @@ TEST_CASE("LAS 1.4 format 7 round trip keeps coordinates - attributes and CRS", 
     uint64_t count = 0;
     std::memcpy(&count, bytes.data() + 247, 8);
     CHECK(count == 1000);
+    // The WKT bit of the global encoding is set for format 7, with a CRS or
+    // without (LAS 1.4 R15: formats 6-10 with the bit clear are an error).
+    CHECK((static_cast<uint8_t>(bytes[6]) & 0x10) != 0);
+    {
+        LasWriter w(dir / "none.las", {0.001, 0.001, 0.001}, {500000, 4400000, 0}, "");
+        w.write(c);
+        w.close();
+    }
+    const std::string none = slurp(dir / "none.las");
+    REQUIRE(none.size() > 6);
+    CHECK((static_cast<uint8_t>(none[6]) & 0x10) != 0);
+    LasHeader hn;
+    CHECK(read_las(dir / "none.las", &hn).size() == 1000);
+    CHECK(hn.crs.wkt.empty());
 }
 
 TEST_CASE("A writer that is not closed leaves no file", "[cloud][las][errors]") {
