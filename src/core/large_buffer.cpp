@@ -8,6 +8,9 @@
 namespace cityforge {
 
 namespace {
+// How much larger than a request a cached block handed out for it may be: twice, plus this.
+constexpr std::size_t kMaxSurplusBytes = std::size_t(64) << 20;
+
 
 struct Block {
     void* p;
@@ -62,10 +65,13 @@ void* acquire_cached_block(std::size_t bytes) {
     const std::size_t need = (std::max<std::size_t>(bytes, 1) + kCachedBlockAlign - 1) / kCachedBlockAlign * kCachedBlockAlign;
     BlockCache& c = cache();
     std::lock_guard<std::mutex> lock(c.mutex);
-    // The smallest cached block that holds the request, used whole.
+    // The smallest cached block that holds the request, used whole; not one
+    // more than twice the request (+ 64 MiB): with tiles at once in one
+    // process, a small tile taking a large tile's blocks would make that
+    // tile allocate them again, both held beyond what the tile planning counts.
     auto best = c.blocks.end();
     for (auto it = c.blocks.begin(); it != c.blocks.end(); ++it)
-        if (it->bytes >= need && (best == c.blocks.end() || it->bytes < best->bytes)) best = it;
+        if (it->bytes >= need && it->bytes - need <= need + kMaxSurplusBytes && (best == c.blocks.end() || it->bytes < best->bytes)) best = it;
     if (best != c.blocks.end()) {
         const Block b = *best;
         c.blocks.erase(best);

@@ -67,7 +67,7 @@ inline constexpr std::size_t kCachedBlockAlign = std::size_t(2) << 20;
 
 /// A block of at least `bytes` (>= kCachedBlockMinBytes; rounded up to
 /// 2 MiB), 2 MiB-aligned, marked for huge pages. The smallest cached block
-/// that holds the request is handed out whole, its bytes stale: the caller
+/// that holds the request (and is at most twice it + 64 MiB) is handed out whole, its bytes stale: the caller
 /// must write every byte it reads. When no cached block is large enough, the
 /// cache is emptied first (its blocks freed) and a new block allocated
 /// (aligned_alloc, as LargeBufferAllocator), so the process never holds

@@ -72,6 +72,23 @@ TEST_CASE("the large block cache hands a freed block out again, the smallest tha
     release_large_buffer_cache();
     CHECK(large_buffer_cache_stats().cached_bytes == 0);
     CHECK(large_buffer_cache_stats().cached_blocks == 0);
+
+    // A cached block more than twice a request + 64 MiB is not handed out for
+    // it (a small tile must not take a large tile's blocks): a block of its own.
+    void* big = acquire_cached_block(200 * kMiB);  // never touched: no memory
+    return_cached_block(big, 200 * kMiB);
+    const auto cached_big = large_buffer_cache_stats();
+    REQUIRE(cached_big.cached_bytes == 200 * kMiB);
+    void* small = acquire_cached_block(60 * kMiB);
+    CHECK(small != big);
+    CHECK(large_buffer_cache_stats().reused_bytes == cached_big.reused_bytes);
+    CHECK(large_buffer_cache_stats().allocated_bytes - cached_big.allocated_bytes == 60 * kMiB);
+    return_cached_block(small, 60 * kMiB);
+    // Within twice + 64 MiB it is.
+    void* again = acquire_cached_block(60 * kMiB);
+    CHECK(again == small);
+    return_cached_block(again, 60 * kMiB);
+    release_large_buffer_cache();
 }
 
 TEST_CASE("the large block cache keeps to its limit", "[core][large_buffer]") {
