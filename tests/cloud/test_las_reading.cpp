@@ -7,6 +7,7 @@
 #include <fstream>
 #include <tbb/global_control.h>
 
+#include "same_cloud.hpp"
 #include "cloud/las.hpp"
 #include "core/error.hpp"
 #include "test_support.hpp"
@@ -49,21 +50,6 @@ PointCloud decode_by_hand(const std::string& bytes) {
     return c;
 }
 
-void require_same(const PointCloud& a, const PointCloud& b) {
-    REQUIRE(a.size() == b.size());
-    CHECK(a.x == b.x);
-    CHECK(a.y == b.y);
-    CHECK(a.z == b.z);
-    CHECK(a.intensity == b.intensity);
-    CHECK(a.classification == b.classification);
-    CHECK(a.return_number == b.return_number);
-    CHECK(a.number_of_returns == b.number_of_returns);
-    CHECK(a.gps_time == b.gps_time);
-    CHECK(a.red == b.red);
-    CHECK(a.green == b.green);
-    CHECK(a.blue == b.blue);
-}
-
 PointCloud read_in_chunks(const std::string& path, std::size_t chunk) {
     LasReader reader(path);
     PointCloud c;
@@ -81,10 +67,10 @@ TEST_CASE("LAS records decoded in parallel blocks equal the bytes decoded by han
         INFO(name);
         const PointCloud expected = decode_by_hand(slurp(path));
         REQUIRE(expected.size() > 100000);
-        require_same(read_las(path), expected);
-        for (std::size_t chunk : {std::size_t(1) << 20, std::size_t(7777), std::size_t(100001)}) require_same(read_in_chunks(path, chunk), expected);
+        cityforge::test::check_same_cloud(read_las(path), expected);
+        for (std::size_t chunk : {std::size_t(1) << 20, std::size_t(7777), std::size_t(100001)}) cityforge::test::check_same_cloud(read_in_chunks(path, chunk), expected);
         tbb::global_control one(tbb::global_control::max_allowed_parallelism, 1);
-        require_same(read_las(path), expected);
+        cityforge::test::check_same_cloud(read_las(path), expected);
     }
 }
 
