@@ -120,12 +120,14 @@ void PointCloud::append(const PointCloud& src, std::size_t i) {
 
 namespace {
 // Reads exactly `bytes` at `offset` of `fd` (pread, again after a signal or
-// a short read); false when the file ends first or a read fails.
-bool read_at(int fd, char* out, std::size_t bytes, uint64_t offset) {
+// a short read); false when the file ends first; a failed read (an I/O
+// error) throws Error naming `path` and the system's reason.
+bool read_at(int fd, char* out, std::size_t bytes, uint64_t offset, const std::string& path) {
     while (bytes > 0) {
         const ssize_t got = ::pread(fd, out, std::min<std::size_t>(bytes, std::size_t(1) << 30), static_cast<off_t>(offset));
         if (got < 0 && errno == EINTR) continue;
-        if (got <= 0) return false;
+        if (got < 0) throw Error(path, std::string("read error in the point records: ") + std::strerror(errno));
+        if (got == 0) return false;
         out += got, bytes -= static_cast<std::size_t>(got), offset += static_cast<uint64_t>(got);
     }
     return true;
@@ -347,7 +349,7 @@ std::size_t LasReader::read_into(char* out, std::size_t n) {
         if (laz_->read(out, n) != n) throw Error(path_, "LAZ chunks hold fewer points than the header announces");
     } else {
         const std::size_t rl = static_cast<std::size_t>(header_.point_record_length);
-        if (!read_at(fd_, out, n * rl, header_.offset_to_points + read_ * rl)) throw Error(path_, "truncated point records");
+        if (!read_at(fd_, out, n * rl, header_.offset_to_points + read_ * rl, path_)) throw Error(path_, "truncated point records");
     }
     read_ += n;
     return n;
@@ -443,7 +445,7 @@ std::size_t LasReader::read_chunk_unscreened(PointCloud& out, std::size_t max_po
             thread_local std::vector<char> records;
             const std::size_t first = b * block, count = std::min(block, n - first);
             if (records.size() < count * rl) records.resize(count * rl);
-            if (!read_at(fd_, records.data(), count * rl, start + first * rl)) throw Error(path_, "truncated point records");
+            if (!read_at(fd_, records.data(), count * rl, start + first * rl, path_)) throw Error(path_, "truncated point records");
             if (decode(records.data(), first, count)) outside.store(true, std::memory_order_relaxed);
         });
         read_ += n;
