@@ -65,6 +65,7 @@ void fit_outline(const Polygon& pixels, const OutlineFitOptions& o, double pixel
 FittedOutline fit_building_outline(const Polygon& pixels, const OutlineFitOptions& o, double pixel_size, double unit) {
     if (!(std::abs(pixel_size) > 0.0)) throw Error("fit_building_outline", "the pixel size must not be zero");
     if (!(unit > 0.0)) throw Error("fit_building_outline", "metres per CRS unit must be positive");
+    o.validate();
     FittedOutline r;
     // Douglas–Peucker may fold a ring onto itself: then the exact pixel outline.
     r.raw = simplify_polygon(pixels, o.simplify_m / unit);

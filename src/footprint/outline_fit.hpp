@@ -50,7 +50,8 @@ struct FittedOutline {
 /// `metres_per_unit` > 0). A fit that throws, or gives an invalid polygon
 /// that filling diagonal-only pockets does not mend, leaves `raw` (fit: the
 /// fit asked for, area error 0, IoU 1) with status "fit_failed" and the
-/// reason. Throws Error for a zero pixel size or a unit that is not positive.
+/// reason. Throws Error for a zero pixel size, a unit that is not positive
+/// or options that fail validate().
 FittedOutline fit_building_outline(const Polygon& pixels, const OutlineFitOptions& options, double pixel_size, double metres_per_unit);
 
 }  // namespace cityforge

@@ -123,6 +123,8 @@ TEST_CASE("Outline fits: the recursive and regularised fits' options in metres r
     // A zero pixel size or a unit that is not positive is refused.
     CHECK_THROWS_WITH(fit_building_outline(step, o, 0.0, ft), Catch::Contains("pixel size"));
     CHECK_THROWS_WITH(fit_building_outline(step, o, px, 0.0), Catch::Contains("metres per CRS unit"));
+    o.simplify_m = -1.0;
+    CHECK_THROWS_WITH(fit_building_outline(step, o, px, ft), Catch::Contains("simplify_m"));
 }
 
 TEST_CASE("Fit names: every fit reads back from its name - an unknown name is refused naming --fit", "[footprint][fit]") {
