@@ -104,6 +104,12 @@ std::string las_text(const char* p, std::size_t n) {
     return s;
 }
 
+void PointCloud::truncate(std::size_t n) {
+    for (auto* v : {&x, &y, &z, &gps_time}) v->resize(std::min(v->size(), n));
+    for (auto* v : {&intensity, &red, &green, &blue}) v->resize(std::min(v->size(), n));
+    for (auto* v : {&classification, &return_number, &number_of_returns}) v->resize(std::min(v->size(), n));
+}
+
 void PointCloud::clear() {
     for (auto* v : {&x, &y, &z, &gps_time}) v->clear();
     for (auto* v : {&intensity, &red, &green, &blue}) v->clear();
@@ -119,19 +125,6 @@ void PointCloud::append(const PointCloud& src, std::size_t i) {
 }
 
 namespace {
-// Reads exactly `bytes` at `offset` of `fd` (pread, again after a signal or
-// a short read); false when the file ends first; a failed read (an I/O
-// error) throws Error naming `path` and the system's reason.
-bool read_at(int fd, char* out, std::size_t bytes, uint64_t offset, const std::string& path) {
-    while (bytes > 0) {
-        const ssize_t got = ::pread(fd, out, std::min<std::size_t>(bytes, std::size_t(1) << 30), static_cast<off_t>(offset));
-        if (got < 0 && errno == EINTR) continue;
-        if (got < 0) throw Error(path, std::string("read error in the point records: ") + std::strerror(errno));
-        if (got == 0) return false;
-        out += got, bytes -= static_cast<std::size_t>(got), offset += static_cast<uint64_t>(got);
-    }
-    return true;
-}
 // Marks the whole 2 MiB pages inside a fresh block of `v`'s capacity for
 // transparent huge pages (a hint, as LargeBufferAllocator gives): a cloud of
 // 127 M points first touches ~5.5 GB, 1.3 M page faults on 4 kB pages.
@@ -171,17 +164,10 @@ bool LasHeader::has_color() const {
 }
 bool LasHeader::has_gps_time() const { return point_format != 0 && point_format != 2; }
 
-LasReader::LasReader(const std::string& path) : path_(path) {
-    namespace fs = std::filesystem;
-    if (!fs::exists(path)) throw Error(path, "file not found");
-    if (fs::is_directory(path)) throw Error(path, "is a directory, not a point cloud file");
-    in_.open(path, std::ios::binary);
-    if (!in_) throw Error(path, "cannot open for reading");
-    const auto file_size = static_cast<uint64_t>(fs::file_size(path));
+LasReader::LasReader(const std::string& path) : path_(path), file_(path, "a point cloud file") {
+    const uint64_t file_size = file_.size();
     char hdr[375] = {};
-    in_.read(hdr, sizeof hdr);
-    const auto got = static_cast<std::size_t>(in_.gcount());
-    in_.clear();
+    const std::size_t got = file_.read_at(0, hdr, sizeof hdr);
     if (got == 0) throw Error(path, "empty file (0 bytes), not a LAS file");
     if (got < 4 || std::memcmp(hdr, "LASF", 4) != 0) throw Error(path, "not a LAS file (no LASF signature)");
     if (got < 227) throw Error(path, "truncated LAS header: the file ends after " + std::to_string(got) + " bytes, a header needs at least 227");
@@ -236,17 +222,14 @@ LasReader::LasReader(const std::string& path) : path_(path) {
     uint64_t pos = header_size;
     for (uint32_t i = 0; i < n_vlr && pos + 54 <= h.offset_to_points; ++i) {
         char vh[54];
-        in_.seekg(static_cast<std::streamoff>(pos));
-        in_.read(vh, 54);
-        if (!in_) throw Error(path, "truncated variable length record header");
+        if (!file_.read_exact_at(pos, vh, 54)) throw Error(path, "truncated variable length record header");
         const std::string user = las_text(vh + 2, 16);
         const auto record_id = get<uint16_t>(vh + 18);
         const auto length = get<uint16_t>(vh + 20);
         if (pos + 54 + length > h.offset_to_points) throw Error(path, "variable length record runs past the point data");
         if (user == "LASF_Projection" || user == "liblas") {
             std::vector<char> data(length);
-            in_.read(data.data(), length);
-            if (!in_) throw Error(path, "truncated variable length record");
+            if (!file_.read_exact_at(pos + 54, data.data(), length)) throw Error(path, "truncated variable length record");
             if (record_id == 2112) (user == "liblas" ? h.crs.liblas_wkt : h.crs.wkt) = las_text(data.data(), data.size());
             else if (user == "LASF_Projection" && record_id == 34735) {
                 h.crs.geokey_directory.resize(length / 2);
@@ -262,8 +245,7 @@ LasReader::LasReader(const std::string& path) : path_(path) {
         }
         if (compressed && user == "laszip encoded" && record_id == 22204) {
             std::vector<char> data(length);
-            in_.read(data.data(), length);
-            if (!in_) throw Error(path, "truncated LASzip VLR");
+            if (!file_.read_exact_at(pos + 54, data.data(), length)) throw Error(path, "truncated LASzip VLR");
             h.laz = parse_laszip_vlr(data, path);
         }
         pos += 54 + length;
@@ -277,16 +259,14 @@ LasReader::LasReader(const std::string& path) : path_(path) {
         // the position forward by at least 60 bytes, so the loop ends.
         for (uint32_t i = 0; i < n_evlr && epos <= file_size && file_size - epos >= 60; ++i) {
             char eh[60];
-            in_.seekg(static_cast<std::streamoff>(epos));
-            in_.read(eh, 60);
-            if (!in_) break;
+            if (!file_.read_exact_at(epos, eh, 60)) break;
             const std::string user = las_text(eh + 2, 16);
             const auto record_id = get<uint16_t>(eh + 18);
             const auto length = get<uint64_t>(eh + 20);
             if (length > file_size - epos - 60) throw Error(path, "extended variable length record " + std::to_string(i) + " (" + std::to_string(length) + " bytes at " + std::to_string(epos) + ") runs past the end of the file");
             if (user == "LASF_Projection" && record_id == 2112 && length < (1u << 24)) {
                 std::vector<char> data(length);
-                in_.read(data.data(), static_cast<std::streamsize>(length));
+                if (!file_.read_exact_at(epos + 60, data.data(), data.size())) throw Error(path, "truncated extended variable length record " + std::to_string(i));
                 h.crs.evlr_wkt = las_text(data.data(), data.size());
             }
             epos += 60 + length;
@@ -306,21 +286,17 @@ LasReader::LasReader(const std::string& path) : path_(path) {
     if (compressed) {
         if (!h.laz) throw Error(path, "LAZ-compressed points (point format byte " + std::to_string(raw_format) + ") but no LASzip VLR (laszip encoded/22204)");
         check_laz_supported(*h.laz, h.point_format, h.point_record_length, path);
-        laz_ = std::make_unique<LazPointSource>(path, *h.laz, h.offset_to_points, h.point_count, h.point_record_length);
+        laz_ = std::make_unique<LazPointSource>(file_, *h.laz, h.offset_to_points, h.point_count, h.point_record_length);
         return;
     }
     // Compared as a quotient: point_count x record length can wrap 2^64.
     if (h.point_count > (file_size - h.offset_to_points) / static_cast<uint64_t>(h.point_record_length))
         throw Error(path, "header says " + std::to_string(h.point_count) + " points but the file holds only " +
                               std::to_string((file_size - h.offset_to_points) / h.point_record_length) + " (truncated or corrupt)");
-    fd_ = ::open(path.c_str(), O_RDONLY | O_CLOEXEC);
-    if (fd_ < 0) throw Error(path, "cannot open for reading");
-    ::posix_fadvise(fd_, 0, 0, POSIX_FADV_SEQUENTIAL);  // a hint: a larger read-ahead window
+    file_.advise_sequential();  // a hint: a larger read-ahead window
 }
 
-LasReader::~LasReader() {
-    if (fd_ >= 0) ::close(fd_);
-}
+LasReader::~LasReader() = default;
 
 std::size_t LasReader::reserve_hint() const {
     // An uncompressed file holds its records (checked on open); a LAZ header
@@ -349,7 +325,7 @@ std::size_t LasReader::read_into(char* out, std::size_t n) {
         if (laz_->read(out, n) != n) throw Error(path_, "LAZ chunks hold fewer points than the header announces");
     } else {
         const std::size_t rl = static_cast<std::size_t>(header_.point_record_length);
-        if (!read_at(fd_, out, n * rl, header_.offset_to_points + read_ * rl, path_)) throw Error(path_, "truncated point records");
+        if (!file_.read_exact_at(header_.offset_to_points + read_ * rl, out, n * rl)) throw Error(path_, "truncated point records");
     }
     read_ += n;
     return n;
@@ -398,6 +374,19 @@ std::size_t LasReader::read_chunk_unscreened(PointCloud& out, std::size_t max_po
     // LAS: read below, block by block, by the tasks that decode them.
     const std::size_t n = laz_ ? read_records(buffer_, max_points) : static_cast<std::size_t>(std::min<uint64_t>(max_points, points_remaining()));
     if (n == 0) return 0;
+    // A chunk that cannot be read (or memory that cannot be had) leaves `out`
+    // as it was: the points appended for this chunk are taken off again.
+    const std::size_t base = out.size();
+    try {
+        append_records(out, n);
+    } catch (...) {
+        out.truncate(base);
+        throw;
+    }
+    return n;
+}
+
+void LasReader::append_records(PointCloud& out, std::size_t n) {
     const LasHeader& h = header_;
     const std::size_t rl = h.point_record_length;
     const RecordLayout layout(h);
@@ -445,13 +434,12 @@ std::size_t LasReader::read_chunk_unscreened(PointCloud& out, std::size_t max_po
             thread_local std::vector<char> records;
             const std::size_t first = b * block, count = std::min(block, n - first);
             if (records.size() < count * rl) records.resize(count * rl);
-            if (!read_at(fd_, records.data(), count * rl, start + first * rl, path_)) throw Error(path_, "truncated point records");
+            if (!file_.read_exact_at(start + first * rl, records.data(), count * rl)) throw Error(path_, "truncated point records");
             if (decode(records.data(), first, count)) outside.store(true, std::memory_order_relaxed);
         });
         read_ += n;
     }
     chunk_has_outside_ = outside.load();
-    return n;
 }
 
 PointCloud read_las(const std::string& path, LasHeader* header) {

@@ -15,6 +15,7 @@
 
 #include "cloud/laz_decoder.hpp"
 #include "cloud/point_cloud.hpp"
+#include "core/random_access_file.hpp"
 
 namespace cityforge {
 
@@ -90,7 +91,8 @@ public:
     LasReader& operator=(const LasReader&) = delete;
     const LasHeader& header() const { return header_; }
     /// Appends up to `max_points` points to `out`; returns how many were read
-    /// (0 at the end). Throws Error on a truncated file.
+    /// (0 at the end). Throws Error on a truncated file or a read error,
+    /// leaving `out` as it was before the call.
     /// A reader is used either through read_chunk or through read_records
     /// (LAZ: read_chunk skips the layers a PointCloud does not hold).
     std::size_t read_chunk(PointCloud& out, std::size_t max_points);
@@ -137,13 +139,15 @@ public:
 private:
     void report_end();
     std::size_t read_chunk_unscreened(PointCloud& out, std::size_t max_points);
+    /// Decodes the next `n` records (LAZ: already in buffer_) onto the end of `out`.
+    void append_records(PointCloud& out, std::size_t n);
     /// n records (n <= points_remaining()) into `out`.
     std::size_t read_into(char* out, std::size_t n);
     std::string path_;
-    std::ifstream in_;
-    /// Uncompressed LAS: the file opened once more for its records, read
-    /// with pread at their offsets (by several threads at once); -1 for LAZ.
-    int fd_ = -1;
+    /// The file, opened once: header, VLRs, EVLRs and records (LAS: read by
+    /// several threads at once; LAZ: by laz_, which borrows it and is
+    /// destroyed first) all come from this descriptor.
+    RandomAccessFile file_;
     LasHeader header_;
     uint64_t read_ = 0;
     uint64_t total_ = 0;  ///< points this reader hands out (all, or the selected chunks')

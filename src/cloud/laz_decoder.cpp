@@ -1691,12 +1691,10 @@ std::size_t decode_laz_chunk_xy(const LazInfo& info, int record_length, const ui
 
 // ------------------------------------------------------------ streaming
 
-LazPointSource::LazPointSource(const std::string& path, const LazInfo& info, uint64_t offset_to_points, uint64_t point_count,
+LazPointSource::LazPointSource(const RandomAccessFile& file, const LazInfo& info, uint64_t offset_to_points, uint64_t point_count,
                                int record_length)
-    : path_(path), info_(info), record_length_(record_length), point_count_(point_count) {
-    in_.open(path, std::ios::binary);
-    if (!in_) throw Error(path, "cannot open for reading");
-    file_size_ = static_cast<uint64_t>(std::filesystem::file_size(path));
+    : path_(file.path()), info_(info), record_length_(record_length), point_count_(point_count), file_(&file), file_size_(file.size()) {
+    const std::string& path = path_;
     if (point_count == 0) return;
     if (info.compressor == 1) {
         // Pointwise, not chunked: no chunk-table pointer; the first point
@@ -1711,12 +1709,7 @@ LazPointSource::LazPointSource(const std::string& path, const LazInfo& info, uin
     }
     const uint64_t chunks_start = offset_to_points + 8;
     if (chunks_start > file_size_) throw Error(path, "LAZ file ends before its first chunk (truncated)");
-    auto read_at = [&](uint64_t pos, void* dst, std::size_t n) {
-        in_.clear();
-        in_.seekg(static_cast<std::streamoff>(pos));
-        in_.read(static_cast<char*>(dst), static_cast<std::streamsize>(n));
-        return static_cast<std::size_t>(in_.gcount()) == n;
-    };
+    auto read_at = [&](uint64_t pos, void* dst, std::size_t n) { return file_->read_exact_at(pos, dst, n); };
     int64_t table_pos = 0;
     read_at(offset_to_points, &table_pos, 8);
     if (table_pos == -1 && file_size_ >= 8) read_at(file_size_ - 8, &table_pos, 8);
@@ -1819,9 +1812,7 @@ void LazPointSource::fill() {
         const uint64_t avail = file_size_ - std::min(file_size_, sequential_offset_);
         const uint64_t want = std::min<uint64_t>(avail, c.point_count * rl * 2 + 65536);
         std::vector<uint8_t> raw(static_cast<std::size_t>(want));
-        in_.clear();
-        in_.seekg(static_cast<std::streamoff>(sequential_offset_));
-        in_.read(reinterpret_cast<char*>(raw.data()), static_cast<std::streamsize>(raw.size()));
+        raw.resize(file_->read_at(sequential_offset_, raw.data(), raw.size()));
         std::vector<char> out(static_cast<std::size_t>(c.point_count) * rl);
         const std::size_t used = decode_laz_chunk(info_, record_length_, raw.data(), raw.size(), c.point_count, out.data(), path_, order_[next_],
                                               point_fields_only_);
@@ -1941,10 +1932,7 @@ std::size_t LazPointSource::decode_direct(char* out, std::size_t max_points) {
 void LazPointSource::read_raw(std::size_t chunk, std::vector<uint8_t>& raw) {
     const LazChunk& c = chunks_[chunk];
     raw.resize(static_cast<std::size_t>(c.bytes));
-    in_.clear();
-    in_.seekg(static_cast<std::streamoff>(c.offset));
-    in_.read(reinterpret_cast<char*>(raw.data()), static_cast<std::streamsize>(c.bytes));
-    if (static_cast<uint64_t>(in_.gcount()) != c.bytes)
+    if (!file_->read_exact_at(c.offset, raw.data(), raw.size()))
         throw Error(path_, "chunk " + std::to_string(chunk) + ": truncated (the file ends inside it)");
 }
 

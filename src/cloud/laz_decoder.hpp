@@ -18,6 +18,8 @@
 #include <string>
 #include <vector>
 
+#include "core/random_access_file.hpp"
+
 namespace cityforge {
 
 /// One item of the LASzip VLR (a field group of the point record).
@@ -94,7 +96,8 @@ struct LazXYBox {
 class LazPointSource {
 public:
     /// Reads the chunk table (or plans a sequential read when there is none).
-    LazPointSource(const std::string& path, const LazInfo& info, uint64_t offset_to_points, uint64_t point_count,
+    /// `file` is borrowed: it must outlive this source (LasReader owns both).
+    LazPointSource(const RandomAccessFile& file, const LazInfo& info, uint64_t offset_to_points, uint64_t point_count,
                    int record_length);
     ~LazPointSource();
     LazPointSource(const LazPointSource&) = delete;
@@ -132,7 +135,7 @@ private:
     LazInfo info_;
     int record_length_;
     uint64_t point_count_;
-    std::ifstream in_;
+    const RandomAccessFile* file_;
     uint64_t file_size_ = 0;
     std::vector<LazChunk> chunks_;
     bool has_table_ = false;

@@ -31,6 +31,9 @@ struct PointCloud {
     bool has_color() const { return !red.empty(); }
     bool has_gps_time() const { return !gps_time.empty(); }
     void clear();
+    /// Keeps the first `n` points (n <= size()) with all their attributes;
+    /// an attribute array that was empty stays empty.
+    void truncate(std::size_t n);
     void reserve(std::size_t n, bool color, bool gps);
     /// Appends point `i` of `src` with all its attributes (colour and GPS time
     /// when `src` has them; mixing clouds with and without them is the caller's error).

@@ -85,6 +85,7 @@ TEST_CASE("A LAS file cut short after it was opened gives the one-line truncated
         LasReader reader(p);
         PointCloud c;
         REQUIRE(reader.read_chunk(c, 1000) == 1000);
+        const PointCloud first = c;
         // Cut inside a record, after the open checked the size.
         std::filesystem::resize_file(p, offset_to_points + keep_points * rl + rl / 2);
         CHECK_THROWS_WITH(
@@ -93,6 +94,9 @@ TEST_CASE("A LAS file cut short after it was opened gives the one-line truncated
                 }
             }(),
             Catch::Contains("shrinks.las") && Catch::Contains("truncated point records"));
+        // The failed chunk is taken off again: the caller's cloud holds what
+        // it held before that call, every attribute array of the same length.
+        cityforge::test::check_same_cloud(c, first);
     }
     // The raw records take the same path.
     std::ofstream(p, std::ios::binary | std::ios::trunc) << bytes;
@@ -100,4 +104,89 @@ TEST_CASE("A LAS file cut short after it was opened gives the one-line truncated
     std::filesystem::resize_file(p, offset_to_points + 10 * rl);
     std::vector<char> records;
     CHECK_THROWS_WITH(reader.read_records(records, 100), Catch::Contains("shrinks.las") && Catch::Contains("truncated point records"));
+}
+
+TEST_CASE("A LAS file replaced under its path after it was opened is read whole from the file that was opened - LAS and LAZ", "[cloud][las][read]") {
+    // The header, VLRs and records come from one open descriptor: renaming
+    // another file onto the path mixes nothing in.
+    ScratchDir dir("las_replaced");
+    for (const char* name : {"autzen_oregon/autzen_trim.las", "laz_corpus/autzen_trim.laz"}) {
+        INFO(name);
+        const std::string src = shared_data(name);
+        const PointCloud expected = read_las(src);
+        const std::string p = dir / (std::string("opened") + std::filesystem::path(name).extension().string());
+        std::filesystem::copy_file(src, p, std::filesystem::copy_options::overwrite_existing);
+        LasReader reader(p);
+        const std::string other = dir / "other.las";
+        std::filesystem::copy_file(shared_data("delft_ahn3_bgt_west/ahn3_delft_west.las"), other, std::filesystem::copy_options::overwrite_existing);
+        std::filesystem::rename(other, p);
+        PointCloud c;
+        while (reader.read_chunk(c, 50000) > 0) {
+        }
+        cityforge::test::check_same_cloud(c, expected);
+    }
+}
+
+TEST_CASE("LAS 1.4 format 7 with 3 extra bytes per record and an EVLR after the points: records, CRS from the EVLR, any chunking", "[cloud][las][read]") {
+    // Built from our writer's file by hand: every record gets 3 extra bytes
+    // (the record length says 39), and an extended VLR holding a WKT follows
+    // the points (the header's EVLR offset and count point at it). 20,000
+    // points: several of the reader's 256 kB blocks, and a block boundary
+    // inside no record.
+    ScratchDir dir("las14_evlr");
+    PointCloud c;
+    for (int i = 0; i < 20000; ++i) {
+        c.x.push_back(500000.0 + 0.01 * i), c.y.push_back(4400000.0 + 0.37 * (i % 977)), c.z.push_back(10.0 + 0.001 * (i % 3001));
+        c.intensity.push_back(static_cast<uint16_t>(i * 7)), c.classification.push_back(static_cast<uint8_t>(1 + i % 6));
+        c.return_number.push_back(static_cast<uint8_t>(1 + i % 3)), c.number_of_returns.push_back(3);
+        c.gps_time.push_back(1000.0 + i * 0.5);
+        c.red.push_back(static_cast<uint16_t>(i)), c.green.push_back(static_cast<uint16_t>(2 * i)), c.blue.push_back(static_cast<uint16_t>(3 * i));
+    }
+    {
+        LasWriter w(dir / "plain.las", {0.001, 0.001, 0.001}, {500000, 4400000, 0}, "");
+        w.write(c);
+        w.close();
+    }
+    const PointCloud expected = read_las(dir / "plain.las");
+    REQUIRE(expected.size() == 20000);
+    const std::string plain = slurp(dir / "plain.las");
+    const std::size_t offset_to_points = at<uint32_t>(plain, 96), rl = at<uint16_t>(plain, 105);
+    REQUIRE(static_cast<uint8_t>(plain[104]) == 7);
+    REQUIRE(rl == 36);
+    std::string b = plain.substr(0, offset_to_points);
+    for (std::size_t i = 0; i < 20000; ++i) {
+        b += plain.substr(offset_to_points + i * rl, rl);
+        b += std::string{'\x11', '\x22', '\x33'};
+    }
+    const std::string wkt = "PROJCS[\"from the EVLR\"]";
+    std::string evlr(60, '\0');
+    std::memcpy(evlr.data() + 2, "LASF_Projection", 15);
+    const uint16_t record_id = 2112;
+    const uint64_t length = wkt.size() + 1;
+    std::memcpy(evlr.data() + 18, &record_id, 2);
+    std::memcpy(evlr.data() + 20, &length, 8);
+    const uint64_t evlr_offset = b.size();
+    const uint32_t evlr_count = 1;
+    const uint16_t new_rl = 39;
+    b += evlr + wkt + '\0';
+    std::memcpy(b.data() + 105, &new_rl, 2);
+    std::memcpy(b.data() + 235, &evlr_offset, 8);
+    std::memcpy(b.data() + 243, &evlr_count, 4);
+    const std::string p = dir / "extra_evlr.las";
+    std::ofstream(p, std::ios::binary) << b;
+
+    LasHeader h;
+    cityforge::test::check_same_cloud(read_las(p, &h), expected);
+    CHECK(h.point_record_length == 39);
+    CHECK(h.crs.evlr_wkt == "PROJCS[\"from the EVLR\"]");
+    for (std::size_t chunk : {std::size_t(6721), std::size_t(1) << 20, std::size_t(3)}) cityforge::test::check_same_cloud(read_in_chunks(p, chunk), expected);
+    tbb::global_control one(tbb::global_control::max_allowed_parallelism, 1);
+    cityforge::test::check_same_cloud(read_las(p), expected);
+    // The raw records keep the extra bytes.
+    LasReader reader(p);
+    std::vector<char> records;
+    REQUIRE(reader.read_records(records, 2) == 2);
+    CHECK(records.size() == 78);
+    CHECK(records[36] == '\x11');
+    CHECK(records[77] == '\x33');
 }
