@@ -1,5 +1,7 @@
 #include "core/large_buffer.hpp"
 
+#include "core/memory.hpp"
+
 #include <algorithm>
 #include <mutex>
 #include <unordered_map>
@@ -28,9 +30,12 @@ struct BlockCache {
     std::unordered_map<void*, std::size_t> out;
     std::size_t limit = 0;
     LargeBufferCacheStats stats;
+    // A quarter of the memory this process may use (usable_memory_bytes: the
+    // address-space limit when lower than the machine's RAM), as the tile
+    // planning counts memory.
     BlockCache() {
-        const long pages = ::sysconf(_SC_PHYS_PAGES), page = ::sysconf(_SC_PAGESIZE);
-        limit = pages > 0 && page > 0 ? static_cast<std::size_t>(pages) * static_cast<std::size_t>(page) / 4 : std::size_t(1) << 30;
+        const double usable = usable_memory_bytes();
+        limit = usable > 0 ? static_cast<std::size_t>(usable / 4) : std::size_t(1) << 30;
     }
     void free_block(void* p, std::size_t bytes) noexcept {
         std::free(p);
@@ -74,18 +79,23 @@ void* acquire_cached_block(std::size_t bytes) {
         if (it->bytes >= need && it->bytes - need <= need + kMaxSurplusBytes && (best == c.blocks.end() || it->bytes < best->bytes)) best = it;
     if (best != c.blocks.end()) {
         const Block b = *best;
+        c.out.emplace(b.p, b.bytes);  // first: if the bookkeeping cannot grow, the block stays cached
         c.blocks.erase(best);
         c.stats.cached_bytes -= b.bytes, c.stats.cached_blocks = c.blocks.size();
         c.stats.reused_bytes += b.bytes;
-        c.out.emplace(b.p, b.bytes);
         return b.p;
     }
     c.free_all();  // before allocating: cached memory never sits beside the new block
     void* p = std::aligned_alloc(kCachedBlockAlign, need);
     if (!p) throw std::bad_alloc();
     ::madvise(p, need, MADV_HUGEPAGE);  // a hint: failure is harmless
+    try {
+        c.out.emplace(p, need);
+    } catch (...) {
+        std::free(p);
+        throw;
+    }
     c.stats.allocated_bytes += need;
-    c.out.emplace(p, need);
     return p;
 }
 
@@ -101,7 +111,12 @@ void return_cached_block(void* p, std::size_t) noexcept {
         c.free_block(p, size);
         return;
     }
-    c.blocks.push_back(Block{p, size});
+    try {
+        c.blocks.push_back(Block{p, size});
+    } catch (...) {  // no room to list it: freed, not leaked (this function never throws)
+        c.free_block(p, size);
+        return;
+    }
     c.stats.cached_bytes += size, c.stats.cached_blocks = c.blocks.size();
 }
 

@@ -85,8 +85,9 @@ void return_cached_block(void* p, std::size_t bytes) noexcept;
 /// the next step's memory. Thread-safe.
 void release_large_buffer_cache() noexcept;
 
-/// Limit of the cache in bytes (default: a quarter of physical memory); a
-/// lower limit frees blocks until the cache fits. 0 disables caching.
+/// Limit of the cache in bytes (default: a quarter of usable_memory_bytes(),
+/// so a ulimit -v is respected); a lower limit frees blocks until the cache
+/// fits. 0 disables caching.
 void set_large_buffer_cache_limit(std::size_t bytes) noexcept;
 std::size_t large_buffer_cache_limit() noexcept;
 

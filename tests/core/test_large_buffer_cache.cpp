@@ -9,6 +9,7 @@
 
 #include "cloud/cloud_filters.hpp"
 #include "core/large_buffer.hpp"
+#include "core/memory.hpp"
 #include "core/random.hpp"
 
 using namespace cityforge;
@@ -208,4 +209,12 @@ TEST_CASE("canonical_order and filter_outliers give the same flags from cached b
     CHECK(result.limit == fresh_result.limit);
     CHECK(result.removed_statistical == fresh_result.removed_statistical);
     CHECK(result.removed_statistical > 1000);
+}
+
+TEST_CASE("the large block cache's default limit is a quarter of the memory this process may use", "[core][large_buffer]") {
+    // Every test restores the limit it found (FreshCache), so the default
+    // holds here whatever ran before in this process.
+    const double usable = usable_memory_bytes();
+    REQUIRE(usable > 0);
+    CHECK(large_buffer_cache_limit() == static_cast<std::size_t>(usable / 4));
 }
