@@ -117,8 +117,11 @@ private:
             State& s = state();
             std::lock_guard lock(s.mutex);
             if (s.users > 0 && s.cached + n <= kCacheBytes) {
-                s.blocks.emplace(n, raw), s.cached += n;
-                return;
+                try {
+                    s.blocks.emplace(n, raw), s.cached += n;
+                    return;
+                } catch (...) {  // no room to list it: freed below (a deleter must not throw)
+                }
             }
         }
         std::free(raw);
