@@ -337,75 +337,209 @@ double grid_metres_per_unit(const RunManifest& m) {
     return ground_metres_per_unit(crs_from_wkt(m.crs_wkt, "manifest"), m.grid.transform, m.grid.width, m.grid.height);
 }
 
+namespace {
+// The run's grid before any tile: where its pixels are, in which CRS, at
+// which ground sample distance, and what was read on the way.
+struct PlannedGrid {
+    double gsd_m = 0.0;
+    /// Given footprints, on the grid's CRS (empty without footprints).
+    std::vector<Extent> footprint_extents;
+    /// The cloud's points' box on the grid's CRS when it was read to place
+    /// the grid (cloud only); empty_extent() otherwise.
+    Extent cloud_bounds = empty_extent();
+};
+
+// The working grid: the ortho's, or a lon/lat ortho warped onto its UTM zone
+// (as `footprints` reads it). Given footprints are read now, so that a
+// missing or unreadable file is refused at plan time (not by every tile), and
+// the ones outside the cloud are counted as in a run without ortho.
+PlannedGrid grid_from_ortho(RunManifest& m) {
+    const RunOptions& o = m.options;
+    PlannedGrid g;
+    const RasterInfo info = read_raster_info(o.ortho, run_ortho_open_options(o));
+    if (info.crs.geographic) throw Error(o.working_crs.empty() ? o.ortho : "--working-crs", "the working CRS must be projected (metres)");
+    if (info.warped) log::info(o.ortho + ": " + info.source_crs.label() + " read on " + info.crs.label() + " (working CRS)");
+    m.grid = {info.transform, info.width, info.height};
+    m.crs_wkt = info.crs.wkt;
+    g.gsd_m = std::abs(info.transform.pixel_width) * info.metres_per_unit;
+    if (!o.footprints.empty()) {
+        PolygonLayer fp = read_polygon_layer(o.footprints, o.buildings.heights.footprint_layer);
+        put_layer_on(fp, info.crs, o.footprints);
+        for (const Feature& f : fp.features) g.footprint_extents.push_back(parts_extent(f.geometry));
+    }
+    return g;
+}
+
+// Cloud only: a grid of extraction.mask.gsd_m cells (the config's
+// extraction.cloud_grid_m, as `footprints --gsd`) over the cloud's points
+// (cloud_point_bounds: a few points kilometres away do not make it), in the
+// cloud's projected CRS or --working-crs.
+PlannedGrid grid_from_cloud(RunManifest& m, const Progress& bounds_progress) {
+    const RunOptions& o = m.options;
+    PlannedGrid g;
+    const CrsInfo cloud = o.working_crs.empty() ? require_cloud_crs(o.cloud, o.cloud_crs) : crs_from_user_input(o.working_crs, "--working-crs");
+    if (cloud.geographic) throw Error("--working-crs", "the working CRS must be projected (metres)");
+    const Extent e = cloud_bounds_in(o.cloud, o.cloud_crs, cloud, bounds_progress);
+    g.cloud_bounds = e;  // the grid's CRS is `cloud`: no second pass for it
+    const double unit = ground_metres_per_unit_at(cloud, e);
+    const double cell = o.extraction.mask.gsd_m / unit;
+    // The top edge strictly above the highest point: windows keep y < top.
+    const double x0 = std::floor(e.min_x / cell) * cell, y1 = (std::floor(e.max_y / cell) + 1) * cell;
+    m.grid = {GeoTransform{x0, cell, y1, -cell}, static_cast<int>(std::ceil((e.max_x - x0) / cell)) + 1,
+              static_cast<int>(std::ceil((y1 - e.min_y) / cell)) + 1};
+    m.crs_wkt = cloud.wkt;
+    g.gsd_m = o.extraction.mask.gsd_m;
+    return g;
+}
+
+// Footprints given, no ortho: a grid of footprint_grid_m cells over them, in
+// their own projected CRS, or --working-crs, or (lon/lat footprints) the
+// cloud's projected CRS, else their UTM zone.
+PlannedGrid grid_from_footprints(RunManifest& m) {
+    const RunOptions& o = m.options;
+    PlannedGrid g;
+    PolygonLayer fp = read_polygon_layer(o.footprints, o.buildings.heights.footprint_layer);
+    std::string working = o.working_crs;
+    if (working.empty() && fp.crs.geographic) {
+        const CrsInfo cloud = resolve_cloud_crs(o.cloud, o.cloud_crs).crs;
+        if (!cloud.empty() && !cloud.geographic && cloud.horizontal_epsg) working = "EPSG:" + std::to_string(*cloud.horizontal_epsg);
+    }
+    const CrsInfo on = working_crs_for_layer(fp, working, o.footprints);
+    if (fp.crs.geographic) log::warning(o.footprints + ": lon/lat footprints (" + fp.crs.label() + ") worked on in " + on.label());
+    put_layer_on(fp, on, o.footprints);
+    drop_colliding_fields(fp, run_computed_fields(), o.footprints);  // the warning, once per run
+    for (const Feature& f : fp.features) g.footprint_extents.push_back(parts_extent(f.geometry));
+    Extent e = empty_extent();
+    for (const Feature& f : fp.features) include(e, parts_extent(f.geometry));
+    const double cell = o.footprint_grid_m / fp.crs.linear_unit_m;
+    const double x0 = std::floor(e.min_x / cell) * cell, y1 = std::ceil(e.max_y / cell) * cell;
+    m.grid = {GeoTransform{x0, cell, y1, -cell}, static_cast<int>(std::ceil((e.max_x - x0) / cell)) + 1,
+              static_cast<int>(std::ceil((y1 - e.min_y) / cell)) + 1};
+    m.crs_wkt = fp.crs.wkt;
+    g.gsd_m = o.footprint_grid_m;
+    return g;
+}
+
+// What must be alike in every tile, measured once on a sample fixed by where
+// the cloud is on the grid (the central 400 m square of the part it covers,
+// `covered`, so an ortho cropped around the cloud decides as the whole ortho
+// does): the outlier filter's limit, the cloud cells' size, and whether
+// point classes decide building cells. Sets them in m.options where the
+// options leave them to the run.
+void measure_cloud_sample(RunManifest& m, const Extent& covered, double gsd_m, const Progress& progress) {
+    const RunOptions& o = m.options;
+    auto& outliers = m.options.buildings.heights.outliers;
+    auto& ex = m.options.extraction;
+    const bool need_limit = outliers.enabled && !(outliers.max_mean_distance > 0);
+    const bool extract = o.footprints.empty();
+    if (!(need_limit || (extract && (ex.cloud_cell_factor == 0 || ex.mask.use_classes < 0)))) return;
+    const CrsInfo grid_crs = crs_from_wkt(m.crs_wkt, "grid");
+    PreparedCloud points;
+    MapPoint centre{0.5 * (covered.min_x + covered.max_x), 0.5 * (covered.min_y + covered.max_y)};
+    progress(0.4, "cloud sample: the 400 m square at the centre of the covered part");  // a streamed pass, not counted
+    CloudSample sample = sample_cloud(o.cloud, o.cloud_crs, grid_crs, outliers, centre, &points);
+    // Too few points there to measure anything (the box says little of
+    // where the points are: an L-shaped survey): the grid's most
+    // populated 400 m square.
+    constexpr std::size_t kMinSample = 100;
+    if (points.cloud.size() < kMinSample) {
+        const DensestSquare d = densest_square(o.cloud, o.cloud_crs, grid_crs, grid_extent(m), 400.0 / grid_metres_per_unit(m), progress.sub(0.4, 0.5));
+        if (d.points > points.cloud.size()) {
+            PreparedCloud p;
+            CloudSample s = sample_cloud(o.cloud, o.cloud_crs, grid_crs, outliers, d.centre, &p);
+            if (p.cloud.size() > points.cloud.size()) centre = d.centre, sample = s, points = std::move(p);
+        }
+    }
+    if (need_limit) {
+        if (!(sample.outlier_limit_m > 0))
+            throw Error(o.cloud, "too few points to measure the outlier filter's limit: " + std::to_string(points.cloud.size()) +
+                                     " in the grid's most populated 400 m square, " + describe_extent(square_around(centre, 200.0 / grid_metres_per_unit(m)), grid_crs) +
+                                     "; set cleaning.outlier_limit_m or cleaning.outlier_filter false in the --config");
+        outliers.max_mean_distance = sample.outlier_limit_m;
+        ex.outliers.max_mean_distance = sample.outlier_limit_m;
+    }
+    if (extract && ex.cloud_cell_factor == 0) ex.cloud_cell_factor = cloud_cell_factor(sample.points_per_m2, gsd_m);
+    if (extract && ex.mask.use_classes < 0) {
+        // The sample on the run's cloud cells, decided as a window would.
+        const double cell = std::abs(m.grid.transform.pixel_width) * std::max(1, ex.cloud_cell_factor);
+        const double unit = grid_metres_per_unit(m);
+        const double half = 200.0 / unit;
+        const int n = std::max(1, static_cast<int>(std::ceil(2 * half / cell)));
+        const GridSpec g{GeoTransform{centre.x - half, cell, centre.y + half, -cell}, n, n};
+        const CloudRasters r = points.cloud.size() ? rasterize_cloud(points.cloud, points.keep, points.is_ground, g, unit) : CloudRasters{};
+        ex.mask.use_classes = points.cloud.size() && point_classes_present(r.building_share, r.vegetation_share) ? 1 : 0;
+    }
+}
+
+// Points of the cloud per block of the grid, as a summed-area table: whether
+// a pixel window may hold a point. Blocks are 16 px or more (doubled until
+// the table has at most 2^22 entries); a block the window only partly covers
+// counts whole, so a window said to have points may still find none, but no
+// window with points is said to have none.
+class PointBlockTable {
+public:
+    PointBlockTable(const RunManifest& m, const Progress& progress) {
+        while ((int64_t(m.grid.width) / block_ + 1) * (int64_t(m.grid.height) / block_ + 1) > (int64_t(1) << 22)) block_ *= 2;
+        blocks_x_ = (m.grid.width + block_ - 1) / block_;
+        const int blocks_y = (m.grid.height + block_ - 1) / block_;
+        const std::vector<uint64_t> counts = count_points_in_blocks(m.options.cloud, m.options.cloud_crs, crs_from_wkt(m.crs_wkt, "grid"), m.grid, block_, progress);
+        const std::size_t stride = static_cast<std::size_t>(blocks_x_) + 1;
+        sums_.assign(static_cast<std::size_t>(blocks_y + 1) * stride, 0);
+        for (int by = 0; by < blocks_y; ++by)
+            for (int bx = 0; bx < blocks_x_; ++bx)
+                sums_[(by + 1) * stride + bx + 1] = counts[static_cast<std::size_t>(by) * blocks_x_ + bx] + sums_[by * stride + bx + 1] +
+                                                    sums_[(by + 1) * stride + bx] - sums_[by * stride + bx];
+    }
+    bool may_hold_points(const PixelWindow& w) const {
+        const std::size_t x0 = static_cast<std::size_t>(w.col / block_), x1 = static_cast<std::size_t>((w.col + w.width - 1) / block_) + 1;
+        const std::size_t y0 = static_cast<std::size_t>(w.row / block_), y1 = static_cast<std::size_t>((w.row + w.height - 1) / block_) + 1;
+        const std::size_t stride = static_cast<std::size_t>(blocks_x_) + 1;
+        return sums_[y1 * stride + x1] + sums_[y0 * stride + x0] - sums_[y0 * stride + x1] - sums_[y1 * stride + x0] > 0;
+    }
+
+private:
+    int block_ = 16;
+    int blocks_x_ = 0;
+    std::vector<uint64_t> sums_;  ///< (blocks_y + 1) x (blocks_x + 1), inclusive prefix sums
+};
+
+// Cuts the grid into tiles of tile_size_px with overlap_px around each core.
+// Extraction (`points` given): a tile whose window holds no point of the
+// cloud would only fail for want of points ("no points in tile K"), so it is
+// not planned: a corridor or an L-shaped survey costs its own area, not its
+// box's, and a cloud over part of the ortho runs where it has points. Sets
+// m.tiles (indices 0.. in row order) and m.tiles_left_out.
+void cut_tiles(RunManifest& m, const PointBlockTable* points) {
+    const int ts = m.options.tile_size_px;
+    int k = 0, left_out = 0;
+    for (int r = 0; r < m.grid.height; r += ts)
+        for (int c = 0; c < m.grid.width; c += ts) {
+            TileSpec t;
+            t.core = {c, r, std::min(ts, m.grid.width - c), std::min(ts, m.grid.height - r)};
+            const int c0 = std::max(0, c - m.overlap_px), r0 = std::max(0, r - m.overlap_px);
+            const int c1 = std::min(m.grid.width, c + t.core.width + m.overlap_px), r1 = std::min(m.grid.height, r + t.core.height + m.overlap_px);
+            t.window = {c0, r0, c1 - c0, r1 - r0};
+            if (points && !points->may_hold_points(t.window)) {
+                ++left_out;
+                continue;
+            }
+            t.index = k++;
+            m.tiles.push_back(t);
+        }
+    m.tiles_left_out = left_out;
+}
+}  // namespace
+
 RunManifest plan_run(const RunOptions& in, const Progress& progress) {
     RunOptions o = run_options_from_json(to_json(in), "options", in);  // normalised: shared cleaning options
     o.validate();
     RunManifest m;
     m.options = o;
-    double gsd_m = 0.0;
-    // The cloud's points' box on the grid's CRS, read once when needed.
-    Extent cloud_bounds = empty_extent();
     // The plan's passes over the cloud: its box, the sample, points per tile.
     const Progress bounds_progress = progress.sub(0.0, 0.4), tiles_progress = progress.sub(0.5, 1.0);
-    std::vector<Extent> footprint_extents;  // given footprints, on the grid's CRS
-    if (!o.ortho.empty()) {
-        // The working grid: the ortho's, or a lon/lat ortho warped onto its UTM zone (as `footprints` reads it).
-        const RasterInfo info = read_raster_info(o.ortho, run_ortho_open_options(o));
-        if (info.crs.geographic) throw Error(o.working_crs.empty() ? o.ortho : "--working-crs", "the working CRS must be projected (metres)");
-        if (info.warped) log::info(o.ortho + ": " + info.source_crs.label() + " read on " + info.crs.label() + " (working CRS)");
-        m.grid = {info.transform, info.width, info.height};
-        m.crs_wkt = info.crs.wkt;
-        gsd_m = std::abs(info.transform.pixel_width) * info.metres_per_unit;
-        if (!o.footprints.empty()) {
-            // Given footprints on the ortho's grid: read now, so that a missing or
-            // unreadable file is refused at plan time (not by every tile), and
-            // the ones outside the cloud are counted as in a run without ortho.
-            PolygonLayer fp = read_polygon_layer(o.footprints, o.buildings.heights.footprint_layer);
-            put_layer_on(fp, info.crs, o.footprints);
-            for (const Feature& f : fp.features) footprint_extents.push_back(parts_extent(f.geometry));
-        }
-    } else if (o.footprints.empty()) {
-        // Cloud only: a grid of extraction.mask.gsd_m cells (the config's
-        // extraction.cloud_grid_m, as `footprints --gsd`) over the cloud's
-        // points (cloud_point_bounds: a few points kilometres away do not make
-        // it), in the cloud's projected CRS or --working-crs.
-        const CrsInfo cloud = o.working_crs.empty() ? require_cloud_crs(o.cloud, o.cloud_crs) : crs_from_user_input(o.working_crs, "--working-crs");
-        if (cloud.geographic) throw Error("--working-crs", "the working CRS must be projected (metres)");
-        const Extent e = cloud_bounds_in(o.cloud, o.cloud_crs, cloud, bounds_progress);
-        cloud_bounds = e;  // the grid's CRS is `cloud`: no second pass for it
-        const double unit = ground_metres_per_unit_at(cloud, e);
-        const double cell = o.extraction.mask.gsd_m / unit;
-        // The top edge strictly above the highest point: windows keep y < top.
-        const double x0 = std::floor(e.min_x / cell) * cell, y1 = (std::floor(e.max_y / cell) + 1) * cell;
-        m.grid = {GeoTransform{x0, cell, y1, -cell}, static_cast<int>(std::ceil((e.max_x - x0) / cell)) + 1,
-                  static_cast<int>(std::ceil((y1 - e.min_y) / cell)) + 1};
-        m.crs_wkt = cloud.wkt;
-        gsd_m = o.extraction.mask.gsd_m;
-    } else {
-        // The footprints' own projected CRS, or --working-crs, or (lon/lat footprints) the
-        // cloud's projected CRS, else their UTM zone.
-        PolygonLayer fp = read_polygon_layer(o.footprints, o.buildings.heights.footprint_layer);
-        std::string working = o.working_crs;
-        if (working.empty() && fp.crs.geographic) {
-            const CrsInfo cloud = resolve_cloud_crs(o.cloud, o.cloud_crs).crs;
-            if (!cloud.empty() && !cloud.geographic && cloud.horizontal_epsg) working = "EPSG:" + std::to_string(*cloud.horizontal_epsg);
-        }
-        const CrsInfo on = working_crs_for_layer(fp, working, o.footprints);
-        if (fp.crs.geographic) log::warning(o.footprints + ": lon/lat footprints (" + fp.crs.label() + ") worked on in " + on.label());
-        put_layer_on(fp, on, o.footprints);
-        drop_colliding_fields(fp, run_computed_fields(), o.footprints);  // the warning, once per run
-        for (const Feature& f : fp.features) footprint_extents.push_back(parts_extent(f.geometry));
-        Extent e = empty_extent();
-        for (const Feature& f : fp.features) include(e, parts_extent(f.geometry));
-        const double cell = o.footprint_grid_m / fp.crs.linear_unit_m;
-        const double x0 = std::floor(e.min_x / cell) * cell, y1 = std::ceil(e.max_y / cell) * cell;
-        m.grid = {GeoTransform{x0, cell, y1, -cell}, static_cast<int>(std::ceil((e.max_x - x0) / cell)) + 1,
-                  static_cast<int>(std::ceil((y1 - e.min_y) / cell)) + 1};
-        m.crs_wkt = fp.crs.wkt;
-        gsd_m = o.footprint_grid_m;
-    }
+    PlannedGrid g = !o.ortho.empty() ? grid_from_ortho(m) : o.footprints.empty() ? grid_from_cloud(m, bounds_progress) : grid_from_footprints(m);
     run_output_crs(m, crs_from_wkt(m.crs_wkt, "grid"));  // a geographic --out-crs is refused before any tile runs
-    m.overlap_px = static_cast<int>(std::ceil(o.overlap_m / gsd_m));
+    m.overlap_px = static_cast<int>(std::ceil(o.overlap_m / g.gsd_m));
     if (o.cloud.empty()) {
         // Ortho only: segmentation merges regions across the whole raster, so it runs as one tile.
         m.options.tile_size_px = std::max(m.grid.width, m.grid.height);
@@ -416,115 +550,33 @@ RunManifest plan_run(const RunOptions& in, const Progress& progress) {
     // An input that cannot produce a result is an error naming both files and their
     // extents; given footprints outside the cloud are counted in a warning.
     auto bounds = [&]() -> const Extent& {
-        if (!(cloud_bounds.min_x <= cloud_bounds.max_x)) cloud_bounds = cloud_bounds_on_grid(m, bounds_progress);
-        return cloud_bounds;
+        if (!(g.cloud_bounds.min_x <= g.cloud_bounds.max_x)) g.cloud_bounds = cloud_bounds_on_grid(m, bounds_progress);
+        return g.cloud_bounds;
     };
-    if (!footprint_extents.empty()) {
+    if (!g.footprint_extents.empty()) {
         covered_part(m, bounds());
-        check_footprints_within(bounds(), crs_from_wkt(m.crs_wkt, "grid"), o.cloud, footprint_extents, o.footprints);
+        check_footprints_within(bounds(), crs_from_wkt(m.crs_wkt, "grid"), o.cloud, g.footprint_extents, o.footprints);
     }
-    // What must be alike in every tile is measured once, on a sample fixed by
-    // where the cloud is on the grid (the central 400 m square of the part it
-    // covers, so an ortho cropped around the cloud decides as the whole ortho
-    // does): the outlier filter's limit, the cloud cells' size, and whether
-    // point classes decide building cells.
-    auto& outliers = m.options.buildings.heights.outliers;
-    auto& ex = m.options.extraction;
-    const bool need_limit = outliers.enabled && !(outliers.max_mean_distance > 0);
+    const auto& outliers = m.options.buildings.heights.outliers;
+    const auto& ex = m.options.extraction;
     const bool extract = o.footprints.empty();
-    if (need_limit || (extract && (ex.cloud_cell_factor == 0 || ex.mask.use_classes < 0))) {
-        const CrsInfo grid_crs = crs_from_wkt(m.crs_wkt, "grid");
-        PreparedCloud points;
-        const Extent covered = covered_part(m, bounds());
-        MapPoint centre{0.5 * (covered.min_x + covered.max_x), 0.5 * (covered.min_y + covered.max_y)};
-        progress(0.4, "cloud sample: the 400 m square at the centre of the covered part");  // a streamed pass, not counted
-        CloudSample sample = sample_cloud(o.cloud, o.cloud_crs, grid_crs, outliers, centre, &points);
-        // Too few points there to measure anything (the box says little of
-        // where the points are: an L-shaped survey): the grid's most
-        // populated 400 m square.
-        constexpr std::size_t kMinSample = 100;
-        if (points.cloud.size() < kMinSample) {
-            const DensestSquare d = densest_square(o.cloud, o.cloud_crs, grid_crs, grid_extent(m), 400.0 / grid_metres_per_unit(m), progress.sub(0.4, 0.5));
-            if (d.points > points.cloud.size()) {
-                PreparedCloud p;
-                CloudSample s = sample_cloud(o.cloud, o.cloud_crs, grid_crs, outliers, d.centre, &p);
-                if (p.cloud.size() > points.cloud.size()) centre = d.centre, sample = s, points = std::move(p);
-            }
-        }
-        if (need_limit) {
-            if (!(sample.outlier_limit_m > 0))
-                throw Error(o.cloud, "too few points to measure the outlier filter's limit: " + std::to_string(points.cloud.size()) +
-                                         " in the grid's most populated 400 m square, " + describe_extent(square_around(centre, 200.0 / grid_metres_per_unit(m)), grid_crs) +
-                                         "; set cleaning.outlier_limit_m or cleaning.outlier_filter false in the --config");
-            outliers.max_mean_distance = sample.outlier_limit_m;
-            ex.outliers.max_mean_distance = sample.outlier_limit_m;
-        }
-        if (extract && ex.cloud_cell_factor == 0) ex.cloud_cell_factor = cloud_cell_factor(sample.points_per_m2, gsd_m);
-        if (extract && ex.mask.use_classes < 0) {
-            // The sample on the run's cloud cells, decided as a window would.
-            const double cell = std::abs(m.grid.transform.pixel_width) * std::max(1, ex.cloud_cell_factor);
-            const double unit = grid_metres_per_unit(m);
-            const double half = 200.0 / unit;
-            const int n = std::max(1, static_cast<int>(std::ceil(2 * half / cell)));
-            const GridSpec g{GeoTransform{centre.x - half, cell, centre.y + half, -cell}, n, n};
-            const CloudRasters r = points.cloud.size() ? rasterize_cloud(points.cloud, points.keep, points.is_ground, g, unit) : CloudRasters{};
-            ex.mask.use_classes = points.cloud.size() && point_classes_present(r.building_share, r.vegetation_share) ? 1 : 0;
-        }
-    }
+    if ((outliers.enabled && !(outliers.max_mean_distance > 0)) || (extract && (ex.cloud_cell_factor == 0 || ex.mask.use_classes < 0)))
+        measure_cloud_sample(m, covered_part(m, bounds()), g.gsd_m, progress);
     // At least the context of one building (smaller overlaps would only make
     // every building near a core's edge be done again on a grown window).
-    m.overlap_px = std::max(m.overlap_px, context_px(m.options, gsd_m));
-    const int ts = o.tile_size_px;
-    // Extraction: a tile whose window holds no point of the cloud would only
-    // fail for want of points ("no points in tile K"), so it is not planned:
-    // a corridor or an L-shaped survey costs its own area, not its box's, and
-    // a cloud over part of the ortho runs where it has points. Points are
-    // counted on blocks of 16 px or more (summed-area table); a block the
-    // window only partly covers counts whole, so a kept tile may still find
-    // no point (then it fails as before), but no tile with points is left out.
-    std::vector<uint64_t> sums;  // (blocks_y + 1) x (blocks_x + 1), inclusive prefix sums
-    int block = 16;
-    while ((int64_t(m.grid.width) / block + 1) * (int64_t(m.grid.height) / block + 1) > (int64_t(1) << 22)) block *= 2;
-    const int blocks_x = (m.grid.width + block - 1) / block, blocks_y = (m.grid.height + block - 1) / block;
+    m.overlap_px = std::max(m.overlap_px, context_px(m.options, g.gsd_m));
     if (extract) {
-        const std::vector<uint64_t> counts = count_points_in_blocks(o.cloud, o.cloud_crs, crs_from_wkt(m.crs_wkt, "grid"), m.grid, block, tiles_progress);
-        sums.assign(static_cast<std::size_t>(blocks_y + 1) * (blocks_x + 1), 0);
-        for (int by = 0; by < blocks_y; ++by)
-            for (int bx = 0; bx < blocks_x; ++bx)
-                sums[static_cast<std::size_t>(by + 1) * (blocks_x + 1) + bx + 1] = counts[static_cast<std::size_t>(by) * blocks_x + bx] +
-                                                                                   sums[static_cast<std::size_t>(by) * (blocks_x + 1) + bx + 1] +
-                                                                                   sums[static_cast<std::size_t>(by + 1) * (blocks_x + 1) + bx] -
-                                                                                   sums[static_cast<std::size_t>(by) * (blocks_x + 1) + bx];
+        const PointBlockTable points(m, tiles_progress);
+        cut_tiles(m, &points);
+    } else {
+        cut_tiles(m, nullptr);
     }
-    auto window_has_points = [&](const PixelWindow& w) {
-        if (sums.empty()) return true;
-        const std::size_t x0 = static_cast<std::size_t>(w.col / block), x1 = static_cast<std::size_t>((w.col + w.width - 1) / block) + 1;
-        const std::size_t y0 = static_cast<std::size_t>(w.row / block), y1 = static_cast<std::size_t>((w.row + w.height - 1) / block) + 1;
-        const std::size_t stride = static_cast<std::size_t>(blocks_x) + 1;
-        return sums[y1 * stride + x1] + sums[y0 * stride + x0] - sums[y0 * stride + x1] - sums[y1 * stride + x0] > 0;
-    };
-    int k = 0, left_out = 0;
-    for (int r = 0; r < m.grid.height; r += ts)
-        for (int c = 0; c < m.grid.width; c += ts) {
-            TileSpec t;
-            t.core = {c, r, std::min(ts, m.grid.width - c), std::min(ts, m.grid.height - r)};
-            const int c0 = std::max(0, c - m.overlap_px), r0 = std::max(0, r - m.overlap_px);
-            const int c1 = std::min(m.grid.width, c + t.core.width + m.overlap_px), r1 = std::min(m.grid.height, r + t.core.height + m.overlap_px);
-            t.window = {c0, r0, c1 - c0, r1 - r0};
-            if (!window_has_points(t.window)) {
-                ++left_out;
-                continue;
-            }
-            t.index = k++;
-            m.tiles.push_back(t);
-        }
-    m.tiles_left_out = left_out;
-    if (k == 0) {  // the box met the grid, no point did: nothing to run
+    if (m.tiles.empty()) {  // the box met the grid, no point did: nothing to run
         const CrsInfo grid_crs = crs_from_wkt(m.crs_wkt, "grid");
         throw Error(o.cloud, "no point of the cloud lies on the grid of " + (o.ortho.empty() ? o.cloud : o.ortho) + ": cloud " +
                                  describe_extent(bounds(), grid_crs) + ", grid " + describe_extent(grid_extent(m), grid_crs));
     }
-    if (left_out > 0) {
+    if (m.tiles_left_out > 0) {
         if (o.ortho.empty()) log::info(tiles_left_out_note(m));
         else log::warning(tiles_left_out_note(m));
     }
