@@ -1163,14 +1163,12 @@ TileReport run_tile(const RunManifest& m, int k, const std::string& out_dir, con
     return rep;
 }
 
-RunReport merge_tiles(const RunManifest& m, const std::string& out_dir, const Progress& progress, const std::map<std::string, double>& phases) {
-    const auto t0 = std::chrono::steady_clock::now();
-    RunReport rep;
-    rep.wall_seconds = phases;
-    const fs::path dir = fs::path(out_dir) / "tiles";
-    const CrsInfo grid_crs = crs_from_wkt(m.crs_wkt, "manifest");
-    std::vector<Building> buildings;
-    std::map<std::string, double> stage_seconds;
+namespace {
+// Every planned tile's report (DIR/tiles/tile_K.json) into rep.tiles, with
+// its warnings (a failed tile's reason among them) and peak memory; the
+// tiles' stage seconds summed into `stage_seconds`. Error naming the file
+// when a tile has not run or its report is not valid.
+void read_tile_reports(const RunManifest& m, const fs::path& dir, RunReport& rep, std::map<std::string, double>& stage_seconds) {
     for (const TileSpec& t : m.tiles) {
         const fs::path summary = dir / (tile_name(t.index) + ".json");
         if (!fs::exists(summary)) throw Error(summary.string(), "tile " + std::to_string(t.index) + " has not run yet");
@@ -1196,12 +1194,16 @@ RunReport merge_tiles(const RunManifest& m, const std::string& out_dir, const Pr
         rep.peak_memory_mb = std::max(rep.peak_memory_mb, tr.peak_memory_mb);
         rep.tiles.push_back(tr);
     }
-    // The finished tiles' building lines, parsed in parallel (one task per
-    // tile), joined in tile order.
-    std::vector<std::vector<Building>> per_tile(rep.tiles.size());
-    parallel_tasks_in_order(rep.tiles.size(), 1, [&](std::size_t k) {  // the first bad line in tile order is the error
-        if (rep.tiles[k].status != "done") return;
-        const fs::path path = dir / (tile_name(rep.tiles[k].index) + ".jsonl");
+}
+
+// The finished tiles' building lines (DIR/tiles/tile_K.jsonl), parsed in
+// parallel (one task per tile), joined in tile order; the first bad line in
+// tile order is the error, naming the file and line.
+std::vector<Building> read_tile_buildings(const std::vector<TileReport>& tiles, const fs::path& dir) {
+    std::vector<std::vector<Building>> per_tile(tiles.size());
+    parallel_tasks_in_order(tiles.size(), 1, [&](std::size_t k) {
+        if (tiles[k].status != "done") return;
+        const fs::path path = dir / (tile_name(tiles[k].index) + ".jsonl");
         std::ifstream lines(path);
         std::string line;
         int n = 0;
@@ -1215,17 +1217,20 @@ RunReport merge_tiles(const RunManifest& m, const std::string& out_dir, const Pr
             }
         }
     });
+    std::vector<Building> buildings;
     for (std::vector<Building>& tile : per_tile)
         for (Building& b : tile) buildings.push_back(std::move(b));
-    per_tile.clear();
-    if (m.tiles_left_out > 0) rep.warnings.push_back(tiles_left_out_note(m));
-    // Every tile failed: nothing to model, and empty city models would read as
-    // "no buildings here". The tiles' reports (DIR/tiles/) keep every reason.
+    return buildings;
+}
+
+// Errors for a run that cannot give a city model: every tile failed (empty
+// models would read as "no buildings here"; the tiles' reports keep every
+// reason), or no building was found (as in `footprints`).
+void check_city_has_buildings(const RunManifest& m, const RunReport& rep, const std::vector<Building>& buildings, const std::string& out_dir,
+                              const fs::path& dir) {
     if (!rep.tiles.empty() && std::all_of(rep.tiles.begin(), rep.tiles.end(), [](const TileReport& t) { return t.status == "failed"; }))
         throw Error(out_dir, "every tile failed (" + std::to_string(rep.tiles.size()) + " of " + std::to_string(rep.tiles.size()) +
                                  "; tile " + std::to_string(rep.tiles.front().index) + ": " + rep.tiles.front().reason + "); no city model written");
-    // Nothing found is an error too (as in `footprints`): an empty city model
-    // would read as "no buildings here" rather than "none could be found".
     if (buildings.empty()) {
         const RunOptions& o = m.options;
         const std::string& input = !o.footprints.empty() ? o.footprints : !o.cloud.empty() ? o.cloud : o.ortho;
@@ -1233,22 +1238,20 @@ RunReport merge_tiles(const RunManifest& m, const std::string& out_dir, const Pr
                                (o.cloud.empty() ? "ortho only" : o.ortho.empty() ? "cloud only" : "ortho and cloud") +
                                "; the tiles' reports are in " + dir.string() + "); no city model written");
     }
-    progress(0.3, "tiles read");
-    // One order whatever the tiling: by numeric id when ids are numbers, else as text.
-    auto key = [](const std::string& id) {
-        char* end = nullptr;
-        const long long v = std::strtoll(id.c_str(), &end, 10);
-        return std::pair<long long, std::string>(end && *end == 0 && !id.empty() ? v : LLONG_MAX, id);
-    };
-    std::sort(buildings.begin(), buildings.end(), [&](const Building& a, const Building& b) { return key(a.id) < key(b.id); });
-    // Worked on the grid's (projected, metric) CRS; written in the input's or --out-crs.
+}
+
+// The city model's CRS: the input's or --out-crs horizontally (the buildings,
+// worked on the grid's projected CRS, are reprojected to it), with the
+// vertical datum of the cloud (as the tiles saw it) or --vertical-crs; a
+// cloud without one is a warning in `rep`. `cloud_crs` receives the cloud's CRS.
+CrsInfo city_model_crs(const RunManifest& m, const CrsInfo& grid_crs, std::vector<Building>& buildings, const std::string& out_dir, RunReport& rep,
+                       CrsInfo& cloud_crs) {
     CrsInfo crs = run_output_crs(m, grid_crs);
     if (!same_horizontal_crs(crs, grid_crs)) {
         log::info("city model reprojected from the working CRS " + grid_crs.label() + " to " + crs.label());
         reproject_buildings(buildings, grid_crs, crs, out_dir);
     }
-    // The vertical datum: from the cloud (as the tiles saw it) or the option.
-    const CrsInfo cloud_crs = m.options.cloud.empty() ? CrsInfo{} : resolve_cloud_crs(m.options.cloud, m.options.cloud_crs).crs;
+    cloud_crs = m.options.cloud.empty() ? CrsInfo{} : resolve_cloud_crs(m.options.cloud, m.options.cloud_crs).crs;
     crs = combine_with_vertical(crs, cloud_crs);
     if (!m.options.buildings.model.vertical_crs.empty() && !crs.vertical_epsg)
         crs = combine_with_vertical(crs, crs_from_user_input(m.options.buildings.model.vertical_crs, "--vertical-crs"));
@@ -1256,59 +1259,57 @@ RunReport merge_tiles(const RunManifest& m, const std::string& out_dir, const Pr
         rep.warnings.push_back(m.options.cloud + ": no vertical CRS: the city models' heights are written without a named height datum (give --vertical-crs, e.g. EPSG:5703 NAVD88, 5709 NAP, 5720 NGF-IGN69 height)");
         log::warning(rep.warnings.back());
     }
-    CityModel model;
-    Extent extent = empty_extent();
-    for (const Building& b : buildings) include(extent, parts_extent(b.footprint));
-    model.crs = model_crs_of(crs, extent);
-    model.buildings = std::move(buildings);
-    // The tile lines hold values only: the declared types come from the tile reports.
-    for (const TileReport& t : rep.tiles)
-        if (model.attribute_types.empty()) model.attribute_types = t.attribute_types;
-    for (Building& b : model.buildings) complete_building(b, model.crs, m.options.buildings.model.validity);
-    if (m.options.keep_rasters && fs::exists(fs::path(out_dir) / "rasters")) {
-        for (const char* name : {"dsm", "dtm", "ndsm"}) {
-            std::vector<std::string> parts;
-            for (const TileSpec& t : m.tiles) {
-                const fs::path f = fs::path(out_dir) / "rasters" / (tile_name(t.index) + "_" + name + ".tif");
-                if (fs::exists(f)) parts.push_back(f.string());
-            }
-            if (!parts.empty()) build_vrt_mosaic((fs::path(out_dir) / (std::string(name) + ".vrt")).string(), parts);
-        }
-    }
-    const auto te = std::chrono::steady_clock::now();
-    rep.wall_seconds["merge"] = std::chrono::duration<double>(te - t0).count();
-    ExportOptions eo = m.options.buildings.model;
-    if (m.options.cloud.empty()) {
-        // Without a cloud there is no solid: the 3D-only formats have nothing to hold.
-        const std::size_t before = eo.formats.size();
-        eo.formats.erase(std::remove_if(eo.formats.begin(), eo.formats.end(), [](const std::string& f) { return f == "gltf" || f == "3dtiles"; }),
-                         eo.formats.end());
-        if (eo.formats.size() != before) {
-            rep.warnings.push_back("no cloud, no solids: glTF and 3D Tiles not written");
-            log::warning(rep.warnings.back());
-        }
-    }
-    rep.model = write_city_model(model, crs, out_dir, eo, progress.sub(0.3, 0.95));
-    stage_seconds["export"] = rep.wall_seconds["export"] = since(te);
-    if (fs::exists(fs::path(out_dir) / "buildings.gpkg")) {  // the viewer page, DIR/view/index.html
-        const auto tv = std::chrono::steady_clock::now();
-        try {
-            ViewOptions vo;
-            vo.overwrite = true;
-            rep.model.files["view"] = write_view(out_dir, vo).path;
-        } catch (const Error& e) {
-            rep.warnings.push_back(std::string("viewer page: ") + e.what());
-            log::warning(rep.warnings.back());
-        }
-        stage_seconds["view"] = rep.wall_seconds["view"] = since(tv);
-    }
-    rep.buildings = rep.model.buildings, rep.valid_lod1 = rep.model.valid_lod1, rep.valid_lod2 = rep.model.valid_lod2;
-    rep.peak_memory_mb = std::max(rep.peak_memory_mb, peak_memory_mb());
-    rep.seconds = since(t0);
-    double before_merge = 0.0;
-    for (const auto& [phase, sec] : phases) before_merge += sec;
-    rep.wall_seconds["total"] = before_merge + rep.seconds;
+    return crs;
+}
 
+// keep_rasters: the tiles' DSM, DTM and nDSM as one VRT mosaic each (DIR/dsm.vrt, ...).
+void mosaic_kept_rasters(const RunManifest& m, const std::string& out_dir) {
+    if (!m.options.keep_rasters || !fs::exists(fs::path(out_dir) / "rasters")) return;
+    for (const char* name : {"dsm", "dtm", "ndsm"}) {
+        std::vector<std::string> parts;
+        for (const TileSpec& t : m.tiles) {
+            const fs::path f = fs::path(out_dir) / "rasters" / (tile_name(t.index) + "_" + name + ".tif");
+            if (fs::exists(f)) parts.push_back(f.string());
+        }
+        if (!parts.empty()) build_vrt_mosaic((fs::path(out_dir) / (std::string(name) + ".vrt")).string(), parts);
+    }
+}
+
+// The run's export options; without a cloud there is no solid, so the
+// 3D-only formats (glTF, 3D Tiles) are dropped with a warning in `rep`.
+ExportOptions run_export_options(const RunManifest& m, RunReport& rep) {
+    ExportOptions eo = m.options.buildings.model;
+    if (!m.options.cloud.empty()) return eo;
+    const std::size_t before = eo.formats.size();
+    eo.formats.erase(std::remove_if(eo.formats.begin(), eo.formats.end(), [](const std::string& f) { return f == "gltf" || f == "3dtiles"; }),
+                     eo.formats.end());
+    if (eo.formats.size() != before) {
+        rep.warnings.push_back("no cloud, no solids: glTF and 3D Tiles not written");
+        log::warning(rep.warnings.back());
+    }
+    return eo;
+}
+
+// The viewer page (DIR/view/index.html) when a GeoPackage was written; a
+// failure is a warning in `rep`, not the run's error.
+void write_run_view(const std::string& out_dir, RunReport& rep, std::map<std::string, double>& stage_seconds) {
+    if (!fs::exists(fs::path(out_dir) / "buildings.gpkg")) return;
+    const auto tv = std::chrono::steady_clock::now();
+    try {
+        ViewOptions vo;
+        vo.overwrite = true;
+        rep.model.files["view"] = write_view(out_dir, vo).path;
+    } catch (const Error& e) {
+        rep.warnings.push_back(std::string("viewer page: ") + e.what());
+        log::warning(rep.warnings.back());
+    }
+    stage_seconds["view"] = rep.wall_seconds["view"] = since(tv);
+}
+
+// DIR/run_report.json: options, inputs with their CRSs, the model's CRS and
+// the working CRS, the grid, every tile, times, memory, counts, files, warnings.
+json run_report_json(const RunManifest& m, const RunReport& rep, const CrsInfo& crs, const CrsInfo& grid_crs, const CrsInfo& cloud_crs,
+                     const std::map<std::string, double>& stage_seconds) {
     json j;
     j["cityforge_version"] = version();
     j["options"] = to_json(m.options);
@@ -1334,8 +1335,55 @@ RunReport merge_tiles(const RunManifest& m, const std::string& out_dir, const Pr
                    {"with_lod2", rep.model.with_lod2},   {"valid_lod2", rep.model.valid_lod2}, {"status", rep.model.status_counts}};
     j["files"] = rep.model.files;
     j["warnings"] = rep.warnings;
+    return j;
+}
+}  // namespace
+
+RunReport merge_tiles(const RunManifest& m, const std::string& out_dir, const Progress& progress, const std::map<std::string, double>& phases) {
+    const auto t0 = std::chrono::steady_clock::now();
+    RunReport rep;
+    rep.wall_seconds = phases;
+    const fs::path dir = fs::path(out_dir) / "tiles";
+    const CrsInfo grid_crs = crs_from_wkt(m.crs_wkt, "manifest");
+    std::map<std::string, double> stage_seconds;
+    read_tile_reports(m, dir, rep, stage_seconds);
+    std::vector<Building> buildings = read_tile_buildings(rep.tiles, dir);
+    if (m.tiles_left_out > 0) rep.warnings.push_back(tiles_left_out_note(m));
+    check_city_has_buildings(m, rep, buildings, out_dir, dir);
+    progress(0.3, "tiles read");
+    // One order whatever the tiling: by numeric id when ids are numbers, else as text.
+    auto key = [](const std::string& id) {
+        char* end = nullptr;
+        const long long v = std::strtoll(id.c_str(), &end, 10);
+        return std::pair<long long, std::string>(end && *end == 0 && !id.empty() ? v : LLONG_MAX, id);
+    };
+    std::sort(buildings.begin(), buildings.end(), [&](const Building& a, const Building& b) { return key(a.id) < key(b.id); });
+    CrsInfo cloud_crs;
+    const CrsInfo crs = city_model_crs(m, grid_crs, buildings, out_dir, rep, cloud_crs);
+    CityModel model;
+    Extent extent = empty_extent();
+    for (const Building& b : buildings) include(extent, parts_extent(b.footprint));
+    model.crs = model_crs_of(crs, extent);
+    model.buildings = std::move(buildings);
+    // The tile lines hold values only: the declared types come from the tile reports.
+    for (const TileReport& t : rep.tiles)
+        if (model.attribute_types.empty()) model.attribute_types = t.attribute_types;
+    for (Building& b : model.buildings) complete_building(b, model.crs, m.options.buildings.model.validity);
+    mosaic_kept_rasters(m, out_dir);
+    const auto te = std::chrono::steady_clock::now();
+    rep.wall_seconds["merge"] = std::chrono::duration<double>(te - t0).count();
+    const ExportOptions eo = run_export_options(m, rep);
+    rep.model = write_city_model(model, crs, out_dir, eo, progress.sub(0.3, 0.95));
+    stage_seconds["export"] = rep.wall_seconds["export"] = since(te);
+    write_run_view(out_dir, rep, stage_seconds);
+    rep.buildings = rep.model.buildings, rep.valid_lod1 = rep.model.valid_lod1, rep.valid_lod2 = rep.model.valid_lod2;
+    rep.peak_memory_mb = std::max(rep.peak_memory_mb, peak_memory_mb());
+    rep.seconds = since(t0);
+    double before_merge = 0.0;
+    for (const auto& [phase, sec] : phases) before_merge += sec;
+    rep.wall_seconds["total"] = before_merge + rep.seconds;
     rep.report_path = (fs::path(out_dir) / "run_report.json").string();
-    write_text_file(rep.report_path, j.dump(2) + "\n");
+    write_text_file(rep.report_path, run_report_json(m, rep, crs, grid_crs, cloud_crs, stage_seconds).dump(2) + "\n");
     progress(1.0, "merged");
     return rep;
 }
