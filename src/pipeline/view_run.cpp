@@ -170,77 +170,80 @@ void ViewOptions::validate() const {
     if (ortho_max_px < 64 || ortho_max_px > 8192) throw Error("--ortho-max-px", "must be in 64..8192");
 }
 
-ViewReport write_view(const std::string& run_dir, const ViewOptions& o) {
-    o.validate();
-    const fs::path dir(run_dir);
-    if (!fs::is_directory(dir)) throw Error(run_dir, "not a folder (give the output folder of `cityforge run` or `cityforge export`)");
-    const std::string table = o.buildings.empty() ? (dir / "buildings.gpkg").string() : o.buildings;
-    if (o.buildings.empty() && !fs::exists(table))
-        throw Error(run_dir, "no buildings.gpkg here (give the output folder of `cityforge run` or `cityforge export` with gpkg)");
-    const std::string out = o.out.empty() ? (dir / "view" / "index.html").string() : o.out;
-    if (fs::exists(out) && !o.overwrite) throw Error(out, "exists (use --overwrite to replace it)");
-
-    const PolygonLayer layer = read_polygon_layer(table);
-    if (layer.features.empty()) throw Error(table, "has no buildings to show");
-    if (layer.crs.empty()) throw Error(table, "has no CRS");
-    if (layer.crs.geographic) throw Error(table, "is in a geographic CRS; the viewer needs the model's projected CRS (the GeoPackage output)");
-
-    Extent ext = empty_extent();
-    for (const Feature& f : layer.features) include(ext, parts_extent(f.geometry));
-    // The glb's origin when there is one (so 2D and 3D share a frame), else the extent's centre.
-    std::array<double, 3> origin{std::round(0.5 * (ext.min_x + ext.max_x)), std::round(0.5 * (ext.min_y + ext.max_y)), 0.0};
-    const std::string glb_path = o.glb.empty() ? (dir / "buildings.glb").string() : o.glb;
-    std::string glb;
+namespace {
+// The 3D view's binary glTF: its bytes, the origin its vertices are relative
+// to (asset.extras.origin; `fallback` when it names none) and how many
+// buildings it meshes (its property table). Empty when there is no glb and
+// none was asked for (a warning: the page has no 3D view).
+struct ViewGlb {
+    std::string bytes;
+    std::array<double, 3> origin{};
     std::size_t meshed = 0;
-    if (fs::exists(glb_path)) {
-        glb = read_bytes(glb_path);
-        uint32_t jlen = 0;
-        if (glb.size() < 28 || glb.compare(0, 4, "glTF") != 0) throw Error(glb_path, "is not a binary glTF (.glb)");
-        std::memcpy(&jlen, glb.data() + 12, 4);
-        if (20 + std::size_t(jlen) > glb.size()) throw Error(glb_path, "is truncated");
-        const json g = json::parse(glb.substr(20, jlen), nullptr, false);
-        if (g.is_discarded()) throw Error(glb_path, "has an unreadable JSON chunk");
-        if (g.contains("asset") && g["asset"].contains("extras") && g["asset"]["extras"].contains("origin")) {
-            const auto& og = g["asset"]["extras"]["origin"];
-            origin = {og[0].get<double>(), og[1].get<double>(), og[2].get<double>()};
-        }
-        const json::json_pointer count("/extensions/EXT_structural_metadata/propertyTables/0/count");
-        if (!g.contains(count)) throw Error(glb_path, "has no building property table (EXT_structural_metadata); write it with cityforge export --formats gltf");
-        meshed = g[count].get<std::size_t>();
-    } else if (!o.glb.empty()) {
-        throw Error(o.glb, "does not exist");
-    } else {
+};
+ViewGlb read_view_glb(const std::string& glb_path, bool asked, const std::string& run_dir, const std::array<double, 3>& fallback) {
+    ViewGlb v;
+    v.origin = fallback;
+    if (!fs::exists(glb_path)) {
+        if (asked) throw Error(glb_path, "does not exist");
         log::warning(run_dir + ": no buildings.glb (export with --formats gltf); the page has no 3D view");
+        return v;
     }
+    v.bytes = read_bytes(glb_path);
+    const std::string& glb = v.bytes;
+    uint32_t jlen = 0;
+    if (glb.size() < 28 || glb.compare(0, 4, "glTF") != 0) throw Error(glb_path, "is not a binary glTF (.glb)");
+    std::memcpy(&jlen, glb.data() + 12, 4);
+    if (20 + std::size_t(jlen) > glb.size()) throw Error(glb_path, "is truncated");
+    const json g = json::parse(glb.substr(20, jlen), nullptr, false);
+    if (g.is_discarded()) throw Error(glb_path, "has an unreadable JSON chunk");
+    if (g.contains("asset") && g["asset"].contains("extras") && g["asset"]["extras"].contains("origin")) {
+        const auto& og = g["asset"]["extras"]["origin"];
+        v.origin = {og[0].get<double>(), og[1].get<double>(), og[2].get<double>()};
+    }
+    const json::json_pointer count("/extensions/EXT_structural_metadata/propertyTables/0/count");
+    if (!g.contains(count)) throw Error(glb_path, "has no building property table (EXT_structural_metadata); write it with cityforge export --formats gltf");
+    v.meshed = g[count].get<std::size_t>();
+    return v;
+}
 
-    // Per-building audit errors from footprint audits of this table (matched by feature id).
-    std::map<int64_t, json> audit_of_fid;
-    json audits = json::array();
-    std::size_t n_audits = 0;
-    if (fs::is_directory(dir)) {
-        std::vector<fs::path> reports;
-        for (const auto& e : fs::directory_iterator(dir))
-            if (e.is_directory() && fs::exists(e.path() / "report.json")) reports.push_back(e.path() / "report.json");
-        std::sort(reports.begin(), reports.end());
-        for (const fs::path& r : reports) {
-            const json j = json::parse(read_bytes(r), nullptr, false);
-            if (j.is_discarded() || !j.is_object()) {
-                log::warning(r.string() + ": not a JSON report; left out of the page");
-                continue;
-            }
-            const std::string kind = j.value("audit", r.parent_path().filename().string());
-            audits.push_back({{"title", "audit " + kind + " (" + r.parent_path().filename().string() + ")"}, {"figures", audit_figures(j)}});
-            ++n_audits;
-            const std::string pred = j.contains("predicted") && j["predicted"].is_object() ? j["predicted"].value("path", "") : "";
-            if (kind == "footprints" && j.contains("matches") && !pred.empty() && fs::path(pred).filename() == fs::path(table).filename())
-                for (const auto& m : j["matches"])
-                    if (m.contains("predicted_fid"))
-                        audit_of_fid[m["predicted_fid"].get<int64_t>()] = {{"audit_iou", m.value("iou", json())},
-                                                                           {"audit_area_error_pct", m.value("area_error_pct", json())},
-                                                                           {"audit_polis", m.value("polis", json())}};
+// The audits in the run folder (each subfolder's report.json, in name
+// order): their figures for the page, and per building of `table` (by
+// feature id) the errors a footprint audit of that table measured.
+struct ViewAudits {
+    json list = json::array();
+    std::map<int64_t, json> of_fid;
+};
+ViewAudits read_view_audits(const fs::path& dir, const std::string& table) {
+    ViewAudits a;
+    std::vector<fs::path> reports;
+    for (const auto& e : fs::directory_iterator(dir))
+        if (e.is_directory() && fs::exists(e.path() / "report.json")) reports.push_back(e.path() / "report.json");
+    std::sort(reports.begin(), reports.end());
+    for (const fs::path& r : reports) {
+        const json j = json::parse(read_bytes(r), nullptr, false);
+        if (j.is_discarded() || !j.is_object()) {
+            log::warning(r.string() + ": not a JSON report; left out of the page");
+            continue;
         }
+        const std::string kind = j.value("audit", r.parent_path().filename().string());
+        a.list.push_back({{"title", "audit " + kind + " (" + r.parent_path().filename().string() + ")"}, {"figures", audit_figures(j)}});
+        const std::string pred = j.contains("predicted") && j["predicted"].is_object() ? j["predicted"].value("path", "") : "";
+        if (kind == "footprints" && j.contains("matches") && !pred.empty() && fs::path(pred).filename() == fs::path(table).filename())
+            for (const auto& m : j["matches"])
+                if (m.contains("predicted_fid"))
+                    a.of_fid[m["predicted_fid"].get<int64_t>()] = {{"audit_iou", m.value("iou", json())},
+                                                                   {"audit_area_error_pct", m.value("area_error_pct", json())},
+                                                                   {"audit_polis", m.value("polis", json())}};
     }
+    return a;
+}
 
+// The page's buildings: id (cityforge_id, else id, else the feature id),
+// status, reason, the other attributes with the audit's errors, flags, LOD
+// and the footprint's rings in centimetres relative to `origin`. The
+// attribute names holding numbers and text are collected for the colour menu.
+json view_buildings(const PolygonLayer& layer, const std::array<double, 3>& origin, const std::map<int64_t, json>& audit_of_fid,
+                    std::set<std::string>& numeric_fields, std::set<std::string>& text_fields) {
     int id_f = -1, status_f = -1, reason_f = -1;
     for (std::size_t k = 0; k < layer.field_names.size(); ++k) {
         if (layer.field_names[k] == "cityforge_id") id_f = int(k);
@@ -251,7 +254,6 @@ ViewReport write_view(const std::string& run_dir, const ViewOptions& o) {
         for (std::size_t k = 0; k < layer.field_names.size(); ++k)
             if (layer.field_names[k] == "id") id_f = int(k);
     json buildings = json::array();
-    std::set<std::string> numeric_fields, text_fields;
     for (std::size_t i = 0; i < layer.features.size(); ++i) {
         const Feature& f = layer.features[i];
         json b;
@@ -294,8 +296,11 @@ ViewReport write_view(const std::string& run_dir, const ViewOptions& o) {
         b["footprint"] = parts;
         buildings.push_back(b);
     }
+    return buildings;
+}
 
-    // Colour menu: status first, then the attributes a user compares (when present), then other numbers.
+// Colour menu: status first, then the attributes a user compares (when present), then other numbers.
+json view_colour_fields(const std::set<std::string>& numeric_fields, const std::set<std::string>& text_fields) {
     json colour_fields = json::array({"status"});
     std::set<std::string> listed{"status"};
     for (const char* k : {"height_m", "roof_type", "fit_iou", "audit_iou", "audit_area_error_pct", "audit_polis", "height_quality", "lod2_rmse_m",
@@ -303,6 +308,44 @@ ViewReport write_view(const std::string& run_dir, const ViewOptions& o) {
         if ((numeric_fields.count(k) || text_fields.count(k)) && listed.insert(k).second) colour_fields.push_back(k);
     for (const std::string& k : numeric_fields)
         if (listed.insert(k).second) colour_fields.push_back(k);
+    return colour_fields;
+}
+
+// The ortho's quicklook over the buildings' extent (with a margin), warped
+// onto their CRS (a lon/lat ortho's run writes UTM), as the page's data.
+json view_ortho(const std::string& ortho, const Extent& ext, const std::array<double, 3>& origin, const ViewOptions& o, const CrsInfo& crs) {
+    const double w = ext.max_x - ext.min_x, h = ext.max_y - ext.min_y, m = 0.05 * std::max(w, h) + 5.0;
+    const Quicklook q = render_quicklook_png(ortho, {ext.min_x - m, ext.min_y - m, ext.max_x + m, ext.max_y + m}, o.ortho_max_px, crs.wkt);
+    return {{"src", "data:image/png;base64," + base64(q.png)},
+            {"extent", {cm(q.extent.min_x - origin[0]), cm(q.extent.min_y - origin[1]), cm(q.extent.max_x - origin[0]), cm(q.extent.max_y - origin[1])}},
+            {"path", ortho}};
+}
+}  // namespace
+
+ViewReport write_view(const std::string& run_dir, const ViewOptions& o) {
+    o.validate();
+    const fs::path dir(run_dir);
+    if (!fs::is_directory(dir)) throw Error(run_dir, "not a folder (give the output folder of `cityforge run` or `cityforge export`)");
+    const std::string table = o.buildings.empty() ? (dir / "buildings.gpkg").string() : o.buildings;
+    if (o.buildings.empty() && !fs::exists(table))
+        throw Error(run_dir, "no buildings.gpkg here (give the output folder of `cityforge run` or `cityforge export` with gpkg)");
+    const std::string out = o.out.empty() ? (dir / "view" / "index.html").string() : o.out;
+    if (fs::exists(out) && !o.overwrite) throw Error(out, "exists (use --overwrite to replace it)");
+
+    const PolygonLayer layer = read_polygon_layer(table);
+    if (layer.features.empty()) throw Error(table, "has no buildings to show");
+    if (layer.crs.empty()) throw Error(table, "has no CRS");
+    if (layer.crs.geographic) throw Error(table, "is in a geographic CRS; the viewer needs the model's projected CRS (the GeoPackage output)");
+
+    Extent ext = empty_extent();
+    for (const Feature& f : layer.features) include(ext, parts_extent(f.geometry));
+    // The glb's origin when there is one (so 2D and 3D share a frame), else the extent's centre.
+    const ViewGlb glb = read_view_glb(o.glb.empty() ? (dir / "buildings.glb").string() : o.glb, !o.glb.empty(), run_dir,
+                                      {std::round(0.5 * (ext.min_x + ext.max_x)), std::round(0.5 * (ext.min_y + ext.max_y)), 0.0});
+    const std::array<double, 3>& origin = glb.origin;
+    const ViewAudits audits = read_view_audits(dir, table);
+    std::set<std::string> numeric_fields, text_fields;
+    const json buildings = view_buildings(layer, origin, audits.of_fid, numeric_fields, text_fields);
 
     json data;
     data["title"] = "cityforge — " + fs::absolute(dir).lexically_normal().filename().string();
@@ -311,20 +354,13 @@ ViewReport write_view(const std::string& run_dir, const ViewOptions& o) {
     data["origin"] = origin;
     data["extent"] = {cm(ext.min_x - origin[0]), cm(ext.min_y - origin[1]), cm(ext.max_x - origin[0]), cm(ext.max_y - origin[1])};
     data["buildings"] = buildings;
-    data["colour_fields"] = colour_fields;
-    data["audits"] = audits;
+    data["colour_fields"] = view_colour_fields(numeric_fields, text_fields);
+    data["audits"] = audits.list;
     data["ortho"] = nullptr;
     ViewReport rep;
     const std::string ortho = o.ortho.empty() ? run_ortho(dir) : o.ortho;
     if (!ortho.empty()) {
-        const double w = ext.max_x - ext.min_x, h = ext.max_y - ext.min_y, m = 0.05 * std::max(w, h) + 5.0;
-        // The extent is in the buildings' CRS (a lon/lat ortho's run writes UTM): the picture is warped onto it.
-        const Quicklook q = render_quicklook_png(ortho, {ext.min_x - m, ext.min_y - m, ext.max_x + m, ext.max_y + m}, o.ortho_max_px,
-                                                 layer.crs.wkt);
-        data["ortho"] = {{"src", "data:image/png;base64," + base64(q.png)},
-                         {"extent", {cm(q.extent.min_x - origin[0]), cm(q.extent.min_y - origin[1]), cm(q.extent.max_x - origin[0]),
-                                     cm(q.extent.max_y - origin[1])}},
-                         {"path", ortho}};
+        data["ortho"] = view_ortho(ortho, ext, origin, o, layer.crs);
         rep.ortho = true;
     }
 
@@ -333,13 +369,13 @@ ViewReport write_view(const std::string& run_dir, const ViewOptions& o) {
     const std::size_t at = tmpl.find(placeholder);
     if (at == std::string_view::npos) throw Error(out, "internal: the viewer template has no data placeholder");
     std::string page;
-    page.reserve(tmpl.size() + glb.size() * 4 / 3 + 1024);
+    page.reserve(tmpl.size() + glb.bytes.size() * 4 / 3 + 1024);
     page.append(tmpl.substr(0, at));
     page += "<script type=\"application/json\" id=\"cityforge-data\">" + script_safe(data.dump()) + "</script>\n";
     // The glb as a string in a script (base64 holds no quote, backslash or '<'):
     // Chromium reads a large inline script about 5x faster than the same text in
     // a non-script data block (10,171 LOD1 buildings, 14.5 MB: 0.4 s against 2.2 s).
-    page += "<script id=\"cityforge-glb\">window.CITYFORGE_GLB_BASE64 = \"" + base64(glb) + "\";</script>\n";
+    page += "<script id=\"cityforge-glb\">window.CITYFORGE_GLB_BASE64 = \"" + base64(glb.bytes) + "\";</script>\n";
     // The tileset, bundled as a script beside the page.
     const std::string tileset = o.tileset.empty() ? (dir / "3dtiles" / "tileset.json").string() : o.tileset;
     if (!o.tileset.empty() && !fs::exists(tileset)) throw Error(o.tileset, "does not exist");
@@ -356,9 +392,9 @@ ViewReport write_view(const std::string& run_dir, const ViewOptions& o) {
     write_text_file(out, page);
     rep.path = out;
     rep.buildings = buildings.size();
-    rep.audits = n_audits;
+    rep.audits = audits.list.size();
     rep.bytes = page.size();
-    rep.meshed = meshed;
+    rep.meshed = glb.meshed;
     return rep;
 }
 
