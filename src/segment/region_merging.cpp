@@ -1073,7 +1073,10 @@ public:
     // the neighbours' lists (t replaced by s); m's nearest neighbour; and,
     // with `track_nn`, the neighbours whose nearest neighbour was a or b go
     // to `rescan`, those whose nearest neighbour became m to `changed`.
-    uint32_t merge(uint32_t a, uint32_t b, bool track_nn, std::vector<uint32_t>& changed, std::vector<uint32_t>& rescan) {
+    // Aligned to a cache line: where its loop falls otherwise moves with
+    // the code before it, and that alone moved the merging thread by ~7 ms
+    // (+2.7 %) on 341,401 seeds between builds that changed only the scan.
+    [[gnu::aligned(64)]] uint32_t merge(uint32_t a, uint32_t b, bool track_nn, std::vector<uint32_t>& changed, std::vector<uint32_t>& rescan) {
         const uint32_t s = head(a).degree >= head(b).degree ? a : b;  // survivor slot
         const uint32_t t = s == a ? b : a;                            // dies
         // The records of both lists' neighbours are read below (scored, and
