@@ -305,6 +305,205 @@ void SceneVariation::validate() const {
         if (!(v >= 0 && v <= 1)) throw Error(name, "must be between 0 and 1");
 }
 
+namespace {
+// Plants a tree of crown radius `radius` at (x, y) when its crown lies inside
+// the scene (height, crown base and colour drawn from `r`, ground from the terrain).
+struct TreePlanter {
+    Scene& scene;
+    double size_m;
+    void operator()(Rng& r, double x, double y, double radius) const {
+        if (x - radius < 0 || y - radius < 0 || x + radius > size_m || y + radius > size_m) return;
+        SceneTree t;
+        t.cx = x, t.cy = y, t.radius = radius;
+        t.height = r.uniform(6.0, 15.0);
+        t.crown_base = t.height * r.uniform(0.25, 0.45);
+        t.ground_z = scene.terrain_z(x, y);
+        t.color = {static_cast<uint8_t>(r.integer(35, 70)), static_cast<uint8_t>(r.integer(75, 110)),
+                   static_cast<uint8_t>(r.integer(28, 50))};
+        scene.trees.push_back(t);
+    }
+};
+
+// A park: trees on a jittered grid of 8-12 m over the block's inner lot.
+void plant_park(Rng& br, const Lot& inner, const TreePlanter& add_tree) {
+    const double spacing = br.uniform(8.0, 12.0);
+    for (double x = inner.x0 + spacing / 2; x < inner.x1; x += spacing)
+        for (double y = inner.y0 + spacing / 2; y < inner.y1; y += spacing)
+            if (br.chance(0.6)) add_tree(br, x + br.uniform(-2, 2), y + br.uniform(-2, 2), br.uniform(2.5, 5.0));
+}
+
+// The block's lots: the whole inner lot (`whole`), else one or two rows of
+// 15-32 m lots along the block's longer side.
+std::vector<Lot> cut_lots(Rng& br, const Lot& inner, bool whole) {
+    const double iw = inner.x1 - inner.x0, ih = inner.y1 - inner.y0;
+    std::vector<Lot> lots;
+    if (whole) {
+        lots.push_back(inner);
+        return lots;
+    }
+    const bool along_x = iw >= ih;
+    const double long_len = along_x ? iw : ih, short_len = along_x ? ih : iw;
+    const int rows = short_len >= 40.0 ? 2 : 1;
+    for (int r = 0; r < rows; ++r) {
+        double s0 = r * short_len / rows, s1 = (r + 1) * short_len / rows;
+        double pos = 0.0;
+        while (long_len - pos >= 14.0) {
+            double w = br.uniform(15.0, 32.0);
+            if (long_len - pos - w < 14.0) w = long_len - pos;
+            Lot lot = along_x ? Lot{inner.x0 + pos, inner.y0 + s0, inner.x0 + pos + w, inner.y0 + s1}
+                              : Lot{inner.x0 + s0, inner.y0 + pos, inner.x0 + s1, inner.y0 + pos + w};
+            lots.push_back(lot);
+            pos += w;
+        }
+    }
+    return lots;
+}
+
+// A terrace: the row's lots built wall to wall, one height, one roof type
+// (drawn from `vr`); a gap to the street and at the row's ends.
+void build_terrace(Scene& scene, Rng& vr, const std::vector<Lot>& lots, const Lot& inner) {
+    const double iw = inner.x1 - inner.x0, ih = inner.y1 - inner.y0;
+    const bool along_x = iw >= ih;
+    const double gap = vr.uniform(2.0, 4.0);
+    const double eave = vr.uniform(4.0, 14.0);
+    const RoofType roof = vr.chance(0.5) ? RoofType::flat : RoofType::gable;
+    const double pitch = std::tan(vr.uniform(25.0, 40.0) * kPi / 180.0);
+    const auto base = roof == RoofType::flat ? kFlatColours[vr.integer(0, int(kFlatColours.size()) - 1)]
+                                             : kPitchedColours[vr.integer(0, int(kPitchedColours.size()) - 1)];
+    for (const Lot& lot : lots) {
+        Lot l = lot;
+        auto at = [](double v, double edge) { return std::abs(v - edge) < 1e-9; };
+        if (along_x) {
+            l.y0 += gap, l.y1 -= gap;
+            if (at(l.x0, inner.x0)) l.x0 += gap;
+            if (at(l.x1, inner.x1)) l.x1 -= gap;
+        } else {
+            l.x0 += gap, l.x1 -= gap;
+            if (at(l.y0, inner.y0)) l.y0 += gap;
+            if (at(l.y1, inner.y1)) l.y1 -= gap;
+        }
+        const double W = l.x1 - l.x0, D = l.y1 - l.y0;
+        if (std::min(W, D) < 7.0) continue;
+        SceneBuilding b;
+        b.shape = BuildingShape::rectangle;
+        b.roof = roof;
+        b.cx = 0.5 * (l.x0 + l.x1), b.cy = 0.5 * (l.y0 + l.y1);
+        b.angle_rad = 0.0;
+        make_shape(b, W, D, 0.0);
+        b.ground_z = scene.terrain_z(b.cx, b.cy);
+        b.eave_height_m = eave;
+        b.pitch_tan = roof == RoofType::flat ? 0.0 : pitch;
+        b.ridge_height_m = eave + (roof == RoofType::flat ? 0.0 : 0.5 * std::min(W, D) * pitch);
+        b.color = jitter_colour(vr, base);
+        b.id = static_cast<int>(scene.buildings.size()) + 1;
+        scene.buildings.push_back(std::move(b));
+    }
+}
+
+// A detached building on `lot` (rotated by `angle`, radians), with its shape,
+// roof and colour, and trees in the lot's free space (sometimes one touching
+// it). Draws from `br` in the order the default town was made with; the
+// variations draw from their own streams (per building index), so the
+// default town stays the same whatever variations are on.
+void build_detached(Scene& scene, Rng& br, const Lot& lot, double angle, const SceneLayout& layout, const TreePlanter& add_tree) {
+    const SceneVariation& var = layout.variation;
+    const double lw = lot.x1 - lot.x0, lh = lot.y1 - lot.y0;
+    const double gap = br.uniform(2.0, 4.0);
+    const double avail_w = lw - 2 * gap, avail_h = lh - 2 * gap;
+    if (avail_w < 8.0 || avail_h < 8.0) return;
+    SceneBuilding b;
+    const double c = std::abs(std::cos(angle)), s = std::abs(std::sin(angle));
+    // Pick dimensions in the building frame, then shrink to fit the rotated box.
+    double W = br.uniform(0.6, 1.0) * (c >= s ? avail_w : avail_h);
+    double D = br.uniform(0.6, 1.0) * (c >= s ? avail_h : avail_w);
+    const double ex = W * c + D * s, ey = W * s + D * c;
+    const double k = std::min({1.0, avail_w / ex, avail_h / ey});
+    W *= k, D *= k;
+    if (std::min(W, D) < 7.0) return;
+    const double shape_roll = br.uniform();
+    const bool big = std::min(W, D) >= 24.0;
+    if (big && shape_roll < 0.4) b.shape = BuildingShape::courtyard;
+    else if (shape_roll < 0.45) b.shape = BuildingShape::rectangle;
+    else if (shape_roll < 0.67) b.shape = BuildingShape::l_shape;
+    else if (shape_roll < 0.82) b.shape = BuildingShape::t_shape;
+    else b.shape = BuildingShape::u_shape;
+    if (std::min(W, D) < 14.0) b.shape = BuildingShape::rectangle;
+    double t = 0.0;
+    if (b.shape == BuildingShape::courtyard) t = br.uniform(6.0, std::min(W, D) / 2 - 4.0);
+    else if (b.shape != BuildingShape::rectangle) t = br.uniform(5.5, std::min(W, D) * 0.45);
+    const double roof_roll = br.uniform();
+    if (b.shape == BuildingShape::rectangle)
+        b.roof = roof_roll < 0.3 ? RoofType::flat : roof_roll < 0.45 ? RoofType::shed : roof_roll < 0.75 ? RoofType::gable : RoofType::hip;
+    else
+        b.roof = roof_roll < 0.4 ? RoofType::flat : roof_roll < 0.75 ? RoofType::gable : RoofType::hip;
+    // Variations: own random stream per building, so the default town stays the same.
+    Rng bv(layout.seed, 5000000 + static_cast<uint64_t>(scene.buildings.size()));
+    if (var.all_roof_families) {
+        const RoofType families[] = {RoofType::flat, RoofType::shed, RoofType::gable, RoofType::hip};
+        b.roof = families[bv.integer(0, 3)];
+    }
+    const double slack_x = avail_w - (W * c + D * s), slack_y = avail_h - (W * s + D * c);
+    b.cx = lot.x0 + gap + (W * c + D * s) / 2 + br.uniform(0.0, std::max(0.0, slack_x));
+    b.cy = lot.y0 + gap + (W * s + D * c) / 2 + br.uniform(0.0, std::max(0.0, slack_y));
+    b.angle_rad = angle;
+    make_shape(b, W, D, t);
+    if (b.shape == BuildingShape::rectangle && var.oblique_share > 0 && bv.chance(var.oblique_share))
+        cut_corner(b, W, D, bv.integer(0, 3), bv.uniform(0.25, 0.7), bv.uniform(0.25, 0.7));
+    // Round and many-sided buildings: own random stream, flat roofs.
+    Rng rv(layout.seed, 6000000 + static_cast<uint64_t>(scene.buildings.size()));
+    const bool round = b.shape == BuildingShape::rectangle && !b.oblique && var.round_share > 0 && rv.chance(var.round_share);
+    if (round) {
+        const int kind = rv.integer(0, 3);  // circle, ellipse, octagon, hexagon
+        round_outline(b, W, D, kind == 0, kind <= 1 ? 48 : kind == 2 ? 8 : 6, rv.uniform(0.0, 2 * kPi));
+        b.roof = RoofType::flat;
+    }
+    if (var.base_at_area_centroid) {
+        const auto xy = b.to_scene(area_centroid(b));
+        b.ground_z = scene.terrain_z(xy[0], xy[1]);
+    } else {
+        b.ground_z = scene.terrain_z(b.cx, b.cy);
+    }
+    if (b.roof == RoofType::flat) {
+        b.eave_height_m = br.uniform(3.5, 24.0);
+        b.pitch_tan = 0.0;
+        b.color = jitter_colour(br, kFlatColours[br.integer(0, int(kFlatColours.size()) - 1)]);
+    } else {
+        b.eave_height_m = br.uniform(3.0, 14.0);
+        const double pitch_deg = b.roof == RoofType::shed ? br.uniform(6.0, 15.0) : br.uniform(22.0, 42.0);
+        b.pitch_tan = std::tan(pitch_deg * kPi / 180.0);
+        b.color = jitter_colour(br, kPitchedColours[br.integer(0, int(kPitchedColours.size()) - 1)]);
+    }
+    double ridge = 0.0;
+    for (const Wing& w : b.wings) {
+        const double half_short = 0.5 * std::min(w.u1 - w.u0, w.v1 - w.v0);
+        ridge = std::max(ridge, b.roof == RoofType::shed ? 2 * half_short * b.pitch_tan : half_short * b.pitch_tan);
+    }
+    b.ridge_height_m = b.eave_height_m + ridge;
+    if (var.ground_like_roof_share > 0 && bv.chance(var.ground_like_roof_share))
+        b.color = jitter_colour(bv, kGroundLikeColours[bv.integer(0, int(kGroundLikeColours.size()) - 1)]);
+    b.dark_roof = br.chance(var.dark_roof_share);
+    b.id = static_cast<int>(scene.buildings.size()) + 1;
+
+    // Trees in the lot's free space, and sometimes one touching the building.
+    const int n_trees = br.integer(0, 3);
+    for (int i = 0; i < n_trees; ++i) {
+        const double r = br.uniform(2.0, 4.5);
+        const double x = br.uniform(lot.x0 + r, std::max(lot.x0 + r, lot.x1 - r));
+        const double y = br.uniform(lot.y0 + r, std::max(lot.y0 + r, lot.y1 - r));
+        const LocalPoint p = b.to_local(x, y);
+        if (std::abs(p.u) < W / 2 + r * 0.8 && std::abs(p.v) < D / 2 + r * 0.8) continue;
+        add_tree(br, x, y, r);
+    }
+    if (br.chance(var.tree_touch_share)) {
+        const double r = br.uniform(2.5, 4.5);
+        const double side = br.chance(0.5) ? 1.0 : -1.0;
+        const auto xy = b.to_scene({side * (W / 2 + 0.6 * r), br.uniform(-D / 3, D / 3)});
+        add_tree(br, xy[0], xy[1], r);
+    }
+    scene.buildings.push_back(std::move(b));
+}
+}  // namespace
+
 Scene generate_scene(const SceneLayout& layout) {
     Scene scene;
     scene.size_m = layout.size_m;
@@ -322,18 +521,7 @@ Scene generate_scene(const SceneLayout& layout) {
 
     const double size = layout.size_m;
     const double margin = 2.0;  // buildings stay this far inside the scene
-    auto add_tree = [&](Rng& r, double x, double y, double radius) {
-        if (x - radius < 0 || y - radius < 0 || x + radius > size || y + radius > size) return;
-        SceneTree t;
-        t.cx = x, t.cy = y, t.radius = radius;
-        t.height = r.uniform(6.0, 15.0);
-        t.crown_base = t.height * r.uniform(0.25, 0.45);
-        t.ground_z = scene.terrain_z(x, y);
-        t.color = {static_cast<uint8_t>(r.integer(35, 70)), static_cast<uint8_t>(r.integer(75, 110)),
-                   static_cast<uint8_t>(r.integer(28, 50))};
-        scene.trees.push_back(t);
-    };
-
+    const TreePlanter add_tree{scene, size};
     uint64_t block_index = 0;
     for (const auto& xb : bx) {
         for (const auto& yb : by) {
@@ -344,171 +532,19 @@ Scene generate_scene(const SceneLayout& layout) {
             const double iw = inner.x1 - inner.x0, ih = inner.y1 - inner.y0;
             if (iw < 16.0 || ih < 16.0) continue;
             const double roll = br.uniform();
-            if (roll < 0.07) {  // park
-                const double spacing = br.uniform(8.0, 12.0);
-                for (double x = inner.x0 + spacing / 2; x < inner.x1; x += spacing)
-                    for (double y = inner.y0 + spacing / 2; y < inner.y1; y += spacing)
-                        if (br.chance(0.6)) add_tree(br, x + br.uniform(-2, 2), y + br.uniform(-2, 2), br.uniform(2.5, 5.0));
+            if (roll < 0.07) {
+                plant_park(br, inner, add_tree);
                 continue;
             }
             const double angle = br.chance(0.65) ? 0.0 : (br.chance(0.5) ? 1 : -1) * br.uniform(10.0, 45.0) * kPi / 180.0;
-            std::vector<Lot> lots;
-            if (roll < 0.19 && iw >= 45.0 && ih >= 45.0) {
-                lots.push_back(inner);
-            } else {
-                const bool along_x = iw >= ih;
-                const double long_len = along_x ? iw : ih, short_len = along_x ? ih : iw;
-                const int rows = short_len >= 40.0 ? 2 : 1;
-                for (int r = 0; r < rows; ++r) {
-                    double s0 = r * short_len / rows, s1 = (r + 1) * short_len / rows;
-                    double pos = 0.0;
-                    while (long_len - pos >= 14.0) {
-                        double w = br.uniform(15.0, 32.0);
-                        if (long_len - pos - w < 14.0) w = long_len - pos;
-                        Lot lot = along_x ? Lot{inner.x0 + pos, inner.y0 + s0, inner.x0 + pos + w, inner.y0 + s1}
-                                          : Lot{inner.x0 + s0, inner.y0 + pos, inner.x0 + s1, inner.y0 + pos + w};
-                        lots.push_back(lot);
-                        pos += w;
-                    }
-                }
-            }
-            // Terrace: the row's lots built wall to wall, one height, one roof type.
+            const bool whole = roll < 0.19 && iw >= 45.0 && ih >= 45.0;
+            const std::vector<Lot> lots = cut_lots(br, inner, whole);
             Rng vr(layout.seed, 700000 + block_index);
-            if (var.terraced_block_share > 0 && lots.size() >= 2 && !(roll < 0.19 && iw >= 45.0 && ih >= 45.0) &&
-                vr.chance(var.terraced_block_share)) {
-                const bool along_x = iw >= ih;
-                const double gap = vr.uniform(2.0, 4.0);
-                const double eave = vr.uniform(4.0, 14.0);
-                const RoofType roof = vr.chance(0.5) ? RoofType::flat : RoofType::gable;
-                const double pitch = std::tan(vr.uniform(25.0, 40.0) * kPi / 180.0);
-                const auto base = roof == RoofType::flat ? kFlatColours[vr.integer(0, int(kFlatColours.size()) - 1)]
-                                                         : kPitchedColours[vr.integer(0, int(kPitchedColours.size()) - 1)];
-                for (const Lot& lot : lots) {
-                    Lot l = lot;
-                    auto at = [](double v, double edge) { return std::abs(v - edge) < 1e-9; };
-                    if (along_x) {
-                        l.y0 += gap, l.y1 -= gap;
-                        if (at(l.x0, inner.x0)) l.x0 += gap;
-                        if (at(l.x1, inner.x1)) l.x1 -= gap;
-                    } else {
-                        l.x0 += gap, l.x1 -= gap;
-                        if (at(l.y0, inner.y0)) l.y0 += gap;
-                        if (at(l.y1, inner.y1)) l.y1 -= gap;
-                    }
-                    const double W = l.x1 - l.x0, D = l.y1 - l.y0;
-                    if (std::min(W, D) < 7.0) continue;
-                    SceneBuilding b;
-                    b.shape = BuildingShape::rectangle;
-                    b.roof = roof;
-                    b.cx = 0.5 * (l.x0 + l.x1), b.cy = 0.5 * (l.y0 + l.y1);
-                    b.angle_rad = 0.0;
-                    make_shape(b, W, D, 0.0);
-                    b.ground_z = scene.terrain_z(b.cx, b.cy);
-                    b.eave_height_m = eave;
-                    b.pitch_tan = roof == RoofType::flat ? 0.0 : pitch;
-                    b.ridge_height_m = eave + (roof == RoofType::flat ? 0.0 : 0.5 * std::min(W, D) * pitch);
-                    b.color = jitter_colour(vr, base);
-                    b.id = static_cast<int>(scene.buildings.size()) + 1;
-                    scene.buildings.push_back(std::move(b));
-                }
+            if (var.terraced_block_share > 0 && lots.size() >= 2 && !whole && vr.chance(var.terraced_block_share)) {
+                build_terrace(scene, vr, lots, inner);
                 continue;
             }
-            for (const Lot& lot : lots) {
-                const double lw = lot.x1 - lot.x0, lh = lot.y1 - lot.y0;
-                const double gap = br.uniform(2.0, 4.0);
-                const double avail_w = lw - 2 * gap, avail_h = lh - 2 * gap;
-                if (avail_w < 8.0 || avail_h < 8.0) continue;
-                SceneBuilding b;
-                const double c = std::abs(std::cos(angle)), s = std::abs(std::sin(angle));
-                // Pick dimensions in the building frame, then shrink to fit the rotated box.
-                double W = br.uniform(0.6, 1.0) * (c >= s ? avail_w : avail_h);
-                double D = br.uniform(0.6, 1.0) * (c >= s ? avail_h : avail_w);
-                const double ex = W * c + D * s, ey = W * s + D * c;
-                const double k = std::min({1.0, avail_w / ex, avail_h / ey});
-                W *= k, D *= k;
-                if (std::min(W, D) < 7.0) continue;
-                const double shape_roll = br.uniform();
-                const bool big = std::min(W, D) >= 24.0;
-                if (big && shape_roll < 0.4) b.shape = BuildingShape::courtyard;
-                else if (shape_roll < 0.45) b.shape = BuildingShape::rectangle;
-                else if (shape_roll < 0.67) b.shape = BuildingShape::l_shape;
-                else if (shape_roll < 0.82) b.shape = BuildingShape::t_shape;
-                else b.shape = BuildingShape::u_shape;
-                if (std::min(W, D) < 14.0) b.shape = BuildingShape::rectangle;
-                double t = 0.0;
-                if (b.shape == BuildingShape::courtyard) t = br.uniform(6.0, std::min(W, D) / 2 - 4.0);
-                else if (b.shape != BuildingShape::rectangle) t = br.uniform(5.5, std::min(W, D) * 0.45);
-                const double roof_roll = br.uniform();
-                if (b.shape == BuildingShape::rectangle)
-                    b.roof = roof_roll < 0.3 ? RoofType::flat : roof_roll < 0.45 ? RoofType::shed : roof_roll < 0.75 ? RoofType::gable : RoofType::hip;
-                else
-                    b.roof = roof_roll < 0.4 ? RoofType::flat : roof_roll < 0.75 ? RoofType::gable : RoofType::hip;
-                // Variations: own random stream per building, so the default town stays the same.
-                Rng bv(layout.seed, 5000000 + static_cast<uint64_t>(scene.buildings.size()));
-                if (var.all_roof_families) {
-                    const RoofType families[] = {RoofType::flat, RoofType::shed, RoofType::gable, RoofType::hip};
-                    b.roof = families[bv.integer(0, 3)];
-                }
-                const double slack_x = avail_w - (W * c + D * s), slack_y = avail_h - (W * s + D * c);
-                b.cx = lot.x0 + gap + (W * c + D * s) / 2 + br.uniform(0.0, std::max(0.0, slack_x));
-                b.cy = lot.y0 + gap + (W * s + D * c) / 2 + br.uniform(0.0, std::max(0.0, slack_y));
-                b.angle_rad = angle;
-                make_shape(b, W, D, t);
-                if (b.shape == BuildingShape::rectangle && var.oblique_share > 0 && bv.chance(var.oblique_share))
-                    cut_corner(b, W, D, bv.integer(0, 3), bv.uniform(0.25, 0.7), bv.uniform(0.25, 0.7));
-                // Round and many-sided buildings: own random stream, flat roofs.
-                Rng rv(layout.seed, 6000000 + static_cast<uint64_t>(scene.buildings.size()));
-                const bool round = b.shape == BuildingShape::rectangle && !b.oblique && var.round_share > 0 && rv.chance(var.round_share);
-                if (round) {
-                    const int kind = rv.integer(0, 3);  // circle, ellipse, octagon, hexagon
-                    round_outline(b, W, D, kind == 0, kind <= 1 ? 48 : kind == 2 ? 8 : 6, rv.uniform(0.0, 2 * kPi));
-                    b.roof = RoofType::flat;
-                }
-                if (var.base_at_area_centroid) {
-                    const auto xy = b.to_scene(area_centroid(b));
-                    b.ground_z = scene.terrain_z(xy[0], xy[1]);
-                } else {
-                    b.ground_z = scene.terrain_z(b.cx, b.cy);
-                }
-                if (b.roof == RoofType::flat) {
-                    b.eave_height_m = br.uniform(3.5, 24.0);
-                    b.pitch_tan = 0.0;
-                    b.color = jitter_colour(br, kFlatColours[br.integer(0, int(kFlatColours.size()) - 1)]);
-                } else {
-                    b.eave_height_m = br.uniform(3.0, 14.0);
-                    const double pitch_deg = b.roof == RoofType::shed ? br.uniform(6.0, 15.0) : br.uniform(22.0, 42.0);
-                    b.pitch_tan = std::tan(pitch_deg * kPi / 180.0);
-                    b.color = jitter_colour(br, kPitchedColours[br.integer(0, int(kPitchedColours.size()) - 1)]);
-                }
-                double ridge = 0.0;
-                for (const Wing& w : b.wings) {
-                    const double half_short = 0.5 * std::min(w.u1 - w.u0, w.v1 - w.v0);
-                    ridge = std::max(ridge, b.roof == RoofType::shed ? 2 * half_short * b.pitch_tan : half_short * b.pitch_tan);
-                }
-                b.ridge_height_m = b.eave_height_m + ridge;
-                if (var.ground_like_roof_share > 0 && bv.chance(var.ground_like_roof_share))
-                    b.color = jitter_colour(bv, kGroundLikeColours[bv.integer(0, int(kGroundLikeColours.size()) - 1)]);
-                b.dark_roof = br.chance(var.dark_roof_share);
-                b.id = static_cast<int>(scene.buildings.size()) + 1;
-
-                // Trees in the lot's free space, and sometimes one touching the building.
-                const int n_trees = br.integer(0, 3);
-                for (int i = 0; i < n_trees; ++i) {
-                    const double r = br.uniform(2.0, 4.5);
-                    const double x = br.uniform(lot.x0 + r, std::max(lot.x0 + r, lot.x1 - r));
-                    const double y = br.uniform(lot.y0 + r, std::max(lot.y0 + r, lot.y1 - r));
-                    const LocalPoint p = b.to_local(x, y);
-                    if (std::abs(p.u) < W / 2 + r * 0.8 && std::abs(p.v) < D / 2 + r * 0.8) continue;
-                    add_tree(br, x, y, r);
-                }
-                if (br.chance(var.tree_touch_share)) {
-                    const double r = br.uniform(2.5, 4.5);
-                    const double side = br.chance(0.5) ? 1.0 : -1.0;
-                    const auto xy = b.to_scene({side * (W / 2 + 0.6 * r), br.uniform(-D / 3, D / 3)});
-                    add_tree(br, xy[0], xy[1], r);
-                }
-                scene.buildings.push_back(std::move(b));
-            }
+            for (const Lot& lot : lots) build_detached(scene, br, lot, angle, layout, add_tree);
         }
     }
     return scene;
