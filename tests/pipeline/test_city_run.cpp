@@ -203,6 +203,18 @@ TEST_CASE("run: a tile that fails while another runs is reported and the others 
     CHECK(merged.err.find("partial result") != std::string::npos);
     CHECK(merged.err.find("tile_00008.las: corrupt LAS header") != std::string::npos);
     CHECK(merged.err.find("--tile K") != std::string::npos);
+    // Rank 0 of two MPI ranks without a job id in the environment (an MPI
+    // that names none): it cannot tell this failure from an old one, so the
+    // failed tile is kept, the run merges the others (rank 1's tiles are all
+    // reported already) and says how to run the failed tile: exit 5.
+    const auto rank0 = test::run_command(env + "env -u PMIX_NAMESPACE -u OMPI_MCA_ess_base_jobid -u PMI_JOBID -u SLURM_JOB_ID "
+                                               "OMPI_COMM_WORLD_RANK=0 OMPI_COMM_WORLD_SIZE=2 " +
+                                         test::cli() + " run --manifest " + (dir / "faulty/manifest.json") + " --mpi --out " + (dir / "faulty"));
+    INFO(rank0.err);
+    CHECK(rank0.exit_code == 5);
+    CHECK(rank0.err.find("no MPI job id in the environment") != std::string::npos);
+    CHECK(rank0.err.find("--tile K") != std::string::npos);
+    CHECK(nlohmann::json::parse(test::slurp(dir / "faulty/run_report.json"))["tiles"][8]["status"] == "failed");
     int done = 0;
     for (int k = 0; k < 9; ++k) {  // the tiles that finished are whole: the clean run's bytes
         INFO("tile " << k);
