@@ -772,10 +772,6 @@ public:
         }
         // Totals into the node records (with the region's key, whether it
         // has pixels, and its colour term); the inline adjacency gets its room back.
-        // fixed is a power of two: dividing by it or by its square is
-        // multiplying by the exact reciprocal (both are the correctly rounded
-        // x / 2^k), without six divisions per region.
-        const double inv_fixed = 1.0 / fixed, inv_fixed_sq = 1.0 / (fixed * fixed);
         alive_count_ = tbb::parallel_reduce(
             tbb::blocked_range<uint32_t>(0, n_, 1 << 14), uint32_t(0),
             [&](const tbb::blocked_range<uint32_t>& rr, uint32_t alive) {
@@ -790,11 +786,11 @@ public:
                     const int64_t* half = A + 6 + bands_ + 2 * b;
                     const auto sq = static_cast<int128>(static_cast<uint128>(static_cast<uint64_t>(half[0])) |
                                                         static_cast<uint128>(static_cast<uint64_t>(half[1])) << 64);
-                    S[2 * b] = static_cast<double>(A[6 + b]) * inv_fixed;
+                    S[2 * b] = static_cast<double>(A[6 + b]) / fixed;
                     // (a value that fits 64 bits converts as one: the same rounding,
                     // without libgcc's 128-bit conversion call)
                     const bool fits = half[1] == (half[0] >> 63);
-                    S[2 * b + 1] = (fits ? static_cast<double>(half[0]) : static_cast<double>(sq)) * inv_fixed_sq;
+                    S[2 * b + 1] = (fits ? static_cast<double>(half[0]) : static_cast<double>(sq)) / (fixed * fixed);
                 }
                 R.list = new (inline_bytes(r)) Neighbour[inline_capacity_];
                 R.capacity = inline_capacity_;
