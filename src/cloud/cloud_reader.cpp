@@ -38,7 +38,7 @@ std::string lower(std::string s) {
 class LasFormatReader final : public CloudFormatReader {
 public:
     explicit LasFormatReader(const std::string& path) : path_(path), reader_(path) {
-        if (reader_.laz_source()) copc_ = read_copc_hierarchy(path, reader_.header());
+        if (reader_.laz_source()) copc_ = read_copc_hierarchy(reader_.file(), reader_.header());
     }
     std::size_t read_chunk(PointCloud& out, std::size_t max_points) override { return reader_.read_chunk(out, max_points); }
     std::size_t reserve_hint() const override { return reader_.reserve_hint(); }

@@ -108,7 +108,7 @@ CloudTranslateResult translate_las(const CloudTranslateOptions& o) {
     if (o.bounds && reader.laz_source()) {
         const auto& b = *o.bounds;
         std::vector<bool> keep;
-        if (const auto copc = read_copc_hierarchy(o.input, h)) {
+        if (const auto copc = read_copc_hierarchy(reader.file(), h)) {
             const double pad = std::max(h.scale[0], h.scale[1]);
             // copc_chunks_in_box takes a half-open box; widen it so max is kept.
             keep = copc_chunks_in_box(*copc, reader.laz_source()->chunks(), b[0], b[1], b[2] + pad, b[3] + pad, pad, -1, o.input);

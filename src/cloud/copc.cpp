@@ -3,8 +3,6 @@
 #include <algorithm>
 #include <cmath>
 #include <cstring>
-#include <filesystem>
-#include <fstream>
 #include <set>
 
 #include "cloud/las.hpp"
@@ -29,16 +27,13 @@ std::array<double, 6> CopcNode::bounds(const CopcInfo& info) const {
     return {x0, y0, z0, x0 + side, y0 + side, z0 + side};
 }
 
-std::optional<CopcHierarchy> read_copc_hierarchy(const std::string& path, const LasHeader& header) {
+std::optional<CopcHierarchy> read_copc_hierarchy(const RandomAccessFile& file, const LasHeader& header) {
     if (!header.laz || header.version_minor < 4 || header.header_size < 375) return std::nullopt;
-    std::ifstream in(path, std::ios::binary);
-    if (!in) throw Error(path, "cannot open for reading");
-    const auto file_size = static_cast<uint64_t>(std::filesystem::file_size(path));
+    const std::string& path = file.path();
+    const uint64_t file_size = file.size();
     // The info VLR is the first VLR, right after the header.
     char vh[54 + 160];
-    in.seekg(header.header_size);
-    in.read(vh, sizeof vh);
-    if (in.gcount() != static_cast<std::streamsize>(sizeof vh)) return std::nullopt;
+    if (!file.read_exact_at(header.header_size, vh, sizeof vh)) return std::nullopt;
     if (user_id(vh + 2) != "copc" || get<uint16_t>(vh + 18) != 1) return std::nullopt;
     if (get<uint16_t>(vh + 20) < 160) throw Error(path, "COPC info VLR is shorter than 160 bytes");
     const char* p = vh + 54;
@@ -63,9 +58,7 @@ std::optional<CopcHierarchy> read_copc_hierarchy(const std::string& path, const 
         if (!seen.insert(off).second) throw Error(path, "COPC hierarchy pages form a loop (page at " + std::to_string(off) + ")");
         ++h.pages;
         std::vector<char> page(static_cast<std::size_t>(size));
-        in.clear();
-        in.seekg(static_cast<std::streamoff>(off));
-        in.read(page.data(), static_cast<std::streamsize>(size));
+        if (!file.read_exact_at(off, page.data(), page.size())) throw Error(path, "COPC hierarchy page at " + std::to_string(off) + ": the file ends inside it");
         for (std::size_t e = 0; e + 32 <= page.size(); e += 32) {
             const char* q = page.data() + e;
             CopcNode n;

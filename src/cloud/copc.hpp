@@ -42,10 +42,11 @@ struct CopcHierarchy {
     uint64_t pages = 0;           ///< hierarchy pages read
 };
 
-/// Reads the COPC info VLR and the whole hierarchy of `path` (with `header`
-/// from LasReader). Returns nullopt when the file is not COPC; throws Error
-/// naming the file for a corrupt hierarchy (pages outside the file, loops).
-std::optional<CopcHierarchy> read_copc_hierarchy(const std::string& path, const LasHeader& header);
+/// Reads the COPC info VLR and the whole hierarchy of `file` (LasReader::file(),
+/// with `header` from that LasReader: the same open file as its points).
+/// Returns nullopt when the file is not COPC; throws Error naming the file
+/// for a corrupt hierarchy (pages outside the file, loops).
+std::optional<CopcHierarchy> read_copc_hierarchy(const RandomAccessFile& file, const LasHeader& header);
 
 /// For each chunk of `chunks`: true when its node's cube (x/y, padded by
 /// `pad` CRS units) meets [min_x, max_x) × [min_y, max_y) and its level is

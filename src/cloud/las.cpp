@@ -5,13 +5,9 @@
 #include <cmath>
 #include <cstdio>
 #include <cstring>
-#include <filesystem>
 #include <limits>
 #include <vector>
-#include <cerrno>
-#include <fcntl.h>
 #include <sys/mman.h>
-#include <unistd.h>
 #include <tbb/parallel_for.h>
 
 #include "core/atomic_file.hpp"
@@ -377,10 +373,13 @@ std::size_t LasReader::read_chunk_unscreened(PointCloud& out, std::size_t max_po
     // A chunk that cannot be read (or memory that cannot be had) leaves `out`
     // as it was: the points appended for this chunk are taken off again.
     const std::size_t base = out.size();
+    const bool had_gps = out.has_gps_time(), had_color = out.has_color();
     try {
         append_records(out, n);
     } catch (...) {
         out.truncate(base);
+        if (!had_gps) out.gps_time.clear();  // attributes this chunk added are taken off too
+        if (!had_color) out.red.clear(), out.green.clear(), out.blue.clear();
         throw;
     }
     return n;

@@ -92,7 +92,8 @@ public:
     const LasHeader& header() const { return header_; }
     /// Appends up to `max_points` points to `out`; returns how many were read
     /// (0 at the end). Throws Error on a truncated file or a read error,
-    /// leaving `out` as it was before the call.
+    /// leaving `out` as it was before the call (its points and which
+    /// attributes it holds); the reader is not to be used after it threw.
     /// A reader is used either through read_chunk or through read_records
     /// (LAZ: read_chunk skips the layers a PointCloud does not hold).
     std::size_t read_chunk(PointCloud& out, std::size_t max_points);
@@ -109,6 +110,8 @@ public:
     /// an uncompressed file (its size was checked against the count on open),
     /// at most 2^24 for LAZ (whose header may claim any count).
     std::size_t reserve_hint() const;
+    /// The open file the header and points come from (COPC's hierarchy is read from it too).
+    const RandomAccessFile& file() const { return file_; }
     /// LAZ only: the chunk decoder (chunk table, chunk selection); null for LAS.
     LazPointSource* laz_source() { return laz_.get(); }
     /// LAZ only, before the first read: decode only the chunks with keep[i].

@@ -32,7 +32,8 @@ struct PointCloud {
     bool has_gps_time() const { return !gps_time.empty(); }
     void clear();
     /// Keeps the first `n` points (n <= size()) with all their attributes;
-    /// an attribute array that was empty stays empty.
+    /// an attribute array shorter than `n` (empty: the cloud has no such
+    /// attribute) is left as it is.
     void truncate(std::size_t n);
     void reserve(std::size_t n, bool color, bool gps);
     /// Appends point `i` of `src` with all its attributes (colour and GPS time

@@ -16,7 +16,7 @@ RandomAccessFile::RandomAccessFile(const std::string& path, const std::string& w
     fd_ = ::open(path.c_str(), O_RDONLY | O_CLOEXEC);
     if (fd_ < 0) {
         const int e = errno;
-        if (e == ENOENT) throw Error(path, "file not found");
+        if (e == ENOENT || e == ENOTDIR) throw Error(path, "file not found");
         throw Error(path, std::string("cannot open for reading: ") + std::strerror(e));
     }
     struct stat st {};
@@ -41,9 +41,11 @@ std::size_t RandomAccessFile::read_at(uint64_t offset, void* out, std::size_t by
     std::size_t done = 0;
     while (done < bytes) {
         const ssize_t got = ::pread(fd_, p + done, std::min<std::size_t>(bytes - done, std::size_t(1) << 30), static_cast<off_t>(offset + done));
-        if (got < 0 && errno == EINTR) continue;
-        if (got < 0)
-            throw Error(path_, "read error at byte " + std::to_string(offset + done) + ": " + std::strerror(errno));
+        if (got < 0) {
+            const int e = errno;
+            if (e == EINTR) continue;
+            throw Error(path_, "read error at byte " + std::to_string(offset + done) + ": " + std::strerror(e));
+        }
         if (got == 0) break;
         done += static_cast<std::size_t>(got);
     }

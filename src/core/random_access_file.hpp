@@ -1,6 +1,7 @@
 #pragma once
-// A file opened once for positional reads (pread): the one way cityforge's
-// binary readers (LAS, LAZ) take bytes at given offsets. Several threads may
+// A file opened once for positional reads (pread): how the LAS/LAZ/COPC
+// reader (LasReader, the LAZ chunk decoder, the COPC hierarchy) takes bytes
+// at given offsets. Several threads may
 // read from one object at once (pread has no shared file position). The
 // file's size is taken from the open descriptor (fstat), so the size, the
 // header and the records all come from the same file even if the path is
@@ -14,9 +15,10 @@ namespace cityforge {
 class RandomAccessFile {
 public:
     /// Opens `path` for reading. Throws Error naming the path: "file not
-    /// found", "is a directory, not a ...", or "cannot open for reading:
-    /// <system reason>". `what_kind` names the expected content in the
-    /// directory message (e.g. "a point cloud file").
+    /// found" (also a path through a file), "is a directory, not <what_kind>",
+    /// "cannot open for reading: <system reason>" or "cannot read the file's
+    /// size: <system reason>". `what_kind` names the expected content (e.g.
+    /// "a point cloud file").
     RandomAccessFile(const std::string& path, const std::string& what_kind);
     ~RandomAccessFile();
     RandomAccessFile(const RandomAccessFile&) = delete;

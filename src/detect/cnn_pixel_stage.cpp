@@ -71,16 +71,15 @@ public:
 
     /// Starts (users 0 -> 1) or ends (1 -> 0, the cache freed) a use of the cache.
     static void use(int delta) {
-        std::vector<void*> freed;
+        std::multimap<std::size_t, void*> freed;  // taken out under the lock, freed outside it; no allocation
         {
             State& s = state();
             std::lock_guard lock(s.mutex);
             s.users += delta;
             if (s.users > 0) return;
-            for (auto& [size, raw] : s.blocks) freed.push_back(raw);
-            s.blocks.clear(), s.cached = 0;
+            freed.swap(s.blocks), s.cached = 0;
         }
-        for (void* raw : freed) std::free(raw);
+        for (const auto& [size, raw] : freed) std::free(raw);
     }
 
 private:

@@ -36,7 +36,7 @@ CloudInfo inspect_cloud(const std::string& path, const InspectOptions& options) 
     if (LazPointSource* laz = reader.laz_source()) {
         info.laz_chunks = laz->chunks().size();
         info.laz_chunk_table = laz->has_chunk_table();
-        info.copc = read_copc_hierarchy(path, info.header);
+        info.copc = read_copc_hierarchy(reader.file(), info.header);
     }
     {
         CloudCrs resolved = resolve_cloud_crs(CloudReader(path), options.assume_crs, "--crs");

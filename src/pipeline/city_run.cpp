@@ -420,6 +420,16 @@ PlannedGrid grid_from_footprints(RunManifest& m) {
     return g;
 }
 
+// Whether the run leaves to a cloud sample the outlier filter's limit, or
+// (extracting buildings) the cloud cells' size or whether point classes
+// decide building cells.
+bool cloud_sample_needed(const RunOptions& o) {
+    const auto& outliers = o.buildings.heights.outliers;
+    const auto& ex = o.extraction;
+    const bool extract = o.footprints.empty();
+    return (outliers.enabled && !(outliers.max_mean_distance > 0)) || (extract && (ex.cloud_cell_factor == 0 || ex.mask.use_classes < 0));
+}
+
 // What must be alike in every tile, measured once on a sample fixed by where
 // the cloud is on the grid (the central 400 m square of the part it covers,
 // `covered`, so an ortho cropped around the cloud decides as the whole ortho
@@ -432,7 +442,7 @@ void measure_cloud_sample(RunManifest& m, const Extent& covered, double gsd_m, c
     auto& ex = m.options.extraction;
     const bool need_limit = outliers.enabled && !(outliers.max_mean_distance > 0);
     const bool extract = o.footprints.empty();
-    if (!(need_limit || (extract && (ex.cloud_cell_factor == 0 || ex.mask.use_classes < 0)))) return;
+    if (!cloud_sample_needed(o)) return;
     const CrsInfo grid_crs = crs_from_wkt(m.crs_wkt, "grid");
     PreparedCloud points;
     MapPoint centre{0.5 * (covered.min_x + covered.max_x), 0.5 * (covered.min_y + covered.max_y)};
@@ -557,11 +567,8 @@ RunManifest plan_run(const RunOptions& in, const Progress& progress) {
         covered_part(m, bounds());
         check_footprints_within(bounds(), crs_from_wkt(m.crs_wkt, "grid"), o.cloud, g.footprint_extents, o.footprints);
     }
-    const auto& outliers = m.options.buildings.heights.outliers;
-    const auto& ex = m.options.extraction;
+    if (cloud_sample_needed(m.options)) measure_cloud_sample(m, covered_part(m, bounds()), g.gsd_m, progress);
     const bool extract = o.footprints.empty();
-    if ((outliers.enabled && !(outliers.max_mean_distance > 0)) || (extract && (ex.cloud_cell_factor == 0 || ex.mask.use_classes < 0)))
-        measure_cloud_sample(m, covered_part(m, bounds()), g.gsd_m, progress);
     // At least the context of one building (smaller overlaps would only make
     // every building near a core's edge be done again on a grown window).
     m.overlap_px = std::max(m.overlap_px, context_px(m.options, g.gsd_m));

@@ -329,7 +329,15 @@ void plant_park(Rng& br, const Lot& inner, const TreePlanter& add_tree) {
     const double spacing = br.uniform(8.0, 12.0);
     for (double x = inner.x0 + spacing / 2; x < inner.x1; x += spacing)
         for (double y = inner.y0 + spacing / 2; y < inner.y1; y += spacing)
-            if (br.chance(0.6)) add_tree(br, x + br.uniform(-2, 2), y + br.uniform(-2, 2), br.uniform(2.5, 5.0));
+            if (br.chance(0.6)) {
+                // Drawn in this order (the order GCC evaluated the call's
+                // arguments in when the default towns were made), named so
+                // that no compiler's argument order changes the town.
+                const double radius = br.uniform(2.5, 5.0);
+                const double dy = br.uniform(-2, 2);
+                const double dx = br.uniform(-2, 2);
+                add_tree(br, x + dx, y + dy, radius);
+            }
 }
 
 // The block's lots: the whole inner lot (`whole`), else one or two rows of
@@ -447,8 +455,13 @@ void build_detached(Scene& scene, Rng& br, const Lot& lot, double angle, const S
     b.cy = lot.y0 + gap + (W * s + D * c) / 2 + br.uniform(0.0, std::max(0.0, slack_y));
     b.angle_rad = angle;
     make_shape(b, W, D, t);
-    if (b.shape == BuildingShape::rectangle && var.oblique_share > 0 && bv.chance(var.oblique_share))
-        cut_corner(b, W, D, bv.integer(0, 3), bv.uniform(0.25, 0.7), bv.uniform(0.25, 0.7));
+    if (b.shape == BuildingShape::rectangle && var.oblique_share > 0 && bv.chance(var.oblique_share)) {
+        // Drawn in the order GCC evaluated the call's arguments in when the
+        // towns were first made, named so that no compiler changes them.
+        const double cut_v = bv.uniform(0.25, 0.7), cut_u = bv.uniform(0.25, 0.7);
+        const int corner = bv.integer(0, 3);
+        cut_corner(b, W, D, corner, cut_u, cut_v);
+    }
     // Round and many-sided buildings: own random stream, flat roofs.
     Rng rv(layout.seed, 6000000 + static_cast<uint64_t>(scene.buildings.size()));
     const bool round = b.shape == BuildingShape::rectangle && !b.oblique && var.round_share > 0 && rv.chance(var.round_share);

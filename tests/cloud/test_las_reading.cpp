@@ -190,3 +190,37 @@ TEST_CASE("LAS 1.4 format 7 with 3 extra bytes per record and an EVLR after the 
     CHECK(records[36] == '\x11');
     CHECK(records[77] == '\x33');
 }
+
+TEST_CASE("A chunk that fails to read leaves a cloud without GPS time or colour without them - points and attributes as before", "[cloud][las][read][errors]") {
+    // The caller's cloud holds 5 points with neither GPS time nor colour; the
+    // file (Autzen, format 3) has both. The failed chunk must not leave
+    // zero-filled GPS and colour arrays behind.
+    ScratchDir dir("las_fail_attrs");
+    PointCloud c;
+    for (int i = 0; i < 5; ++i) {
+        c.x.push_back(i), c.y.push_back(2 * i), c.z.push_back(3 * i), c.intensity.push_back(static_cast<uint16_t>(i));
+        c.classification.push_back(2), c.return_number.push_back(1), c.number_of_returns.push_back(1);
+    }
+    const PointCloud before = c;
+    const std::string bytes = slurp(shared_data("autzen_oregon/autzen_trim.las"));
+    const std::size_t offset_to_points = at<uint32_t>(bytes, 96), rl = at<uint16_t>(bytes, 105);
+    const std::string p = dir / "cut.las";
+    std::ofstream(p, std::ios::binary) << bytes;
+    LasReader reader(p);
+    std::filesystem::resize_file(p, offset_to_points + 1000 * rl);
+    CHECK_THROWS_WITH(reader.read_chunk(c, 1u << 20), Catch::Contains("cut.las") && Catch::Contains("truncated point records"));
+    CHECK_FALSE(c.has_gps_time());
+    CHECK_FALSE(c.has_color());
+    cityforge::test::check_same_cloud(c, before);
+}
+
+TEST_CASE("LAS paths that are no file: a directory, a dangling link, a path through a file - one-line errors naming them", "[cloud][las][read][errors]") {
+    ScratchDir dir("las_no_file");
+    std::filesystem::create_directories(dir / "folder.las");
+    CHECK_THROWS_WITH(read_las(dir / "folder.las"), Catch::Contains("folder.las") && Catch::Contains("is a directory, not a point cloud file"));
+    std::filesystem::create_symlink(dir / "gone.las", dir / "link.las");
+    CHECK_THROWS_WITH(read_las(dir / "link.las"), Catch::Contains("link.las") && Catch::Contains("file not found"));
+    std::ofstream(dir / "plain.las") << "x";
+    CHECK_THROWS_WITH(read_las(dir / "plain.las" + "/inner.las"), Catch::Contains("inner.las") && Catch::Contains("file not found"));
+    CHECK_THROWS_WITH(read_las(dir / "plain.las"), Catch::Contains("plain.las") && Catch::Contains("not a LAS file"));
+}

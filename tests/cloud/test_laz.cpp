@@ -168,7 +168,7 @@ TEST_CASE("COPC: every hierarchy node decodes alone to the oracle's node hash", 
         const std::string name = entry["file"];
         INFO(name);
         LasReader probe(corpus(name));
-        const auto h = read_copc_hierarchy(corpus(name), probe.header());
+        const auto h = read_copc_hierarchy(probe.file(), probe.header());
         REQUIRE(h);
         const auto& nodes = entry["copc_nodes_in_file_order"];
         REQUIRE(h->nodes.size() == nodes.size());
@@ -204,7 +204,7 @@ TEST_CASE("COPC window reads decode only the nodes that meet the window and miss
     CHECK(window.size() == inside);
     // The hierarchy really is used: fewer nodes than the whole file.
     LasReader reader(p);
-    const auto h = read_copc_hierarchy(p, reader.header());
+    const auto h = read_copc_hierarchy(reader.file(), reader.header());
     REQUIRE(h);
     const auto keep = copc_chunks_in_box(*h, reader.laz_source()->chunks(), box[0], box[1], box[2], box[3], 0.001, -1, p);
     const auto kept = static_cast<std::size_t>(std::count(keep.begin(), keep.end(), true));
