@@ -6,6 +6,9 @@
 #include <array>
 #include <cmath>
 #include <cstdint>
+#include <functional>
+#include <memory>
+#include <utility>
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
 
@@ -26,7 +29,7 @@ namespace {
 // parallel, each starting `limit` rows before its first row (the same values
 // as one sweep over the whole grid, whatever the thread count); without a
 // limit the grid is one strip.
-void sweep(const std::vector<double>& g, int w, int h, int limit, std::vector<double>& num, std::vector<double>& den) {
+void sweep(const double* g, int w, int h, int limit, double* num, double* den) {
     static const std::array<std::array<int, 2>, 8> dirs{{{1, 0}, {-1, 0}, {0, 1}, {0, -1}, {1, 1}, {-1, -1}, {1, -1}, {-1, 1}}};
     const int strip = limit > 0 ? std::max(256, 4 * limit) : h;
     const int strips = (h + strip - 1) / strip;
@@ -49,7 +52,7 @@ void sweep(const std::vector<double>& g, int w, int h, int limit, std::vector<do
                 for (int y = y_first; y != y_end; y += ys) {
                     const bool first_row = y == y_first;  // the row before counts as outside the grid
                     const bool accumulate = y >= ya && y < yb;
-                    const double* row = g.data() + static_cast<std::size_t>(y) * w;
+                    const double* row = g + static_cast<std::size_t>(y) * w;
                     for (int x = x0; x != x1; x += xs) {
                         if (!std::isnan(row[x])) {
                             cur_v[x] = row[x], cur_d[x] = 0;
@@ -82,18 +85,32 @@ void sweep(const std::vector<double>& g, int w, int h, int limit, std::vector<do
 int gap_fill_reach_cells(double cell_m) { return std::max(1, static_cast<int>(std::ceil(kGapFillReach_m / cell_m))); }
 
 void fill_gaps(std::vector<double>& g, int w, int h, int max_ray_cells, const std::vector<uint8_t>* fill_only) {
+    const std::size_t cells = static_cast<std::size_t>(w) * h;
+    if (g.size() != cells) throw Error("fill_gaps", "internal: the grid's size differs from its width x height");
+    if (fill_only && fill_only->size() != cells) throw Error("fill_gaps", "internal: the mask of cells to fill differs from the grid");
+    std::unique_ptr<double[]> num, den;
+    fill_gaps(g.data(), w, h, max_ray_cells, fill_only ? fill_only->data() : nullptr, [&] {
+        num = std::make_unique_for_overwrite<double[]>(cells), den = std::make_unique_for_overwrite<double[]>(cells);
+        return std::pair<double*, double*>{num.get(), den.get()};
+    });
+}
+
+void fill_gaps(double* g, int w, int h, int max_ray_cells, const uint8_t* fill_only, const std::function<std::pair<double*, double*>()>& workspace) {
+    const std::size_t cells = static_cast<std::size_t>(w) * h;
     bool any_gap = false, any_valid = false;
     double sum = 0.0;
     std::size_t n_valid = 0;
-    for (double v : g) {
+    for (std::size_t k = 0; k < cells; ++k) {
+        const double v = g[k];
         if (std::isnan(v)) any_gap = true;
         else any_valid = true, sum += v, ++n_valid;
     }
     if (!any_gap || !any_valid) return;
-    const std::size_t cells = static_cast<std::size_t>(w) * h;
-    if (fill_only && fill_only->size() != cells) throw Error("fill_gaps", "internal: the mask of cells to fill differs from the grid");
-    auto wanted = [&](std::size_t k) { return !fill_only || (*fill_only)[k]; };
-    std::vector<double> num(cells, 0.0), den(cells, 0.0);
+    auto wanted = [&](std::size_t k) { return !fill_only || fill_only[k]; };
+    const auto [num, den] = workspace();
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, cells, 1u << 16), [&](const tbb::blocked_range<std::size_t>& r) {
+        std::fill(num + r.begin(), num + r.end(), 0.0), std::fill(den + r.begin(), den + r.end(), 0.0);
+    });
     sweep(g, w, h, max_ray_cells, num, den);
     if (max_ray_cells > 0) {
         // Cells with no valid cell within reach on any ray: the unlimited fill.
@@ -101,7 +118,7 @@ void fill_gaps(std::vector<double>& g, int w, int h, int max_ray_cells, const st
         for (std::size_t k = 0; k < cells && !far; ++k) far = std::isnan(g[k]) && !(den[k] > 0) && wanted(k);
         if (far) {
             std::vector<double> num_all(cells, 0.0), den_all(cells, 0.0);
-            sweep(g, w, h, 0, num_all, den_all);
+            sweep(g, w, h, 0, num_all.data(), den_all.data());
             for (std::size_t k = 0; k < cells; ++k)
                 if (std::isnan(g[k]) && !(den[k] > 0)) num[k] = num_all[k], den[k] = den_all[k];
         }

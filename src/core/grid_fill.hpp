@@ -5,6 +5,8 @@
 // depends only on its gap), so windows of a grid fill alike. O(cells), no GDAL.
 #include <cstddef>
 #include <cstdint>
+#include <functional>
+#include <utility>
 #include <vector>
 
 namespace cityforge {
@@ -25,6 +27,13 @@ inline constexpr double kGapFillReach_m = 40.0;
 /// filled, the others stay NaN (and need no unlimited fill); the filled
 /// cells get the values they get without it.
 void fill_gaps(std::vector<double>& grid, int w, int h, int max_ray_cells = 0, const std::vector<uint8_t>* fill_only = nullptr);
+
+/// The same on a caller-owned row-major array of `w` x `h` values (and mask
+/// of as many bytes, or null). `workspace()` is called only when the grid has
+/// gaps to fill and returns two arrays of w * h doubles (contents stale:
+/// they are overwritten), distinct from `grid`: for a caller that reuses its
+/// buffers (no fresh memory per fill).
+void fill_gaps(double* grid, int w, int h, int max_ray_cells, const uint8_t* fill_only, const std::function<std::pair<double*, double*>()>& workspace);
 
 /// Grows values into NaN cells of the row-major `w` x `h` grid of
 /// `channels` interleaved values per cell (a cell is empty when its first

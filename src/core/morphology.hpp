@@ -8,6 +8,7 @@
 #include <limits>
 #include <optional>
 #include <type_traits>
+#include <utility>
 #include <vector>
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
@@ -25,10 +26,27 @@ namespace cityforge {
 /// extrema stay in cache), rows and column strips in parallel; the result does
 /// not depend on the thread count.
 template <typename T>
+void morphology_square(const T* in, int w, int h, int r, bool erode, T* out, T* scratch, std::optional<T> outside = std::nullopt);
+
+template <typename T>
 void morphology_square(const std::vector<T>& in, int w, int h, int r, bool erode, std::vector<T>& out, std::vector<T>& scratch,
                        std::optional<T> outside = std::nullopt) {
     if (r <= 0 || w <= 0 || h <= 0) {
         out = in;
+        return;
+    }
+    scratch.resize(in.size()), out.resize(in.size());
+    morphology_square(in.data(), w, h, r, erode, out.data(), scratch.data(), outside);
+}
+
+/// The same on caller-owned row-major arrays of w * h values: `in`, `out`
+/// and `scratch` distinct (every cell of `out` and `scratch` is written
+/// before it is read; r > 0, w > 0, h > 0, else `out` is a copy of `in`).
+/// For callers that keep their grids in buffers of their own.
+template <typename T>
+void morphology_square(const T* in, int w, int h, int r, bool erode, T* out, T* scratch, std::optional<T> outside) {
+    if (r <= 0 || w <= 0 || h <= 0) {
+        if (w > 0 && h > 0) std::copy(in, in + static_cast<std::size_t>(w) * static_cast<std::size_t>(h), out);
         return;
     }
     auto pick = [erode](T a, T b) { return erode ? std::min(a, b) : std::max(a, b); };
@@ -49,7 +67,10 @@ void morphology_square(const std::vector<T>& in, int w, int h, int r, bool erode
     // same or adjacent blocks, so two blocks are held at a time.
     // `line(j, v)` loads padded line j into v; `emit(y, hh_y, g_y)` gets the
     // two halves of output line y.
-    auto run = [&](std::size_t lines, std::size_t lanes, auto&& line, auto&& emit, std::vector<T>& buf) {
+    // `lanes` may be a std::integral_constant (full strips: loops of a known
+    // length). Each line is loaded into hh and its running extremum g taken
+    // while the line is in cache (one pass over the block, not three).
+    auto run = [&](std::size_t lines, auto lanes, auto&& line, auto&& emit, std::vector<T>& buf) {
         const std::size_t padded = lines + win - 1, block = win * lanes;
         buf.resize(4 * block);
         for (std::size_t b = 0, k = 0; b < padded; b += win, ++k) {
@@ -57,10 +78,15 @@ void morphology_square(const std::vector<T>& in, int w, int h, int r, bool erode
             T* hh = buf.data() + (2 + (k & 1)) * block;
             const T* hh_before = buf.data() + (2 + ((k + 1) & 1)) * block;  // the previous block's
             const std::size_t len = std::min(padded, b + win) - b;
-            for (std::size_t j = 0; j < len; ++j) line(b + j, g + j * lanes);
-            std::copy(g, g + len * lanes, hh);
-            for (std::size_t j = 1; j < len; ++j)
-                for (std::size_t l = 0; l < lanes; ++l) g[j * lanes + l] = pick(g[(j - 1) * lanes + l], g[j * lanes + l]);
+            line(b, hh);
+            std::copy(hh, hh + lanes, g);
+            for (std::size_t j = 1; j < len; ++j) {
+                T* v = hh + j * lanes;
+                line(b + j, v);
+                const T* before = g + (j - 1) * lanes;
+                T* gj = g + j * lanes;
+                for (std::size_t l = 0; l < lanes; ++l) gj[l] = pick(before[l], v[l]);
+            }
             for (std::size_t j = len - 1; j-- > 0;)
                 for (std::size_t l = 0; l < lanes; ++l) hh[j * lanes + l] = pick(hh[j * lanes + l], hh[(j + 1) * lanes + l]);
             // Output lines whose window ends in this block: y + win - 1 in [b, b + len).
@@ -72,17 +98,40 @@ void morphology_square(const std::vector<T>& in, int w, int h, int r, bool erode
         }
     };
     const auto W = static_cast<std::size_t>(w), H = static_cast<std::size_t>(h), R = static_cast<std::size_t>(r);
-    scratch.resize(in.size()), out.resize(in.size());
-    T* tmp = scratch.data();
-    T* dst = out.data();
-    // Rows: each row is one line of single values.
-    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, H, 16), [&](const tbb::blocked_range<std::size_t>& rows) {
+    T* tmp = scratch;
+    T* dst = out;
+    // Rows: kRowLanes rows at a time, each row a lane (position x a line of
+    // kRowLanes values): the running extrema of the rows side by side, in
+    // vector registers, instead of one scalar chain per row. The same
+    // extrema per row. (Erosion + dilation, r = 1..18, on 4001 x 4001 cells,
+    // one thread: 7.2 ns CPU a cell and operation before, 5.3 now, with the
+    // single pass over each block in `run`.)
+    constexpr std::size_t kRowLanes = 8;
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, (H + kRowLanes - 1) / kRowLanes, 2), [&](const tbb::blocked_range<std::size_t>& groups) {
         std::vector<T> buf;
-        for (std::size_t y = rows.begin(); y != rows.end(); ++y) {
-            const T* src = in.data() + y * W;
-            T* row = tmp + y * W;
-            run(W, 1, [&](std::size_t j, T* v) { *v = j < R || j >= W + R ? pad : is_nan(src[j - R]) ? identity : src[j - R]; },
-                [&](std::size_t x, const T* hy, const T* gy) { row[x] = is_nan(src[x]) ? src[x] : pick(*hy, *gy); }, buf);
+        for (std::size_t gi = groups.begin(); gi != groups.end(); ++gi) {
+            const std::size_t y0 = gi * kRowLanes, count = std::min(kRowLanes, H - y0);
+            const T* src = in + y0 * W;
+            T* rows = tmp + y0 * W;
+            auto rows_run = [&](auto lanes) {
+                run(W, lanes, [&](std::size_t j, T* v) {
+                    if (j < R || j >= W + R) {
+                        for (std::size_t l = 0; l < lanes; ++l) v[l] = pad;
+                        return;
+                    }
+                    for (std::size_t l = 0; l < lanes; ++l) {
+                        const T t = src[l * W + j - R];
+                        v[l] = is_nan(t) ? identity : t;
+                    }
+                }, [&](std::size_t x, const T* hy, const T* gy) {
+                    for (std::size_t l = 0; l < lanes; ++l) {
+                        const T c = src[l * W + x];
+                        rows[l * W + x] = is_nan(c) ? c : pick(hy[l], gy[l]);
+                    }
+                }, buf);
+            };
+            if (count == kRowLanes) rows_run(std::integral_constant<std::size_t, kRowLanes>{});
+            else rows_run(count);
         }
     });
     // Columns: strips of up to 256 columns, each padded row of the strip a line
@@ -91,17 +140,23 @@ void morphology_square(const std::vector<T>& in, int w, int h, int r, bool erode
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, (W + kStrip - 1) / kStrip, 1), [&](const tbb::blocked_range<std::size_t>& strips) {
         std::vector<T> buf;
         for (std::size_t s = strips.begin(); s != strips.end(); ++s) {
-            const std::size_t x0 = s * kStrip, lanes = std::min(kStrip, W - x0);
-            run(H, lanes, [&](std::size_t j, T* v) {
-                for (std::size_t l = 0; l < lanes; ++l) {
-                    const T t = j < R || j >= H + R ? pad : tmp[(j - R) * W + x0 + l];
-                    v[l] = is_nan(t) ? identity : t;
-                }
-            }, [&](std::size_t y, const T* hy, const T* gy) {
-                const T* c = tmp + y * W + x0;
-                T* o = dst + y * W + x0;
-                for (std::size_t l = 0; l < lanes; ++l) o[l] = is_nan(c[l]) ? c[l] : pick(hy[l], gy[l]);
-            }, buf);
+            const std::size_t x0 = s * kStrip, count = std::min(kStrip, W - x0);
+            auto strip_run = [&](auto lanes) {
+                run(H, lanes, [&](std::size_t j, T* v) {
+                    if (j < R || j >= H + R) {
+                        for (std::size_t l = 0; l < lanes; ++l) v[l] = pad;
+                        return;
+                    }
+                    const T* t = tmp + (j - R) * W + x0;
+                    for (std::size_t l = 0; l < lanes; ++l) v[l] = is_nan(t[l]) ? identity : t[l];
+                }, [&](std::size_t y, const T* hy, const T* gy) {
+                    const T* c = tmp + y * W + x0;
+                    T* o = dst + y * W + x0;
+                    for (std::size_t l = 0; l < lanes; ++l) o[l] = is_nan(c[l]) ? c[l] : pick(hy[l], gy[l]);
+                }, buf);
+            };
+            if (count == kStrip) strip_run(std::integral_constant<std::size_t, kStrip>{});
+            else strip_run(count);
         }
     });
 }

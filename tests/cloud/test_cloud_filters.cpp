@@ -155,6 +155,8 @@ TEST_CASE("SMRF ground agrees with the synthetic scene's exact ground class", "[
     CHECK(double(agree) / double(c.size()) > 0.95);
     GroundFilterOptions trust;
     CHECK(classify_ground(c, {}, trust).from_classification);
+    tbb::global_control one_thread(tbb::global_control::max_allowed_parallelism, 1);
+    CHECK(classify_ground(c, {}, go).is_ground == g.is_ground);
 }
 
 TEST_CASE("SMRF on two sites far apart (a grid each, grouped in parallel) flags the points as each site alone does, for any thread count", "[cloud][ground]") {
@@ -331,7 +333,8 @@ bool same_cells(const std::vector<double>& a, const std::vector<double>& b) {
 TEST_CASE("Square morphology (running extrema) equals the cell-by-cell window scan, NaN cells and grid edges included", "[cloud][ground][morphology]") {
     Rng rng(7);
     std::vector<double> reused_out, reused_scratch;
-    for (const auto& [w, h] : {std::pair{1, 1}, std::pair{1, 9}, std::pair{13, 1}, std::pair{37, 23}, std::pair{130, 71}, std::pair{530, 9}}) {  // 530: three column strips
+    // 530: three column strips; 256 x 17: one whole strip, rows in two groups of 8 and one of 1.
+    for (const auto& [w, h] : {std::pair{1, 1}, std::pair{1, 9}, std::pair{13, 1}, std::pair{37, 23}, std::pair{130, 71}, std::pair{530, 9}, std::pair{256, 17}}) {
         std::vector<double> grid(static_cast<std::size_t>(w) * h);
         std::vector<uint8_t> mask(grid.size());
         for (std::size_t i = 0; i < grid.size(); ++i) {
@@ -349,6 +352,11 @@ TEST_CASE("Square morphology (running extrema) equals the cell-by-cell window sc
                                  naive_morphology<double>(grid, w, h, r, erode, 3.0)));
                 CHECK(morphology_square(mask, w, h, r, erode) == naive_morphology<uint8_t>(mask, w, h, r, erode, std::nullopt));
                 CHECK(morphology_square<uint8_t>(mask, w, h, r, erode, uint8_t(0)) == naive_morphology<uint8_t>(mask, w, h, r, erode, uint8_t(0)));
+                // Caller-owned buffers holding stale values, on one thread.
+                std::vector<double> out(grid.size(), 1e300), scratch(grid.size(), -1e300);
+                tbb::global_control one(tbb::global_control::max_allowed_parallelism, 1);
+                morphology_square<double>(grid.data(), w, h, r, erode, out.data(), scratch.data());
+                CHECK(same_cells(out, naive_morphology<double>(grid, w, h, r, erode, std::nullopt)));
             }
     }
 }
@@ -429,6 +437,10 @@ TEST_CASE("Gap fill by strips of rows equals the sweeps over the whole grid, for
                 masked_ok = masked_ok && (filled_cell ? (masked[i] == expected[i] || (std::isnan(masked[i]) && std::isnan(expected[i]))) : std::isnan(masked[i]));
             }
             CHECK(masked_ok);
+            // Caller-owned workspace holding stale values.
+            std::vector<double> in_place = grid, num(grid.size(), 7.0), den(grid.size(), -3.0);
+            fill_gaps(in_place.data(), w, h, limit, nullptr, [&] { return std::pair<double*, double*>{num.data(), den.data()}; });
+            CHECK(same_cells(in_place, expected));
             tbb::global_control one(tbb::global_control::max_allowed_parallelism, 1);
             fill_gaps(one_thread, w, h, limit);
             CHECK(same_cells(one_thread, expected));
