@@ -21,6 +21,7 @@
 #include "core/grid_fill.hpp"
 #include "core/grid_size.hpp"
 #include "core/large_buffer.hpp"
+#include "core/memory.hpp"
 #include "core/morphology.hpp"
 
 namespace cityforge {
@@ -1320,7 +1321,18 @@ GroundResult classify_ground(const PointCloud& c, const std::vector<uint8_t>& ke
     // pass, instead of a pass over the points to find them first (1.7 CPU s
     // at 127 M points); when they make more groups, the points are split as below.
     constexpr double kTryWholeCells = 2 * kSingleGridCells;
-    if (w * h <= kTryWholeCells && minx <= bb.minx && miny <= bb.miny && smrf_grid(c, kept, bb, o, g, true)) return g;
+    if (w * h <= kTryWholeCells && minx <= bb.minx && miny <= bb.miny) {
+        // Too large for this machine's memory as one grid: split first (a
+        // cloud that is one group then meets the same error below; one of
+        // several groups does not need the whole grid). The check comes
+        // before anything is written to `g`.
+        bool done = false;
+        try {
+            done = smrf_grid(c, kept, bb, o, g, true);
+        } catch (const OutOfMemory&) {
+        }
+        if (done) return g;
+    }
     uint32_t groups = 0;
     const LargeArray<uint32_t> group = split_ground_groups(c, kept, bb, minx, miny, o.cell, groups);
     if (!group) {  // one group: every kept point, on the grid over all of them

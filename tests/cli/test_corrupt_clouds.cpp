@@ -6,6 +6,7 @@
 // change. The corrupt files are made here from a small synthetic town.
 #include <catch2/catch.hpp>
 #include <algorithm>
+#include <cstdio>
 #include <cstring>
 #include <filesystem>
 #include <fstream>
@@ -369,4 +370,32 @@ TEST_CASE("clear messages naming the file: 1e300 footprints, a 1e9 m footprint, 
     check_one_line_error(cli_guarded("cloud rasterize --cloud " + s.cloud_path + " --grid " + (dir / "far.tif") + " --out " + (dir / "ras_far")),
                          s.cloud_path, "does not overlap");
     CHECK_FALSE(std::filesystem::exists(dir / "ras_far/dsm.tif"));
+}
+
+TEST_CASE("SMRF on two sites 4.2 km apart in a 1.4 GB address space: split into a grid per site, not out of memory", "[faults][corrupt][cli]") {
+    // The whole 4,400 x 4,400-cell grid needs ~794 MB, over half of 1.4 GB;
+    // the sites are two groups, each a small grid. The grid is tried whole
+    // first only when memory allows it (once, that try refused the cloud).
+    ScratchDir dir("two_sites_small_memory");
+    {
+        std::ofstream out(dir / "two.xyz");
+        uint64_t state = 1;
+        auto uniform = [&state] {  // a small LCG: the same points everywhere
+            state = state * 6364136223846793005ULL + 1442695040888963407ULL;
+            return static_cast<double>(state >> 11) / 9007199254740992.0;
+        };
+        char line[96];
+        for (const double o : {0.0, 4200.0})
+            for (int i = 0; i < 80000; ++i) {
+                const double x = 500000.0 + o + 200.0 * uniform(), y = 4400000.0 + o + 200.0 * uniform();
+                const bool roof = x - 500000.0 - o > 50 && x - 500000.0 - o < 100 && y - 4400000.0 - o > 50 && y - 4400000.0 - o < 100;
+                std::snprintf(line, sizeof line, "%.3f %.3f %.3f\n", x, y, 10.0 + (roof ? 8.0 : 0.0) + 0.05 * uniform());
+                out << line;
+            }
+    }
+    const auto r = test::run_command("bash -c '" + test::address_space_limit(1400000) + test::cli() + " cloud rasterize --quiet --cloud " + (dir / "two.xyz") +
+                                     " --cloud-crs EPSG:32650 --gsd 4 --out " + (dir / "r") + "'");
+    INFO(r.err);
+    CHECK(r.exit_code == 0);
+    CHECK(std::filesystem::exists(dir / "r/dtm.tif"));
 }
