@@ -969,6 +969,24 @@ OutlierFilterResult filter_outliers(const PointCloud& c, const OutlierFilterOpti
 namespace {
 
 constexpr uint32_t kNoGroup = std::numeric_limits<uint32_t>::max();  // a point in no group: not kept
+
+// v / d for a grid's cell or block size d: a multiplication by 1 / d when d
+// is a power of two (its inverse is exact and normal, so the product is the
+// same number as the quotient), else the division. For the passes over
+// every point.
+class ExactQuotient {
+public:
+    explicit ExactQuotient(double d) : d_(d) {
+        int exponent = 0;
+        const double inv = std::frexp(d, &exponent) == 0.5 ? std::ldexp(1.0, 1 - exponent) : 0.0;
+        by_inverse_ = std::isnormal(inv), inv_ = inv;
+    }
+    double operator()(double v) const { return by_inverse_ ? v * inv_ : v / d_; }
+
+private:
+    double d_, inv_ = 0.0;
+    bool by_inverse_ = false;
+};
 // SMRF's blocks of 256 x 256 cells (x, y: block numbers from the grid's
 // anchored corner), and how they group: occupied blocks closer than 4
 // blocks (Chebyshev) join, and groups whose bounding boxes meet merge. `blocks`: the occupied ones, sorted, each once; returns each one's
@@ -1056,13 +1074,9 @@ bool smrf_grid(const PointCloud& c, Kept&& kept, const XYBounds& bb, const Groun
     const int w = size.width, h = size.height;
     const std::size_t cells = static_cast<std::size_t>(w) * h;
     constexpr std::size_t kGrain = 1u << 16;
-    // A point's cell: (v - origin) / cell, by a multiplication when the cell
-    // is a power of two (its inverse is exact, so the product is the same
-    // number as the quotient): no division in the two passes over the points.
-    int exponent = 0;
-    const double inv_cell = std::frexp(o.cell, &exponent) == 0.5 ? std::ldexp(1.0, 1 - exponent) : 0.0;
-    const bool by_inverse = std::isnormal(inv_cell);
-    auto cell_of = [&](double v, double origin) { return by_inverse ? (v - origin) * inv_cell : (v - origin) / o.cell; };
+    // A point's cell: (v - origin) / cell (no division for a power-of-two cell).
+    const ExactQuotient per_cell(o.cell);
+    auto cell_of = [&](double v, double origin) { return per_cell(v - origin); };
     auto cell_x = [&](std::size_t i) { return std::min(w - 1, static_cast<int>(cell_of(c.x[i], minx))); };
     auto cell_y = [&](std::size_t i) { return std::min(h - 1, static_cast<int>(cell_of(c.y[i], miny))); };
     // Five grids of doubles, allocated once (fresh memory is dear on a VM:
@@ -1200,13 +1214,10 @@ LargeArray<uint32_t> split_ground_groups(const PointCloud& c, Kept&& kept, const
     const std::size_t n = c.size();
     const double bsize = cell * kGroundBlockCells;
     using Key = BlockKey;
-    // floor((v - origin) / bsize) without a call to floor (exact: |q| < 2^63),
-    // by a multiplication when bsize is a power of two (the same quotient).
-    int exponent = 0;
-    const double inv_bsize = std::frexp(bsize, &exponent) == 0.5 ? std::ldexp(1.0, 1 - exponent) : 0.0;
-    const bool by_inverse = std::isnormal(inv_bsize);
-    auto block_of = [bsize, inv_bsize, by_inverse](double v, double origin) {
-        const double q = by_inverse ? (v - origin) * inv_bsize : (v - origin) / bsize;
+    // floor((v - origin) / bsize) without a call to floor (exact: |q| < 2^63).
+    const ExactQuotient per_block(bsize);
+    auto block_of = [per_block](double v, double origin) {
+        const double q = per_block(v - origin);
         const auto t = static_cast<int64_t>(q);
         return t - static_cast<int64_t>(static_cast<double>(t) > q);
     };
@@ -1215,9 +1226,10 @@ LargeArray<uint32_t> split_ground_groups(const PointCloud& c, Kept&& kept, const
     const int64_t kx0 = block_of(bb.minx, minx), ky0 = block_of(bb.miny, miny);
     const auto nbx = static_cast<uint64_t>(block_of(bb.maxx, minx) - kx0) + 1, nby = static_cast<uint64_t>(block_of(bb.maxy, miny) - ky0) + 1;
     // A byte a block when the blocks' rectangle is small (a town: 16 x 16
-    // blocks for 4 x 4 km; one pass of two divisions a point), else a sorted
-    // list of the occupied ones (sites far apart).
-    constexpr uint64_t kDenseBlocks = uint64_t(1) << 26;
+    // blocks for 4 x 4 km; one pass of two divisions a point; at most 4 MB
+    // here and 16 MB of block groups below), else a sorted list of the
+    // occupied ones (sites far apart).
+    constexpr uint64_t kDenseBlocks = uint64_t(1) << 22;
     const bool dense = nbx <= kDenseBlocks && nby <= kDenseBlocks && nbx * nby <= kDenseBlocks;
     auto dense_of = [&](std::size_t i) { return static_cast<std::size_t>(block_of(c.x[i], minx) - kx0) * nby + static_cast<std::size_t>(block_of(c.y[i], miny) - ky0); };
     std::vector<Key> blocks;

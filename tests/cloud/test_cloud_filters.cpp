@@ -160,8 +160,11 @@ TEST_CASE("SMRF ground agrees with the synthetic scene's exact ground class", "[
 }
 
 TEST_CASE("SMRF on two sites far apart (a grid each, grouped in parallel) flags the points as each site alone does, for any thread count", "[cloud][ground]") {
-    // Two 150 m sites 6 km east and 3 km north of each other: one 1 m grid
-    // over both would hold 1.8e7 cells, so the points are grouped by site.
+    // Two 150 m sites. 6 km east and 3 km north of each other: one 1 m grid
+    // over both would hold 1.8e7 cells (tried whole, then split by the blocks
+    // read off its minimum-z pass); 12 km east: 3.6e7 cells (split at once,
+    // a byte a block); 600 km east and north: 3.6e11 cells (split through the
+    // sorted list of occupied blocks). Each path flags what each site alone does.
     const auto site = [](PointCloud& c, double x0, double y0, uint64_t seed) {
         Rng rng(seed);
         for (int q = 0; q < 150 * 150; ++q) {
@@ -171,22 +174,31 @@ TEST_CASE("SMRF on two sites far apart (a grid each, grouped in parallel) flags 
             c.intensity.push_back(0), c.classification.push_back(1), c.return_number.push_back(1), c.number_of_returns.push_back(1);
         }
     };
-    PointCloud a, b, both;
-    site(a, 400000.0, 5000000.0, 1), site(b, 406000.0, 5003000.0, 2);
-    site(both, 400000.0, 5000000.0, 1), site(both, 406000.0, 5003000.0, 2);
     GroundFilterOptions go;
     go.trust_classification = false;
-    const GroundResult ga = classify_ground(a, {}, go), gb = classify_ground(b, {}, go), g = classify_ground(both, {}, go);
-    std::vector<uint8_t> want = ga.is_ground;
-    want.insert(want.end(), gb.is_ground.begin(), gb.is_ground.end());
-    CHECK(g.is_ground == want);
-    CHECK(g.ground_points == ga.ground_points + gb.ground_points);
-    std::size_t roof_ground = 0;  // the roofs are not ground
-    for (std::size_t i = 0; i < both.size(); ++i) roof_ground += g.is_ground[i] && both.z[i] - 20.0 - 0.02 * std::fmod(both.x[i] - 400000.0, 6000.0) > 3.0;
-    CHECK(roof_ground == 0);
-    CHECK(g.ground_points > both.size() / 2);
-    tbb::global_control one_thread(tbb::global_control::max_allowed_parallelism, 1);
-    CHECK(classify_ground(both, {}, go).is_ground == g.is_ground);
+    PointCloud a;
+    site(a, 400000.0, 5000000.0, 1);
+    const GroundResult ga = classify_ground(a, {}, go);
+    for (const auto& [dx, dy] : {std::pair{6000.0, 3000.0}, std::pair{12000.0, 0.0}, std::pair{600000.0, 600000.0}}) {
+        INFO("second site " << dx << " m east, " << dy << " m north");
+        PointCloud b, both;
+        site(b, 400000.0 + dx, 5000000.0 + dy, 2);
+        site(both, 400000.0, 5000000.0, 1), site(both, 400000.0 + dx, 5000000.0 + dy, 2);
+        const GroundResult gb = classify_ground(b, {}, go), g = classify_ground(both, {}, go);
+        std::vector<uint8_t> want = ga.is_ground;
+        want.insert(want.end(), gb.is_ground.begin(), gb.is_ground.end());
+        CHECK(g.is_ground == want);
+        CHECK(g.ground_points == ga.ground_points + gb.ground_points);
+        std::size_t roof_ground = 0;  // the roofs are not ground
+        for (std::size_t i = 0; i < both.size(); ++i) {
+            const double x0 = i < a.size() ? 400000.0 : 400000.0 + dx;
+            roof_ground += g.is_ground[i] && both.z[i] - 20.0 - 0.02 * (both.x[i] - x0) > 3.0;
+        }
+        CHECK(roof_ground == 0);
+        CHECK(g.ground_points > both.size() / 2);
+        tbb::global_control one_thread(tbb::global_control::max_allowed_parallelism, 1);
+        CHECK(classify_ground(both, {}, go).is_ground == g.is_ground);
+    }
 }
 
 TEST_CASE("Outlier filter on grid neighbourhoods flags exactly the points of a whole-cloud k-d tree, for any thread count", "[cloud][filters]") {
