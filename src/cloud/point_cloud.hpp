@@ -58,10 +58,7 @@ struct PointCloud {
                 if (w != i) move_all(w, i);
                 ++w;
             }
-        for (auto* v : {&x, &y, &z}) v->resize(w);
-        intensity.resize(w), classification.resize(w), return_number.resize(w), number_of_returns.resize(w);
-        if (!gps_time.empty()) gps_time.resize(w);
-        if (!red.empty()) red.resize(w), green.resize(w), blue.resize(w);
+        truncate(w);
         return n - w;
     }
 };
