@@ -16,6 +16,7 @@
 #include "cloud/las.hpp"
 #include "core/error.hpp"
 #include "core/log.hpp"
+#include "core/random_access_file.hpp"
 
 namespace cityforge {
 
@@ -37,7 +38,7 @@ std::string lower(std::string s) {
 
 class LasFormatReader final : public CloudFormatReader {
 public:
-    explicit LasFormatReader(const std::string& path) : path_(path), reader_(path) {
+    explicit LasFormatReader(RandomAccessFile file) : path_(file.path()), reader_(std::move(file)) {
         if (reader_.laz_source()) copc_ = read_copc_hierarchy(reader_.file(), reader_.header());
     }
     std::size_t read_chunk(PointCloud& out, std::size_t max_points) override { return reader_.read_chunk(out, max_points); }
@@ -377,16 +378,15 @@ private:
 }  // namespace
 
 CloudReader::CloudReader(const std::string& path) : path_(path) {
-    if (!std::filesystem::exists(path)) throw Error(path, "file not found");
-    if (std::filesystem::is_directory(path)) throw Error(path, "is a directory, not a point cloud file");
+    // The format is read off the first bytes of the file that a LAS reader
+    // then reads from (one open: a file replaced under its path in between
+    // cannot be taken for another format). PLY and text are read as streams.
+    RandomAccessFile file(path, "a point cloud file");  // "file not found", "is a directory, ..."
     const std::string ext = lower(std::filesystem::path(path).extension().string());
     char magic[4] = {};
-    {
-        std::ifstream probe(path, std::ios::binary);
-        probe.read(magic, 4);
-    }
+    file.read_at(0, magic, sizeof magic);
     if (std::memcmp(magic, "LASF", 4) == 0 || ext == ".las" || ext == ".laz") {
-        auto las = std::make_unique<LasFormatReader>(path);
+        auto las = std::make_unique<LasFormatReader>(std::move(file));
         crs_records_ = las->reader_.header().crs;
         announced_ = las->reader_.header().point_count;
         const LasHeader& h = las->reader_.header();

@@ -160,7 +160,10 @@ bool LasHeader::has_color() const {
 }
 bool LasHeader::has_gps_time() const { return point_format != 0 && point_format != 2; }
 
-LasReader::LasReader(const std::string& path) : path_(path), file_(path, "a point cloud file") {
+LasReader::LasReader(const std::string& path) : LasReader(RandomAccessFile(path, "a point cloud file")) {}
+
+LasReader::LasReader(RandomAccessFile file) : path_(file.path()), file_(std::move(file)) {
+    const std::string& path = path_;
     const uint64_t file_size = file_.size();
     char hdr[375] = {};
     const std::size_t got = file_.read_at(0, hdr, sizeof hdr);

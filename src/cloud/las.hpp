@@ -86,6 +86,10 @@ int las_min_record_length(int format);
 class LasReader {
 public:
     explicit LasReader(const std::string& path);
+    /// The same from a file already opened (CloudReader, which looked at its
+    /// first bytes to choose the format, hands over that open file: the
+    /// format, header and records all come from one descriptor).
+    explicit LasReader(RandomAccessFile file);
     ~LasReader();
     LasReader(const LasReader&) = delete;
     LasReader& operator=(const LasReader&) = delete;

@@ -32,6 +32,11 @@ RandomAccessFile::RandomAccessFile(const std::string& path, const std::string& w
     size_ = static_cast<uint64_t>(st.st_size);
 }
 
+RandomAccessFile::RandomAccessFile(RandomAccessFile&& other) noexcept
+    : path_(std::move(other.path_)), fd_(other.fd_), size_(other.size_) {
+    other.fd_ = -1, other.size_ = 0;
+}
+
 RandomAccessFile::~RandomAccessFile() {
     if (fd_ >= 0) ::close(fd_);
 }

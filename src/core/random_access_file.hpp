@@ -23,6 +23,9 @@ public:
     ~RandomAccessFile();
     RandomAccessFile(const RandomAccessFile&) = delete;
     RandomAccessFile& operator=(const RandomAccessFile&) = delete;
+    /// Takes over `other`'s open file (`other` is left closed: reads throw).
+    RandomAccessFile(RandomAccessFile&& other) noexcept;
+    RandomAccessFile& operator=(RandomAccessFile&&) = delete;
 
     const std::string& path() const { return path_; }
     /// Size in bytes when the file was opened.
