@@ -1309,17 +1309,19 @@ RegionMergingResult merge_regions(const Image<float>& image, const Image<uint32_
     result.graph_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t_graph).count();
     result.graph_cpu_seconds = process_cpu_seconds() - c_graph;
     const std::vector<double> initial_totals = o.verify_invariants ? g.totals() : std::vector<double>{};
-    std::vector<uint32_t> previous_compact(n, 0);  // alive node -> label at previous level
-    // alive node -> label at this level; allocated once: only the entries of
-    // the regions left are written and read at each scale (a fresh zeroed
-    // vector of 1.1 M entries per scale was ~1-2 ms of page faults each)
+    // The regions of the previous level in the order of their labels there
+    // (ascending key): [k - 1] = node of region k, 0 for an input label
+    // without pixels (at the first scale, whose previous level is the
+    // input). Filled by the first scale's pass over the records.
+    std::vector<uint32_t> previous_order(n > 0 ? n - 1 : 0, 0), order;
+    // root node -> label at this level while a level's labels are given
+    // (0 = none yet; cleared again afterwards); allocated once (a fresh
+    // zeroed vector of 1.1 M entries per scale was ~1-2 ms of page faults each)
     std::vector<uint32_t> compact(n, 0);
     // Nodes alive at the start of the scale, ascending: the per-scale loops
     // visit them, not every record of the over-segmentation (1.1 M records
-    // of 320 bytes when 10 k regions are left).
-    // Filled by the first scale's pass over the records.
+    // of 320 bytes when 10 k regions are left). Not used by the first scale.
     std::vector<uint32_t> live;
-    live.reserve(g.alive_count());
     uint32_t previous_count = region_count;
     std::vector<uint32_t> changed, rescan;
     std::vector<uint32_t> offered;  // mutual: lower nodes of the pairs pushed by the current merge
@@ -1366,7 +1368,7 @@ RegionMergingResult merge_regions(const Image<float>& image, const Image<uint32_
                 if (r + kEntriesAhead < n) g.prefetch_node(r + kEntriesAhead, 4);  // head and the list, read next
                 if (!g.alive(r)) continue;
                 g.rescan_nn(r);
-                previous_compact[r] = g.key_of(r), live.push_back(r);
+                previous_order[g.key_of(r) - 1] = r;  // the key is the region's input label
                 if (o.strategy != QueueStrategy::mutual) {
                     queue_initial(r);
                 } else {
@@ -1446,19 +1448,27 @@ RegionMergingResult merge_regions(const Image<float>& image, const Image<uint32_
         }
         level.regions_after = g.alive_count();
         if (o.verify_invariants) g.verify(initial_totals);
-        // Contiguous labels of this level in ascending key; hierarchy links.
-        std::vector<std::pair<uint32_t, uint32_t>> by_key;  // (key, node) of the regions left
-        by_key.reserve(g.alive_count());
-        for (uint32_t r : live)  // alive = never absorbed: read in the union-find, not in the records
-            if (uf[r] == r) by_key.push_back({g.key_of(r), r});
-        std::sort(by_key.begin(), by_key.end());
-        uint32_t next = 0;
-        for (const auto& kr : by_key) compact[kr.second] = ++next;
+        // Contiguous labels of this level in ascending key, and the
+        // hierarchy links, in one pass over the previous level's regions in
+        // ascending key: a region of this level is first met at its part of
+        // the lowest key, which is its key, so labels given in the order
+        // regions are met ascend with the key (no sort, and no key read
+        // from the records).
         level.parent.assign(previous_count + 1, 0);
-        for (uint32_t r : live) level.parent[previous_compact[r]] = compact[find(r)];
+        uint32_t next = 0;
+        order.clear();
+        order.reserve(g.alive_count());
+        for (uint32_t k = 0; k < previous_count; ++k) {
+            const uint32_t r = previous_order[k];
+            if (!r) continue;  // an input label without pixels
+            const uint32_t root = find(r);
+            if (!compact[root]) compact[root] = ++next, order.push_back(root);
+            level.parent[k + 1] = compact[root];
+        }
+        for (uint32_t r : order) compact[r] = 0;
         // An input label's region at this level is the parent of its region
         // at the previous level (at the first scale, of the label itself:
-        // previous_compact holds each region's key, its own label): one
+        // the previous level is the input): one
         // pass through a table of the previous level's regions instead of
         // a walk of the union-find from every input label's node (1.1 M
         // Autzen seeds: ~12 ms at every scale).
@@ -1469,10 +1479,9 @@ RegionMergingResult merge_regions(const Image<float>& image, const Image<uint32_
             const std::vector<uint32_t>& below = result.levels.back().label_of_input;
             for (uint32_t l = 0; l < n; ++l) level.label_of_input[l] = level.parent[below[l]];
         }
-        live.clear();
-        for (const auto& kr : by_key) live.push_back(kr.second);
+        live.assign(order.begin(), order.end());
         std::sort(live.begin(), live.end());
-        previous_compact.swap(compact);  // compact's stale entries are overwritten before they are read
+        previous_order.swap(order);
         previous_count = next;
         level.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
         level.cpu_seconds = thread_cpu_seconds() - c0;
