@@ -433,7 +433,7 @@ std::size_t CloudReader::read_chunk(PointCloud& out, std::size_t max_points) {
 }
 
 void CloudReader::reserve_for_all(PointCloud& cloud) const {
-    if (const std::size_t n = impl_->reserve_hint()) cloud.reserve(n, color_, gps_);
+    if (const std::size_t n = impl_->reserve_hint()) cloud.reserve(cloud.size() + n, color_, gps_);
 }
 
 CloudReader::~CloudReader() = default;
@@ -450,30 +450,27 @@ PointCloud read_point_cloud(const std::string& path) {
     return cloud;
 }
 
-PointCloud read_point_cloud_in(const std::string& path, double min_x, double min_y, double max_x, double max_y) {
+void append_point_cloud_in(const std::string& path, double min_x, double min_y, double max_x, double max_y, PointCloud& out) {
     CloudReader reader(path);
     reader.restrict_to_box(min_x, min_y, max_x, max_y);
-    PointCloud out, chunk;
-    std::vector<uint32_t> in_box;
+    // A file whose header bounds lie inside the box (a run's tile split file
+    // read for its own window) has all its points kept: their arrays are
+    // reserved once, not regrown chunk by chunk.
+    if (const auto& b = reader.announced_bounds(); b && (*b)[0] >= min_x && (*b)[1] >= min_y && (*b)[2] <= max_x && (*b)[3] <= max_y)
+        reader.reserve_for_all(out);
+    // Chunks are read straight into `out`, and the points outside the box of
+    // each are taken off again (in file order) only when it holds some.
+    auto outside = [&](std::size_t i) { return !(out.x[i] >= min_x && out.x[i] < max_x && out.y[i] >= min_y && out.y[i] < max_y); };
     while (true) {
-        chunk.clear();
-        if (reader.read_chunk(chunk, 1u << 20) == 0) break;
-        in_box.clear();
-        for (std::size_t i = 0; i < chunk.size(); ++i)
-            if (chunk.x[i] >= min_x && chunk.x[i] < max_x && chunk.y[i] >= min_y && chunk.y[i] < max_y) in_box.push_back(static_cast<uint32_t>(i));
-        // Attribute by attribute (not point by point): one tight loop each.
-        out.reserve(out.size() + in_box.size(), chunk.has_color(), chunk.has_gps_time());
-        auto take = [&](auto& to, const auto& from) {
-            if (from.empty()) return;
-            const std::size_t base = to.size();
-            to.resize(base + in_box.size());
-            for (std::size_t t = 0; t < in_box.size(); ++t) to[base + t] = from[in_box[t]];
-        };
-        take(out.x, chunk.x), take(out.y, chunk.y), take(out.z, chunk.z), take(out.intensity, chunk.intensity);
-        take(out.classification, chunk.classification), take(out.return_number, chunk.return_number);
-        take(out.number_of_returns, chunk.number_of_returns), take(out.gps_time, chunk.gps_time);
-        take(out.red, chunk.red), take(out.green, chunk.green), take(out.blue, chunk.blue);
+        const std::size_t base = out.size();
+        if (reader.read_chunk(out, 1u << 20) == 0) break;
+        if (any_point(base, out.size(), outside)) out.remove_from(base, outside);
     }
+}
+
+PointCloud read_point_cloud_in(const std::string& path, double min_x, double min_y, double max_x, double max_y) {
+    PointCloud out;
+    append_point_cloud_in(path, min_x, min_y, max_x, max_y, out);
     return out;
 }
 

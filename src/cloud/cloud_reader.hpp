@@ -65,9 +65,9 @@ public:
     /// (point formats 6-8) only the chunks whose XY layer has a point in it;
     /// other formats still hand out every point (the caller filters).
     void restrict_to_box(double min_x, double min_y, double max_x, double max_y) { impl_->restrict_to_box(min_x, min_y, max_x, max_y); }
-    /// Before reading everything into `cloud`: reserves room for the points
-    /// the file certainly holds (an uncompressed LAS: all of them), so the
-    /// cloud is not copied as it grows.
+    /// Before reading everything into `cloud`: reserves room for its points
+    /// and those the file certainly holds (an uncompressed LAS: all of them),
+    /// so the cloud is not copied as it grows.
     void reserve_for_all(PointCloud& cloud) const;
 
 private:
@@ -91,5 +91,8 @@ PointCloud read_point_cloud(const std::string& path);
 /// CRS), streaming, so memory follows the box, not the file. May return an
 /// empty cloud.
 PointCloud read_point_cloud_in(const std::string& path, double min_x, double min_y, double max_x, double max_y);
+/// The same points appended to `out` (its points and attributes stay first):
+/// the parts of a window read into one cloud without copying it.
+void append_point_cloud_in(const std::string& path, double min_x, double min_y, double max_x, double max_y, PointCloud& out);
 
 }  // namespace cityforge

@@ -118,12 +118,9 @@ PreparedCloud prepare_cloud(const std::vector<CloudPart>& parts, const std::stri
     p.source_crs = require_cloud_crs(first, cloud_crs_override);
     if (!target.empty() && !same_horizontal_crs(p.source_crs, target)) throw Error(first, "cloud parts must be in the target CRS");
     p.crs = target.empty() ? p.source_crs : combine_with_vertical(target, p.source_crs);
-    for (const CloudPart& part : parts) {
-        const PointCloud c = read_point_cloud_in(part.path, part.crop.min_x, part.crop.min_y, part.crop.max_x, part.crop.max_y);
-        if (p.cloud.size() == 0) p.cloud.reserve(c.size(), c.has_color(), c.has_gps_time());
-        for (std::size_t i = 0; i < c.size(); ++i)
-            if (c.x[i] >= part.crop.min_x && c.x[i] < part.crop.max_x && c.y[i] >= part.crop.min_y && c.y[i] < part.crop.max_y) p.cloud.append(c, i);
-    }
+    // Each part's points in its crop (half-open), read straight into the one cloud.
+    for (const CloudPart& part : parts)
+        append_point_cloud_in(part.path, part.crop.min_x, part.crop.min_y, part.crop.max_x, part.crop.max_y, p.cloud);
     if (p.cloud.size() == 0) return p;
     clean_prepared(p, outliers, ground, parts.size() == 1 ? first : first + " (and " + std::to_string(parts.size() - 1) + " more parts)");
     return p;
