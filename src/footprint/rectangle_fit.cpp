@@ -216,10 +216,21 @@ GridRect largest_rectangle(const std::vector<uint8_t>& m, int w, int h) {
     long best_area = 0;
     std::vector<int> stack;
     for (int y = 0; y < h; ++y) {
-        for (int x = 0; x < w; ++x) height[x] = m[static_cast<std::size_t>(y) * w + x] ? height[x] + 1 : 0;
+        const uint8_t* row = m.data() + static_cast<std::size_t>(y) * w;
+        int any = 0;
+        for (int x = 0; x < w; ++x) height[x] = row[x] ? height[x] + 1 : 0, any |= height[x];
+        // The masks are sparse (a fit's missing and extra cells): a row of
+        // empty columns ends no rectangle, and in a run of empty columns each
+        // one only replaces the one before it on the stack (its area is 0,
+        // never a best): both skipped, the same rectangles met in the same order.
+        if (!any) continue;
         stack.clear();
         for (int x = 0; x <= w; ++x) {
             const int hx = x < w ? height[x] : 0;
+            if (hx == 0 && stack.size() == 1 && height[stack[0]] == 0) {
+                stack[0] = x;
+                continue;
+            }
             while (!stack.empty() && height[stack.back()] >= hx) {
                 const int top = stack.back();
                 stack.pop_back();
