@@ -878,6 +878,11 @@ public:
         // its heap block here, before any chunk writes into it (the others
         // are in the records, which this pass does not touch).
         std::vector<uint32_t> lower_count(n_);
+        // 1 if no lower neighbour of the region lies in an earlier chunk than
+        // its own: its list is then complete when its chunk reaches it
+        std::vector<uint8_t> complete_in_chunk(n_);
+        std::vector<uint32_t> chunk_bounds(chunks + 1);
+        for (int c = 0; c <= chunks; ++c) chunk_bounds[c] = chunk_begin(c);
         tbb::combinable<std::vector<uint32_t>> long_lists;  // regions given a heap block here
         tbb::parallel_for(tbb::blocked_range<uint32_t>(0, n_, 1 << 12), [&](const tbb::blocked_range<uint32_t>& rr) {
             for (uint32_t r = rr.begin(); r != rr.end(); ++r) {
@@ -885,6 +890,7 @@ public:
                 for (int c = 0; c < chunks; ++c) {
                     const uint32_t k = from_chunk[c][r];
                     from_chunk[c][r] = lower;
+                    if (r >= chunk_bounds[c] && r < chunk_bounds[c + 1]) complete_in_chunk[r] = lower == 0;
                     lower += k;
                 }
                 lower_count[r] = lower;
@@ -902,7 +908,12 @@ public:
         // in cache for the cost (one pass instead of a second one that
         // loads every higher region's record again; 4 MP Autzen seeds: list
         // fill and lower entries 47 -> 32 ms CPU).
+        // Each region's nearest neighbour is found (rescan_nn) as soon as
+        // its list is complete, while its record is in cache: at its own
+        // turn when all its lower neighbours are in its chunk (nearly all
+        // regions), else after the pass.
         constexpr uint32_t kScoreAhead = 4;
+        tbb::combinable<std::vector<uint32_t>> later;  // regions with lower neighbours in earlier chunks
         tbb::parallel_for(0, chunks, [&](int c) {
             std::vector<uint32_t>& slot = from_chunk[c];
             const uint32_t chunk_end = chunk_begin(c + 1);
@@ -920,7 +931,12 @@ public:
                     *out++ = {i->id, i->shared, c_ab};
                     head(i->id).list[slot[i->id]++] = {a, i->shared, c_ab};
                 }
+                if (complete_in_chunk[a]) rescan_nn(a);
+                else later.local().push_back(a);
             }
+        });
+        later.combine_each([&](const std::vector<uint32_t>& v) {
+            for (uint32_t a : v) rescan_nn(a);
         });
     }
 
@@ -1035,8 +1051,8 @@ public:
     // Nearest neighbour of r (lowest (cost, key)) from the cached edge costs
     // (exact: build() caches each edge's cost on both sides, and an edge's
     // cost changes only when one of its regions merges, when merge()
-    // rewrites it on both sides). merge_regions finds every region's first
-    // one in its first pass over the records.
+    // rewrites it on both sides). build() finds every region's first one
+    // as soon as its list is complete.
     void rescan_nn(uint32_t r) {
         uint32_t best = 0, best_key = UINT32_MAX;  // best_key loaded only on a tie
         double best_cost = INFINITY;
@@ -1360,20 +1376,18 @@ RegionMergingResult merge_regions(const Image<float>& image, const Image<uint32_
         };
         constexpr uint32_t kEntriesAhead = 8;
         if (s == 0) {
-            // One pass over all records, on one thread: every region's
-            // nearest neighbour (from the edge costs the build cached on
-            // both sides), the live regions and their entries. A mutual pair
-            // is queued when its higher node is reached (the lower one's
-            // nearest neighbour is known by then): the same entry as from
-            // the lower node (the edge's cost is the same double on both
-            // sides), and the queue pops by (cost, keys) whatever order the
-            // entries came in. One pass instead of a parallel one for the
-            // nearest neighbours and this one reading every record again
-            // (341,401 Autzen seeds: the two took 8 + 10.5 ms CPU).
+            // One pass over all records, on one thread: the regions and
+            // their entries (build() found every region's nearest neighbour
+            // where its list was in cache: this pass reads the heads only,
+            // but for rag; on 1.1 M Autzen seeds 110-206 -> 64-78 M cycles).
+            // A mutual pair is queued when its higher node is reached: the
+            // same entry as from the lower node (the edge's cost is the same
+            // double on both sides), and the queue pops by (cost, keys)
+            // whatever order the entries came in.
+            const int lines_ahead = o.strategy == QueueStrategy::rag ? 4 : 1;  // rag reads the lists, the others the heads
             for (uint32_t r = 1; r < n; ++r) {
-                if (r + kEntriesAhead < n) g.prefetch_node(r + kEntriesAhead, 4);  // head and the list, read next
+                if (r + kEntriesAhead < n) g.prefetch_node(r + kEntriesAhead, lines_ahead);
                 if (!g.alive(r)) continue;
-                g.rescan_nn(r);
                 previous_order[g.key_of(r) - 1] = r;  // the key is the region's input label
                 if (o.strategy != QueueStrategy::mutual) {
                     queue_initial(r);
