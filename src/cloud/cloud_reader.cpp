@@ -45,8 +45,13 @@ public:
     std::size_t reserve_hint() const override { return reader_.reserve_hint(); }
     void restrict_to_box(double min_x, double min_y, double max_x, double max_y) override {
         LazPointSource* laz = reader_.laz_source();
-        if (!laz) return;
         const LasHeader& h = reader_.header();
+        if (!laz) {
+            // Only the points in the box kept while decoding, unless the
+            // header's bounds say the box holds them all (a tile's own window).
+            if (!(h.min[0] >= min_x && h.min[1] >= min_y && h.max[0] <= max_x && h.max[1] <= max_y)) reader_.restrict_to_box(min_x, min_y, max_x, max_y);
+            return;
+        }
         if (copc_) {
             // Pad by one quantum: points sit on the scale grid, the cubes need not.
             const double pad = std::max(h.scale[0], h.scale[1]);

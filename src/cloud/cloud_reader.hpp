@@ -63,7 +63,9 @@ public:
     /// min_x <= x < max_x, min_y <= y < max_y (file CRS). COPC files then
     /// decode only the octree nodes whose cube meets the box; layered LAZ
     /// (point formats 6-8) only the chunks whose XY layer has a point in it;
-    /// other formats still hand out every point (the caller filters).
+    /// uncompressed LAS only the points in the closed box (all of them when
+    /// the header's bounds lie inside it); other formats still hand out
+    /// every point (the caller filters).
     void restrict_to_box(double min_x, double min_y, double max_x, double max_y) { impl_->restrict_to_box(min_x, min_y, max_x, max_y); }
     /// Before reading everything into `cloud`: reserves room for its points
     /// and those the file certainly holds (an uncompressed LAS: all of them),

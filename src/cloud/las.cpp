@@ -350,7 +350,23 @@ void LasReader::account_screened(uint64_t points, uint64_t dropped) {
     dropped_outside_ += dropped;
 }
 
+void LasReader::restrict_to_box(double min_x, double min_y, double max_x, double max_y) {
+    if (laz_ || read_ != 0) return;
+    box_ = std::array<double, 4>{min_x, min_y, max_x, max_y};
+}
+
 std::size_t LasReader::read_chunk(PointCloud& out, std::size_t max_points) {
+    while (box_) {
+        const auto n = static_cast<std::size_t>(std::min<uint64_t>(max_points, points_remaining()));
+        if (n == 0) {
+            report_end();
+            return 0;
+        }
+        uint64_t dropped = 0;
+        const std::size_t kept = append_records_in_box(out, n, dropped);
+        screened_ += n, dropped_outside_ += dropped;
+        if (kept > 0) return kept;  // else: read on, 0 means the end
+    }
     while (true) {
         const std::size_t base = out.size();
         const std::size_t n = read_chunk_unscreened(out, max_points);
@@ -442,6 +458,63 @@ void LasReader::append_records(PointCloud& out, std::size_t n) {
         read_ += n;
     }
     chunk_has_outside_ = outside.load();
+}
+
+std::size_t LasReader::append_records_in_box(PointCloud& out, std::size_t n, uint64_t& dropped) {
+    const LasHeader& h = header_;
+    const std::size_t rl = h.point_record_length;
+    const RecordLayout layout(h);
+    const bool color = layout.color, gps = layout.gps;
+    const std::array<double, 4> box = *box_;
+    // Blocks of ~256 kB of records as append_records reads them, each
+    // keeping its points in the box; then appended in block order.
+    const std::size_t block = std::max<std::size_t>(1, (std::size_t(256) << 10) / rl);
+    const std::size_t blocks = (n + block - 1) / block;
+    std::vector<std::vector<LasPoint>> kept(blocks);
+    std::vector<uint64_t> outside(blocks, 0);
+    const uint64_t start = h.offset_to_points + read_ * rl;
+    tbb::parallel_for(std::size_t(0), blocks, [&](std::size_t b) {
+        thread_local std::vector<char> records;
+        const std::size_t first = b * block, count = std::min(block, n - first);
+        if (records.size() < count * rl) records.resize(count * rl);
+        if (!file_.read_exact_at(start + first * rl, records.data(), count * rl)) throw Error(path_, "truncated point records");
+        for (std::size_t i = 0; i != count; ++i) {
+            const LasPoint q = decode_record(records.data() + i * rl, h, layout);
+            if (outside_bounds(q.x, q.y, q.z)) ++outside[b];
+            else if (q.x >= box[0] && q.x <= box[2] && q.y >= box[1] && q.y <= box[3]) kept[b].push_back(q);
+        }
+    });
+    read_ += n;
+    std::size_t total = 0;
+    for (std::size_t b = 0; b < blocks; ++b) total += kept[b].size(), dropped += outside[b];
+    if (total == 0) return 0;
+    const std::size_t base = out.size();
+    const bool had_gps = out.has_gps_time(), had_color = out.has_color();
+    try {
+        out.reserve(base + total, color, gps);
+        for (auto* v : {&out.x, &out.y, &out.z}) v->resize(base + total);
+        out.intensity.resize(base + total);
+        for (auto* v : {&out.classification, &out.return_number, &out.number_of_returns}) v->resize(base + total);
+        if (gps) out.gps_time.resize(base + total);
+        if (color) out.red.resize(base + total), out.green.resize(base + total), out.blue.resize(base + total);
+    } catch (...) {
+        out.truncate(base);
+        if (!had_gps) out.gps_time.clear();
+        if (!had_color) out.red.clear(), out.green.clear(), out.blue.clear();
+        throw;
+    }
+    std::size_t k = base;
+    for (const std::vector<LasPoint>& points : kept)
+        for (const LasPoint& q : points) {
+            out.x[k] = q.x, out.y[k] = q.y, out.z[k] = q.z;
+            out.intensity[k] = q.intensity;
+            out.return_number[k] = q.return_number, out.number_of_returns[k] = q.number_of_returns;
+            out.classification[k] = q.classification;
+            if (gps) out.gps_time[k] = q.gps_time;
+            if (color) out.red[k] = q.red, out.green[k] = q.green, out.blue[k] = q.blue;
+            ++k;
+        }
+    return total;
 }
 
 PointCloud read_las(const std::string& path, LasHeader* header) {

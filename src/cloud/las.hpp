@@ -120,6 +120,13 @@ public:
     LazPointSource* laz_source() { return laz_.get(); }
     /// LAZ only, before the first read: decode only the chunks with keep[i].
     void select_laz_chunks(const std::vector<bool>& keep);
+    /// Uncompressed LAS only, before the first read: read_chunk hands out
+    /// only the points with min_x <= x <= max_x and min_y <= y <= max_y (file
+    /// units; closed, so a superset of a caller's half-open box), in file
+    /// order; the others are decoded but not stored (a small window of a
+    /// large file costs no copy of the whole file's points). The bounds
+    /// screen counts and drops as before. Ignored for LAZ (see select_laz_chunks).
+    void restrict_to_box(double min_x, double min_y, double max_x, double max_y);
     /// Points read_chunk dropped so far because they lie outside the header's
     /// bounds (by more than one scale quantum): records a corrupt VLR shifted,
     /// or garbage. Screened only when the header bounds are usable (finite,
@@ -148,6 +155,11 @@ private:
     std::size_t read_chunk_unscreened(PointCloud& out, std::size_t max_points);
     /// Decodes the next `n` records (LAZ: already in buffer_) onto the end of `out`.
     void append_records(PointCloud& out, std::size_t n);
+    /// restrict_to_box's read: decodes the next `n` records of an
+    /// uncompressed file and appends those in box_ and inside the header's
+    /// bounds; returns how many it appended, and adds those outside the
+    /// bounds to `dropped`. Throws leaving `out` as it was.
+    std::size_t append_records_in_box(PointCloud& out, std::size_t n, uint64_t& dropped);
     /// n records (n <= points_remaining()) into `out`.
     std::size_t read_into(char* out, std::size_t n);
     std::string path_;
@@ -163,6 +175,7 @@ private:
     bool screen_bounds_ = false, end_reported_ = false;
     bool chunk_has_outside_ = false;  ///< the last chunk read_chunk_unscreened decoded has a point outside_bounds
     std::array<double, 3> bounds_tolerance_{};
+    std::optional<std::array<double, 4>> box_;  ///< restrict_to_box's (min_x, min_y, max_x, max_y)
     uint64_t dropped_outside_ = 0, screened_ = 0;
 };
 

@@ -1,13 +1,16 @@
 // Reading uncompressed LAS records: the parallel blocks (pread at each
 // block's offset) against an independent decoding of the raw bytes, for any
 // chunking and thread count, and a file cut short after it was opened.
+#include <array>
 #include <catch2/catch.hpp>
 #include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <tbb/global_control.h>
+#include <vector>
 
 #include "same_cloud.hpp"
+#include "cloud/cloud_reader.hpp"
 #include "cloud/las.hpp"
 #include "core/error.hpp"
 #include "test_support.hpp"
@@ -71,6 +74,41 @@ TEST_CASE("LAS records decoded in parallel blocks equal the bytes decoded by han
         for (std::size_t chunk : {std::size_t(1) << 20, std::size_t(7777), std::size_t(100001)}) cityforge::test::check_same_cloud(read_in_chunks(path, chunk), expected);
         tbb::global_control one(tbb::global_control::max_allowed_parallelism, 1);
         cityforge::test::check_same_cloud(read_las(path), expected);
+    }
+}
+
+TEST_CASE("Window reads of an uncompressed LAS keep exactly the points of the half-open box, in file order - parts appended to one cloud", "[cloud][las][read][window]") {
+    for (const char* name : {"autzen_oregon/autzen_trim.las", "delft_ahn3_bgt_west/ahn3_delft_west.las"}) {
+        const std::string path = shared_data(name);
+        INFO(name);
+        const PointCloud all = read_las(path);
+        REQUIRE(all.size() > 100000);
+        const auto crop = [&](const std::array<double, 4>& b, PointCloud& into) {
+            for (std::size_t i = 0; i < all.size(); ++i)
+                if (all.x[i] >= b[0] && all.x[i] < b[2] && all.y[i] >= b[1] && all.y[i] < b[3]) into.append(all, i);
+        };
+        const LasHeader h = LasReader(path).header();
+        // Boxes ending exactly on points (the half-open edge), a corner, one
+        // missing the file, one holding all of it (the header's bounds inside).
+        const double mx = 0.5 * (h.min[0] + h.max[0]), my = 0.5 * (h.min[1] + h.max[1]);
+        const std::vector<std::array<double, 4>> boxes = {{h.min[0], h.min[1], all.x[all.size() / 2], all.y[all.size() / 3]},
+                                                          {mx, my, h.max[0], h.max[1]},
+                                                          {all.x[10], all.y[10], all.x[10] + 30, all.y[10] + 30},
+                                                          {h.max[0] + 10, h.max[1] + 10, h.max[0] + 20, h.max[1] + 20},
+                                                          {h.min[0] - 1, h.min[1] - 1, h.max[0] + 1, h.max[1] + 1}};
+        PointCloud parts, expected_parts;
+        for (const auto& b : boxes) {
+            PointCloud expected;
+            crop(b, expected);
+            cityforge::test::check_same_cloud(read_point_cloud_in(path, b[0], b[1], b[2], b[3]), expected);
+            append_point_cloud_in(path, b[0], b[1], b[2], b[3], parts);
+            crop(b, expected_parts);
+        }
+        cityforge::test::check_same_cloud(parts, expected_parts);
+        tbb::global_control one(tbb::global_control::max_allowed_parallelism, 1);
+        PointCloud expected;
+        crop(boxes[0], expected);
+        cityforge::test::check_same_cloud(read_point_cloud_in(path, boxes[0][0], boxes[0][1], boxes[0][2], boxes[0][3]), expected);
     }
 }
 
