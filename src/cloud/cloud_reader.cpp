@@ -36,6 +36,11 @@ std::string lower(std::string s) {
     return s;
 }
 
+// Does the box min_x..max_x, min_y..max_y hold the bounds x0..x1, y0..y1?
+bool box_holds(double min_x, double min_y, double max_x, double max_y, double x0, double y0, double x1, double y1) {
+    return x0 >= min_x && y0 >= min_y && x1 <= max_x && y1 <= max_y;
+}
+
 class LasFormatReader final : public CloudFormatReader {
 public:
     explicit LasFormatReader(RandomAccessFile file) : path_(file.path()), reader_(std::move(file)) {
@@ -49,7 +54,7 @@ public:
         if (!laz) {
             // Only the points in the box kept while decoding, unless the
             // header's bounds say the box holds them all (a tile's own window).
-            if (!(h.min[0] >= min_x && h.min[1] >= min_y && h.max[0] <= max_x && h.max[1] <= max_y)) reader_.restrict_to_box(min_x, min_y, max_x, max_y);
+            if (!box_holds(min_x, min_y, max_x, max_y, h.min[0], h.min[1], h.max[0], h.max[1])) reader_.restrict_to_box(min_x, min_y, max_x, max_y);
             return;
         }
         if (copc_) {
@@ -384,8 +389,9 @@ private:
 
 CloudReader::CloudReader(const std::string& path) : path_(path) {
     // The format is read off the first bytes of the file that a LAS reader
-    // then reads from (one open: a file replaced under its path in between
-    // cannot be taken for another format). PLY and text are read as streams.
+    // then reads from (one open for LAS: a file replaced under its path in
+    // between cannot be taken for another format). PLY and text files are
+    // opened again as streams by their readers.
     RandomAccessFile file(path, "a point cloud file");  // "file not found", "is a directory, ..."
     const std::string ext = lower(std::filesystem::path(path).extension().string());
     char magic[4] = {};
@@ -461,15 +467,36 @@ void append_point_cloud_in(const std::string& path, double min_x, double min_y, 
     // A file whose header bounds lie inside the box (a run's tile split file
     // read for its own window) has all its points kept: their arrays are
     // reserved once, not regrown chunk by chunk.
-    if (const auto& b = reader.announced_bounds(); b && (*b)[0] >= min_x && (*b)[1] >= min_y && (*b)[2] <= max_x && (*b)[3] <= max_y)
+    if (const auto& b = reader.announced_bounds(); b && box_holds(min_x, min_y, max_x, max_y, (*b)[0], (*b)[1], (*b)[2], (*b)[3]))
         reader.reserve_for_all(out);
     // Chunks are read straight into `out`, and the points outside the box of
     // each are taken off again (in file order) only when it holds some.
     auto outside = [&](std::size_t i) { return !(out.x[i] >= min_x && out.x[i] < max_x && out.y[i] >= min_y && out.y[i] < max_y); };
-    while (true) {
-        const std::size_t base = out.size();
-        if (reader.read_chunk(out, 1u << 20) == 0) break;
-        if (any_point(base, out.size(), outside)) out.remove_from(base, outside);
+    // Every attribute array holds one value per point or none (a file with
+    // colour or GPS time read after parts without them: the LAS reader gives
+    // the earlier points zeros; a PLY or text file after parts with them
+    // would leave the arrays short).
+    auto aligned = [&] {
+        for (const std::size_t k : {out.gps_time.size(), out.red.size(), out.green.size(), out.blue.size()})
+            if (k != 0 && k != out.size()) return false;
+        return true;
+    };
+    // A file that fails part-way leaves `out` as it was: its points (and the
+    // attributes it added) are taken off again.
+    const std::size_t start = out.size();
+    const bool had_gps = out.has_gps_time(), had_color = out.has_color();
+    try {
+        while (true) {
+            const std::size_t base = out.size();
+            if (reader.read_chunk(out, 1u << 20) == 0) break;
+            if (!aligned()) throw Error(path, "its points carry other attributes (colour, GPS time) than the cloud parts read before it for the same window");
+            if (any_point(base, out.size(), outside)) out.remove_from(base, outside);
+        }
+    } catch (...) {
+        out.truncate(start);
+        if (!had_gps) out.gps_time.clear();
+        if (!had_color) out.red.clear(), out.green.clear(), out.blue.clear();
+        throw;
     }
 }
 

@@ -94,7 +94,12 @@ PointCloud read_point_cloud(const std::string& path);
 /// empty cloud.
 PointCloud read_point_cloud_in(const std::string& path, double min_x, double min_y, double max_x, double max_y);
 /// The same points appended to `out` (its points and attributes stay first):
-/// the parts of a window read into one cloud without copying it.
+/// the parts of a window read into one cloud without copying it. Throws
+/// Error naming the file when it cannot be read or when its points carry
+/// other attributes (colour, GPS time) than `out`'s points in a way that
+/// cannot be aligned (a PLY or text file without colour after parts with it;
+/// a LAS file with colour after parts without gives them zeros); `out` is
+/// then as it was before the call.
 void append_point_cloud_in(const std::string& path, double min_x, double min_y, double max_x, double max_y, PointCloud& out);
 
 }  // namespace cityforge

@@ -32,8 +32,8 @@ RandomAccessFile::RandomAccessFile(const std::string& path, const std::string& w
     size_ = static_cast<uint64_t>(st.st_size);
 }
 
-RandomAccessFile::RandomAccessFile(RandomAccessFile&& other) noexcept
-    : path_(std::move(other.path_)), fd_(other.fd_), size_(other.size_) {
+RandomAccessFile::RandomAccessFile(RandomAccessFile&& other)
+    : path_(other.path_), fd_(other.fd_), size_(other.size_) {  // the path stays: a read of `other` names the file
     other.fd_ = -1, other.size_ = 0;
 }
 

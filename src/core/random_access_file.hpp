@@ -24,7 +24,7 @@ public:
     RandomAccessFile(const RandomAccessFile&) = delete;
     RandomAccessFile& operator=(const RandomAccessFile&) = delete;
     /// Takes over `other`'s open file (`other` is left closed: reads throw).
-    RandomAccessFile(RandomAccessFile&& other) noexcept;
+    RandomAccessFile(RandomAccessFile&& other);
     RandomAccessFile& operator=(RandomAccessFile&&) = delete;
 
     const std::string& path() const { return path_; }

@@ -112,6 +112,46 @@ TEST_CASE("Window reads of an uncompressed LAS keep exactly the points of the ha
     }
 }
 
+TEST_CASE("A window part that fails or carries other attributes leaves the cloud it was appended to as it was", "[cloud][read][window][errors]") {
+    ScratchDir dir("window_part_fails");
+    const std::string las = shared_data("autzen_oregon/autzen_trim.las");
+    const PointCloud all = read_las(las);  // format 3: colour and GPS time
+    const std::array<double, 4> box{all.x[10] - 50, all.y[10] - 50, all.x[10] + 50, all.y[10] + 50};
+    PointCloud parts;
+    append_point_cloud_in(las, box[0], box[1], box[2], box[3], parts);
+    REQUIRE(parts.size() > 100);
+    REQUIRE(parts.has_color());
+    REQUIRE(parts.has_gps_time());
+    const PointCloud before = parts;
+    // A text file (no colour, no GPS time) after a part with both: refused,
+    // not arrays of different lengths.
+    const std::string xyz = dir / "plain.xyz";
+    std::ofstream(xyz) << std::fixed << all.x[10] << " " << all.y[10] << " " << all.z[10] << "\n";
+    try {
+        append_point_cloud_in(xyz, box[0], box[1], box[2], box[3], parts);
+        FAIL("a part without colour after parts with it was accepted");
+    } catch (const cityforge::Error& e) {
+        CHECK_THAT(e.what(), Catch::Contains("plain.xyz") && Catch::Contains("other attributes"));
+    }
+    cityforge::test::check_same_cloud(parts, before);
+    // A file that fails after more than one chunk (2^20 points) was read into
+    // the cloud: its points are taken off again, attributes too.
+    const std::string bad = dir / "bad_tail.xyz";
+    {
+        std::ofstream out(bad);
+        for (int i = 0; i < (1 << 20) + 5000; ++i) out << "1 2 3\n";
+        out << "garbage here\n";
+    }
+    PointCloud plain;
+    append_point_cloud_in(xyz, box[0], box[1], box[2], box[3], plain);
+    REQUIRE(plain.size() == 1);
+    const PointCloud plain_before = plain;
+    CHECK_THROWS_WITH(append_point_cloud_in(bad, 0, 0, 10, 10, plain), Catch::Contains("bad_tail.xyz"));
+    cityforge::test::check_same_cloud(plain, plain_before);
+    CHECK_THROWS_WITH(append_point_cloud_in(bad, 0, 0, 10, 10, parts), Catch::Contains("bad_tail.xyz"));
+    cityforge::test::check_same_cloud(parts, before);
+}
+
 TEST_CASE("A LAS file cut short after it was opened gives the one-line truncated error naming it", "[cloud][las][read][errors]") {
     ScratchDir dir("las_cut_late");
     const std::string bytes = slurp(shared_data("autzen_oregon/autzen_trim.las"));
