@@ -2,8 +2,10 @@
 #include <algorithm>
 #include <cmath>
 #include <map>
+#include <random>
 #include <set>
 #include <tbb/global_control.h>
+#include <tbb/task_arena.h>
 
 #include "segment/watershed_reference.hpp"
 #include "core/error.hpp"
@@ -119,6 +121,48 @@ TEST_CASE("Merging preserves totals and adjacency symmetry - hierarchy consisten
     CHECK(tables[0].back().size() == over.region_count + 1);
 }
 
+TEST_CASE("Merged labels ascend with each region's lowest input label - input labels without pixels map to 0 - at every level", "[segment][merging]") {
+    ScratchDir dir("seg_label_order");
+    make_town(dir, 150, 3, 0);
+    Image<float> img = RasterReader(dir / "ortho.tif").read_all<float>();
+    normalize_bands(img, {});
+    WatershedOptions fine;  // fine seeds: many merges at every scale
+    fine.h_minima = 0.0;
+    fine.smoothing_sigma_px = 0.0;
+    const Oversegmentation over = watershed_oversegment(img, {}, fine);
+    REQUIRE(over.region_count > 500);
+    // Input labels spread out and shuffled: label l becomes new_label[l], a
+    // permutation of the even numbers 2..2N, so every odd label has no pixel.
+    std::vector<uint32_t> new_label(over.region_count + 1, 0);
+    for (uint32_t l = 1; l <= over.region_count; ++l) new_label[l] = 2 * l;
+    std::mt19937 rng(5);
+    std::shuffle(new_label.begin() + 1, new_label.end(), rng);
+    Image<uint32_t> labels = over.labels;
+    for (auto& v : labels.data) v = new_label[v];
+    const uint32_t count = 2 * over.region_count + 1;
+    RegionMergingOptions mo;
+    mo.scales = {10, 20, 40, 80};
+    for (auto strategy : {QueueStrategy::rag, QueueStrategy::nng, QueueStrategy::mutual}) {
+        mo.strategy = strategy;
+        const auto res = merge_regions(img, labels, count, mo);
+        for (const auto& level : res.levels) {
+            REQUIRE(level.label_of_input.size() == count + 1);
+            std::vector<uint32_t> lowest(level.regions_after + 1, UINT32_MAX);  // region -> its lowest input label
+            bool unused_zero = true;
+            for (uint32_t l = 1; l <= count; ++l) {
+                const uint32_t k = level.label_of_input[l];
+                if (l % 2 == 1) unused_zero = unused_zero && k == 0;
+                else if (k >= 1 && k <= level.regions_after) lowest[k] = std::min(lowest[k], l);
+            }
+            CHECK(unused_zero);
+            CHECK(level.parent[0] == 0);
+            bool ascending = lowest[1] != UINT32_MAX;
+            for (uint32_t k = 2; k <= level.regions_after; ++k) ascending = ascending && lowest[k] != UINT32_MAX && lowest[k - 1] < lowest[k];
+            CHECK(ascending);
+        }
+    }
+}
+
 TEST_CASE("Merging down to a region count through one huge scale: every strategy the same labels, and fewer regions coarsen more", "[segment][merging]") {
     // One scale of 1e9 lets every pair merge, so costs grow far past the
     // initial ones: the merge queue's buckets overflow and are spread again
@@ -232,6 +276,15 @@ TEST_CASE("Segmentation gives the same labels with 1 thread and with all threads
         return std::make_pair(over.labels.data, res.levels.back().label_of_input);
     };
     const auto all_threads = run();
+    // Arenas of 1, 3 and 8 threads: the graph build cuts its work into as
+    // many chunks as its arena has threads (up to 8), whatever the cores.
+    for (int threads : {1, 3, 8}) {
+        INFO(threads << " threads");
+        tbb::task_arena arena(threads);
+        const auto in_arena = arena.execute(run);
+        CHECK(all_threads.first == in_arena.first);
+        CHECK(all_threads.second == in_arena.second);
+    }
     tbb::global_control one(tbb::global_control::max_allowed_parallelism, 1);
     const auto one_thread = run();
     CHECK(all_threads.first == one_thread.first);
