@@ -483,8 +483,7 @@ void append_point_cloud_in(const std::string& path, double min_x, double min_y, 
     };
     // A file that fails part-way leaves `out` as it was: its points (and the
     // attributes it added) are taken off again.
-    const std::size_t start = out.size();
-    const bool had_gps = out.has_gps_time(), had_color = out.has_color();
+    const PointCloud::Mark before = out.mark();
     try {
         while (true) {
             const std::size_t base = out.size();
@@ -493,9 +492,7 @@ void append_point_cloud_in(const std::string& path, double min_x, double min_y, 
             if (any_point(base, out.size(), outside)) out.remove_from(base, outside);
         }
     } catch (...) {
-        out.truncate(start);
-        if (!had_gps) out.gps_time.clear();
-        if (!had_color) out.red.clear(), out.green.clear(), out.blue.clear();
+        out.roll_back(before);
         throw;
     }
 }

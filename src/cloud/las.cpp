@@ -106,6 +106,22 @@ void PointCloud::truncate(std::size_t n) {
     for (auto* v : {&classification, &return_number, &number_of_returns}) v->resize(std::min(v->size(), n));
 }
 
+void PointCloud::grow(std::size_t n, bool color, bool gps) {
+    const std::size_t to = size() + n;
+    reserve(to, color, gps);
+    for (auto* v : {&x, &y, &z}) v->resize(to);
+    intensity.resize(to);
+    for (auto* v : {&classification, &return_number, &number_of_returns}) v->resize(to);
+    if (gps) gps_time.resize(to);
+    if (color) red.resize(to), green.resize(to), blue.resize(to);
+}
+
+void PointCloud::roll_back(const Mark& m) {
+    truncate(m.size);
+    if (!m.gps_time) gps_time.clear();
+    if (!m.color) red.clear(), green.clear(), blue.clear();
+}
+
 void PointCloud::clear() {
     for (auto* v : {&x, &y, &z, &gps_time}) v->clear();
     for (auto* v : {&intensity, &red, &green, &blue}) v->clear();
@@ -391,18 +407,28 @@ std::size_t LasReader::read_chunk_unscreened(PointCloud& out, std::size_t max_po
     if (n == 0) return 0;
     // A chunk that cannot be read (or memory that cannot be had) leaves `out`
     // as it was: the points appended for this chunk are taken off again.
-    const std::size_t base = out.size();
-    const bool had_gps = out.has_gps_time(), had_color = out.has_color();
+    const PointCloud::Mark before = out.mark();
     try {
         append_records(out, n);
     } catch (...) {
-        out.truncate(base);
-        if (!had_gps) out.gps_time.clear();  // attributes this chunk added are taken off too
-        if (!had_color) out.red.clear(), out.green.clear(), out.blue.clear();
+        out.roll_back(before);  // the attributes this chunk added are taken off too
         throw;
     }
     return n;
 }
+
+namespace {
+// Writes decoded point q into slot k of `out` (grown to hold it; colour and
+// GPS time only when the point format has them).
+inline void store_point(PointCloud& out, std::size_t k, const LasPoint& q, bool gps, bool color) {
+    out.x[k] = q.x, out.y[k] = q.y, out.z[k] = q.z;
+    out.intensity[k] = q.intensity;
+    out.return_number[k] = q.return_number, out.number_of_returns[k] = q.number_of_returns;
+    out.classification[k] = q.classification;
+    if (gps) out.gps_time[k] = q.gps_time;
+    if (color) out.red[k] = q.red, out.green[k] = q.green, out.blue[k] = q.blue;
+}
+}  // namespace
 
 void LasReader::append_records(PointCloud& out, std::size_t n) {
     const LasHeader& h = header_;
@@ -411,12 +437,7 @@ void LasReader::append_records(PointCloud& out, std::size_t n) {
     const bool color = layout.color, gps = layout.gps;
     // Resize once, then fill by index (much faster than per-field push_back).
     const std::size_t base = out.size();
-    out.reserve(base + n, color, gps);
-    for (auto* v : {&out.x, &out.y, &out.z}) v->resize(base + n);
-    out.intensity.resize(base + n);
-    for (auto* v : {&out.classification, &out.return_number, &out.number_of_returns}) v->resize(base + n);
-    if (gps) out.gps_time.resize(base + n);
-    if (color) out.red.resize(base + n), out.green.resize(base + n), out.blue.resize(base + n);
+    out.grow(n, color, gps);
     // Records decoded in parallel blocks: each point's fields depend on its
     // record only. The bounds screen is checked on the way.
     auto decode = [&](const char* records, std::size_t first, std::size_t count) {
@@ -424,13 +445,7 @@ void LasReader::append_records(PointCloud& out, std::size_t n) {
         for (std::size_t i = 0; i != count; ++i) {
             const LasPoint q = decode_record(records + i * rl, h, layout);
             out_here = out_here || outside_bounds(q.x, q.y, q.z);
-            const std::size_t k = base + first + i;
-            out.x[k] = q.x, out.y[k] = q.y, out.z[k] = q.z;
-            out.intensity[k] = q.intensity;
-            out.return_number[k] = q.return_number, out.number_of_returns[k] = q.number_of_returns;
-            out.classification[k] = q.classification;
-            if (gps) out.gps_time[k] = q.gps_time;
-            if (color) out.red[k] = q.red, out.green[k] = q.green, out.blue[k] = q.blue;
+            store_point(out, base + first + i, q, gps, color);
         }
         return out_here;
     };
@@ -489,31 +504,16 @@ std::size_t LasReader::append_records_in_box(PointCloud& out, std::size_t n, uin
     for (std::size_t b = 0; b < blocks; ++b) total += kept[b].size(), dropped += outside[b];
     if (total == 0) return 0;
     const std::size_t base = out.size();
-    const bool had_gps = out.has_gps_time(), had_color = out.has_color();
+    const PointCloud::Mark before = out.mark();
     try {
-        out.reserve(base + total, color, gps);
-        for (auto* v : {&out.x, &out.y, &out.z}) v->resize(base + total);
-        out.intensity.resize(base + total);
-        for (auto* v : {&out.classification, &out.return_number, &out.number_of_returns}) v->resize(base + total);
-        if (gps) out.gps_time.resize(base + total);
-        if (color) out.red.resize(base + total), out.green.resize(base + total), out.blue.resize(base + total);
+        out.grow(total, color, gps);
     } catch (...) {
-        out.truncate(base);
-        if (!had_gps) out.gps_time.clear();
-        if (!had_color) out.red.clear(), out.green.clear(), out.blue.clear();
+        out.roll_back(before);
         throw;
     }
     std::size_t k = base;
     for (const std::vector<LasPoint>& points : kept)
-        for (const LasPoint& q : points) {
-            out.x[k] = q.x, out.y[k] = q.y, out.z[k] = q.z;
-            out.intensity[k] = q.intensity;
-            out.return_number[k] = q.return_number, out.number_of_returns[k] = q.number_of_returns;
-            out.classification[k] = q.classification;
-            if (gps) out.gps_time[k] = q.gps_time;
-            if (color) out.red[k] = q.red, out.green[k] = q.green, out.blue[k] = q.blue;
-            ++k;
-        }
+        for (const LasPoint& q : points) store_point(out, k++, q, gps, color);
     return total;
 }
 

@@ -36,6 +36,20 @@ struct PointCloud {
     /// attribute) is left as it is.
     void truncate(std::size_t n);
     void reserve(std::size_t n, bool color, bool gps);
+    /// Appends `n` points of zeros (colour and GPS time too when asked: the
+    /// points before them get zeros if the cloud had none), to be filled by
+    /// index; one reservation, then one resize per array.
+    void grow(std::size_t n, bool color, bool gps);
+    /// What a cloud holds before an append: its size and which attributes it has.
+    struct Mark {
+        std::size_t size;
+        bool gps_time, color;
+    };
+    Mark mark() const { return {size(), has_gps_time(), has_color()}; }
+    /// Back to `m` (taken from this cloud, with no point removed since): the
+    /// points after it are taken off, and an attribute the cloud did not have
+    /// then is dropped (how a failed read leaves the caller's cloud as it was).
+    void roll_back(const Mark& m);
     /// Appends point `i` of `src` with all its attributes (colour and GPS time
     /// when `src` has them; mixing clouds with and without them is the caller's error).
     void append(const PointCloud& src, std::size_t i);
