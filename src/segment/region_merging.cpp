@@ -955,8 +955,6 @@ public:
         return it != A.list + A.degree && it->id == b ? it->cost : std::nan("");
     }
     uint32_t key_of(uint32_t r) const { return head(r).key; }
-    // Node of input label l (0 for 0).
-    uint32_t node_of_label(uint32_t l) const { return node_of_label_[l]; }
     NeighbourSpan neighbours(uint32_t r) const { return {head(r).list, head(r).list + head(r).degree}; }
     // Starts loading the records of r's neighbours (they are about to be read).
     void prefetch_node(uint32_t r, int lines) const {
