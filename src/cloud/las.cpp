@@ -430,6 +430,21 @@ inline void store_point(PointCloud& out, std::size_t k, const LasPoint& q, bool 
 }
 }  // namespace
 
+std::size_t LasReader::record_block() const { return std::max<std::size_t>(1, (std::size_t(256) << 10) / header_.point_record_length); }
+
+template <class Visit>
+void LasReader::read_record_blocks(std::size_t n, const Visit& visit) const {
+    const std::size_t rl = header_.point_record_length, block = record_block();
+    const uint64_t start = header_.offset_to_points + read_ * rl;
+    tbb::parallel_for(std::size_t(0), (n + block - 1) / block, [&](std::size_t b) {
+        thread_local std::vector<char> records;
+        const std::size_t first = b * block, count = std::min(block, n - first);
+        if (records.size() < count * rl) records.resize(count * rl);
+        if (!file_.read_exact_at(start + first * rl, records.data(), count * rl)) throw Error(path_, "truncated point records");
+        visit(static_cast<const char*>(records.data()), first, count, b);
+    });
+}
+
 void LasReader::append_records(PointCloud& out, std::size_t n) {
     const LasHeader& h = header_;
     const std::size_t rl = h.point_record_length;
@@ -461,14 +476,8 @@ void LasReader::append_records(PointCloud& out, std::size_t n) {
         // and no chunk-sized buffer is written and read again. A block the
         // file no longer holds (cut short since it was opened) is the one
         // "truncated point records" error, whichever task meets it.
-        const std::size_t block = std::max<std::size_t>(1, (std::size_t(256) << 10) / rl);
-        const uint64_t start = h.offset_to_points + read_ * rl;
-        tbb::parallel_for(std::size_t(0), (n + block - 1) / block, [&](std::size_t b) {
-            thread_local std::vector<char> records;
-            const std::size_t first = b * block, count = std::min(block, n - first);
-            if (records.size() < count * rl) records.resize(count * rl);
-            if (!file_.read_exact_at(start + first * rl, records.data(), count * rl)) throw Error(path_, "truncated point records");
-            if (decode(records.data(), first, count)) outside.store(true, std::memory_order_relaxed);
+        read_record_blocks(n, [&](const char* records, std::size_t first, std::size_t count, std::size_t) {
+            if (decode(records, first, count)) outside.store(true, std::memory_order_relaxed);
         });
         read_ += n;
     }
@@ -481,20 +490,15 @@ std::size_t LasReader::append_records_in_box(PointCloud& out, std::size_t n, uin
     const RecordLayout layout(h);
     const bool color = layout.color, gps = layout.gps;
     const std::array<double, 4> box = *box_;
-    // Blocks of ~256 kB of records as append_records reads them, each
-    // keeping its points in the box; then appended in block order.
-    const std::size_t block = std::max<std::size_t>(1, (std::size_t(256) << 10) / rl);
+    // Blocks of records as append_records reads them, each keeping its
+    // points in the box; then appended in block order.
+    const std::size_t block = record_block();
     const std::size_t blocks = (n + block - 1) / block;
     std::vector<std::vector<LasPoint>> kept(blocks);
     std::vector<uint64_t> outside(blocks, 0);
-    const uint64_t start = h.offset_to_points + read_ * rl;
-    tbb::parallel_for(std::size_t(0), blocks, [&](std::size_t b) {
-        thread_local std::vector<char> records;
-        const std::size_t first = b * block, count = std::min(block, n - first);
-        if (records.size() < count * rl) records.resize(count * rl);
-        if (!file_.read_exact_at(start + first * rl, records.data(), count * rl)) throw Error(path_, "truncated point records");
+    read_record_blocks(n, [&](const char* records, std::size_t, std::size_t count, std::size_t b) {
         for (std::size_t i = 0; i != count; ++i) {
-            const LasPoint q = decode_record(records.data() + i * rl, h, layout);
+            const LasPoint q = decode_record(records + i * rl, h, layout);
             if (outside_bounds(q.x, q.y, q.z)) ++outside[b];
             else if (q.x >= box[0] && q.x <= box[2] && q.y >= box[1] && q.y <= box[3]) kept[b].push_back(q);
         }

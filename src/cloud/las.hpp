@@ -160,6 +160,15 @@ private:
     /// bounds; returns how many it appended, and adds those outside the
     /// bounds to `dropped`. Throws leaving `out` as it was.
     std::size_t append_records_in_box(PointCloud& out, std::size_t n, uint64_t& dropped);
+    /// Uncompressed files: records per block of read_record_blocks (~256 kB).
+    std::size_t record_block() const;
+    /// Uncompressed files: the next `n` records (from read_) in blocks of
+    /// record_block(), each read with pread into its task's buffer and
+    /// handed to visit(records, first, count, block) in parallel (first =
+    /// index of its first record among the n). A block the file no longer
+    /// holds throws "truncated point records". Does not advance read_.
+    template <class Visit>
+    void read_record_blocks(std::size_t n, const Visit& visit) const;
     /// n records (n <= points_remaining()) into `out`.
     std::size_t read_into(char* out, std::size_t n);
     std::string path_;
